@@ -1,0 +1,20 @@
+"""Reading and writing MAST's file contracts (DESIGN.md, "File contracts").
+
+Every reader raises :class:`mast.errors.InputError` naming the file, the line
+(where there is one) and the problem.
+"""
+
+from .bags import bag_kind, list_topics, read_laserscans, write_laserscans
+from .beacons_csv import read_survey, write_survey
+from .scan_csv import read_scan_csv, write_scan_csv
+
+__all__ = [
+    "bag_kind",
+    "list_topics",
+    "read_laserscans",
+    "read_scan_csv",
+    "read_survey",
+    "write_laserscans",
+    "write_scan_csv",
+    "write_survey",
+]

@@ -1,0 +1,243 @@
+"""``sensor_msgs/LaserScan`` sequences in ROS 1 and ROS 2 bags, through rosbags.
+
+ROS 1 bags are single ``.bag`` files (recognised by their ``#ROSBAG V2.0``
+magic whatever their name); ROS 2 bags are folders with a ``metadata.yaml``
+and sqlite3 (``.db3``) or MCAP storage. No ROS installation is needed.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+
+from ..errors import InputError
+from ..scan import Scan
+
+__all__ = ["BagKind", "bag_kind", "list_topics", "read_laserscans", "write_laserscans"]
+
+LASERSCAN = "sensor_msgs/msg/LaserScan"
+BagKind = Literal["rosbag1", "sqlite3", "mcap"]
+_ROS1_MAGIC = b"#ROSBAG V2.0"
+
+
+def bag_kind(path: str | Path) -> Literal["rosbag1", "rosbag2"]:
+    """Tell a ROS 1 bag file from a ROS 2 bag folder, or raise :class:`InputError`."""
+    p = Path(path)
+    if p.is_dir():
+        if (p / "metadata.yaml").is_file():
+            return "rosbag2"
+        raise InputError("folder is not a ROS 2 bag (no metadata.yaml in it)", path=p)
+    if not p.exists():
+        raise InputError("bag not found", path=p)
+    try:
+        with p.open("rb") as fh:
+            head = fh.read(len(_ROS1_MAGIC))
+    except OSError as err:
+        raise InputError(f"cannot read bag: {err.strerror}", path=p) from None
+    if head == _ROS1_MAGIC:
+        return "rosbag1"
+    if p.suffix in {".db3", ".mcap"} and (p.parent / "metadata.yaml").is_file():
+        return "rosbag2"
+    if p.suffix in {".db3", ".mcap"}:
+        raise InputError(
+            "a ROS 2 bag is a folder with metadata.yaml; this storage file has none beside it",
+            path=p,
+        )
+    raise InputError("not a ROS 1 bag (no '#ROSBAG V2.0' header) nor a ROS 2 bag folder", path=p)
+
+
+@dataclass(frozen=True, slots=True)
+class TopicInfo:
+    topic: str
+    msgtype: str
+    count: int
+
+
+def _open(path: Path) -> tuple[Any, Any, bool]:
+    from rosbags.typesys import Stores, get_typestore
+
+    kind = bag_kind(path)
+    try:
+        if kind == "rosbag1":
+            from rosbags.rosbag1 import Reader as Reader1
+
+            if path.is_dir():  # pragma: no cover - bag_kind only returns rosbag1 for files
+                raise InputError("expected a ROS 1 bag file", path=path)
+            reader: Any = Reader1(path)
+            store = get_typestore(Stores.ROS1_NOETIC)
+            ros1 = True
+        else:
+            from rosbags.rosbag2 import Reader as Reader2
+
+            reader = Reader2(path if path.is_dir() else path.parent)
+            store = get_typestore(Stores.ROS2_HUMBLE)
+            ros1 = False
+        reader.open()
+    except InputError:
+        raise
+    except Exception as err:  # rosbags raises several kinds (ReaderError, AssertionError, ...)
+        raise InputError(f"unreadable bag: {_describe(err)}", path=path) from None
+    return reader, store, ros1
+
+
+def _describe(err: BaseException) -> str:
+    text = str(err).strip().splitlines()[0] if str(err).strip() else ""
+    return f"{type(err).__name__}: {text}" if text else type(err).__name__
+
+
+def list_topics(path: str | Path) -> list[TopicInfo]:
+    """Topics of a bag with their message types and counts."""
+    p = Path(path)
+    reader, _, _ = _open(p)
+    try:
+        counts: dict[tuple[str, str], int] = {}
+        for c in reader.connections:
+            key = (c.topic, c.msgtype)
+            counts[key] = counts.get(key, 0) + int(getattr(c, "msgcount", 0) or 0)
+        return [TopicInfo(t, m, n) for (t, m), n in sorted(counts.items())]
+    finally:
+        reader.close()
+
+
+def read_laserscans(path: str | Path, *, topic: str | None = None) -> Iterator[Scan]:
+    """Yield the ``LaserScan`` messages of ``topic`` in time order.
+
+    With ``topic=None`` the bag must hold exactly one LaserScan topic. A topic
+    that is missing, or not LaserScan, is an :class:`InputError` listing the
+    bag's topics.
+    """
+    p = Path(path)
+    reader, store, ros1 = _open(p)
+    try:
+        conns = list(reader.connections)
+        scans = [c for c in conns if c.msgtype == LASERSCAN]
+        listing = ", ".join(sorted({f"{c.topic} ({c.msgtype})" for c in conns})) or "none"
+        if topic is None:
+            names = sorted({c.topic for c in scans})
+            if len(names) != 1:
+                what = "no LaserScan topic" if not names else "several LaserScan topics"
+                raise InputError(
+                    f"bag has {what}; choose one with --topic. Topics: {listing}", path=p
+                )
+            chosen = [c for c in scans if c.topic == names[0]]
+        else:
+            chosen = [c for c in conns if c.topic == topic]
+            if not chosen:
+                raise InputError(f"bag has no topic {topic!r}. Topics: {listing}", path=p)
+            if any(c.msgtype != LASERSCAN for c in chosen):
+                raise InputError(
+                    f"topic {topic!r} carries {chosen[0].msgtype}, not {LASERSCAN}", path=p
+                )
+        index = 0
+        try:
+            for conn, _t, raw in reader.messages(connections=chosen):
+                if ros1:
+                    msg = store.deserialize_ros1(raw, conn.msgtype)
+                else:
+                    msg = store.deserialize_cdr(raw, conn.msgtype)
+                index += 1
+                yield _to_scan(msg, p, index)
+        except InputError:
+            raise
+        except Exception as err:
+            raise InputError(
+                f"unreadable bag at message {index + 1} of {chosen[0].topic}: {_describe(err)}",
+                path=p,
+            ) from None
+    finally:
+        reader.close()
+
+
+def _to_scan(msg: Any, path: Path, index: int) -> Scan:
+    stamp = msg.header.stamp
+    try:
+        return Scan.from_laserscan(
+            angle_min=float(msg.angle_min),
+            angle_increment=float(msg.angle_increment),
+            ranges=np.asarray(msg.ranges, dtype=float),
+            range_min=float(msg.range_min) if math.isfinite(msg.range_min) else 0.0,
+            range_max=float(msg.range_max) if msg.range_max > msg.range_min else math.inf,
+            intensities=np.asarray(msg.intensities, dtype=float),
+            stamp_ns=int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec),
+            frame_id=str(msg.header.frame_id),
+        )
+    except InputError as err:
+        raise InputError(f"message {index}: {err.problem}", path=path) from None
+
+
+def write_laserscans(
+    path: str | Path,
+    scans: Iterable[Scan],
+    *,
+    kind: BagKind = "rosbag1",
+    topic: str = "/scan",
+) -> int:
+    """Write scans as ``LaserScan`` messages; returns the number written.
+
+    ``kind`` is ``"rosbag1"`` (a ``.bag`` file), ``"sqlite3"`` or ``"mcap"``
+    (ROS 2 bag folders). Beams must be evenly spaced, as a LaserScan has one
+    ``angle_increment``. Each scan's ``stamp_ns`` is its bag time.
+    """
+    from rosbags.typesys import Stores, get_typestore
+
+    p = Path(path)
+    if p.exists():
+        raise InputError("exists already; not overwriting a bag", path=p)
+    ros1 = kind == "rosbag1"
+    store = get_typestore(Stores.ROS1_NOETIC if ros1 else Stores.ROS2_HUMBLE)
+    LaserScan = store.types[LASERSCAN]
+    Header = store.types["std_msgs/msg/Header"]
+    Time = store.types["builtin_interfaces/msg/Time"]
+    if ros1:
+        from rosbags.rosbag1 import Writer as Writer1
+
+        writer: Any = Writer1(p)
+    else:
+        from rosbags.rosbag2 import StoragePlugin
+        from rosbags.rosbag2 import Writer as Writer2
+
+        plugin = StoragePlugin.MCAP if kind == "mcap" else StoragePlugin.SQLITE3
+        writer = Writer2(p, version=Writer2.VERSION_LATEST, storage_plugin=plugin)
+    n = 0
+    with writer:
+        conn = writer.add_connection(topic, LASERSCAN, typestore=store)
+        for seq, scan in enumerate(scans):
+            if not scan.is_uniform:
+                raise InputError(f"scan {seq}: beams are not evenly spaced; a LaserScan needs that")
+            inc = scan.angle_increment if len(scan) > 1 else 0.0
+            sec, nsec = divmod(int(scan.stamp_ns), 1_000_000_000)
+            header_kw: dict[str, Any] = {
+                "stamp": Time(sec=sec, nanosec=nsec),
+                "frame_id": scan.frame_id,
+            }
+            if ros1:
+                header_kw["seq"] = seq
+            msg = LaserScan(
+                header=Header(**header_kw),
+                angle_min=float(scan.angles_rad[0]),
+                angle_max=float(scan.angles_rad[-1]),
+                angle_increment=float(inc),
+                time_increment=0.0,
+                scan_time=0.0,
+                range_min=float(scan.range_min_m),
+                range_max=float(scan.range_max_m),
+                ranges=np.asarray(scan.ranges_m, dtype=np.float32),
+                intensities=(
+                    np.asarray(scan.intensities, dtype=np.float32)
+                    if scan.intensities is not None
+                    else np.zeros(0, dtype=np.float32)
+                ),
+            )
+            raw = (
+                store.serialize_ros1(msg, LASERSCAN)
+                if ros1
+                else store.serialize_cdr(msg, LASERSCAN)
+            )
+            writer.write(conn, int(scan.stamp_ns), bytes(raw))
+            n += 1
+    return n

@@ -1,0 +1,48 @@
+"""Simulation: tunnels, beacons, clutter and scanners, the fixture factory of MAST.
+
+Ray casting is vectorised over beams; every beam keeps what it really hit,
+so tests and benchmarks know which panels a scan saw.
+"""
+
+from .design import BeaconDesign, paper_design, polyline_design, random_design
+from .scanner import SCANNERS, ScannerModel, SimulatedScan, scanner_model, simulate_scan
+from .scenarios import (
+    SCENARIOS,
+    Scene,
+    Shot,
+    build_scenario,
+    paper_scenario,
+    paper_scene,
+    random_scenario,
+    random_scene,
+    write_scenario,
+)
+from .tunnel import Roughness, Tunnel, roughen
+from .world import Surface, World, WorldBuilder
+
+__all__ = [
+    "SCANNERS",
+    "SCENARIOS",
+    "BeaconDesign",
+    "Roughness",
+    "ScannerModel",
+    "Scene",
+    "Shot",
+    "SimulatedScan",
+    "Surface",
+    "Tunnel",
+    "World",
+    "WorldBuilder",
+    "build_scenario",
+    "paper_design",
+    "paper_scenario",
+    "paper_scene",
+    "polyline_design",
+    "random_design",
+    "random_scenario",
+    "random_scene",
+    "roughen",
+    "scanner_model",
+    "simulate_scan",
+    "write_scenario",
+]

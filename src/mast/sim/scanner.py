@@ -1,0 +1,240 @@
+"""Scanner models and the simulation of one scan from a known pose."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..errors import InputError
+from ..pose import Pose2D
+from ..scan import Scan
+from .world import Surface, World
+
+__all__ = ["SCANNERS", "ScannerModel", "SimulatedScan", "scanner_model", "simulate_scan"]
+
+
+@dataclass(frozen=True, slots=True)
+class ScannerModel:
+    """A 2D scanner: beam layout, range limits and error model.
+
+    Attributes
+    ----------
+    name : str
+    fov_deg, resolution_deg : float
+        Field of view, centred on +x, and beam spacing, degrees.
+    range_min_m, range_max_m : float
+        Returns outside these limits are reported as no return (``nan``).
+    range_sigma_m : float
+        Standard deviation of Gaussian range noise.
+    range_bias_m : float
+        Constant added to every range (a calibration error).
+    angle_sigma_rad : float
+        Standard deviation of the true beam direction about its nominal angle.
+    dropout_prob : float
+        Probability that a beam returns nothing.
+    mixed_pixel_prob : float
+        Probability that a beam straddling a range jump returns a range in
+        between the two surfaces (a mixed pixel).
+    beam_divergence_rad : float
+        Full width of the beam footprint used to detect such straddles.
+    """
+
+    name: str
+    fov_deg: float
+    resolution_deg: float
+    range_min_m: float = 0.05
+    range_max_m: float = 30.0
+    range_sigma_m: float = 0.0
+    range_bias_m: float = 0.0
+    angle_sigma_rad: float = 0.0
+    dropout_prob: float = 0.0
+    mixed_pixel_prob: float = 0.0
+    beam_divergence_rad: float = math.radians(0.25)
+
+    def __post_init__(self) -> None:
+        if not 0 < self.fov_deg <= 360:
+            raise InputError(
+                f"scanner {self.name!r}: field of view {self.fov_deg}° not in (0, 360]"
+            )
+        if not 0 < self.resolution_deg <= self.fov_deg:
+            raise InputError(f"scanner {self.name!r}: resolution {self.resolution_deg}° is invalid")
+        if not 0 <= self.range_min_m < self.range_max_m:
+            raise InputError(f"scanner {self.name!r}: range limits are invalid")
+        for attr in ("range_sigma_m", "angle_sigma_rad", "beam_divergence_rad"):
+            if getattr(self, attr) < 0:
+                raise InputError(f"scanner {self.name!r}: {attr} must not be negative")
+        for attr in ("dropout_prob", "mixed_pixel_prob"):
+            if not 0 <= getattr(self, attr) <= 1:
+                raise InputError(f"scanner {self.name!r}: {attr} must be in [0, 1]")
+
+    @property
+    def beam_count(self) -> int:
+        if self.fov_deg >= 360 - 1e-9:
+            return round(360.0 / self.resolution_deg)
+        return round(self.fov_deg / self.resolution_deg) + 1
+
+    @property
+    def angle_min_rad(self) -> float:
+        if self.fov_deg >= 360 - 1e-9:
+            return -math.pi
+        return -math.radians(self.resolution_deg) * (self.beam_count - 1) / 2
+
+    def beam_angles(self) -> NDArray[np.float64]:
+        """Nominal beam angles, radians, counter-clockwise from +x, increasing."""
+        step = math.radians(self.resolution_deg)
+        return np.asarray(self.angle_min_rad + step * np.arange(self.beam_count), dtype=np.float64)
+
+    def noise_free(self) -> ScannerModel:
+        return replace(
+            self,
+            name=self.name + "-exact",
+            range_sigma_m=0.0,
+            range_bias_m=0.0,
+            angle_sigma_rad=0.0,
+            dropout_prob=0.0,
+            mixed_pixel_prob=0.0,
+        )
+
+
+#: Named scanner models. Range noise figures are typical of the classes named.
+SCANNERS: dict[str, ScannerModel] = {
+    m.name: m
+    for m in (
+        ScannerModel("ideal-270-0.25", 270.0, 0.25, range_max_m=30.0),
+        ScannerModel("ideal-270-0.5", 270.0, 0.5, range_max_m=30.0),
+        ScannerModel("lms1xx-0.5", 270.0, 0.5, range_max_m=20.0, range_sigma_m=0.012),
+        ScannerModel("lms1xx-0.25", 270.0, 0.25, range_max_m=20.0, range_sigma_m=0.012),
+        ScannerModel("lms2xx-0.1667", 190.0, 1.0 / 6.0, range_max_m=30.0, range_sigma_m=0.008),
+        ScannerModel("spinning-360-0.2", 360.0, 0.2, range_max_m=40.0, range_sigma_m=0.020),
+        ScannerModel(
+            "urg04lx", 240.0, 360.0 / 1024.0, range_min_m=0.02, range_max_m=5.6, range_sigma_m=0.01
+        ),
+    )
+}
+
+
+def scanner_model(name: str) -> ScannerModel:
+    """Look up a named scanner model; the error lists the known names."""
+    try:
+        return SCANNERS[name]
+    except KeyError:
+        raise InputError(f"unknown scanner {name!r}; known: {', '.join(SCANNERS)}") from None
+
+
+@dataclass(frozen=True, eq=False)
+class SimulatedScan:
+    """A simulated scan with what each beam really hit.
+
+    Attributes
+    ----------
+    scan : Scan
+        What the scanner reports.
+    pose : Pose2D
+        The true pose it was taken from.
+    scanner : ScannerModel
+    true_ranges_m : ndarray, shape (n,)
+        Noise-free range along the nominal beam (``inf`` for no surface).
+    surface_index : ndarray of int, shape (n,)
+        Index into ``surfaces`` of the surface each beam hit (-1: none or dropped).
+    surfaces : tuple of Surface
+    """
+
+    scan: Scan
+    pose: Pose2D
+    scanner: ScannerModel
+    true_ranges_m: NDArray[np.float64]
+    surface_index: NDArray[np.intp]
+    surfaces: tuple[Surface, ...]
+    _panel_cache: dict[tuple[str, int], int] = field(default_factory=dict, repr=False)
+
+    def beacon_mask(self) -> NDArray[np.bool_]:
+        """Beams with a valid return from a beacon panel."""
+        kinds = np.array([s.kind == "beacon" for s in self.surfaces] + [False])
+        return kinds[self.surface_index] & self.scan.valid
+
+    def panel_hits(self) -> dict[tuple[str, int], int]:
+        """Number of valid returns on each (beacon id, panel) that was hit."""
+        if not self._panel_cache:
+            ok = self.scan.valid & (self.surface_index >= 0)
+            idx, counts = np.unique(self.surface_index[ok], return_counts=True)
+            for i, c in zip(idx, counts, strict=True):
+                s = self.surfaces[int(i)]
+                if s.kind == "beacon":
+                    self._panel_cache[(s.beacon, s.panel)] = int(c)
+        return dict(self._panel_cache)
+
+    def panels_seen(self, *, min_points: int = 5) -> dict[str, list[int]]:
+        """Panels with at least ``min_points`` returns, per beacon id."""
+        out: dict[str, list[int]] = {}
+        for (b, p), c in sorted(self.panel_hits().items()):
+            if c >= min_points:
+                out.setdefault(b, []).append(p)
+        return out
+
+
+def simulate_scan(
+    world: World,
+    pose: Pose2D,
+    scanner: ScannerModel,
+    *,
+    rng: np.random.Generator | None = None,
+    stamp_ns: int = 0,
+    frame_id: str = "laser",
+) -> SimulatedScan:
+    """Ray-cast one scan from ``pose`` (vectorised over beams).
+
+    A beam of nominal angle ``phi`` travels along mine bearing ``A - phi``
+    (DESIGN.md), perturbed by ``angle_sigma_rad``; its range gets bias and
+    Gaussian noise; returns outside the range limits, dropped beams and
+    beams that hit nothing are ``nan``.
+    """
+    if rng is None:
+        rng = np.random.default_rng(0)
+    phi = scanner.beam_angles()
+    n = phi.size
+    true_dir = phi
+    if scanner.angle_sigma_rad > 0:
+        true_dir = phi + rng.normal(0.0, scanner.angle_sigma_rad, n)
+
+    def cast(angles: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.intp]]:
+        bearing = pose.azimuth - angles
+        dirs = np.stack([np.sin(bearing), np.cos(bearing)], axis=1)
+        return world.raycast(pose.position, dirs)
+
+    true_r, surf = cast(true_dir)
+    r = true_r.copy()
+    if scanner.mixed_pixel_prob > 0:
+        half = scanner.beam_divergence_rad / 2
+        r_lo, s_lo = cast(true_dir - half)
+        r_hi, s_hi = cast(true_dir + half)
+        # A footprint straddles a jump when its two halves hit different surfaces at
+        # clearly different ranges (an oblique wall alone is no jump).
+        both = np.isfinite(r_lo) & np.isfinite(r_hi) & (s_lo != s_hi)
+        jump = both & (np.abs(r_lo - r_hi) > 0.1 + 3 * scanner.range_sigma_m)
+        mixed = jump & (rng.random(n) < scanner.mixed_pixel_prob)
+        w = rng.random(n)
+        r = np.where(mixed, w * r_lo + (1 - w) * r_hi, r)
+        surf = np.where(mixed, -1, surf)
+    if scanner.range_sigma_m > 0:
+        r = r + rng.normal(0.0, scanner.range_sigma_m, n)
+    r = r + scanner.range_bias_m
+    lost = ~np.isfinite(r) | (r < scanner.range_min_m) | (r > scanner.range_max_m)
+    if scanner.dropout_prob > 0:
+        lost |= rng.random(n) < scanner.dropout_prob
+    r = np.where(lost, np.nan, r)
+    surf = np.where(lost, -1, surf)
+    scan = Scan.from_laserscan(
+        angle_min=scanner.angle_min_rad,
+        angle_increment=math.radians(scanner.resolution_deg),
+        ranges=r,
+        range_min=scanner.range_min_m,
+        range_max=scanner.range_max_m,
+        stamp_ns=stamp_ns,
+        frame_id=frame_id,
+    )
+    # Truth is along the nominal beam (what a noise-free scanner would report).
+    nominal_r = true_r if scanner.angle_sigma_rad == 0 else cast(phi)[0]
+    return SimulatedScan(scan, pose, scanner, nominal_r, surf, world.surfaces)
