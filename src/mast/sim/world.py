@@ -7,6 +7,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from ..geometry import first_hits
+
 __all__ = ["Surface", "World", "WorldBuilder"]
 
 #: Surface kinds the simulator labels every hit with.
@@ -70,27 +72,9 @@ class World:
         n = d.shape[0]
         best = np.full(n, np.inf)
         which = np.full(n, -1, dtype=np.intp)
-        m = self.seg_a.shape[0]
-        if m:
-            e = self.seg_b - self.seg_a
-            w = self.seg_a - o
-            # Solve o + t d = a + s e:  t = (w x e) / (d x e),  s = (w x d) / (d x e).
-            w_x_e = w[:, 0] * e[:, 1] - w[:, 1] * e[:, 0]
-            step = max(1, chunk_elements // m)
-            for lo in range(0, n, step):
-                dd = d[lo : lo + step]
-                den = dd[:, :1] * e[None, :, 1] - dd[:, 1:] * e[None, :, 0]
-                w_x_d = w[None, :, 0] * dd[:, 1:] - w[None, :, 1] * dd[:, :1]
-                with np.errstate(divide="ignore", invalid="ignore"):
-                    t = w_x_e[None, :] / den
-                    s = w_x_d / den
-                ok = (den != 0) & (t > 1e-12) & (s >= 0.0) & (s <= 1.0)
-                t = np.where(ok, t, np.inf)
-                j = np.argmin(t, axis=1)
-                tj = t[np.arange(t.shape[0]), j]
-                hit = tj < best[lo : lo + step]
-                best[lo : lo + step][hit] = tj[hit]
-                which[lo : lo + step][hit] = self.seg_surface[j[hit]]
+        if self.seg_a.shape[0]:
+            best, j = first_hits(o, d, self.seg_a, self.seg_b, chunk_elements=chunk_elements)
+            which = np.where(j >= 0, self.seg_surface[np.maximum(j, 0)], -1)
         if self.circ_c.shape[0]:
             w = self.circ_c - o  # (k, 2)
             proj = d @ w.T  # (n, k): distance along the ray to the closest approach

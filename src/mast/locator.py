@@ -1,0 +1,370 @@
+"""The MAST locator: one scan and a beacon survey in, a fix (or a reasoned no-fix) out.
+
+Stages, as in the paper's "MAST Algorithm":
+
+1. :func:`mast.segmentation.segment_scan` — PCA line segmentation;
+2. :func:`mast.identification.identify_panels` — Table 1 panel identification;
+3. :func:`mast.matching.pose_hypotheses` — template matching between beacons;
+4. :func:`mast.alignment.similarity_transform` and
+   :func:`mast.alignment.icp_point_to_line` — alignment and verification;
+5. :func:`mast.adjustment.adjust_pose` — least-squares adjustment and statistics.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .adjustment import MIN_INCIDENCE_COS, Adjustment, adjust_pose
+from .alignment import IcpResult, Similarity, icp_point_to_line
+from .beacon import Survey
+from .geometry import PanelSet, first_hits
+from .identification import IdentificationConfig, PanelIdentification, identify_panels
+from .matching import Hypothesis, MatchingConfig, pose_hypotheses
+from .pose import Pose2D
+from .scan import Scan
+from .segmentation import Segmentation, SegmentationConfig, segment_scan
+
+__all__ = ["NO_FIX_REASONS", "Fix", "LocatorConfig", "Verified", "locate"]
+
+#: Every reason a scan can get no fix, with what it means.
+NO_FIX_REASONS: dict[str, str] = {
+    "no_beacon": "no corner of the scan matches any surveyed beacon's panels",
+    "one_beacon": "beacon panels were identified on fewer than two beacons",
+    "inconsistent": "the identified beacons do not agree with their surveyed geometry",
+    "ambiguous": "two different poses explain the scan equally well",
+    "degenerate_geometry": "the panels seen do not determine position and azimuth",
+}
+
+
+@dataclass(frozen=True, slots=True)
+class LocatorConfig:
+    """Everything the locator can be told; defaults suit a typical 2D scanner.
+
+    Attributes
+    ----------
+    range_sigma_m : float
+        A-priori standard deviation of one range.
+    angle_sigma_rad : float
+        A-priori standard deviation of one beam angle.
+    min_beacons : int
+        Beacons that must support a fix (each with two panels seen).
+    min_panel_points : int
+        Returns a panel needs to count as seen.
+    gate_sigmas : float
+        Returns farther than this many standard deviations from their panel
+        are not used.
+    survey_sigma_m : float
+        Standard deviation of surveyed edge coordinates (widens the gate).
+    coarse_gates_m : tuple of float
+        Association gates while the pose is still rough (ICP stages).
+    max_violation_fraction : float
+        Fraction of the beams that should hit a surveyed panel but pass
+        through it, beyond which a hypothesis is refused.
+    ambiguity_ratio : float
+        A second pose with this fraction of the best one's support makes the
+        scan ambiguous.
+    """
+
+    range_sigma_m: float = 0.01
+    angle_sigma_rad: float = 0.0
+    min_beacons: int = 2
+    min_panel_points: int = 3
+    gate_sigmas: float = 4.0
+    survey_sigma_m: float = 0.003
+    coarse_gates_m: tuple[float, ...] = (0.15, 0.05)
+    max_violation_fraction: float = 0.1
+    ambiguity_ratio: float = 0.8
+    segmentation: SegmentationConfig = field(default_factory=SegmentationConfig)
+    identification: IdentificationConfig = field(default_factory=IdentificationConfig)
+    matching: MatchingConfig = field(default_factory=MatchingConfig)
+
+    @property
+    def final_gate_m(self) -> float:
+        return self.gate_sigmas * math.hypot(self.range_sigma_m, self.survey_sigma_m)
+
+
+@dataclass(frozen=True, eq=False)
+class Verified:
+    """A hypothesis after ICP and its checks against the whole survey."""
+
+    hypothesis: Hypothesis
+    icp: IcpResult
+    panel_points: dict[tuple[str, int], int]
+    supported: tuple[str, ...]
+    violations: int
+    predicted_hits: int
+
+    @property
+    def score(self) -> tuple[int, int, float]:
+        return (len(self.supported), self.icp.inliers, -self.icp.rms_m)
+
+
+@dataclass(frozen=True, eq=False)
+class Fix:
+    """What the locator concluded about one scan.
+
+    ``status`` is ``"fix"`` with ``pose`` and ``adjustment``, or ``"no_fix"``
+    with ``reason`` (a key of :data:`NO_FIX_REASONS`) and ``detail``.
+    The remaining fields keep what each stage found, for people debugging.
+    """
+
+    status: str
+    pose: Pose2D | None
+    adjustment: Adjustment | None
+    beacons: tuple[str, ...]
+    panels: dict[str, list[int]]
+    points_used: int
+    reason: str | None
+    detail: str
+    segmentation: Segmentation
+    identification: PanelIdentification
+    hypotheses: tuple[Hypothesis, ...]
+    verified: tuple[Verified, ...]
+    chosen: Verified | None
+    observations: NDArray[np.intp]
+    """Beam indices used in the adjustment."""
+    observation_panels: NDArray[np.intp]
+    """Panel (index into the survey's PanelSet) of each observation."""
+    elapsed_s: float
+    config: LocatorConfig
+
+    @property
+    def ok(self) -> bool:
+        return self.status == "fix"
+
+    @property
+    def similarity(self) -> Similarity | None:
+        return None if self.chosen is None else self.chosen.hypothesis.similarity
+
+    @property
+    def icp_iterations(self) -> int:
+        return 0 if self.chosen is None else self.chosen.icp.iterations
+
+
+def _support(
+    icp: IcpResult, panels: PanelSet, min_points: int
+) -> tuple[dict[tuple[str, int], int], tuple[str, ...]]:
+    counts: dict[tuple[str, int], int] = {}
+    idx, n = np.unique(icp.panel[icp.panel >= 0], return_counts=True)
+    for k, c in zip(idx, n, strict=True):
+        counts[(panels.ids[panels.beacon[k]], int(panels.panel[k]))] = int(c)
+    per_beacon: dict[str, int] = {}
+    for (b, _p), c in counts.items():
+        if c >= min_points:
+            per_beacon[b] = per_beacon.get(b, 0) + 1
+    supported = tuple(sorted(b for b, k in per_beacon.items() if k >= 2))
+    return counts, supported
+
+
+def _free_space_violations(
+    scan: Scan, pose: Pose2D, panels: PanelSet, gate_m: float, margin_m: float = 0.02
+) -> tuple[int, int]:
+    """Beams that should hit a surveyed panel but were measured beyond it.
+
+    A beam measured farther than a panel it must cross (by more than the
+    gate, and not near a panel end) went through where a beacon should be:
+    evidence against the pose. Shorter returns are occlusion, and allowed.
+    """
+    ok = scan.valid
+    bearing = pose.azimuth - scan.angles_rad[ok]
+    dirs = np.stack([np.sin(bearing), np.cos(bearing)], axis=1)
+    # shrink each panel by the margin so grazing its ends does not count
+    a = panels.a + margin_m * panels.direction
+    b = panels.b - margin_m * panels.direction
+    keep = panels.length > 2 * margin_m
+    t, j = first_hits(pose.position, dirs, a[keep], b[keep])
+    hit = np.isfinite(t) & (t <= scan.range_max_m)
+    beyond = hit & (scan.ranges_m[ok] > t + gate_m)
+    return int(np.count_nonzero(beyond)), int(np.count_nonzero(hit))
+
+
+def _no_fix(reason: str, detail: str, **kw: object) -> dict[str, object]:
+    return {"status": "no_fix", "reason": reason, "detail": detail, **kw}
+
+
+def locate(scan: Scan, survey: Survey, *, config: LocatorConfig | None = None) -> Fix:
+    """Fix the scanner's pose from one scan of surveyed beacons.
+
+    Parameters
+    ----------
+    scan : Scan
+        One horizontal scan, scanner frame.
+    survey : Survey
+        The surveyed beacons.
+    config : LocatorConfig, optional
+
+    Returns
+    -------
+    Fix
+        ``status == "fix"`` with the adjusted pose and its statistics, or
+        ``"no_fix"`` with a reason from :data:`NO_FIX_REASONS`. The locator
+        never raises for what a scan contains.
+    """
+    cfg = config or LocatorConfig()
+    t0 = time.perf_counter()
+    seg_cfg = cfg.segmentation
+    segmentation = segment_scan(scan, seg_cfg)
+    ident = identify_panels(segmentation, survey, cfg.identification)
+    panels = PanelSet.from_survey(survey)
+    common: dict[str, object] = {
+        "segmentation": segmentation,
+        "identification": ident,
+        "config": cfg,
+    }
+
+    def finish(**kw: object) -> Fix:
+        fields: dict[str, object] = {
+            "status": "fix",
+            "pose": None,
+            "adjustment": None,
+            "beacons": (),
+            "panels": {},
+            "points_used": 0,
+            "reason": None,
+            "detail": "",
+            "hypotheses": (),
+            "verified": (),
+            "chosen": None,
+            "observations": np.zeros(0, dtype=np.intp),
+            "observation_panels": np.zeros(0, dtype=np.intp),
+            **common,
+            **kw,
+        }
+        fields["elapsed_s"] = time.perf_counter() - t0
+        return Fix(**fields)  # type: ignore[arg-type]
+
+    seen = sorted({n.beacon for n in ident.nodes})
+    if not seen:
+        return finish(**_no_fix("no_beacon", f"{len(segmentation.segments)} segments, no beacon corner identified"))
+    if len(seen) < cfg.min_beacons:
+        return finish(**_no_fix("one_beacon", f"only beacon {', '.join(seen)} identified"))
+    hyps = pose_hypotheses(ident, segmentation, survey, cfg.matching)
+    if not hyps:
+        return finish(
+            **_no_fix(
+                "inconsistent",
+                f"corners matching beacons {', '.join(seen)} do not agree with the surveyed geometry",
+            )
+        )
+    _, pts = scan.points()
+    gates = (*cfg.coarse_gates_m, cfg.final_gate_m)
+    verified: list[Verified] = []
+    for h in hyps:
+        icp = icp_point_to_line(pts, h.similarity.pose(), panels, gates_m=gates)
+        counts, supported = _support(icp, panels, cfg.min_panel_points)
+        if not set(h.beacons) <= set(supported):
+            continue
+        viol, hits = _free_space_violations(scan, icp.pose, panels, cfg.final_gate_m)
+        if viol > max(3, cfg.max_violation_fraction * hits):
+            continue
+        verified.append(Verified(h, icp, counts, supported, viol, hits))
+    if not verified:
+        return finish(
+            hypotheses=tuple(hyps),
+            **_no_fix("inconsistent", f"no pose from beacons {', '.join(seen)} is confirmed by the scan"),
+        )
+    verified.sort(key=lambda v: v.score, reverse=True)
+    best = verified[0]
+    if len(best.supported) < cfg.min_beacons:
+        return finish(
+            hypotheses=tuple(hyps),
+            verified=tuple(verified),
+            chosen=best,
+            **_no_fix("one_beacon", f"only beacon {', '.join(best.supported)} confirmed with two panels"),
+        )
+    for other in verified[1:]:
+        d = math.hypot(other.icp.pose.easting - best.icp.pose.easting, other.icp.pose.northing - best.icp.pose.northing)
+        da = abs(math.remainder(other.icp.pose.azimuth - best.icp.pose.azimuth, 2 * math.pi))
+        if d < 0.1 and da < math.radians(1.0):
+            continue  # the same pose reached from another pair of nodes
+        if (
+            len(other.supported) >= len(best.supported)
+            and other.icp.inliers >= cfg.ambiguity_ratio * best.icp.inliers
+        ):
+            return finish(
+                hypotheses=tuple(hyps),
+                verified=tuple(verified),
+                chosen=best,
+                **_no_fix(
+                    "ambiguous",
+                    f"poses {best.icp.pose} ({', '.join(best.supported)}) and "
+                    f"{other.icp.pose} ({', '.join(other.supported)}) fit equally well",
+                ),
+            )
+    # Adjustment on the returns of the supporting beacons; re-associate once it moves.
+    keep = np.flatnonzero(np.isin(panels.beacon, [panels.ids.index(b) for b in best.supported]))
+    valid_beams = np.flatnonzero(scan.valid)
+    pose = best.icp.pose
+    adj: Adjustment | None = None
+    used = np.zeros(0, dtype=np.intp)
+    used_panels = np.zeros(0, dtype=np.intp)
+    for _ in range(4):
+        assoc, _d = panels.associate(pose.scanner_to_mine(pts), cfg.final_gate_m, subset=keep)
+        sel = assoc >= 0
+        beams = valid_beams[sel]
+        pk = assoc[sel]
+        nrm = panels.normal[pk]
+        bearing = pose.azimuth - scan.angles_rad[beams]
+        nu = np.abs(nrm[:, 0] * np.sin(bearing) + nrm[:, 1] * np.cos(bearing))
+        good = nu > MIN_INCIDENCE_COS
+        beams, pk, nrm = beams[good], pk[good], nrm[good]
+        if np.array_equal(beams, used) and adj is not None:
+            break
+        if beams.size < 4:
+            return finish(
+                hypotheses=tuple(hyps),
+                verified=tuple(verified),
+                chosen=best,
+                **_no_fix("degenerate_geometry", f"only {beams.size} returns on the panels"),
+            )
+        offsets = np.einsum("ij,ij->i", nrm, panels.a[pk])
+        try:
+            adj = adjust_pose(
+                pose,
+                scan.angles_rad[beams],
+                scan.ranges_m[beams],
+                nrm,
+                offsets,
+                range_sigma_m=cfg.range_sigma_m,
+                angle_sigma_rad=cfg.angle_sigma_rad,
+            )
+        except np.linalg.LinAlgError:
+            adj = None
+        if adj is None or not np.all(np.isfinite(adj.cofactor)) or np.linalg.cond(
+            _scaled(adj.cofactor)
+        ) > 1e10:
+            return finish(
+                hypotheses=tuple(hyps),
+                verified=tuple(verified),
+                chosen=best,
+                **_no_fix("degenerate_geometry", "the panels seen do not constrain all of E, N and azimuth"),
+            )
+        used, used_panels = beams, pk
+        pose = adj.pose
+    assert adj is not None
+    panels_used: dict[str, list[int]] = {}
+    for k in np.unique(used_panels):
+        panels_used.setdefault(panels.ids[panels.beacon[k]], []).append(int(panels.panel[k]))
+    return finish(
+        pose=adj.pose,
+        adjustment=adj,
+        beacons=tuple(sorted(panels_used)),
+        panels=panels_used,
+        points_used=int(used.size),
+        hypotheses=tuple(hyps),
+        verified=tuple(verified),
+        chosen=best,
+        observations=used,
+        observation_panels=used_panels,
+    )
+
+
+def _scaled(q: NDArray[np.float64]) -> NDArray[np.float64]:
+    d = np.sqrt(np.abs(np.diag(q)))
+    d[d == 0] = 1.0
+    return np.asarray(q / np.outer(d, d))
