@@ -65,6 +65,9 @@ class LocatorConfig:
     max_violation_fraction : float
         Fraction of the beams that should hit a surveyed panel but pass
         through it, beyond which a hypothesis is refused.
+    min_coverage : float
+        Fraction of the beams that should land on a beacon (at the pose) that
+        must do so for the beacon to confirm the pose.
     ambiguity_ratio : float
         A second pose with this fraction of the best one's support makes the
         scan ambiguous.
@@ -78,6 +81,7 @@ class LocatorConfig:
     survey_sigma_m: float = 0.003
     coarse_gates_m: tuple[float, ...] = (0.15, 0.05)
     max_violation_fraction: float = 0.1
+    min_coverage: float = 0.5
     ambiguity_ratio: float = 0.8
     segmentation: SegmentationConfig = field(default_factory=SegmentationConfig)
     identification: IdentificationConfig = field(default_factory=IdentificationConfig)
@@ -147,18 +151,68 @@ class Fix:
 
 
 def _support(
-    icp: IcpResult, panels: PanelSet, min_points: int
+    icp: IcpResult,
+    panels: PanelSet,
+    survey: Survey,
+    ident: PanelIdentification,
+    noise_m: float,
+    predicted: dict[str, int],
+    cfg: LocatorConfig,
 ) -> tuple[dict[tuple[str, int], int], tuple[str, ...]]:
+    """Beacons that confirm a pose, and the returns on each panel.
+
+    A beacon confirms the pose when, at that pose, (1) two of its panels
+    carry at least ``min_panel_points`` returns, (2) a corner of the scan
+    identified as one of its edges lands on that surveyed edge, and (3) at
+    least ``min_coverage`` of the beams that should hit it do.
+    """
     counts: dict[tuple[str, int], int] = {}
     idx, n = np.unique(icp.panel[icp.panel >= 0], return_counts=True)
     for k, c in zip(idx, n, strict=True):
         counts[(panels.ids[panels.beacon[k]], int(panels.panel[k]))] = int(c)
     per_beacon: dict[str, int] = {}
+    on_beacon: dict[str, int] = {}
     for (b, _p), c in counts.items():
-        if c >= min_points:
+        on_beacon[b] = on_beacon.get(b, 0) + c
+        if c >= cfg.min_panel_points:
             per_beacon[b] = per_beacon.get(b, 0) + 1
-    supported = tuple(sorted(b for b, k in per_beacon.items() if k >= 2))
+    node_ok: set[str] = set()
+    for node in ident.nodes:
+        if node.beacon in node_ok or per_beacon.get(node.beacon, 0) < 2:
+            continue
+        mapped = icp.pose.scanner_to_mine(node.node_scanner[None, :])[0]
+        edge = survey[node.beacon].edges[node.edge - 1]
+        sig = noise_m * (1.0 + 1.0 / max(abs(math.sin(node.tests["deflection_rad"])), 1e-3))
+        if math.dist(mapped, edge) <= cfg.gate_sigmas * math.hypot(sig, cfg.survey_sigma_m, cfg.range_sigma_m):
+            node_ok.add(node.beacon)
+    supported = tuple(
+        sorted(
+            b
+            for b in node_ok
+            if on_beacon.get(b, 0) >= cfg.min_coverage * predicted.get(b, 0)
+        )
+    )
     return counts, supported
+
+
+def _predicted_hits(scan: Scan, pose: Pose2D, panels: PanelSet) -> dict[str, int]:
+    """How many valid beams should land on each beacon's panels at this pose.
+
+    Beams within the incidence limit of a panel are not counted: the scan
+    may well miss them.
+    """
+    ok = scan.valid
+    bearing = pose.azimuth - scan.angles_rad[ok]
+    dirs = np.stack([np.sin(bearing), np.cos(bearing)], axis=1)
+    t, j = first_hits(pose.position, dirs, panels.a, panels.b)
+    hit = (j >= 0) & (t <= scan.range_max_m)
+    nu = np.abs(np.einsum("ij,ij->i", panels.normal[np.maximum(j, 0)], dirs))
+    hit &= nu > math.sin(math.radians(10.0))
+    out: dict[str, int] = {}
+    for k in j[hit]:
+        b = panels.ids[panels.beacon[k]]
+        out[b] = out.get(b, 0) + 1
+    return out
 
 
 def _free_space_violations(
@@ -256,7 +310,8 @@ def locate(scan: Scan, survey: Survey, *, config: LocatorConfig | None = None) -
     verified: list[Verified] = []
     for h in hyps:
         icp = icp_point_to_line(pts, h.similarity.pose(), panels, gates_m=gates)
-        counts, supported = _support(icp, panels, cfg.min_panel_points)
+        predicted = _predicted_hits(scan, icp.pose, panels)
+        counts, supported = _support(icp, panels, survey, ident, segmentation.noise_m, predicted, cfg)
         if not set(h.beacons) <= set(supported):
             continue
         viol, hits = _free_space_violations(scan, icp.pose, panels, cfg.final_gate_m)
@@ -303,7 +358,7 @@ def locate(scan: Scan, survey: Survey, *, config: LocatorConfig | None = None) -
     adj: Adjustment | None = None
     used = np.zeros(0, dtype=np.intp)
     used_panels = np.zeros(0, dtype=np.intp)
-    for _ in range(4):
+    for _ in range(8):
         assoc, _d = panels.associate(pose.scanner_to_mine(pts), cfg.final_gate_m, subset=keep)
         sel = assoc >= 0
         beams = valid_beams[sel]
@@ -313,6 +368,11 @@ def locate(scan: Scan, survey: Survey, *, config: LocatorConfig | None = None) -
         nu = np.abs(nrm[:, 0] * np.sin(bearing) + nrm[:, 1] * np.cos(bearing))
         good = nu > MIN_INCIDENCE_COS
         beams, pk, nrm = beams[good], pk[good], nrm[good]
+        if adj is not None:
+            # Residuals far outside the spread of the others (robust scale, so the
+            # test tightens on clean data) are not ranges to the panel.
+            good = _robust_inliers(adj, pose, scan, beams, nrm, panels.a[pk], cfg)
+            beams, pk, nrm = beams[good], pk[good], nrm[good]
         if np.array_equal(beams, used) and adj is not None:
             break
         if beams.size < 4:
@@ -362,6 +422,32 @@ def locate(scan: Scan, survey: Survey, *, config: LocatorConfig | None = None) -
         observations=used,
         observation_panels=used_panels,
     )
+
+
+def _robust_inliers(
+    adj: Adjustment,
+    pose: Pose2D,
+    scan: Scan,
+    beams: NDArray[np.intp],
+    normals: NDArray[np.float64],
+    points_on: NDArray[np.float64],
+    cfg: LocatorConfig,
+) -> NDArray[np.bool_]:
+    """Observations within ``gate_sigmas`` robust standard deviations of the fit.
+
+    The scale is 1.4826 times the median absolute standardised residual of the
+    previous adjustment, never above 1 (the a-priori precision) and never
+    below a numerical floor.
+    """
+    from .adjustment import range_model
+
+    std = adj.residuals_m / adj.sigmas_m
+    scale = min(1.0, 1.4826 * float(np.median(np.abs(std)))) if std.size else 1.0
+    offsets = np.einsum("ij,ij->i", normals, points_on)
+    rho, _jac, d_phi = range_model(pose, scan.angles_rad[beams], normals, offsets)
+    sig = np.sqrt(cfg.range_sigma_m**2 + (d_phi * cfg.angle_sigma_rad) ** 2)
+    floor = 1e-7 * (1.0 + np.abs(rho))
+    return np.asarray(np.abs(scan.ranges_m[beams] - rho) <= cfg.gate_sigmas * np.maximum(scale * sig, floor))
 
 
 def _scaled(q: NDArray[np.float64]) -> NDArray[np.float64]:

@@ -2,10 +2,10 @@
 
 Runs of consecutive returns are cut where the gap between neighbours is more
 than the beam spacing can explain (the adaptive breakpoint detector of Borges
-and Aldon, 2004); each run is split recursively at its farthest point from
-the chord (iterative end-point fit), collinear neighbours are merged, and the
-points at each split are handed to the line that fits them. Every line is a
-total-least-squares (principal component) fit.
+and Aldon, 2004); each run is then partitioned optimally into straight pieces
+(dynamic programming over all break points, each break paid for by a
+penalty that follows the scan's noise). Every line is a total-least-squares
+(principal component) fit.
 
 References
 ----------
@@ -39,12 +39,9 @@ class SegmentationConfig:
         and surface) at which neighbouring returns still count as one surface.
     max_gap_beams : int
         Most consecutive missing returns bridged inside one run.
-    split_sigmas : float
-        A run is split when a point lies more than this many noise standard
-        deviations from the chord.
     noise_floor_m : float
-        Lower bound on the noise used for thresholds (numerical precision of
-        noise-free scans).
+        Lower bound on the noise used for thresholds: keeps rounding in the
+        cumulative moments of a noise-free scan from passing for structure.
     noise_m : float or None
         Range noise to use for thresholds; ``None`` estimates it from the scan.
     """
@@ -52,8 +49,7 @@ class SegmentationConfig:
     min_points: int = 3
     incidence_limit_deg: float = 8.0
     max_gap_beams: int = 3
-    split_sigmas: float = 4.0
-    noise_floor_m: float = 1e-7
+    noise_floor_m: float = 2e-5
     noise_m: float | None = None
 
 
@@ -172,8 +168,10 @@ def estimate_noise(points: NDArray[np.float64], run_ids: NDArray[np.intp]) -> fl
     """Robust estimate of the perpendicular noise from triples of consecutive returns.
 
     For three neighbours on a straight surface, the middle one's distance
-    from the line through the outer two has variance about 1.5 sigma^2; the
-    median absolute value is robust to the few triples that straddle corners.
+    from the line through the outer two has variance about 1.5 sigma^2. The
+    lower quartile of its absolute value is used: triples on corners and on
+    rough rock (whose bumps are shape, not noise) only lengthen the upper
+    tail.
     """
     if points.shape[0] < 3:
         return 0.0
@@ -185,126 +183,79 @@ def estimate_noise(points: NDArray[np.float64], run_ids: NDArray[np.intp]) -> fl
     length = np.hypot(ac[:, 0], ac[:, 1])
     ok = same & (length > 0)
     dist = np.abs(ac[ok, 0] * (b[ok, 1] - a[ok, 1]) - ac[ok, 1] * (b[ok, 0] - a[ok, 0])) / length[ok]
-    # median |N(0, s)| = 0.6745 s, s^2 = 1.5 sigma^2
-    return float(np.median(dist) / 0.6745 / math.sqrt(1.5))
+    # lower quartile of |N(0, s)| = 0.3186 s, s^2 = 1.5 sigma^2
+    return float(np.quantile(dist, 0.25) / 0.3186 / math.sqrt(1.5))
 
 
-def _split(points: NDArray[np.float64], tol: float, min_points: int) -> list[tuple[int, int]]:
-    """Iterative end-point fit: index ranges [i, j) of straight pieces."""
-    out: list[tuple[int, int]] = []
-    stack = [(0, points.shape[0])]
-    while stack:
-        i, j = stack.pop()
-        p = points[i:j]
-        if j - i < 2 * min_points:
-            out.append((i, j))
-            continue
-        chord = p[-1] - p[0]
-        length = math.hypot(chord[0], chord[1])
-        if length == 0:
-            out.append((i, j))
-            continue
-        dist = np.abs(chord[0] * (p[:, 1] - p[0, 1]) - chord[1] * (p[:, 0] - p[0, 0])) / length
-        k = int(np.argmax(dist))
-        if dist[k] <= tol:
-            fit = fit_line(p)
-            resid = np.abs((p - fit.centroid) @ fit.normal)
-            if resid.max() <= tol:
-                out.append((i, j))
-                continue
-            k = int(np.argmax(resid))
-        k = min(max(k, min_points - 1), j - i - min_points)
-        # The farthest point is the corner: it belongs to both sides until refined.
-        stack.append((i + k, j))
-        stack.append((i, i + k + 1))
-    out.sort()
-    # Pieces share their corner point; give it to the left piece for now.
-    fixed: list[tuple[int, int]] = []
-    for a, b in out:
-        if fixed and a < fixed[-1][1]:
-            a = fixed[-1][1]
-        if b > a:
-            fixed.append((a, b))
-    return fixed
+def _sse(points: NDArray[np.float64]) -> float:
+    """Total-least-squares residual sum of squares (smallest singular value squared)."""
+    if points.shape[0] < 3:
+        return 0.0
+    q = points - points.mean(axis=0)
+    return float(np.linalg.svd(q, compute_uv=False)[-1] ** 2)
 
 
-def _merge(points: NDArray[np.float64], pieces: list[tuple[int, int]], tol: float) -> list[tuple[int, int]]:
-    merged = True
-    while merged and len(pieces) > 1:
-        merged = False
-        best, best_rms = -1, math.inf
-        for k in range(len(pieces) - 1):
-            i, j = pieces[k][0], pieces[k + 1][1]
-            fit = fit_line(points[i:j])
-            resid = np.abs((points[i:j] - fit.centroid) @ fit.normal)
-            if resid.max() <= tol and fit.rms < best_rms:
-                best, best_rms = k, fit.rms
-        if best >= 0:
-            pieces[best : best + 2] = [(pieces[best][0], pieces[best + 1][1])]
-            merged = True
-    return pieces
+def _penalty(n: int) -> float:
+    """SSE, in noise variances, that one more line must buy (BIC-like, grows as ln n).
 
-
-def _absorb_small(
-    points: NDArray[np.float64], pieces: list[tuple[int, int]], tol: float, min_points: int
-) -> list[tuple[int, int]]:
-    """Hand the returns of pieces too small for a line to a neighbour they fit.
-
-    Splitting near a corner can leave one or two returns on their own; they
-    belong to one of the lines beside them (or to neither, e.g. a mixed pixel).
+    A new line adds two parameters and a break point chosen among n; the
+    margin is wide because a false break costs a panel its identity.
     """
-    out = list(pieces)
-    k = 0
-    while k < len(out):
-        i, j = out[k]
-        if j - i >= min_points or len(out) == 1:
-            k += 1
-            continue
-        left = out[k - 1] if k > 0 and out[k - 1][1] - out[k - 1][0] >= min_points else None
-        right = out[k + 1] if k + 1 < len(out) and out[k + 1][1] - out[k + 1][0] >= min_points else None
-        fl = fit_line(points[left[0] : left[1]]) if left else None
-        fr = fit_line(points[right[0] : right[1]]) if right else None
-        # each point goes left while it fits the left line, the rest right while they fit it
-        cut = i
-        while fl is not None and cut < j and abs((points[cut] - fl.centroid) @ fl.normal) <= tol:
-            cut += 1
-        cut_r = j
-        while fr is not None and cut_r > cut and abs((points[cut_r - 1] - fr.centroid) @ fr.normal) <= tol:
-            cut_r -= 1
-        if left is not None and cut > i:
-            out[k - 1] = (left[0], cut)
-        if right is not None and cut_r < j:
-            out[k + 1] = (cut_r, right[1])
-        if cut_r > cut:  # returns that fit neither line stay out of every segment
-            out[k] = (cut, cut_r)
-            k += 1
-        else:
-            del out[k]
-    return out
+    return 4.0 * math.log(max(n, 2)) + 12.0
 
 
-def _refine_boundaries(points: NDArray[np.float64], pieces: list[tuple[int, int]], min_points: int) -> list[tuple[int, int]]:
-    """Move returns across each boundary to the line they lie closer to."""
-    pieces = list(pieces)
-    for _ in range(5):
-        changed = False
-        for k in range(len(pieces) - 1):
-            (a0, a1), (b0, b1) = pieces[k], pieces[k + 1]
-            fa, fb = fit_line(points[a0 : a1 - 1]) if a1 - a0 > min_points else fit_line(points[a0:a1]), (
-                fit_line(points[b0 + 1 : b1]) if b1 - b0 > min_points else fit_line(points[b0:b1])
-            )
-            # last of A to B?
-            p = points[a1 - 1]
-            if a1 - a0 > min_points and abs((p - fb.centroid) @ fb.normal) < abs((p - fa.centroid) @ fa.normal):
-                pieces[k], pieces[k + 1] = (a0, a1 - 1), (a1 - 1, b1)
-                changed = True
-                continue
-            p = points[b0]
-            if b1 - b0 > min_points and abs((p - fa.centroid) @ fa.normal) < abs((p - fb.centroid) @ fb.normal):
-                pieces[k], pieces[k + 1] = (a0, a1 + 1), (b0 + 1, b1)
-                changed = True
-        if not changed:
-            break
+def _partition(points: NDArray[np.float64], var: float) -> list[tuple[int, int]]:
+    """Optimal partition of one run into straight pieces (dynamic programming).
+
+    Minimises ``sum(SSE_TLS(piece) + beta) + tie * (returns in pieces of one
+    or two)`` over all partitions, with ``beta = var * _penalty(n)``: every
+    break must buy more than the noise explains. Returns left in a piece of
+    one or two (no line to test them against) cost like outliers, so exact
+    ties break towards real lines. SSEs come from cumulative moments, so each
+    end point costs O(candidates); candidates that cannot win any more are
+    pruned (PELT, Killick et al. 2012).
+
+    References
+    ----------
+    R. Killick, P. Fearnhead, I. A. Eckley, "Optimal detection of changepoints
+    with a linear computational cost", JASA 107, 2012.
+    """
+    n = points.shape[0]
+    c = points - points.mean(axis=0)
+    z = np.zeros(1)
+    sx = np.concatenate([z, np.cumsum(c[:, 0])])
+    sy = np.concatenate([z, np.cumsum(c[:, 1])])
+    sxx = np.concatenate([z, np.cumsum(c[:, 0] ** 2)])
+    syy = np.concatenate([z, np.cumsum(c[:, 1] ** 2)])
+    sxy = np.concatenate([z, np.cumsum(c[:, 0] * c[:, 1])])
+    beta = var * _penalty(n)
+    tie = 4.0 * var
+    best = np.full(n + 1, np.inf)
+    best[0] = -beta
+    last = np.zeros(n + 1, dtype=np.intp)
+    cand = np.zeros(1, dtype=np.intp)
+    for j in range(1, n + 1):
+        i = cand
+        m = (j - i).astype(float)
+        ax, ay = sx[j] - sx[i], sy[j] - sy[i]
+        vxx = sxx[j] - sxx[i] - ax * ax / m
+        vyy = syy[j] - syy[i] - ay * ay / m
+        vxy = sxy[j] - sxy[i] - ax * ay / m
+        half = 0.5 * (vxx + vyy)
+        sse = np.maximum(half - np.sqrt(np.maximum(0.25 * (vxx - vyy) ** 2 + vxy**2, 0.0)), 0.0)
+        loose = np.where(m < 3, m, 0.0)
+        cost = best[i] + sse + beta + tie * loose
+        k = int(np.argmin(cost))
+        best[j] = cost[k]
+        last[j] = i[k]
+        keep = best[i] + sse <= best[j] + beta + 2.0 * tie
+        cand = np.append(i[keep], j)
+    pieces: list[tuple[int, int]] = []
+    j = n
+    while j > 0:
+        pieces.append((int(last[j]), j))
+        j = int(last[j])
+    pieces.reverse()
     return pieces
 
 
@@ -370,7 +321,6 @@ def segment_scan(scan: Scan, config: SegmentationConfig = SegmentationConfig()) 
         # Second pass with the estimated noise, so noisy returns do not cut runs.
         brk = (gap_beams > config.max_gap_beams + 1) | (step > dmax + 3.0 * noise) | (dphi >= lam)
         run_ids[1:] = np.cumsum(brk)
-    tol = config.split_sigmas * noise
     segments: list[Segment] = []
     corners: list[Corner] = []
     for run in np.unique(run_ids):
@@ -378,10 +328,7 @@ def segment_scan(scan: Scan, config: SegmentationConfig = SegmentationConfig()) 
         if sel.size < config.min_points:
             continue
         p = pts[sel]
-        pieces = _split(p, tol, config.min_points)
-        pieces = _merge(p, pieces, tol)
-        pieces = _absorb_small(p, pieces, tol, config.min_points)
-        pieces = _refine_boundaries(p, pieces, config.min_points)
+        pieces = _partition(p, noise**2)
         prev: Segment | None = None
         for i, j in pieces:
             if j - i < config.min_points:

@@ -166,11 +166,29 @@ class SimulatedScan:
                     self._panel_cache[(s.beacon, s.panel)] = int(c)
         return dict(self._panel_cache)
 
-    def panels_seen(self, *, min_points: int = 5) -> dict[str, list[int]]:
-        """Panels with at least ``min_points`` returns, per beacon id."""
+    def panels_seen(self, *, min_points: int = 5, min_incidence_deg: float = 10.0) -> dict[str, list[int]]:
+        """Panels with at least ``min_points`` returns, per beacon id.
+
+        A panel seen at grazing incidence (the beam within ``min_incidence_deg``
+        of the panel's plane at its returns' centroid) does not count: its
+        returns are too sparse to draw a line through.
+        """
         out: dict[str, list[int]] = {}
+        ok = self.scan.valid
+        _, pts_all = self.scan.points()
+        beam_of = np.flatnonzero(ok)
         for (b, p), c in sorted(self.panel_hits().items()):
-            if c >= min_points:
+            if c < min_points:
+                continue
+            k = self.surfaces.index(Surface("beacon", b, p))
+            sel = self.surface_index[beam_of] == k
+            pts = pts_all[sel]
+            centre = pts.mean(axis=0)
+            _, _, vt = np.linalg.svd(pts - centre)
+            along = vt[0]
+            beam = centre / np.hypot(*centre)
+            incidence = math.degrees(math.asin(min(1.0, abs(beam[0] * along[1] - beam[1] * along[0]))))
+            if incidence >= min_incidence_deg:
                 out.setdefault(b, []).append(p)
         return out
 
