@@ -156,7 +156,9 @@ class Adjustment:
             k = math.sqrt(float(stats.chi2.ppf(confidence, 2)))
         major = v[:, 1]
         az = math.atan2(major[0], major[1]) % math.pi
-        return ErrorEllipse(k * math.sqrt(max(w[1], 0.0)), k * math.sqrt(max(w[0], 0.0)), az, confidence)
+        return ErrorEllipse(
+            k * math.sqrt(max(w[1], 0.0)), k * math.sqrt(max(w[0], 0.0)), az, confidence
+        )
 
 
 def adjust_pose(
@@ -199,7 +201,11 @@ def adjust_pose(
         N = jac.T @ (w[:, None] * jac)
         t = jac.T @ (w * v)
         delta = np.linalg.solve(N, t)
-        p = Pose2D(p.easting + float(delta[0]), p.northing + float(delta[1]), (p.azimuth + float(delta[2])) % (2 * math.pi))
+        p = Pose2D(
+            p.easting + float(delta[0]),
+            p.northing + float(delta[1]),
+            (p.azimuth + float(delta[2])) % (2 * math.pi),
+        )
         tol_m = max(1e-11, 4 * np.spacing(max(abs(p.easting), abs(p.northing), 1.0)))
         if math.hypot(delta[0], delta[1]) < tol_m and abs(delta[2]) < 1e-13:
             break
@@ -208,10 +214,10 @@ def adjust_pose(
     w = 1.0 / var
     v = ranges_m - rho
     N = jac.T @ (w[:, None] * jac)
-    Q = np.linalg.inv(N)
+    Q: NDArray[np.float64] = np.asarray(np.linalg.inv(N), dtype=np.float64)
     dof = n - 3
     s0 = float(v @ (w * v) / dof) if dof > 0 else math.nan
     lo = float(stats.chi2.ppf(0.025, dof) / dof) if dof > 0 else 0.0
     hi = float(stats.chi2.ppf(0.975, dof) / dof) if dof > 0 else math.inf
-    cov = Q * s0 if s0 > 1.0 else Q.copy()
+    cov: NDArray[np.float64] = Q * s0 if s0 > 1.0 else Q.copy()
     return Adjustment(p, Q, cov, s0, dof, lo, hi, v, np.sqrt(var), it, jac)

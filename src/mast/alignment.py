@@ -57,7 +57,9 @@ class Similarity:
         )
 
 
-def similarity_transform(points_scanner: NDArray[np.float64], points_mine: NDArray[np.float64]) -> Similarity:
+def similarity_transform(
+    points_scanner: NDArray[np.float64], points_mine: NDArray[np.float64]
+) -> Similarity:
     """Least-squares four-parameter transformation from two or more point pairs.
 
     Each pair gives the rows ``[x -y 1 0; y x 0 1]`` of the design matrix for
@@ -166,7 +168,11 @@ def icp_point_to_line(
             b = -dist[ok]
             x, *_ = np.linalg.lstsq(A, b, rcond=None)
             omega = math.pi / 2 - p.azimuth + float(x[2])
-            p = Pose2D(p.easting + float(x[0]), p.northing + float(x[1]), (math.pi / 2 - omega) % (2 * math.pi))
+            p = Pose2D(
+                p.easting + float(x[0]),
+                p.northing + float(x[1]),
+                (math.pi / 2 - omega) % (2 * math.pi),
+            )
             # A step below the spacing of doubles at these coordinates cannot change them.
             tol_m = max(tolerance_m, 4 * np.spacing(max(abs(p.easting), abs(p.northing), 1.0)))
             if math.hypot(x[0], x[1]) < tol_m and abs(x[2]) < max(tolerance_rad, tol_m / 100.0):

@@ -7,8 +7,10 @@ on stderr and an exit status: 2 bad input, 3 no fix.
 
 from __future__ import annotations
 
+import math
 import sys
 import tempfile
+from dataclasses import replace
 from enum import StrEnum
 from pathlib import Path
 from typing import Annotated
@@ -17,6 +19,7 @@ import typer
 
 from . import __version__
 from .errors import InputError, MastError, NoFixError
+from .scan import Scan
 
 EXIT_OK = 0
 EXIT_BAD_INPUT = 2
@@ -92,6 +95,141 @@ def simulate(
     typer.echo(f"wrote {sum(w.count for w in written)} scan(s) in {len(written)} scene(s) to {out}")
 
 
+class OutputFormat(StrEnum):
+    text = "text"
+    json = "json"
+
+
+def _load_scans(
+    path: Path, *, topic: str | None, range_min: float | None, range_max: float | None
+) -> tuple[list[Scan], bool]:
+    """The scans in a file: one for a CSV, all LaserScans of a topic for a bag."""
+    from .io import read_laserscans, read_scan_csv
+    from .io.bags import bag_kind
+
+    if path.is_file() and path.suffix.lower() in {".csv", ".txt"}:
+        scan = read_scan_csv(path, range_min_m=range_min or 0.0, range_max_m=range_max or math.inf)
+        return [scan], False
+    bag_kind(path)  # a clear error for anything that is neither
+    scans = list(read_laserscans(path, topic=topic))
+    if range_min is not None or range_max is not None:
+        scans = [
+            Scan(
+                s.angles_rad,
+                s.ranges_m,
+                s.intensities,
+                range_min if range_min is not None else s.range_min_m,
+                range_max if range_max is not None else s.range_max_m,
+                s.stamp_ns,
+                s.frame_id,
+            )
+            for s in scans
+        ]
+    if not scans:
+        raise InputError("bag holds no LaserScan message on that topic", path=path)
+    return scans, True
+
+
+@app.command()
+def locate(
+    scan_path: Annotated[
+        Path, typer.Argument(metavar="SCAN", help="A scan CSV, a ROS 1 bag or a ROS 2 bag folder.")
+    ],
+    beacons: Annotated[Path, typer.Option("--beacons", "-b", help="Beacon survey CSV.")],
+    range_sigma: Annotated[
+        float | None, typer.Option("--range-sigma", help="Range standard deviation, metres.")
+    ] = None,
+    angle_sigma: Annotated[
+        float | None, typer.Option("--angle-sigma", help="Beam angle standard deviation, radians.")
+    ] = None,
+    scanner: Annotated[
+        str | None,
+        typer.Option(
+            "--scanner", help="Named scanner model giving the default sigmas (see mast scanners)."
+        ),
+    ] = None,
+    fmt: Annotated[
+        OutputFormat, typer.Option("--format", help="text report or JSON (JSON Lines for a bag).")
+    ] = OutputFormat.text,
+    plot: Annotated[
+        Path | None,
+        typer.Option(
+            "--plot",
+            help="Write the paper's Figure 3 for the scan (PNG); numbered per scan for a bag.",
+        ),
+    ] = None,
+    topic: Annotated[str | None, typer.Option("--topic", help="LaserScan topic in a bag.")] = None,
+    range_min: Annotated[
+        float | None, typer.Option("--range-min", help="Shortest valid range, metres.")
+    ] = None,
+    range_max: Annotated[
+        float | None, typer.Option("--range-max", help="Longest valid range, metres.")
+    ] = None,
+) -> None:
+    """Fix position and azimuth from one scan (or every scan of a bag).
+
+    Exit status 0 when a scan is fixed (for a bag: at least one), 3 when none
+    is, 2 for bad input.
+    """
+    import json
+
+    from .io import read_survey
+    from .locator import LocatorConfig
+    from .locator import locate as run_locate
+    from .report import fix_record, fix_text
+    from .sim import scanner_model
+
+    cfg = LocatorConfig()
+    if scanner is not None:
+        model = scanner_model(scanner)
+        cfg = replace(
+            cfg, range_sigma_m=max(model.range_sigma_m, 1e-4), angle_sigma_rad=model.angle_sigma_rad
+        )
+    for name, value in (("--range-sigma", range_sigma), ("--angle-sigma", angle_sigma)):
+        if value is not None and not (math.isfinite(value) and value >= 0):
+            raise InputError(f"{name} must be a non-negative number, got {value}")
+    if range_sigma is not None:
+        if range_sigma <= 0:
+            raise InputError("--range-sigma must be positive")
+        cfg = replace(cfg, range_sigma_m=range_sigma)
+    if angle_sigma is not None:
+        cfg = replace(cfg, angle_sigma_rad=angle_sigma)
+    survey = read_survey(beacons)
+    scans, many = _load_scans(scan_path, topic=topic, range_min=range_min, range_max=range_max)
+    fixed = 0
+    for i, scan in enumerate(scans):
+        fix = run_locate(scan, survey, config=cfg)
+        fixed += fix.ok
+        label = f"{scan_path}#{i}" if many else str(scan_path)
+        if fmt is OutputFormat.json:
+            typer.echo(
+                json.dumps(fix_record(fix, source=str(scan_path), index=i if many else None))
+            )
+        else:
+            if i:
+                typer.echo("")
+            typer.echo(fix_text(fix, source=label))
+        if plot is not None:
+            from .plot import plot_fix
+
+            target = plot if not many else plot.with_name(f"{plot.stem}_{i:04d}{plot.suffix}")
+            plot_fix(scan, survey, fix, target, title=label)
+    if fixed == 0:
+        raise typer.Exit(EXIT_NO_FIX)
+
+
+@app.command()
+def scanners() -> None:
+    """List the named scanner models (field of view, resolution, range noise)."""
+    from .sim import SCANNERS
+
+    for m in SCANNERS.values():
+        typer.echo(
+            f"{m.name:<18} {m.fov_deg:5.0f}° at {m.resolution_deg:.4g}°, "
+            f"{m.range_min_m:g}–{m.range_max_m:g} m, σ {1e3 * m.range_sigma_m:g} mm"
+        )
+
+
 @app.command()
 def demo(
     out: Annotated[
@@ -99,23 +237,11 @@ def demo(
         typer.Option("--out", help="Keep the simulated files here (default: a temporary folder)."),
     ] = None,
 ) -> None:
-    """Simulate the paper's scenario and show what was written."""
-    from .sim import build_scenario, write_scenario
+    """Simulate the paper's layout, locate every scan, and compare with the truth (Table 2)."""
+    from .demo import run_demo
 
-    scenes = build_scenario("paper", 0)
     with tempfile.TemporaryDirectory(prefix="mast-demo-") as tmp:
-        target = out if out is not None else Path(tmp)
-        written = write_scenario(scenes, target, scenario="paper")
-        for scene, w in zip(scenes, written, strict=True):
-            typer.echo(f"{scene.name}: {scene.description}")
-            typer.echo(
-                f"  {w.survey}  ({len(scene.survey)} beacons: {', '.join(scene.survey.ids)})"
-            )
-            for shot, path in zip(scene.shots, w.scans, strict=True):
-                typer.echo(
-                    f"  {path.name}  {shot.label:<11} true {shot.pose}  [{shot.scanner.name}]"
-                )
-        typer.echo(f"wrote {sum(w.count for w in written)} scans to {target}")
+        run_demo(out if out is not None else Path(tmp), echo=typer.echo)
 
 
 def main() -> None:

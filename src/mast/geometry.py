@@ -107,13 +107,26 @@ class PanelSet:
         length = np.hypot(v[:, 0], v[:, 1])
         d = v / length[:, None]
         nrm = np.stack([-d[:, 1], d[:, 0]], axis=1)
-        return cls(aa, bb, d, nrm, length, np.array(bi, dtype=np.intp), np.array(pi, dtype=np.intp), tuple(survey.ids))
+        return cls(
+            aa,
+            bb,
+            d,
+            nrm,
+            length,
+            np.array(bi, dtype=np.intp),
+            np.array(pi, dtype=np.intp),
+            tuple(survey.ids),
+        )
 
     def __len__(self) -> int:
         return int(self.length.size)
 
     def associate(
-        self, points_mine: NDArray[np.float64], gate: float | NDArray[np.float64], *, subset: NDArray[np.intp] | None = None
+        self,
+        points_mine: NDArray[np.float64],
+        gate: float | NDArray[np.float64],
+        *,
+        subset: NDArray[np.intp] | None = None,
     ) -> tuple[NDArray[np.intp], NDArray[np.float64]]:
         """Nearest panel of each point, within ``gate`` of its line and inside its extent.
 
@@ -129,7 +142,9 @@ class PanelSet:
         rel = points_mine[:, None, :] - self.a[None, panels, :]
         t = np.einsum("nkj,kj->nk", rel, self.direction[panels])
         s = np.einsum("nkj,kj->nk", rel, self.normal[panels])
-        g = np.broadcast_to(np.asarray(gate, dtype=float).reshape(-1, 1) if np.ndim(gate) else gate, s.shape)
+        g = np.broadcast_to(
+            np.asarray(gate, dtype=float).reshape(-1, 1) if np.ndim(gate) else gate, s.shape
+        )
         ok = (t >= 0) & (t <= self.length[panels][None, :]) & (np.abs(s) <= g)
         score = np.where(ok, np.abs(s), np.inf)
         j = np.argmin(score, axis=1)

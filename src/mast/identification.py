@@ -33,7 +33,13 @@ from numpy.typing import NDArray
 from .beacon import Beacon, Survey
 from .segmentation import Corner, Segment, Segmentation
 
-__all__ = ["IdentificationConfig", "NodeMatch", "PanelIdentification", "SingleMatch", "identify_panels"]
+__all__ = [
+    "IdentificationConfig",
+    "NodeMatch",
+    "PanelIdentification",
+    "SingleMatch",
+    "identify_panels",
+]
 
 #: (p1, p2, theta, c) -> Table 1 option
 _OPTIONS: dict[tuple[bool, bool, bool, bool], int] = {
@@ -150,7 +156,9 @@ def _test_corner(
                 theta = -design_theta
             la, lb = float(tpl.panel_lengths[pa]), float(tpl.panel_lengths[pb])
             survey_theta = cfg.survey_sigma_m * math.sqrt(2.0) * math.hypot(1 / la, 1 / lb)
-            theta_tol = max(cfg.min_deflection_tol_rad, cfg.sigmas * math.hypot(sig_theta, survey_theta))
+            theta_tol = max(
+                cfg.min_deflection_tol_rad, cfg.sigmas * math.hypot(sig_theta, survey_theta)
+            )
             d_theta = math.remainder(corner.deflection - theta, 2 * math.pi)
             if abs(d_theta) > theta_tol:
                 continue
@@ -199,7 +207,9 @@ def _test_corner(
 
 
 def identify_panels(
-    segmentation: Segmentation, survey: Survey, config: IdentificationConfig = IdentificationConfig()
+    segmentation: Segmentation,
+    survey: Survey,
+    config: IdentificationConfig = IdentificationConfig(),
 ) -> PanelIdentification:
     """Test every corner and every segment against every beacon template.
 

@@ -183,14 +183,12 @@ def _support(
         mapped = icp.pose.scanner_to_mine(node.node_scanner[None, :])[0]
         edge = survey[node.beacon].edges[node.edge - 1]
         sig = noise_m * (1.0 + 1.0 / max(abs(math.sin(node.tests["deflection_rad"])), 1e-3))
-        if math.dist(mapped, edge) <= cfg.gate_sigmas * math.hypot(sig, cfg.survey_sigma_m, cfg.range_sigma_m):
+        if math.dist(mapped, edge) <= cfg.gate_sigmas * math.hypot(
+            sig, cfg.survey_sigma_m, cfg.range_sigma_m
+        ):
             node_ok.add(node.beacon)
     supported = tuple(
-        sorted(
-            b
-            for b in node_ok
-            if on_beacon.get(b, 0) >= cfg.min_coverage * predicted.get(b, 0)
-        )
+        sorted(b for b in node_ok if on_beacon.get(b, 0) >= cfg.min_coverage * predicted.get(b, 0))
     )
     return counts, supported
 
@@ -231,7 +229,7 @@ def _free_space_violations(
     a = panels.a + margin_m * panels.direction
     b = panels.b - margin_m * panels.direction
     keep = panels.length > 2 * margin_m
-    t, j = first_hits(pose.position, dirs, a[keep], b[keep])
+    t, _ = first_hits(pose.position, dirs, a[keep], b[keep])
     hit = np.isfinite(t) & (t <= scan.range_max_m)
     beyond = hit & (scan.ranges_m[ok] > t + gate_m)
     return int(np.count_nonzero(beyond)), int(np.count_nonzero(hit))
@@ -294,7 +292,11 @@ def locate(scan: Scan, survey: Survey, *, config: LocatorConfig | None = None) -
 
     seen = sorted({n.beacon for n in ident.nodes})
     if not seen:
-        return finish(**_no_fix("no_beacon", f"{len(segmentation.segments)} segments, no beacon corner identified"))
+        return finish(
+            **_no_fix(
+                "no_beacon", f"{len(segmentation.segments)} segments, no beacon corner identified"
+            )
+        )
     if len(seen) < cfg.min_beacons:
         return finish(**_no_fix("one_beacon", f"only beacon {', '.join(seen)} identified"))
     hyps = pose_hypotheses(ident, segmentation, survey, cfg.matching)
@@ -302,7 +304,7 @@ def locate(scan: Scan, survey: Survey, *, config: LocatorConfig | None = None) -
         return finish(
             **_no_fix(
                 "inconsistent",
-                f"corners matching beacons {', '.join(seen)} do not agree with the surveyed geometry",
+                f"corners matching beacons {', '.join(seen)} disagree with the surveyed geometry",
             )
         )
     _, pts = scan.points()
@@ -311,7 +313,9 @@ def locate(scan: Scan, survey: Survey, *, config: LocatorConfig | None = None) -
     for h in hyps:
         icp = icp_point_to_line(pts, h.similarity.pose(), panels, gates_m=gates)
         predicted = _predicted_hits(scan, icp.pose, panels)
-        counts, supported = _support(icp, panels, survey, ident, segmentation.noise_m, predicted, cfg)
+        counts, supported = _support(
+            icp, panels, survey, ident, segmentation.noise_m, predicted, cfg
+        )
         if not set(h.beacons) <= set(supported):
             continue
         viol, hits = _free_space_violations(scan, icp.pose, panels, cfg.final_gate_m)
@@ -321,7 +325,9 @@ def locate(scan: Scan, survey: Survey, *, config: LocatorConfig | None = None) -
     if not verified:
         return finish(
             hypotheses=tuple(hyps),
-            **_no_fix("inconsistent", f"no pose from beacons {', '.join(seen)} is confirmed by the scan"),
+            **_no_fix(
+                "inconsistent", f"no pose from beacons {', '.join(seen)} is confirmed by the scan"
+            ),
         )
     verified.sort(key=lambda v: v.score, reverse=True)
     best = verified[0]
@@ -330,10 +336,15 @@ def locate(scan: Scan, survey: Survey, *, config: LocatorConfig | None = None) -
             hypotheses=tuple(hyps),
             verified=tuple(verified),
             chosen=best,
-            **_no_fix("one_beacon", f"only beacon {', '.join(best.supported)} confirmed with two panels"),
+            **_no_fix(
+                "one_beacon", f"only beacon {', '.join(best.supported)} confirmed with two panels"
+            ),
         )
     for other in verified[1:]:
-        d = math.hypot(other.icp.pose.easting - best.icp.pose.easting, other.icp.pose.northing - best.icp.pose.northing)
+        d = math.hypot(
+            other.icp.pose.easting - best.icp.pose.easting,
+            other.icp.pose.northing - best.icp.pose.northing,
+        )
         da = abs(math.remainder(other.icp.pose.azimuth - best.icp.pose.azimuth, 2 * math.pi))
         if d < 0.1 and da < math.radians(1.0):
             continue  # the same pose reached from another pair of nodes
@@ -373,6 +384,11 @@ def locate(scan: Scan, survey: Survey, *, config: LocatorConfig | None = None) -
             # test tightens on clean data) are not ranges to the panel.
             good = _robust_inliers(adj, pose, scan, beams, nrm, panels.a[pk], cfg)
             beams, pk, nrm = beams[good], pk[good], nrm[good]
+        # A panel with a return or two is no evidence, only leverage: near an edge
+        # those returns may belong to the next surface.
+        k_ids, k_counts = np.unique(pk, return_counts=True)
+        good = np.isin(pk, k_ids[k_counts >= cfg.min_panel_points])
+        beams, pk, nrm = beams[good], pk[good], nrm[good]
         if np.array_equal(beams, used) and adj is not None:
             break
         if beams.size < 4:
@@ -395,14 +411,19 @@ def locate(scan: Scan, survey: Survey, *, config: LocatorConfig | None = None) -
             )
         except np.linalg.LinAlgError:
             adj = None
-        if adj is None or not np.all(np.isfinite(adj.cofactor)) or np.linalg.cond(
-            _scaled(adj.cofactor)
-        ) > 1e10:
+        if (
+            adj is None
+            or not np.all(np.isfinite(adj.cofactor))
+            or np.linalg.cond(_scaled(adj.cofactor)) > 1e10
+        ):
             return finish(
                 hypotheses=tuple(hyps),
                 verified=tuple(verified),
                 chosen=best,
-                **_no_fix("degenerate_geometry", "the panels seen do not constrain all of E, N and azimuth"),
+                **_no_fix(
+                    "degenerate_geometry",
+                    "the panels seen do not constrain all of E, N and azimuth",
+                ),
             )
         used, used_panels = beams, pk
         pose = adj.pose
@@ -447,7 +468,9 @@ def _robust_inliers(
     rho, _jac, d_phi = range_model(pose, scan.angles_rad[beams], normals, offsets)
     sig = np.sqrt(cfg.range_sigma_m**2 + (d_phi * cfg.angle_sigma_rad) ** 2)
     floor = 1e-7 * (1.0 + np.abs(rho))
-    return np.asarray(np.abs(scan.ranges_m[beams] - rho) <= cfg.gate_sigmas * np.maximum(scale * sig, floor))
+    return np.asarray(
+        np.abs(scan.ranges_m[beams] - rho) <= cfg.gate_sigmas * np.maximum(scale * sig, floor)
+    )
 
 
 def _scaled(q: NDArray[np.float64]) -> NDArray[np.float64]:

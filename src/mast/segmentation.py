@@ -70,7 +70,7 @@ def fit_line(points: NDArray[np.float64]) -> LineFit:
     c = points.mean(axis=0)
     q = points - c
     cov = q.T @ q
-    w, v = np.linalg.eigh(cov)
+    _, v = np.linalg.eigh(cov)
     d = v[:, 1]
     if np.dot(points[-1] - points[0], d) < 0:
         d = -d
@@ -182,7 +182,9 @@ def estimate_noise(points: NDArray[np.float64], run_ids: NDArray[np.intp]) -> fl
     ac = c - a
     length = np.hypot(ac[:, 0], ac[:, 1])
     ok = same & (length > 0)
-    dist = np.abs(ac[ok, 0] * (b[ok, 1] - a[ok, 1]) - ac[ok, 1] * (b[ok, 0] - a[ok, 0])) / length[ok]
+    dist = (
+        np.abs(ac[ok, 0] * (b[ok, 1] - a[ok, 1]) - ac[ok, 1] * (b[ok, 0] - a[ok, 0])) / length[ok]
+    )
     # lower quartile of |N(0, s)| = 0.3186 s, s^2 = 1.5 sigma^2
     return float(np.quantile(dist, 0.25) / 0.3186 / math.sqrt(1.5))
 
@@ -259,7 +261,9 @@ def _partition(points: NDArray[np.float64], var: float) -> list[tuple[int, int]]
     return pieces
 
 
-def _make_segment(index: int, run: int, beams: NDArray[np.intp], pts: NDArray[np.float64], noise: float) -> Segment:
+def _make_segment(
+    index: int, run: int, beams: NDArray[np.intp], pts: NDArray[np.float64], noise: float
+) -> Segment:
     fit = fit_line(pts)
     t = (pts - fit.centroid) @ fit.direction
     start = fit.centroid + t[0] * fit.direction

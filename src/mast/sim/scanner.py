@@ -166,7 +166,9 @@ class SimulatedScan:
                     self._panel_cache[(s.beacon, s.panel)] = int(c)
         return dict(self._panel_cache)
 
-    def panels_seen(self, *, min_points: int = 5, min_incidence_deg: float = 10.0) -> dict[str, list[int]]:
+    def panels_seen(
+        self, *, min_points: int = 5, min_incidence_deg: float = 10.0
+    ) -> dict[str, list[int]]:
         """Panels with at least ``min_points`` returns, per beacon id.
 
         A panel seen at grazing incidence (the beam within ``min_incidence_deg``
@@ -187,7 +189,9 @@ class SimulatedScan:
             _, _, vt = np.linalg.svd(pts - centre)
             along = vt[0]
             beam = centre / np.hypot(*centre)
-            incidence = math.degrees(math.asin(min(1.0, abs(beam[0] * along[1] - beam[1] * along[0]))))
+            incidence = math.degrees(
+                math.asin(min(1.0, abs(beam[0] * along[1] - beam[1] * along[0])))
+            )
             if incidence >= min_incidence_deg:
                 out.setdefault(b, []).append(p)
         return out
