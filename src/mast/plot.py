@@ -45,7 +45,7 @@ def plot_fix(scan: Scan, survey: Survey, fix: Fix, path: str | Path, *, title: s
         if seg.index in used_segments:
             ax1.annotate(
                 used_segments[seg.index],
-                seg.midpoint,
+                (float(seg.midpoint[0]), float(seg.midpoint[1])),
                 fontsize=8,
                 xytext=(4, 4),
                 textcoords="offset points",
@@ -63,10 +63,11 @@ def plot_fix(scan: Scan, survey: Survey, fix: Fix, path: str | Path, *, title: s
     ax1.set_ylabel("y left (m)")
     ax1.set_title("Segmentation, scanner frame")
     ax1.legend(loc="best", fontsize=8)
-    for b in survey:
-        ax2.plot(b.edges[:, 0], b.edges[:, 1], "k-", lw=1.5)
-        ax2.plot(b.edges[:, 0], b.edges[:, 1], "ko", ms=3)
-        ax2.annotate(b.id, b.edges[0], fontsize=9, xytext=(4, -10), textcoords="offset points")
+    for beacon in survey:
+        ax2.plot(beacon.edges[:, 0], beacon.edges[:, 1], "k-", lw=1.5)
+        ax2.plot(beacon.edges[:, 0], beacon.edges[:, 1], "ko", ms=3)
+        first = (float(beacon.edges[0, 0]), float(beacon.edges[0, 1]))
+        ax2.annotate(beacon.id, first, fontsize=9, xytext=(4, -10), textcoords="offset points")
     if fix.ok and fix.pose is not None and fix.adjustment is not None:
         pose = fix.pose
         mine = pose.scanner_to_mine(pts)
@@ -102,9 +103,9 @@ def plot_fix(scan: Scan, survey: Survey, fix: Fix, path: str | Path, *, title: s
         ax2.set_xlim(lo[0], hi[0])
         ax2.set_ylim(lo[1], hi[1])
         obs_pts = mine[obs]
-        for k, b in enumerate(shown):
+        for k, bid in enumerate(shown):
             ax = fig.add_subplot(grid[1, k])
-            e = survey[b].edges
+            e = survey[bid].edges
             ax.plot(e[:, 0], e[:, 1], "k-", lw=1.2, label="surveyed")
             ax.plot(mine[near, 0], mine[near, 1], ".", ms=2, color="0.8")
             ax.plot(obs_pts[:, 0], obs_pts[:, 1], ".", ms=4, color="tab:blue")
@@ -114,7 +115,7 @@ def plot_fix(scan: Scan, survey: Survey, fix: Fix, path: str | Path, *, title: s
             ax.set_ylim(c[1] - span, c[1] + span)
             ax.set_aspect("equal")
             ax.set_title(
-                f"{b}: panels {','.join(map(str, sorted(fix.panels.get(b, []))))}", fontsize=9
+                f"{bid}: panels {','.join(map(str, sorted(fix.panels.get(bid, []))))}", fontsize=9
             )
             ax.ticklabel_format(useOffset=False)
             ax.tick_params(labelsize=7)
