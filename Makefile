@@ -23,8 +23,8 @@ demo: $(STAMP)
 	$(BIN)/mast demo
 
 lint: $(DEVSTAMP)
-	$(BIN)/ruff check src tests
-	$(BIN)/ruff format --check src tests
+	$(BIN)/ruff check src tests benchmarks
+	$(BIN)/ruff format --check src tests benchmarks
 
 typecheck: $(DEVSTAMP)
 	$(BIN)/mypy --strict src/mast

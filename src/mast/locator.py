@@ -100,8 +100,12 @@ class Verified:
     icp: IcpResult
     panel_points: dict[tuple[str, int], int]
     supported: tuple[str, ...]
-    violations: int
-    predicted_hits: int
+    checks: dict[str, BeamCheck]
+
+    @property
+    def violations(self) -> int:
+        """Beams that went through where a surveyed panel should be."""
+        return sum(c.through for c in self.checks.values())
 
     @property
     def score(self) -> tuple[int, int, float]:
@@ -156,7 +160,7 @@ def _support(
     survey: Survey,
     ident: PanelIdentification,
     noise_m: float,
-    predicted: dict[str, int],
+    checks: dict[str, BeamCheck],
     cfg: LocatorConfig,
 ) -> tuple[dict[tuple[str, int], int], tuple[str, ...]]:
     """Beacons that confirm a pose, and the returns on each panel.
@@ -164,16 +168,14 @@ def _support(
     A beacon confirms the pose when, at that pose, (1) two of its panels
     carry at least ``min_panel_points`` returns, (2) a corner of the scan
     identified as one of its edges lands on that surveyed edge, and (3) at
-    least ``min_coverage`` of the beams that should hit it do.
+    least ``min_coverage`` of the unoccluded beams that should hit it do.
     """
     counts: dict[tuple[str, int], int] = {}
     idx, n = np.unique(icp.panel[icp.panel >= 0], return_counts=True)
     for k, c in zip(idx, n, strict=True):
         counts[(panels.ids[panels.beacon[k]], int(panels.panel[k]))] = int(c)
     per_beacon: dict[str, int] = {}
-    on_beacon: dict[str, int] = {}
     for (b, _p), c in counts.items():
-        on_beacon[b] = on_beacon.get(b, 0) + c
         if c >= cfg.min_panel_points:
             per_beacon[b] = per_beacon.get(b, 0) + 1
     node_ok: set[str] = set()
@@ -188,51 +190,63 @@ def _support(
         ):
             node_ok.add(node.beacon)
     supported = tuple(
-        sorted(b for b in node_ok if on_beacon.get(b, 0) >= cfg.min_coverage * predicted.get(b, 0))
+        sorted(b for b in node_ok if checks.get(b, BeamCheck()).coverage >= cfg.min_coverage)
     )
     return counts, supported
 
 
-def _predicted_hits(scan: Scan, pose: Pose2D, panels: PanelSet) -> dict[str, int]:
-    """How many valid beams should land on each beacon's panels at this pose.
+@dataclass(frozen=True, slots=True)
+class BeamCheck:
+    """What the beams predicted to land on one beacon's panels actually did.
 
-    Beams within the incidence limit of a panel are not counted: the scan
-    may well miss them.
+    ``hit``: returned within the gate of the predicted range; ``occluded``:
+    returned short (something stood in front: allowed); ``through``: returned
+    beyond the panel (the beam went where the beacon should be: evidence
+    against the pose); ``missing``: no return.
     """
-    ok = scan.valid
-    bearing = pose.azimuth - scan.angles_rad[ok]
-    dirs = np.stack([np.sin(bearing), np.cos(bearing)], axis=1)
-    t, j = first_hits(pose.position, dirs, panels.a, panels.b)
-    hit = (j >= 0) & (t <= scan.range_max_m)
-    nu = np.abs(np.einsum("ij,ij->i", panels.normal[np.maximum(j, 0)], dirs))
-    hit &= nu > math.sin(math.radians(10.0))
-    out: dict[str, int] = {}
-    for k in j[hit]:
-        b = panels.ids[panels.beacon[k]]
-        out[b] = out.get(b, 0) + 1
-    return out
+
+    hit: int = 0
+    occluded: int = 0
+    through: int = 0
+    missing: int = 0
+
+    @property
+    def coverage(self) -> float:
+        """Share of the unoccluded returns that landed on the panels."""
+        seen = self.hit + self.through
+        return self.hit / seen if seen else 0.0
 
 
-def _free_space_violations(
+def _check_beams(
     scan: Scan, pose: Pose2D, panels: PanelSet, gate_m: float, margin_m: float = 0.02
-) -> tuple[int, int]:
-    """Beams that should hit a surveyed panel but were measured beyond it.
+) -> dict[str, BeamCheck]:
+    """Predict, at ``pose``, every beam that must cross a surveyed panel and compare.
 
-    A beam measured farther than a panel it must cross (by more than the
-    gate, and not near a panel end) went through where a beacon should be:
-    evidence against the pose. Shorter returns are occlusion, and allowed.
+    Panel ends are shrunk by ``margin_m`` and beams within 10 degrees of a
+    panel's plane are left out: near an edge or at grazing incidence a beam
+    may legitimately miss.
     """
-    ok = scan.valid
-    bearing = pose.azimuth - scan.angles_rad[ok]
+    bearing = pose.azimuth - scan.angles_rad
     dirs = np.stack([np.sin(bearing), np.cos(bearing)], axis=1)
-    # shrink each panel by the margin so grazing its ends does not count
     a = panels.a + margin_m * panels.direction
     b = panels.b - margin_m * panels.direction
-    keep = panels.length > 2 * margin_m
-    t, _ = first_hits(pose.position, dirs, a[keep], b[keep])
-    hit = np.isfinite(t) & (t <= scan.range_max_m)
-    beyond = hit & (scan.ranges_m[ok] > t + gate_m)
-    return int(np.count_nonzero(beyond)), int(np.count_nonzero(hit))
+    t, j = first_hits(pose.position, dirs, a, b)
+    hit = (j >= 0) & (t <= scan.range_max_m) & (t >= scan.range_min_m)
+    nu = np.abs(np.einsum("ij,ij->i", panels.normal[np.maximum(j, 0)], dirs))
+    hit &= nu > math.sin(math.radians(10.0))
+    r = scan.ranges_m
+    counts: dict[str, list[int]] = {}
+    for i in np.flatnonzero(hit):
+        c = counts.setdefault(panels.ids[panels.beacon[j[i]]], [0, 0, 0, 0])
+        if not scan.valid[i]:
+            c[3] += 1
+        elif r[i] < t[i] - gate_m:
+            c[1] += 1
+        elif r[i] > t[i] + gate_m:
+            c[2] += 1
+        else:
+            c[0] += 1
+    return {bid: BeamCheck(*c) for bid, c in counts.items()}
 
 
 def _no_fix(reason: str, detail: str, **kw: object) -> dict[str, object]:
@@ -312,16 +326,16 @@ def locate(scan: Scan, survey: Survey, *, config: LocatorConfig | None = None) -
     verified: list[Verified] = []
     for h in hyps:
         icp = icp_point_to_line(pts, h.similarity.pose(), panels, gates_m=gates)
-        predicted = _predicted_hits(scan, icp.pose, panels)
-        counts, supported = _support(
-            icp, panels, survey, ident, segmentation.noise_m, predicted, cfg
-        )
+        checks = _check_beams(scan, icp.pose, panels, cfg.final_gate_m)
+        counts, supported = _support(icp, panels, survey, ident, segmentation.noise_m, checks, cfg)
         if not set(h.beacons) <= set(supported):
             continue
-        viol, hits = _free_space_violations(scan, icp.pose, panels, cfg.final_gate_m)
-        if viol > max(3, cfg.max_violation_fraction * hits):
+        unoccluded = sum(c.hit + c.through for c in checks.values())
+        if sum(c.through for c in checks.values()) > max(
+            3, cfg.max_violation_fraction * unoccluded
+        ):
             continue
-        verified.append(Verified(h, icp, counts, supported, viol, hits))
+        verified.append(Verified(h, icp, counts, supported, checks))
     if not verified:
         return finish(
             hypotheses=tuple(hyps),

@@ -165,13 +165,16 @@ class Segmentation:
 
 
 def estimate_noise(points: NDArray[np.float64], run_ids: NDArray[np.intp]) -> float:
-    """Robust estimate of the perpendicular noise from triples of consecutive returns.
+    """Robust estimate of the range noise from triples of consecutive returns.
 
     For three neighbours on a straight surface, the middle one's distance
-    from the line through the outer two has variance about 1.5 sigma^2. The
-    lower quartile of its absolute value is used: triples on corners and on
-    rough rock (whose bumps are shape, not noise) only lengthen the upper
-    tail.
+    from the line through the outer two has variance about 1.5 sigma_perp^2,
+    and a range error e moves a return by e |n . u| across the surface (n
+    the surface normal, u the beam). Dividing by |n . u| gives the range
+    noise, which bounds the noise across every surface; triples seen within
+    about 17 degrees of grazing are left out. The lower quartile is used:
+    triples on corners and on rough rock (whose bumps are shape, not noise)
+    only lengthen the upper tail.
     """
     if points.shape[0] < 3:
         return 0.0
@@ -181,12 +184,18 @@ def estimate_noise(points: NDArray[np.float64], run_ids: NDArray[np.intp]) -> fl
         return 0.0
     ac = c - a
     length = np.hypot(ac[:, 0], ac[:, 1])
-    ok = same & (length > 0)
+    rb = np.hypot(b[:, 0], b[:, 1])
+    with np.errstate(invalid="ignore", divide="ignore"):
+        # |n . u| = |sin(angle between the surface and the beam)|
+        nu = np.abs(ac[:, 0] * b[:, 1] - ac[:, 1] * b[:, 0]) / (length * rb)
+    ok = same & (length > 0) & (rb > 0) & (nu > 0.3)
+    if not np.any(ok):
+        return 0.0
     dist = (
         np.abs(ac[ok, 0] * (b[ok, 1] - a[ok, 1]) - ac[ok, 1] * (b[ok, 0] - a[ok, 0])) / length[ok]
     )
     # lower quartile of |N(0, s)| = 0.3186 s, s^2 = 1.5 sigma^2
-    return float(np.quantile(dist, 0.25) / 0.3186 / math.sqrt(1.5))
+    return float(np.quantile(dist / nu[ok], 0.25) / 0.3186 / math.sqrt(1.5))
 
 
 def _sse(points: NDArray[np.float64]) -> float:
@@ -206,59 +215,94 @@ def _penalty(n: int) -> float:
     return 4.0 * math.log(max(n, 2)) + 12.0
 
 
-def _partition(points: NDArray[np.float64], var: float) -> list[tuple[int, int]]:
+def _partition(
+    points: NDArray[np.float64], var: float, max_piece: int = 256
+) -> list[tuple[int, int]]:
     """Optimal partition of one run into straight pieces (dynamic programming).
 
-    Minimises ``sum(SSE_TLS(piece) + beta) + tie * (returns in pieces of one
-    or two)`` over all partitions, with ``beta = var * _penalty(n)``: every
-    break must buy more than the noise explains. Returns left in a piece of
-    one or two (no line to test them against) cost like outliers, so exact
-    ties break towards real lines. SSEs come from cumulative moments, so each
-    end point costs O(candidates); candidates that cannot win any more are
-    pruned (PELT, Killick et al. 2012).
+    Minimises, over all partitions, the sum over pieces of
+
+        SSE_TLS(piece) / (var * mean((n . u_i)^2)) + penalty(n) + 4 * (returns in a piece of 1 or 2)
+
+    where ``var`` is the range noise variance and ``(n . u_i)^2`` turns it
+    into the noise across the piece's line for each beam ``u_i``: costs are in
+    chi-square units, so a face-on panel and an oblique wall are judged
+    alike. Every break must buy more than :func:`_penalty` (the optimal
+    partitioning changepoint method, Jackson et al. 2005). Returns left in a
+    piece of one or two cost like outliers, so exact ties break towards real
+    lines. Pieces hold at most ``max_piece`` returns, which bounds the work
+    to ``n * max_piece``; cuts that only the cap made are undone after.
+    Every candidate piece's SSE and normal come at once from cumulative
+    moments.
 
     References
     ----------
-    R. Killick, P. Fearnhead, I. A. Eckley, "Optimal detection of changepoints
-    with a linear computational cost", JASA 107, 2012.
+    B. Jackson et al., "An algorithm for optimal partitioning of data on an
+    interval", IEEE Signal Processing Letters 12, 2005.
     """
     n = points.shape[0]
     c = points - points.mean(axis=0)
+    r = np.hypot(points[:, 0], points[:, 1])
+    u = points / np.where(r > 0, r, 1.0)[:, None]
     z = np.zeros(1)
-    sx = np.concatenate([z, np.cumsum(c[:, 0])])
-    sy = np.concatenate([z, np.cumsum(c[:, 1])])
-    sxx = np.concatenate([z, np.cumsum(c[:, 0] ** 2)])
-    syy = np.concatenate([z, np.cumsum(c[:, 1] ** 2)])
-    sxy = np.concatenate([z, np.cumsum(c[:, 0] * c[:, 1])])
-    beta = var * _penalty(n)
-    tie = 4.0 * var
-    best = np.full(n + 1, np.inf)
-    best[0] = -beta
+
+    def cum(v: NDArray[np.float64]) -> NDArray[np.float64]:
+        return np.concatenate([z, np.cumsum(v)])
+
+    sx, sy = cum(c[:, 0]), cum(c[:, 1])
+    sxx, syy, sxy = cum(c[:, 0] ** 2), cum(c[:, 1] ** 2), cum(c[:, 0] * c[:, 1])
+    uxx, uyy, uxy = cum(u[:, 0] ** 2), cum(u[:, 1] ** 2), cum(u[:, 0] * u[:, 1])
+    w = min(n, max_piece)
+    d = np.arange(1, w + 1)  # piece lengths
+    j = np.arange(1, n + 1)[:, None]  # piece ends (exclusive)
+    i = j - d[None, :]  # piece starts
+    ok = i >= 0
+    ii = np.where(ok, i, 0)
+    m = d[None, :].astype(float)
+    ax, ay = sx[j] - sx[ii], sy[j] - sy[ii]
+    vxx = sxx[j] - sxx[ii] - ax * ax / m
+    vyy = syy[j] - syy[ii] - ay * ay / m
+    vxy = sxy[j] - sxy[ii] - ax * ay / m
+    half = 0.5 * (vxx + vyy)
+    sse = np.maximum(half - np.sqrt(np.maximum(0.25 * (vxx - vyy) ** 2 + vxy**2, 0.0)), 0.0)
+    theta = 0.5 * np.arctan2(2.0 * vxy, vxx - vyy)  # direction of the piece's line
+    nx, ny = -np.sin(theta), np.cos(theta)
+    nu2 = (
+        nx * nx * (uxx[j] - uxx[ii])
+        + 2 * nx * ny * (uxy[j] - uxy[ii])
+        + ny * ny * (uyy[j] - uyy[ii])
+    ) / m
+    scale = var * np.maximum(nu2, 0.05)
+    pen = _penalty(n)
+    cost = np.where(ok, sse / scale + pen + 4.0 * np.where(m < 3, m, 0.0), np.inf)
+    best = np.empty(n + 1)
+    best[0] = -pen
     last = np.zeros(n + 1, dtype=np.intp)
-    cand = np.zeros(1, dtype=np.intp)
-    for j in range(1, n + 1):
-        i = cand
-        m = (j - i).astype(float)
-        ax, ay = sx[j] - sx[i], sy[j] - sy[i]
-        vxx = sxx[j] - sxx[i] - ax * ax / m
-        vyy = syy[j] - syy[i] - ay * ay / m
-        vxy = sxy[j] - sxy[i] - ax * ay / m
-        half = 0.5 * (vxx + vyy)
-        sse = np.maximum(half - np.sqrt(np.maximum(0.25 * (vxx - vyy) ** 2 + vxy**2, 0.0)), 0.0)
-        loose = np.where(m < 3, m, 0.0)
-        cost = best[i] + sse + beta + tie * loose
-        k = int(np.argmin(cost))
-        best[j] = cost[k]
-        last[j] = i[k]
-        keep = best[i] + sse <= best[j] + beta + 2.0 * tie
-        cand = np.append(i[keep], j)
+    for jj in range(1, n + 1):
+        k = min(jj, w)
+        total = best[jj - 1 :: -1][:k] + cost[jj - 1, :k]
+        arg = int(np.argmin(total))
+        best[jj] = total[arg]
+        last[jj] = jj - 1 - arg
     pieces: list[tuple[int, int]] = []
-    j = n
-    while j > 0:
-        pieces.append((int(last[j]), j))
-        j = int(last[j])
+    e = n
+    while e > 0:
+        pieces.append((int(last[e]), e))
+        e = int(last[e])
     pieces.reverse()
-    return pieces
+    # Undo the cuts that only the cap on piece length made.
+    merged: list[tuple[int, int]] = []
+    for a0, b0 in pieces:
+        if merged and b0 - merged[-1][0] > w:
+            s0 = merged[-1][0]
+            fit = fit_line(points[s0:b0])
+            nu = u[s0:b0] @ fit.normal
+            gain = _sse(points[s0:b0]) - _sse(points[s0:a0]) - _sse(points[a0:b0])
+            if gain / (var * max(float(np.mean(nu**2)), 0.05)) <= pen:
+                merged[-1] = (s0, b0)
+                continue
+        merged.append((a0, b0))
+    return merged
 
 
 def _make_segment(
@@ -268,7 +312,10 @@ def _make_segment(
     t = (pts - fit.centroid) @ fit.direction
     start = fit.centroid + t[0] * fit.direction
     end = fit.centroid + t[-1] * fit.direction
-    sigma_dir = noise / math.sqrt(fit.t_spread) if fit.t_spread > 0 else math.inf
+    # range noise seen across this line: sigma_r * rms(n . u) over its beams
+    u = pts / np.hypot(pts[:, 0], pts[:, 1])[:, None]
+    perp = noise * math.sqrt(max(float(np.mean((u @ fit.normal) ** 2)), 1e-6))
+    sigma_dir = perp / math.sqrt(fit.t_spread) if fit.t_spread > 0 else math.inf
     return Segment(
         index=index,
         run=run,
