@@ -87,8 +87,8 @@ class Adjustment:
         ``(G^T W G)^-1`` for (E [m], N [m], A [rad]): the a-priori covariance.
     covariance : ndarray, shape (3, 3)
         The covariance reported: the cofactor scaled by the reference variance
-        when that exceeds 1 (the a-priori precisions were too optimistic),
-        otherwise the cofactor itself.
+        when the global test rejects it as too large (the a-priori precisions
+        were too optimistic), otherwise the cofactor itself.
     reference_variance : float
         A-posteriori ``sigma_0^2 = v^T W v / (n - 3)``.
     dof : int
@@ -134,7 +134,8 @@ class Adjustment:
 
     @property
     def scaled(self) -> bool:
-        return self.reference_variance > 1.0
+        """Whether the covariance was scaled by the reference variance (test rejected high)."""
+        return self.reference_variance > self.chi2_upper
 
     def quantile95(self) -> float:
         """Two-sided 95 % factor: normal for a-priori, Student t for a-posteriori scaling."""
@@ -219,5 +220,8 @@ def adjust_pose(
     s0 = float(v @ (w * v) / dof) if dof > 0 else math.nan
     lo = float(stats.chi2.ppf(0.025, dof) / dof) if dof > 0 else 0.0
     hi = float(stats.chi2.ppf(0.975, dof) / dof) if dof > 0 else math.inf
-    cov: NDArray[np.float64] = Q * s0 if s0 > 1.0 else Q.copy()
+    # Surveying practice: when the global test passes, the a-priori precisions
+    # stand (sigma_0 = 1); when it rejects high, they were too optimistic and
+    # the covariance is scaled by the a-posteriori reference variance.
+    cov: NDArray[np.float64] = Q * s0 if s0 > hi else Q.copy()
     return Adjustment(p, Q, cov, s0, dof, lo, hi, v, np.sqrt(var), it, jac)

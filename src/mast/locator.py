@@ -19,9 +19,10 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-from .adjustment import MIN_INCIDENCE_COS, Adjustment, adjust_pose
+from .adjustment import MIN_INCIDENCE_COS, Adjustment, adjust_pose, range_model
 from .alignment import IcpResult, Similarity, icp_point_to_line
 from .beacon import Survey
+from .bounds import cramer_rao_bound
 from .geometry import PanelSet, first_hits
 from .identification import IdentificationConfig, PanelIdentification, identify_panels
 from .matching import Hypothesis, MatchingConfig, pose_hypotheses
@@ -140,6 +141,8 @@ class Fix:
     """Panel (index into the survey's PanelSet) of each observation."""
     elapsed_s: float
     config: LocatorConfig
+    crb: NDArray[np.float64] | None = None
+    """Cramer-Rao bound of (E, N, A) for the returns used, at the fixed pose."""
 
     @property
     def ok(self) -> bool:
@@ -376,33 +379,29 @@ def locate(scan: Scan, survey: Survey, *, config: LocatorConfig | None = None) -
                     f"{other.icp.pose} ({', '.join(other.supported)}) fit equally well",
                 ),
             )
-    # Adjustment on the returns of the supporting beacons; re-associate once it moves.
-    keep = np.flatnonzero(np.isin(panels.beacon, [panels.ids.index(b) for b in best.supported]))
-    valid_beams = np.flatnonzero(scan.valid)
+    # Adjustment on the returns of the supporting beacons, and of any other beacon whose
+    # panels the beams confirm at this pose (more returns, a tighter fix); re-associate
+    # as it moves.
+    agree = set(best.supported) | {
+        b
+        for b, c in best.checks.items()
+        if c.coverage >= cfg.min_coverage and c.hit >= cfg.min_panel_points
+    }
+    keep = np.flatnonzero(np.isin(panels.beacon, [panels.ids.index(b) for b in agree]))
     pose = best.icp.pose
     adj: Adjustment | None = None
     used = np.zeros(0, dtype=np.intp)
     used_panels = np.zeros(0, dtype=np.intp)
     for _ in range(8):
-        assoc, _d = panels.associate(pose.scanner_to_mine(pts), cfg.final_gate_m, subset=keep)
-        sel = assoc >= 0
-        beams = valid_beams[sel]
-        pk = assoc[sel]
+        beams, pk = _ray_association(
+            scan, pose, panels, keep, cfg, None if adj is None else adj.cofactor
+        )
         nrm = panels.normal[pk]
-        bearing = pose.azimuth - scan.angles_rad[beams]
-        nu = np.abs(nrm[:, 0] * np.sin(bearing) + nrm[:, 1] * np.cos(bearing))
-        good = nu > MIN_INCIDENCE_COS
-        beams, pk, nrm = beams[good], pk[good], nrm[good]
         if adj is not None:
             # Residuals far outside the spread of the others (robust scale, so the
             # test tightens on clean data) are not ranges to the panel.
             good = _robust_inliers(adj, pose, scan, beams, nrm, panels.a[pk], cfg)
             beams, pk, nrm = beams[good], pk[good], nrm[good]
-        # A panel with a return or two is no evidence, only leverage: near an edge
-        # those returns may belong to the next surface.
-        k_ids, k_counts = np.unique(pk, return_counts=True)
-        good = np.isin(pk, k_ids[k_counts >= cfg.min_panel_points])
-        beams, pk, nrm = beams[good], pk[good], nrm[good]
         if np.array_equal(beams, used) and adj is not None:
             break
         if beams.size < 4:
@@ -442,6 +441,15 @@ def locate(scan: Scan, survey: Survey, *, config: LocatorConfig | None = None) -
         used, used_panels = beams, pk
         pose = adj.pose
     assert adj is not None
+    offsets = np.einsum("ij,ij->i", panels.normal[used_panels], panels.a[used_panels])
+    bound = cramer_rao_bound(
+        adj.pose,
+        scan.angles_rad[used],
+        panels.normal[used_panels],
+        offsets,
+        range_sigma_m=cfg.range_sigma_m,
+        angle_sigma_rad=cfg.angle_sigma_rad,
+    )
     panels_used: dict[str, list[int]] = {}
     for k in np.unique(used_panels):
         panels_used.setdefault(panels.ids[panels.beacon[k]], []).append(int(panels.panel[k]))
@@ -456,7 +464,46 @@ def locate(scan: Scan, survey: Survey, *, config: LocatorConfig | None = None) -
         chosen=best,
         observations=used,
         observation_panels=used_panels,
+        crb=bound,
     )
+
+
+def _ray_association(
+    scan: Scan,
+    pose: Pose2D,
+    panels: PanelSet,
+    keep: NDArray[np.intp],
+    cfg: LocatorConfig,
+    pose_cofactor: NDArray[np.float64] | None,
+) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+    """Beams whose ray, cast from ``pose``, first meets a kept panel, and that panel.
+
+    Casting the ray decides which panel a beam near a corner hits (the nearer
+    one), where the nearest line to the return would be a coin toss within
+    the noise. A return is kept when it lies within ``gate_sigmas`` standard
+    deviations of the predicted range, counting the pose's own uncertainty
+    (``g^T Q g``, once an adjustment gives ``Q``): a beam that meets a panel
+    obliquely, far away, is very sensitive to the azimuth and would otherwise
+    be gated out exactly when it carries the most information. Beams within
+    2 degrees of grazing are left out.
+    """
+    beams = np.flatnonzero(scan.valid)
+    bearing = pose.azimuth - scan.angles_rad[beams]
+    dirs = np.stack([np.sin(bearing), np.cos(bearing)], axis=1)
+    t, j = first_hits(pose.position, dirs, panels.a[keep], panels.b[keep])
+    hit = j >= 0
+    pk = keep[np.maximum(j, 0)]
+    nrm = panels.normal[pk]
+    nu = np.abs(np.einsum("ij,ij->i", nrm, dirs))
+    gate = np.full(beams.size, cfg.final_gate_m)
+    if pose_cofactor is not None and np.any(hit):
+        offsets = np.einsum("ij,ij->i", nrm, panels.a[pk])
+        _rho, jac, d_phi = range_model(pose, scan.angles_rad[beams], nrm, offsets)
+        var = cfg.range_sigma_m**2 + cfg.survey_sigma_m**2 + (d_phi * cfg.angle_sigma_rad) ** 2
+        pred = np.einsum("ij,jk,ik->i", jac, pose_cofactor, jac)
+        gate = cfg.gate_sigmas * np.sqrt(var + np.where(np.isfinite(pred), pred, 0.0))
+    ok = hit & (np.abs(scan.ranges_m[beams] - t) <= gate) & (nu > MIN_INCIDENCE_COS)
+    return beams[ok], pk[ok]
 
 
 def _robust_inliers(
@@ -468,19 +515,21 @@ def _robust_inliers(
     points_on: NDArray[np.float64],
     cfg: LocatorConfig,
 ) -> NDArray[np.bool_]:
-    """Observations within ``gate_sigmas`` robust standard deviations of the fit.
+    """Observations within ``gate_sigmas`` robust standard deviations of the prediction.
 
-    The scale is 1.4826 times the median absolute standardised residual of the
-    previous adjustment, never above 1 (the a-priori precision) and never
-    below a numerical floor.
+    The standard deviation of ``r - rho`` is that of the range and of the
+    predicted range (``g^T Q g``, the pose's uncertainty seen along the beam),
+    both scaled by 1.4826 times the median absolute standardised residual of
+    the previous adjustment, capped at 1 (the a-priori precision): the test
+    tightens on clean data, and never below a numerical floor.
     """
-    from .adjustment import range_model
-
     std = adj.residuals_m / adj.sigmas_m
     scale = min(1.0, 1.4826 * float(np.median(np.abs(std)))) if std.size else 1.0
     offsets = np.einsum("ij,ij->i", normals, points_on)
-    rho, _jac, d_phi = range_model(pose, scan.angles_rad[beams], normals, offsets)
-    sig = np.sqrt(cfg.range_sigma_m**2 + (d_phi * cfg.angle_sigma_rad) ** 2)
+    rho, jac, d_phi = range_model(pose, scan.angles_rad[beams], normals, offsets)
+    var = cfg.range_sigma_m**2 + (d_phi * cfg.angle_sigma_rad) ** 2
+    pred = np.einsum("ij,jk,ik->i", jac, adj.cofactor, jac)
+    sig = np.sqrt(var + pred)
     floor = 1e-7 * (1.0 + np.abs(rho))
     return np.asarray(
         np.abs(scan.ranges_m[beams] - rho) <= cfg.gate_sigmas * np.maximum(scale * sig, floor)

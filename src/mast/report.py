@@ -5,6 +5,8 @@ from __future__ import annotations
 import math
 from typing import Any
 
+import numpy as np
+
 from .locator import NO_FIX_REASONS, Fix
 from .pose import format_dms
 
@@ -55,6 +57,13 @@ def fix_record(fix: Fix, *, source: str | None = None, index: int | None = None)
             chi2_bounds=[_r(adj.chi2_lower, 6), _r(adj.chi2_upper, 6)],
             covariance_scaled=adj.scaled,
         )
+        if fix.crb is not None:
+            crb = np.sqrt(np.diag(fix.crb))
+            rec.update(
+                crb_sigma_easting_m=_r(crb[0], 7),
+                crb_sigma_northing_m=_r(crb[1], 7),
+                crb_sigma_azimuth_deg=_r(math.degrees(crb[2]), 8),
+            )
     else:
         rec.update(
             easting=None,
