@@ -211,3 +211,34 @@ def test_scanners_lists_models() -> None:
     r = runner.invoke(app, ["scanners"])
     assert r.exit_code == 0
     assert "lms1xx-0.5" in r.output
+
+
+def test_bench_accuracy_small_run_writes_csv(tmp_path: Path) -> None:
+    import csv
+
+    r = runner.invoke(
+        app, ["bench", "accuracy", "--poses", "2", "--draws", "3", "--out", str(tmp_path)]
+    )
+    assert r.exit_code == 0, r.output
+    assert "RMS/CRB" in r.output
+    with (tmp_path / "accuracy_summary.csv").open() as fh:
+        rows = list(csv.DictReader(fh))
+    assert [x["config"] for x in rows] == [
+        "270deg-0.5deg-12mm",
+        "270deg-0.25deg-12mm",
+        "190deg-0.1667deg-8mm",
+        "360deg-0.2deg-20mm",
+    ]
+    for x in rows:
+        assert 0.0 <= float(x["fix_rate"]) <= 1.0
+        assert int(x["draws"]) == 6
+
+
+def test_reproduce_paper_writes_report_and_figures(tmp_path: Path) -> None:
+    r = runner.invoke(app, ["reproduce", "paper", "--out", str(tmp_path), "--draws", "1"])
+    assert r.exit_code == 0, r.output
+    report = (tmp_path / "report.md").read_text()
+    assert "ours beside the paper's" in report
+    assert "conclusions, checked" in report
+    for png in ("figure3_P1.png", "figure3_P4.png", "errors_by_position.png", "errors_by_size.png"):
+        assert (tmp_path / png).read_bytes()[:4] == b"\x89PNG"

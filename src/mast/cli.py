@@ -218,6 +218,47 @@ def locate(
         raise typer.Exit(EXIT_NO_FIX)
 
 
+bench_app = typer.Typer(
+    help="Benchmarks that print figures (not timed tests).", no_args_is_help=True
+)
+app.add_typer(bench_app, name="bench")
+
+
+@bench_app.command("accuracy")
+def bench_accuracy(
+    out: Annotated[Path | None, typer.Option("--out", help="Folder for the CSV files.")] = None,
+    poses: Annotated[
+        int, typer.Option("--poses", min=1, help="Owed poses per configuration.")
+    ] = 40,
+    draws: Annotated[int, typer.Option("--draws", min=1, help="Noise draws per pose.")] = 30,
+    seed: Annotated[int, typer.Option("--seed", help="First scene seed.")] = 0,
+) -> None:
+    """RMS error against the Cramer-Rao bound and coverage of the 95 % intervals,
+    for the four scanner configurations (270° at 0.5° and 0.25°, 190° at 1/6°, 360° at 0.2°)."""
+    from .bench import run_accuracy
+
+    run_accuracy(poses=poses, draws=draws, seed=seed, out_dir=out, echo=typer.echo)
+
+
+reproduce_app = typer.Typer(help="Re-run published experiments.", no_args_is_help=True)
+app.add_typer(reproduce_app, name="reproduce")
+
+
+@reproduce_app.command("paper")
+def reproduce_paper_cmd(
+    out: Annotated[
+        Path, typer.Option("--out", help="Folder for report.md, figures and results.csv.")
+    ],
+    draws: Annotated[int, typer.Option("--draws", min=1, help="Noisy draws per shot.")] = 30,
+    seed: Annotated[int, typer.Option("--seed", help="Noise seed.")] = 0,
+) -> None:
+    """The MAST paper's experiments (Table 2 positions, wall yaws, beacon sizes), noise-free
+    and with 12 mm range noise, reported beside the paper's published values."""
+    from .reproduce import reproduce_paper
+
+    reproduce_paper(out, draws=draws, seed=seed, echo=typer.echo)
+
+
 @app.command()
 def scanners() -> None:
     """List the named scanner models (field of view, resolution, range noise)."""

@@ -7,6 +7,7 @@ so tests and benchmarks know which panels a scan saw.
 from .design import BeaconDesign, paper_design, polyline_design, random_design
 from .scanner import SCANNERS, ScannerModel, SimulatedScan, scanner_model, simulate_scan
 from .scenarios import (
+    PAPER_VARIANTS,
     SCENARIOS,
     Scene,
     Shot,
@@ -21,6 +22,7 @@ from .tunnel import Roughness, Tunnel, roughen
 from .world import Surface, World, WorldBuilder
 
 __all__ = [
+    "PAPER_VARIANTS",
     "SCANNERS",
     "SCENARIOS",
     "BeaconDesign",
