@@ -5,6 +5,7 @@ so tests and benchmarks know which panels a scan saw.
 """
 
 from .design import BeaconDesign, paper_design, polyline_design, random_design
+from .hard import drift_scene, hard_scene
 from .scanner import SCANNERS, ScannerModel, SimulatedScan, scanner_model, simulate_scan
 from .scenarios import (
     PAPER_VARIANTS,
@@ -36,6 +37,8 @@ __all__ = [
     "World",
     "WorldBuilder",
     "build_scenario",
+    "drift_scene",
+    "hard_scene",
     "paper_design",
     "paper_scenario",
     "paper_scene",

@@ -235,7 +235,9 @@ def simulate_scan(
         # A footprint straddles a jump when its two halves hit different surfaces at
         # clearly different ranges (an oblique wall alone is no jump).
         both = np.isfinite(r_lo) & np.isfinite(r_hi) & (s_lo != s_hi)
-        jump = both & (np.abs(r_lo - r_hi) > 0.1 + 3 * scanner.range_sigma_m)
+        with np.errstate(invalid="ignore"):
+            gap = np.abs(np.where(both, r_lo - r_hi, 0.0))
+        jump = both & (gap > 0.1 + 3 * scanner.range_sigma_m)
         mixed = jump & (rng.random(n) < scanner.mixed_pixel_prob)
         w = rng.random(n)
         r = np.where(mixed, w * r_lo + (1 - w) * r_hi, r)
