@@ -69,7 +69,10 @@ def run_demo(folder: Path, *, echo: Callable[[str], object] = print) -> int:
                 truth = list(csv.DictReader(fh))
             for row, path in zip(truth, w.scans, strict=True):
                 scan = read_scan_csv(path)
-                cfg = LocatorConfig(range_sigma_m=float(row["range_sigma_m"]) or 0.001)
+                # the simulated survey is exact: no survey error in the intervals
+                cfg = LocatorConfig(
+                    range_sigma_m=float(row["range_sigma_m"]) or 0.001, survey_sigma_m=0.0
+                )
                 fix = locate(scan, survey, config=cfg)
                 pos, res = row["label"].split("@")
                 te, tn, taz = (

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -25,6 +25,7 @@ from .beacon import Survey
 from .bounds import cramer_rao_bound
 from .geometry import PanelSet, first_hits
 from .identification import IdentificationConfig, PanelIdentification, identify_panels
+from .integrity import Observations, beacon_tests, snoop
 from .matching import Hypothesis, MatchingConfig, pose_hypotheses
 from .pose import Pose2D
 from .scan import Scan
@@ -60,7 +61,8 @@ class LocatorConfig:
         Returns farther than this many standard deviations from their panel
         are not used.
     survey_sigma_m : float
-        Standard deviation of surveyed edge coordinates (widens the gate).
+        Standard deviation of surveyed edge coordinates: widens the gates and
+        adds its share to the fix's covariance (0 for a simulated, exact survey).
     coarse_gates_m : tuple of float
         Association gates while the pose is still rough (ICP stages).
     max_violation_fraction : float
@@ -143,6 +145,11 @@ class Fix:
     config: LocatorConfig
     crb: NDArray[np.float64] | None = None
     """Cramer-Rao bound of (E, N, A) for the returns used, at the fixed pose."""
+    excluded_beacons: tuple[str, ...] = ()
+    """Beacons seen but left out because their ranges disagree with the others
+    (moved or mis-surveyed)."""
+    outliers_removed: int = 0
+    """Returns removed by data snooping."""
 
     @property
     def ok(self) -> bool:
@@ -441,7 +448,68 @@ def locate(scan: Scan, survey: Survey, *, config: LocatorConfig | None = None) -
         used, used_panels = beams, pk
         pose = adj.pose
     assert adj is not None
-    offsets = np.einsum("ij,ij->i", panels.normal[used_panels], panels.a[used_panels])
+    obs = Observations(
+        used,
+        scan.angles_rad[used],
+        scan.ranges_m[used],
+        panels.normal[used_panels],
+        np.einsum("ij,ij->i", panels.normal[used_panels], panels.a[used_panels]),
+        used_panels,
+        panels.beacon[used_panels],
+    )
+    sig = {"range_sigma_m": cfg.range_sigma_m, "angle_sigma_rad": cfg.angle_sigma_rad}
+    obs, adj, outliers = snoop(
+        obs, adj, range_sigma_m=cfg.range_sigma_m, angle_sigma_rad=cfg.angle_sigma_rad
+    )
+    excluded: list[str] = []
+    while True:
+        tests = beacon_tests(obs, adj, survey_sigma_m=cfg.survey_sigma_m, **sig)
+        failed = [t for t in tests if t.failed]
+        if not failed:
+            break
+        # Which beacon is at fault: the one whose removal leaves the others consistent.
+        # If no single removal does, or more than one does, the scan cannot tell which
+        # beacon moved, and a fix would rest on a guess.
+        present = sorted(set(obs.beacon.tolist()))
+        culprits = []
+        for b in present:
+            rest = obs.subset(obs.beacon != b)
+            if len(set(rest.beacon.tolist())) < cfg.min_beacons:
+                continue
+            try:
+                rest_adj = rest.adjust(adj.pose, **sig)
+            except np.linalg.LinAlgError:
+                continue
+            rest_tests = beacon_tests(rest, rest_adj, survey_sigma_m=cfg.survey_sigma_m, **sig)
+            if (
+                not any(t.failed for t in rest_tests)
+                and rest_adj.reference_variance <= rest_adj.chi2_upper
+            ):
+                culprits.append(b)
+        if len(culprits) != 1:
+            names = sorted(panels.ids[b] for b in (culprits or [t.beacon for t in failed]))
+            return finish(
+                hypotheses=tuple(hyps),
+                verified=tuple(verified),
+                chosen=best,
+                **_no_fix(
+                    "inconsistent",
+                    f"the beacons seen disagree with each other; {' or '.join(names)} may have "
+                    "been moved or mis-surveyed",
+                ),
+            )
+        excluded.append(panels.ids[culprits[0]])
+        obs = obs.subset(obs.beacon != culprits[0])
+        adj = obs.adjust(adj.pose, **sig)
+        obs, adj, more = snoop(
+            obs, adj, range_sigma_m=cfg.range_sigma_m, angle_sigma_rad=cfg.angle_sigma_rad
+        )
+        outliers += more
+    used, used_panels, offsets = obs.beam, obs.panel, obs.offsets
+    if cfg.survey_sigma_m > 0:
+        adj = replace(
+            adj, covariance=adj.covariance + _survey_covariance(adj, obs, cfg.survey_sigma_m)
+        )
     bound = cramer_rao_bound(
         adj.pose,
         scan.angles_rad[used],
@@ -465,6 +533,8 @@ def locate(scan: Scan, survey: Survey, *, config: LocatorConfig | None = None) -
         observations=used,
         observation_panels=used_panels,
         crb=bound,
+        excluded_beacons=tuple(excluded),
+        outliers_removed=outliers,
     )
 
 
@@ -534,6 +604,27 @@ def _robust_inliers(
     return np.asarray(
         np.abs(scan.ranges_m[beams] - rho) <= cfg.gate_sigmas * np.maximum(scale * sig, floor)
     )
+
+
+def _survey_covariance(
+    adj: Adjustment, obs: Observations, survey_sigma_m: float
+) -> NDArray[np.float64]:
+    """Pose covariance from the surveyed panels' own position errors.
+
+    A panel surveyed ``sigma_s`` off across its face moves every range to it by
+    ``sigma_s / |n . u|`` together; through the estimator ``K = Q G^T W`` that
+    adds ``K S K^T`` to the noise covariance (S: those shared range errors).
+    """
+    bearing = adj.pose.azimuth - obs.angles_rad
+    u = np.stack([np.sin(bearing), np.cos(bearing)], axis=1)
+    lever = 1.0 / np.abs(np.einsum("ij,ij->i", obs.normals, u))
+    k = adj.cofactor @ (adj.jacobian / (adj.sigmas_m**2)[:, None]).T  # (3, n)
+    out = np.zeros((3, 3))
+    for p in np.unique(obs.panel):
+        sel = obs.panel == p
+        col = k[:, sel] @ lever[sel]
+        out += survey_sigma_m**2 * np.outer(col, col)
+    return out
 
 
 def _scaled(q: NDArray[np.float64]) -> NDArray[np.float64]:

@@ -77,6 +77,8 @@ def fix_record(fix: Fix, *, source: str | None = None, index: int | None = None)
             detail=fix.detail,
         )
     rec["beacons"] = list(fix.beacons)
+    rec["excluded_beacons"] = list(fix.excluded_beacons)
+    rec["outliers_removed"] = fix.outliers_removed
     rec["panels"] = {b: sorted(p) for b, p in fix.panels.items()}
     rec["points_used"] = fix.points_used
     rec["segments"] = len(fix.segmentation.segments)
@@ -123,6 +125,13 @@ def fix_text(fix: Fix, *, source: str | None = None) -> str:
         )
         + f"; {fix.points_used} returns",
     ]
+    if fix.excluded_beacons:
+        lines.append(
+            f"WARNING   beacon(s) {', '.join(fix.excluded_beacons)} left out: their ranges "
+            "disagree with the others (moved or mis-surveyed?)"
+        )
+    if fix.outliers_removed:
+        lines.append(f"Outliers  {fix.outliers_removed} return(s) removed by data snooping")
     opts = sorted(
         {(n.beacon, n.edge, n.option) for n in fix.identification.nodes if n.beacon in fix.beacons}
     )

@@ -109,7 +109,9 @@ class ShotResult:
 def _run_shot(scene: Scene, k: int, draws: int, seed: int) -> ShotResult:
     shot = scene.shots[k]
     exact = simulate_scan(scene.world, shot.pose, shot.scanner.noise_free())
-    fix = locate(exact.scan, scene.survey, config=LocatorConfig(range_sigma_m=NOISE_M))
+    fix = locate(
+        exact.scan, scene.survey, config=LocatorConfig(range_sigma_m=NOISE_M, survey_sigma_m=0.0)
+    )
     e_pos = e_az = math.nan
     opts = ""
     if fix.ok and fix.pose is not None:
@@ -133,7 +135,9 @@ def _run_shot(scene: Scene, k: int, draws: int, seed: int) -> ShotResult:
     pos, az, sig, cover, pts = [], [], [], [], []
     for _ in range(draws):
         sim = simulate_scan(scene.world, shot.pose, noisy, rng=rng)
-        f = locate(sim.scan, scene.survey, config=LocatorConfig(range_sigma_m=NOISE_M))
+        f = locate(
+            sim.scan, scene.survey, config=LocatorConfig(range_sigma_m=NOISE_M, survey_sigma_m=0.0)
+        )
         if not f.ok or f.pose is None or f.adjustment is None:
             continue
         pos.append(
@@ -214,7 +218,9 @@ def _figures(out: Path, rows: list[ShotResult]) -> None:
     for k in (0, 1):
         shot = scene.shots[k]
         sim = simulate_scan(scene.world, shot.pose, shot.scanner)
-        fix = locate(sim.scan, scene.survey, config=LocatorConfig(range_sigma_m=NOISE_M))
+        fix = locate(
+            sim.scan, scene.survey, config=LocatorConfig(range_sigma_m=NOISE_M, survey_sigma_m=0.0)
+        )
         plot_fix(
             sim.scan,
             scene.survey,

@@ -96,8 +96,11 @@ def run_accuracy(
     summaries: list[AccuracySummary] = []
     for model in configs:
         t0 = time.perf_counter()
+        # The simulated survey is exact: no survey error to add to the covariance.
         cfg = LocatorConfig(
-            range_sigma_m=model.range_sigma_m, angle_sigma_rad=model.angle_sigma_rad
+            range_sigma_m=model.range_sigma_m,
+            angle_sigma_rad=model.angle_sigma_rad,
+            survey_sigma_m=0.0,
         )
         rows: list[dict[str, object]] = []
         for p_idx, (scene_obj, shot_obj) in enumerate(_owed_poses(model, poses, seed)):
