@@ -164,6 +164,12 @@ class Segmentation:
     """Noise standard deviation used for the thresholds (estimated or given)."""
 
 
+#: Quantile of the triple deviations used for the noise estimate, and that
+#: quantile of a unit half-normal distribution.
+NOISE_QUANTILE = 0.5
+_HALF_NORMAL_Q = 0.6745
+
+
 def estimate_noise(points: NDArray[np.float64], run_ids: NDArray[np.intp]) -> float:
     """Robust estimate of the range noise from triples of consecutive returns.
 
@@ -172,9 +178,9 @@ def estimate_noise(points: NDArray[np.float64], run_ids: NDArray[np.intp]) -> fl
     and a range error e moves a return by e |n . u| across the surface (n
     the surface normal, u the beam). Dividing by |n . u| gives the range
     noise, which bounds the noise across every surface; triples seen within
-    about 17 degrees of grazing are left out. The lower quartile is used:
-    triples on corners and on rough rock (whose bumps are shape, not noise)
-    only lengthen the upper tail.
+    about 17 degrees of grazing are left out. The median is used: triples
+    on corners only lengthen the upper tail (rough rock, whose bumps are
+    shape, raises it, which only makes the segmentation more cautious).
     """
     if points.shape[0] < 3:
         return 0.0
@@ -194,8 +200,8 @@ def estimate_noise(points: NDArray[np.float64], run_ids: NDArray[np.intp]) -> fl
     dist = (
         np.abs(ac[ok, 0] * (b[ok, 1] - a[ok, 1]) - ac[ok, 1] * (b[ok, 0] - a[ok, 0])) / length[ok]
     )
-    # lower quartile of |N(0, s)| = 0.3186 s, s^2 = 1.5 sigma^2
-    return float(np.quantile(dist / nu[ok], 0.25) / 0.3186 / math.sqrt(1.5))
+    # median of |N(0, s)| = 0.6745 s, s^2 = 1.5 sigma^2
+    return float(np.quantile(dist / nu[ok], NOISE_QUANTILE) / _HALF_NORMAL_Q / math.sqrt(1.5))
 
 
 def _sse(points: NDArray[np.float64]) -> float:

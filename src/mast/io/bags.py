@@ -11,6 +11,7 @@ import math
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
+from struct import error as struct_error
 from typing import Any, Literal
 
 import numpy as np
@@ -112,7 +113,14 @@ def read_laserscans(path: str | Path, *, topic: str | None = None) -> Iterator[S
     bag's topics.
     """
     p = Path(path)
-    reader, store, ros1 = _open(p)
+    try:
+        reader, store, ros1 = _open(p)
+    except InputError as err:
+        if bag_kind(p) != "rosbag1":
+            raise
+        # A damaged index (strict readers refuse it) need not mean damaged messages.
+        yield from _read_tolerant(p, topic, err)
+        return
     try:
         conns = list(reader.connections)
         scans = [c for c in conns if c.msgtype == LASERSCAN]
@@ -151,6 +159,47 @@ def read_laserscans(path: str | Path, *, topic: str | None = None) -> Iterator[S
             ) from None
     finally:
         reader.close()
+
+
+def _read_tolerant(path: Path, topic: str | None, strict_error: InputError) -> Iterator[Scan]:
+    """ROS 1 messages by walking the records (see :mod:`mast.io.ros1_tolerant`)."""
+    from rosbags.typesys import Stores, get_typestore
+
+    from .ros1_tolerant import BagFormatError, walk_ros1_bag
+
+    try:
+        raw = walk_ros1_bag(path)
+    except (BagFormatError, struct_error, KeyError, IndexError) as err:
+        raise InputError(
+            f"{strict_error.problem}; the records cannot be walked either ({err})", path=path
+        ) from None
+    types = {
+        m.topic: m.msgtype.replace("/", "/msg/", 1) if "/msg/" not in m.msgtype else m.msgtype
+        for m in raw
+    }
+    listing = ", ".join(f"{t} ({types[t]})" for t in sorted(types)) or "none"
+    scans = sorted({t for t, ty in types.items() if ty == LASERSCAN})
+    if topic is None:
+        if len(scans) != 1:
+            what = "no LaserScan topic" if not scans else "several LaserScan topics"
+            raise InputError(
+                f"bag has {what}; choose one with --topic. Topics: {listing}", path=path
+            )
+        topic = scans[0]
+    elif topic not in types:
+        raise InputError(f"bag has no topic {topic!r}. Topics: {listing}", path=path)
+    elif types[topic] != LASERSCAN:
+        raise InputError(f"topic {topic!r} carries {types[topic]}, not {LASERSCAN}", path=path)
+    store = get_typestore(Stores.ROS1_NOETIC)
+    chosen = sorted((m for m in raw if m.topic == topic), key=lambda m: m.time_ns)
+    for index, m in enumerate(chosen, 1):
+        try:
+            msg = store.deserialize_ros1(m.data, LASERSCAN)
+        except Exception as err:
+            raise InputError(
+                f"unreadable message {index} of {topic}: {_describe(err)}", path=path
+            ) from None
+        yield _to_scan(msg, path, index)
 
 
 def _to_scan(msg: Any, path: Path, index: int) -> Scan:
