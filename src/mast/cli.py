@@ -240,6 +240,41 @@ def bench_accuracy(
     run_accuracy(poses=poses, draws=draws, seed=seed, out_dir=out, echo=typer.echo)
 
 
+@bench_app.command("robustness")
+def bench_robustness(
+    out: Annotated[Path | None, typer.Option("--out", help="Folder for the CSV files.")] = None,
+    hard: Annotated[
+        int, typer.Option("--hard", min=0, help="Hostile scenes (5 scans each).")
+    ] = 200,
+    drift: Annotated[
+        int, typer.Option("--drift", min=0, help="Many-beacon drifts (10 scans each).")
+    ] = 40,
+    seed: Annotated[int, typer.Option("--seed", help="First scene seed.")] = 0,
+) -> None:
+    """Fix rate where two beacons each show two clean panels, wrong fixes and no-fix
+    reasons, over hostile scenes and a many-beacon drift."""
+    from .bench.robustness import run_robustness
+
+    run_robustness(hard_scenes=hard, drift_scenes=drift, seed=seed, out_dir=out, echo=typer.echo)
+
+
+@bench_app.command("real")
+def bench_real(
+    data: Annotated[
+        Path, typer.Option("--data", help="Folder of real scans (../shared/data).")
+    ] = Path("../shared/data"),
+    every: Annotated[
+        int, typer.Option("--every", min=1, help="Insert beacons into every Nth scan.")
+    ] = 10,
+) -> None:
+    """Real scans by others: no fix without beacons; fixes with beacons ray-cast into them."""
+    from .bench.realscans import run_real_scans
+
+    if not data.is_dir():
+        raise InputError("folder of real scans not found", path=data)
+    run_real_scans(data, every=every, echo=typer.echo)
+
+
 reproduce_app = typer.Typer(help="Re-run published experiments.", no_args_is_help=True)
 app.add_typer(reproduce_app, name="reproduce")
 

@@ -246,6 +246,13 @@ def _partition(
     B. Jackson et al., "An algorithm for optimal partitioning of data on an
     interval", IEEE Signal Processing Letters 12, 2005.
     """
+    with np.errstate(over="ignore", invalid="ignore"):
+        return _partition_impl(points, var, max_piece)
+
+
+def _partition_impl(
+    points: NDArray[np.float64], var: float, max_piece: int
+) -> list[tuple[int, int]]:
     n = points.shape[0]
     c = points - points.mean(axis=0)
     r = np.hypot(points[:, 0], points[:, 1])
