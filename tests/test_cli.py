@@ -242,3 +242,15 @@ def test_reproduce_paper_writes_report_and_figures(tmp_path: Path) -> None:
     assert "conclusions, checked" in report
     for png in ("figure3_P1.png", "figure3_P4.png", "errors_by_position.png", "errors_by_size.png"):
         assert (tmp_path / png).read_bytes()[:4] == b"\x89PNG"
+
+
+def test_locate_near_option_errors(paper_files: Path) -> None:
+    folder = paper_files / "paper-parallel"
+    args = ["locate", str(folder / "scan_001.csv"), "--beacons", str(folder / "beacons.csv")]
+    r = runner.invoke(app, [*args, "--near", "11,7,0", "--radius", "2"])
+    assert r.exit_code == 0, r.output
+    r = _mast(*args, "--near", "11;7")
+    assert r.returncode == 2
+    assert "--near '11;7': expected E,N or E,N,AZ" in r.stderr
+    r = _mast(*args, "--near", "500,500")
+    assert r.returncode == 3

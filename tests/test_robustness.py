@@ -133,3 +133,25 @@ def test_survey_files_of_hostile_scenes_round_trip(tmp_path: Path) -> None:
     scene = drift_scene(0, 0, poses=1)
     write_survey(tmp_path / "b.csv", scene.survey)
     assert read_survey(tmp_path / "b.csv").ids == scene.survey.ids
+
+
+def test_ambiguous_drift_scan_is_refused_and_a_prior_resolves_it() -> None:
+    from dataclasses import replace
+
+    scene = drift_scene(2, 0, poses=10)
+    shot = next(s for s in scene.shots if s.label == "pose3")
+    sims = dict(zip([s.label for s in scene.shots], scene.simulate_all(), strict=True))
+    sim = sims["pose3"]
+    fix = locate(sim.scan, scene.survey, config=NOISY)
+    assert fix.reason == "ambiguous"  # two pairs of identical beacons, 60 m apart, fit alike
+    near = replace(NOISY, near=shot.pose, near_radius_m=5.0)
+    fix = locate(sim.scan, scene.survey, config=near)
+    assert fix.ok
+    assert fix.pose is not None
+    assert (
+        math.hypot(fix.pose.easting - shot.pose.easting, fix.pose.northing - shot.pose.northing)
+        < 0.02
+    )
+    far = replace(NOISY, near=shot.pose, near_radius_m=1.0)
+    moved = replace(far, near=type(shot.pose)(shot.pose.easting + 500, shot.pose.northing, 0.0))
+    assert locate(sim.scan, scene.survey, config=moved).reason == "inconsistent"

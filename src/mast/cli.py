@@ -130,6 +130,28 @@ def _load_scans(
     return scans, True
 
 
+def _parse_near(text: str, radius: float, az_tol_deg: float) -> dict[str, object]:
+    from .pose import Pose2D, parse_azimuth
+
+    parts = [p.strip() for p in text.split(",")]
+    if len(parts) not in (2, 3):
+        raise InputError(f"--near {text!r}: expected E,N or E,N,AZ")
+    try:
+        e, n = float(parts[0]), float(parts[1])
+    except ValueError:
+        raise InputError(f"--near {text!r}: easting and northing must be numbers") from None
+    if not (math.isfinite(e) and math.isfinite(n)):
+        raise InputError(f"--near {text!r}: easting and northing must be finite")
+    if not (math.isfinite(radius) and radius > 0):
+        raise InputError("--radius must be a positive number")
+    az = parse_azimuth(parts[2]) if len(parts) == 3 else 0.0
+    return {
+        "near": Pose2D.from_degrees(e, n, az),
+        "near_radius_m": radius,
+        "near_azimuth_tol_rad": math.radians(az_tol_deg) if len(parts) == 3 else None,
+    }
+
+
 @app.command()
 def locate(
     scan_path: Annotated[
@@ -165,6 +187,20 @@ def locate(
     range_max: Annotated[
         float | None, typer.Option("--range-max", help="Longest valid range, metres.")
     ] = None,
+    near: Annotated[
+        str | None,
+        typer.Option(
+            "--near",
+            help="Prior position E,N[,AZ] (azimuth in degrees or D°M'S): narrows the search.",
+        ),
+    ] = None,
+    radius: Annotated[
+        float, typer.Option("--radius", help="Radius of the --near prior, metres.")
+    ] = 10.0,
+    azimuth_tolerance: Annotated[
+        float,
+        typer.Option("--azimuth-tolerance", help="With an azimuth in --near: degrees allowed."),
+    ] = 30.0,
 ) -> None:
     """Fix position and azimuth from one scan (or every scan of a bag).
 
@@ -194,6 +230,8 @@ def locate(
         cfg = replace(cfg, range_sigma_m=range_sigma)
     if angle_sigma is not None:
         cfg = replace(cfg, angle_sigma_rad=angle_sigma)
+    if near is not None:
+        cfg = replace(cfg, **_parse_near(near, radius, azimuth_tolerance))  # type: ignore[arg-type]
     survey = read_survey(beacons)
     scans, many = _load_scans(scan_path, topic=topic, range_min=range_min, range_max=range_max)
     fixed = 0

@@ -74,6 +74,11 @@ class LocatorConfig:
     ambiguity_ratio : float
         A second pose with this fraction of the best one's support makes the
         scan ambiguous.
+    near : Pose2D, optional
+        A prior position (and azimuth): hypotheses farther than
+        ``near_radius_m`` (or, when ``near_azimuth_tol_rad`` is set, turned
+        further than that) are not considered. It only narrows the search;
+        an unambiguous scan needs none.
     """
 
     range_sigma_m: float = 0.01
@@ -86,6 +91,9 @@ class LocatorConfig:
     max_violation_fraction: float = 0.1
     min_coverage: float = 0.5
     ambiguity_ratio: float = 0.8
+    near: Pose2D | None = None
+    near_radius_m: float = 10.0
+    near_azimuth_tol_rad: float | None = None
     segmentation: SegmentationConfig = field(default_factory=SegmentationConfig)
     identification: IdentificationConfig = field(default_factory=IdentificationConfig)
     matching: MatchingConfig = field(default_factory=MatchingConfig)
@@ -331,6 +339,15 @@ def locate(scan: Scan, survey: Survey, *, config: LocatorConfig | None = None) -
                 f"corners matching beacons {', '.join(seen)} disagree with the surveyed geometry",
             )
         )
+    if cfg.near is not None:
+        hyps = [h for h in hyps if _near(h.similarity.pose(), cfg)]
+        if not hyps:
+            return finish(
+                **_no_fix(
+                    "inconsistent",
+                    f"no pose within {cfg.near_radius_m:g} m of the prior {cfg.near}",
+                )
+            )
     _, pts = scan.points()
     gates = (*cfg.coarse_gates_m, cfg.final_gate_m)
     verified: list[Verified] = []
@@ -625,6 +642,19 @@ def _survey_covariance(
         col = k[:, sel] @ lever[sel]
         out += survey_sigma_m**2 * np.outer(col, col)
     return out
+
+
+def _near(pose: Pose2D, cfg: LocatorConfig) -> bool:
+    assert cfg.near is not None
+    d = math.hypot(pose.easting - cfg.near.easting, pose.northing - cfg.near.northing)
+    if d > cfg.near_radius_m:
+        return False
+    if cfg.near_azimuth_tol_rad is None:
+        return True
+    return (
+        abs(math.remainder(pose.azimuth - cfg.near.azimuth, 2 * math.pi))
+        <= cfg.near_azimuth_tol_rad
+    )
 
 
 def _scaled(q: NDArray[np.float64]) -> NDArray[np.float64]:

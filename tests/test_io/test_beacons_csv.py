@@ -124,7 +124,7 @@ def test_not_utf8_and_missing_file(write_text: Callable[..., Path], tmp_path: Pa
         read_survey(write_text("n.csv", "beacon,edge,easting,northing\nB\x00,1,2,3\n"))
 
 
-@settings(max_examples=300, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@settings(max_examples=1000, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(st.binary(max_size=400))
 def test_garbage_bytes_only_raise_input_error(tmp_path: Path, data: bytes) -> None:
     p = tmp_path / "fuzz.csv"
@@ -133,7 +133,7 @@ def test_garbage_bytes_only_raise_input_error(tmp_path: Path, data: bytes) -> No
         read_survey(p)
 
 
-@settings(max_examples=300, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@settings(max_examples=1000, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(
     st.lists(
         st.lists(

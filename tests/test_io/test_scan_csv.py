@@ -73,7 +73,7 @@ def test_errors_name_file_line_and_problem(
         read_scan_csv(write_text("s.csv", content))
 
 
-@settings(max_examples=300, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@settings(max_examples=1000, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(st.binary(max_size=300))
 def test_garbage_bytes_only_raise_input_error(tmp_path: Path, data: bytes) -> None:
     p = tmp_path / "fuzz.csv"
@@ -85,7 +85,7 @@ def test_garbage_bytes_only_raise_input_error(tmp_path: Path, data: bytes) -> No
     assert np.all(np.diff(scan.angles_rad) > 0)
 
 
-@settings(max_examples=300, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@settings(max_examples=1000, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(
     st.lists(
         st.tuples(
