@@ -43,7 +43,7 @@ def _table(title: str) -> Table:
     return t
 
 
-def run_demo(folder: Path, *, echo: Callable[[str], object] = print) -> int:
+def run_demo(folder: Path, *, echo: Callable[[str], object] = print, keep: bool = True) -> int:
     """Simulate the paper scenario (noise-free, then 12 mm noise) into ``folder``,
     locate every scan from the files written, and print Table-2-like comparisons.
 

@@ -191,7 +191,7 @@ def estimate_noise(points: NDArray[np.float64], run_ids: NDArray[np.intp]) -> fl
     ac = c - a
     length = np.hypot(ac[:, 0], ac[:, 1])
     rb = np.hypot(b[:, 0], b[:, 1])
-    with np.errstate(invalid="ignore", divide="ignore"):
+    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
         # |n . u| = |sin(angle between the surface and the beam)|
         nu = np.abs(ac[:, 0] * b[:, 1] - ac[:, 1] * b[:, 0]) / (length * rb)
     ok = same & (length > 0) & (rb > 0) & (nu > 0.3)
