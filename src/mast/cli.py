@@ -355,7 +355,7 @@ def demo(
     from .demo import run_demo
 
     with tempfile.TemporaryDirectory(prefix="mast-demo-") as tmp:
-        run_demo(out if out is not None else Path(tmp), echo=typer.echo)
+        run_demo(out if out is not None else Path(tmp), echo=typer.echo, keep=out is not None)
 
 
 def main() -> None:

@@ -128,7 +128,8 @@ def run_demo(folder: Path, *, echo: Callable[[str], object] = print, keep: bool 
             console.print(table)
         echo(cap.get().rstrip())
         echo("")
-    echo(
-        f"Scans and surveys written to {folder}; `mast locate SCAN --beacons beacons.csv` runs one."
-    )
+    if keep:
+        echo(f"Scans and surveys written to {folder}; `mast locate SCAN -b beacons.csv` runs one.")
+    else:
+        echo("The simulated files were temporary; `mast demo --out DIR` keeps them.")
     return missing
