@@ -26,7 +26,7 @@ from .bounds import cramer_rao_bound
 from .geometry import PanelSet, first_hits
 from .identification import IdentificationConfig, PanelIdentification, identify_panels
 from .integrity import Observations, beacon_tests, snoop
-from .matching import Hypothesis, MatchingConfig, pose_hypotheses
+from .matching import Hypothesis, MatchingConfig, node_sigma, pose_hypotheses
 from .pose import Pose2D
 from .scan import Scan
 from .segmentation import Segmentation, SegmentationConfig, segment_scan
@@ -202,7 +202,7 @@ def _support(
             continue
         mapped = icp.pose.scanner_to_mine(node.node_scanner[None, :])[0]
         edge = survey[node.beacon].edges[node.edge - 1]
-        sig = noise_m * (1.0 + 1.0 / max(abs(math.sin(node.tests["deflection_rad"])), 1e-3))
+        sig = node_sigma(node, noise_m)
         if math.dist(mapped, edge) <= cfg.gate_sigmas * math.hypot(
             sig, cfg.survey_sigma_m, cfg.range_sigma_m
         ):
@@ -372,14 +372,18 @@ def locate(scan: Scan, survey: Survey, *, config: LocatorConfig | None = None) -
         )
     verified.sort(key=lambda v: v.score, reverse=True)
     best = verified[0]
-    if len(best.supported) < cfg.min_beacons:
+
+    def refuse(reason: str, detail: str) -> Fix:
         return finish(
             hypotheses=tuple(hyps),
             verified=tuple(verified),
             chosen=best,
-            **_no_fix(
-                "one_beacon", f"only beacon {', '.join(best.supported)} confirmed with two panels"
-            ),
+            **_no_fix(reason, detail),
+        )
+
+    if len(best.supported) < cfg.min_beacons:
+        return refuse(
+            "one_beacon", f"only beacon {', '.join(best.supported)} confirmed with two panels"
         )
     for other in verified[1:]:
         d = math.hypot(
@@ -393,15 +397,10 @@ def locate(scan: Scan, survey: Survey, *, config: LocatorConfig | None = None) -
             len(other.supported) >= len(best.supported)
             and other.icp.inliers >= cfg.ambiguity_ratio * best.icp.inliers
         ):
-            return finish(
-                hypotheses=tuple(hyps),
-                verified=tuple(verified),
-                chosen=best,
-                **_no_fix(
-                    "ambiguous",
-                    f"poses {best.icp.pose} ({', '.join(best.supported)}) and "
-                    f"{other.icp.pose} ({', '.join(other.supported)}) fit equally well",
-                ),
+            return refuse(
+                "ambiguous",
+                f"poses {best.icp.pose} ({', '.join(best.supported)}) and "
+                f"{other.icp.pose} ({', '.join(other.supported)}) fit equally well",
             )
     # Adjustment on the returns of the supporting beacons, and of any other beacon whose
     # panels the beams confirm at this pose (more returns, a tighter fix); re-associate
@@ -429,12 +428,7 @@ def locate(scan: Scan, survey: Survey, *, config: LocatorConfig | None = None) -
         if np.array_equal(beams, used) and adj is not None:
             break
         if beams.size < 4:
-            return finish(
-                hypotheses=tuple(hyps),
-                verified=tuple(verified),
-                chosen=best,
-                **_no_fix("degenerate_geometry", f"only {beams.size} returns on the panels"),
-            )
+            return refuse("degenerate_geometry", f"only {beams.size} returns on the panels")
         offsets = np.einsum("ij,ij->i", nrm, panels.a[pk])
         try:
             adj = adjust_pose(
@@ -453,14 +447,9 @@ def locate(scan: Scan, survey: Survey, *, config: LocatorConfig | None = None) -
             or not np.all(np.isfinite(adj.cofactor))
             or np.linalg.cond(_scaled(adj.cofactor)) > 1e10
         ):
-            return finish(
-                hypotheses=tuple(hyps),
-                verified=tuple(verified),
-                chosen=best,
-                **_no_fix(
-                    "degenerate_geometry",
-                    "the panels seen do not constrain all of E, N and azimuth",
-                ),
+            return refuse(
+                "degenerate_geometry",
+                "the panels seen do not constrain all of E, N and azimuth",
             )
         used, used_panels = beams, pk
         pose = adj.pose
@@ -505,15 +494,10 @@ def locate(scan: Scan, survey: Survey, *, config: LocatorConfig | None = None) -
                 culprits.append(b)
         if len(culprits) != 1:
             names = sorted(panels.ids[b] for b in (culprits or [t.beacon for t in failed]))
-            return finish(
-                hypotheses=tuple(hyps),
-                verified=tuple(verified),
-                chosen=best,
-                **_no_fix(
-                    "inconsistent",
-                    f"the beacons seen disagree with each other; {' or '.join(names)} may have "
-                    "been moved or mis-surveyed",
-                ),
+            return refuse(
+                "inconsistent",
+                f"the beacons seen disagree with each other; {' or '.join(names)} may have "
+                "been moved or mis-surveyed",
             )
         excluded.append(panels.ids[culprits[0]])
         obs = obs.subset(obs.beacon != culprits[0])

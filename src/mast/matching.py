@@ -20,7 +20,7 @@ from .beacon import Survey
 from .identification import NodeMatch, PanelIdentification
 from .segmentation import Segmentation
 
-__all__ = ["Hypothesis", "MatchingConfig", "pose_hypotheses"]
+__all__ = ["Hypothesis", "MatchingConfig", "node_sigma", "pose_hypotheses"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -91,7 +91,8 @@ def _node_rotations(
     return out
 
 
-def _node_sigma(node: NodeMatch, noise: float) -> float:
+def node_sigma(node: NodeMatch, noise: float) -> float:
+    """Standard deviation of an identified node's position: the noise over the corner's sine."""
     d = node.tests["deflection_rad"]
     return noise * (1.0 + 1.0 / max(abs(math.sin(d)), 1e-3))
 
@@ -107,7 +108,7 @@ def pose_hypotheses(
     noise = segmentation.noise_m
     mine = [survey[n.beacon].edges[n.edge - 1] for n in nodes]
     rots = [_node_rotations(n, segmentation, survey) for n in nodes]
-    sig = [_node_sigma(n, noise) for n in nodes]
+    sig = [node_sigma(n, noise) for n in nodes]
     out: list[Hypothesis] = []
     for i in range(len(nodes)):
         for j in range(i + 1, len(nodes)):
