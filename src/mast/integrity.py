@@ -2,8 +2,8 @@
 
 * Data snooping (Baarda): the standardised residual ``w_i = v_i / sigma_vi``
   with ``sigma_vi^2 = sigma_i^2 - g_i Q g_i^T``; the largest beyond the
-  critical value (5 % shared over all returns, Bonferroni) is removed and the
-  pose adjusted again, until none is.
+  critical value (0.1 % shared over all returns, Bonferroni: only returns no
+  noise explains) is removed and the pose adjusted again, until none is.
 * Beacon test: each beacon in turn is left out, the pose fitted to the others,
   and the left-out beacon's ranges compared with their prediction:
   ``T_b = d^T C^-1 d`` with ``C = diag(sigma^2) + G_b Q_(-b) G_b^T`` plus the
@@ -78,7 +78,7 @@ def snoop(
     *,
     range_sigma_m: float,
     angle_sigma_rad: float,
-    alpha: float = 0.05,
+    alpha: float = 0.001,
     max_removed: int = 50,
 ) -> tuple[Observations, Adjustment, int]:
     """Remove, one at a time, returns whose w-test fails; returns what is left."""
