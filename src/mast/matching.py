@@ -13,7 +13,6 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from numpy.typing import NDArray
 
 from .alignment import Similarity, similarity_transform
 from .beacon import Survey
@@ -142,15 +141,3 @@ def pose_hypotheses(
     # Prefer hypotheses whose nodes were identified with more panels (lower Table 1 option).
     out.sort(key=lambda h: (sum(n.option for n in h.nodes), h.misfit))
     return out[: config.max_hypotheses]
-
-
-def implied_rotation(h: Hypothesis) -> float:
-    """Rotation (scanner to mine, counter-clockwise) of a hypothesis."""
-    return h.similarity.rotation_rad
-
-
-def node_points(h: Hypothesis, survey: Survey) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Scanner and mine coordinates of the hypothesis' two nodes."""
-    s = np.array([n.node_scanner for n in h.nodes])
-    m = np.array([survey[n.beacon].edges[n.edge - 1] for n in h.nodes])
-    return s, m
