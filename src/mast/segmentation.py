@@ -222,7 +222,7 @@ def _penalty(n: int) -> float:
 
 
 def _partition(
-    points: NDArray[np.float64], var: float, max_piece: int = 256
+    points: NDArray[np.float64], var: float, max_piece: int = 128
 ) -> list[tuple[int, int]]:
     """Optimal partition of one run into straight pieces (dynamic programming).
 
