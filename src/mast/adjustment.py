@@ -64,9 +64,8 @@ def range_model(
     d_phi : ndarray, shape (n,)
         d rho / d phi (equal to minus the azimuth column).
     """
-    bearing = pose.azimuth - angles_rad
-    u = np.stack([np.sin(bearing), np.cos(bearing)], axis=1)
-    u_a = np.stack([np.cos(bearing), -np.sin(bearing)], axis=1)  # du/dA
+    u = pose.beam_directions(angles_rad)
+    u_a = np.stack([u[:, 1], -u[:, 0]], axis=1)  # du/dA = (cos(A - phi), -sin(A - phi))
     nu = np.einsum("ij,ij->i", normals, u)
     # Offsets relative to the scanner keep precision at large mine coordinates.
     c_rel = offsets - normals @ pose.position

@@ -83,8 +83,7 @@ def truth_bound(
     Beams within 2 degrees of grazing are left out, as the adjustment does.
     """
     panels = PanelSet.from_survey(survey)
-    bearing = pose.azimuth - angles_rad
-    dirs = np.stack([np.sin(bearing), np.cos(bearing)], axis=1)
+    dirs = pose.beam_directions(angles_rad)
     _, j = first_hits(pose.position, dirs, panels.a, panels.b)
     use = valid & (j >= 0)
     if beacon_beams is not None:

@@ -60,6 +60,11 @@ class Observations:
     def __len__(self) -> int:
         return int(self.ranges_m.size)
 
+    def survey_levers(self, pose: Pose2D) -> NDArray[np.float64]:
+        """``1 / |n . u|``: how far each range moves per metre its panel is surveyed off."""
+        u = pose.beam_directions(self.angles_rad)
+        return np.asarray(1.0 / np.abs(np.einsum("ij,ij->i", self.normals, u)))
+
     def adjust(self, pose: Pose2D, range_sigma_m: float, angle_sigma_rad: float) -> Adjustment:
         return adjust_pose(
             pose,
@@ -146,9 +151,7 @@ def beacon_tests(
         var = range_sigma_m**2 + (d_phi * angle_sigma_rad) ** 2
         c = np.diag(var) + jac @ fit.cofactor @ jac.T
         # A panel's surveyed position errs once for all its returns: sigma_s / |n . u| each.
-        bearing = fit.pose.azimuth - o.angles_rad
-        u = np.stack([np.sin(bearing), np.cos(bearing)], axis=1)
-        lever = 1.0 / np.abs(np.einsum("ij,ij->i", o.normals, u))
+        lever = o.survey_levers(fit.pose)
         same = o.panel[:, None] == o.panel[None, :]
         c += survey_sigma_m**2 * np.outer(lever, lever) * same
         try:

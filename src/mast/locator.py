@@ -244,8 +244,7 @@ def _check_beams(
     panel's plane are left out: near an edge or at grazing incidence a beam
     may legitimately miss.
     """
-    bearing = pose.azimuth - scan.angles_rad
-    dirs = np.stack([np.sin(bearing), np.cos(bearing)], axis=1)
+    dirs = pose.beam_directions(scan.angles_rad)
     a = panels.a + margin_m * panels.direction
     b = panels.b - margin_m * panels.direction
     t, j = first_hits(pose.position, dirs, a, b)
@@ -559,8 +558,7 @@ def _ray_association(
     2 degrees of grazing are left out.
     """
     beams = np.flatnonzero(scan.valid)
-    bearing = pose.azimuth - scan.angles_rad[beams]
-    dirs = np.stack([np.sin(bearing), np.cos(bearing)], axis=1)
+    dirs = pose.beam_directions(scan.angles_rad[beams])
     t, j = first_hits(pose.position, dirs, panels.a[keep], panels.b[keep])
     hit = j >= 0
     pk = keep[np.maximum(j, 0)]
@@ -616,9 +614,7 @@ def _survey_covariance(
     ``sigma_s / |n . u|`` together; through the estimator ``K = Q G^T W`` that
     adds ``K S K^T`` to the noise covariance (S: those shared range errors).
     """
-    bearing = adj.pose.azimuth - obs.angles_rad
-    u = np.stack([np.sin(bearing), np.cos(bearing)], axis=1)
-    lever = 1.0 / np.abs(np.einsum("ij,ij->i", obs.normals, u))
+    lever = obs.survey_levers(adj.pose)
     k = adj.cofactor @ (adj.jacobian / (adj.sigmas_m**2)[:, None]).T  # (3, n)
     out = np.zeros((3, 3))
     for p in np.unique(obs.panel):

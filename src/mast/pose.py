@@ -93,12 +93,13 @@ class Pose2D:
 
     def beam_to_mine(self, angle_rad: ArrayLike, range_m: ArrayLike) -> NDArray[np.float64]:
         """DESIGN.md's beam formula: ``E0 + r sin(A - phi)``, ``N0 + r cos(A - phi)``."""
-        phi = np.asarray(angle_rad, dtype=float)
         r = np.asarray(range_m, dtype=float)
-        bearing = self.azimuth - phi
-        return np.stack(
-            [self.easting + r * np.sin(bearing), self.northing + r * np.cos(bearing)], axis=-1
-        )
+        return self.position + r[..., None] * self.beam_directions(angle_rad)
+
+    def beam_directions(self, angle_rad: ArrayLike) -> NDArray[np.float64]:
+        """Unit mine-frame directions ``(sin(A - phi), cos(A - phi))`` of beams, shape (n, 2)."""
+        bearing = self.azimuth - np.asarray(angle_rad, dtype=float)
+        return np.stack([np.sin(bearing), np.cos(bearing)], axis=-1)
 
     def beam_angle_to(self, points_mine: ArrayLike) -> NDArray[np.float64]:
         """Beam angle ``phi`` (radians, in [-pi, pi)) under which mine points are seen."""

@@ -222,9 +222,7 @@ def simulate_scan(
         true_dir = phi + rng.normal(0.0, scanner.angle_sigma_rad, n)
 
     def cast(angles: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.intp]]:
-        bearing = pose.azimuth - angles
-        dirs = np.stack([np.sin(bearing), np.cos(bearing)], axis=1)
-        return world.raycast(pose.position, dirs)
+        return world.raycast(pose.position, pose.beam_directions(angles))
 
     true_r, surf = cast(true_dir)
     r = true_r.copy()
