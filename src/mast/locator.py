@@ -356,12 +356,11 @@ def locate(scan: Scan, survey: Survey, *, config: LocatorConfig | None = None) -
         counts, supported = _support(icp, panels, survey, ident, segmentation.noise_m, checks, cfg)
         if not set(h.beacons) <= set(supported):
             continue
+        v = Verified(h, icp, counts, supported, checks)
         unoccluded = sum(c.hit + c.through for c in checks.values())
-        if sum(c.through for c in checks.values()) > max(
-            3, cfg.max_violation_fraction * unoccluded
-        ):
+        if v.violations > max(3, cfg.max_violation_fraction * unoccluded):
             continue
-        verified.append(Verified(h, icp, counts, supported, checks))
+        verified.append(v)
     if not verified:
         return finish(
             hypotheses=tuple(hyps),
