@@ -123,24 +123,8 @@ def read_laserscans(path: str | Path, *, topic: str | None = None) -> Iterator[S
         return
     try:
         conns = list(reader.connections)
-        scans = [c for c in conns if c.msgtype == LASERSCAN]
-        listing = ", ".join(sorted({f"{c.topic} ({c.msgtype})" for c in conns})) or "none"
-        if topic is None:
-            names = sorted({c.topic for c in scans})
-            if len(names) != 1:
-                what = "no LaserScan topic" if not names else "several LaserScan topics"
-                raise InputError(
-                    f"bag has {what}; choose one with --topic. Topics: {listing}", path=p
-                )
-            chosen = [c for c in scans if c.topic == names[0]]
-        else:
-            chosen = [c for c in conns if c.topic == topic]
-            if not chosen:
-                raise InputError(f"bag has no topic {topic!r}. Topics: {listing}", path=p)
-            if any(c.msgtype != LASERSCAN for c in chosen):
-                raise InputError(
-                    f"topic {topic!r} carries {chosen[0].msgtype}, not {LASERSCAN}", path=p
-                )
+        name = _choose_topic([(c.topic, c.msgtype) for c in conns], topic, p)
+        chosen = [c for c in conns if c.topic == name]
         index = 0
         try:
             for conn, _t, raw in reader.messages(connections=chosen):
@@ -161,6 +145,29 @@ def read_laserscans(path: str | Path, *, topic: str | None = None) -> Iterator[S
         reader.close()
 
 
+def _choose_topic(topics: list[tuple[str, str]], topic: str | None, path: Path) -> str:
+    """The LaserScan topic to read among ``(topic, msgtype)`` pairs, or an error listing them.
+
+    With ``topic=None`` the bag must hold exactly one LaserScan topic.
+    """
+    listing = ", ".join(f"{t} ({ty})" for t, ty in sorted(set(topics))) or "none"
+    if topic is None:
+        names = sorted({t for t, ty in topics if ty == LASERSCAN})
+        if len(names) != 1:
+            what = "no LaserScan topic" if not names else "several LaserScan topics"
+            raise InputError(
+                f"bag has {what}; choose one with --topic. Topics: {listing}", path=path
+            )
+        return names[0]
+    types = {ty for t, ty in topics if t == topic}
+    if not types:
+        raise InputError(f"bag has no topic {topic!r}. Topics: {listing}", path=path)
+    if types != {LASERSCAN}:
+        other = sorted(types - {LASERSCAN})[0]
+        raise InputError(f"topic {topic!r} carries {other}, not {LASERSCAN}", path=path)
+    return topic
+
+
 def _read_tolerant(path: Path, topic: str | None, strict_error: InputError) -> Iterator[Scan]:
     """ROS 1 messages by walking the records (see :mod:`mast.io.ros1_tolerant`)."""
     from rosbags.typesys import Stores, get_typestore
@@ -173,23 +180,12 @@ def _read_tolerant(path: Path, topic: str | None, strict_error: InputError) -> I
         raise InputError(
             f"{strict_error.problem}; the records cannot be walked either ({err})", path=path
         ) from None
-    types = {
-        m.topic: m.msgtype.replace("/", "/msg/", 1) if "/msg/" not in m.msgtype else m.msgtype
+    # ROS 1 names types "pkg/Type"; rosbags and this module say "pkg/msg/Type".
+    topics = [
+        (m.topic, m.msgtype if "/msg/" in m.msgtype else m.msgtype.replace("/", "/msg/", 1))
         for m in raw
-    }
-    listing = ", ".join(f"{t} ({types[t]})" for t in sorted(types)) or "none"
-    scans = sorted({t for t, ty in types.items() if ty == LASERSCAN})
-    if topic is None:
-        if len(scans) != 1:
-            what = "no LaserScan topic" if not scans else "several LaserScan topics"
-            raise InputError(
-                f"bag has {what}; choose one with --topic. Topics: {listing}", path=path
-            )
-        topic = scans[0]
-    elif topic not in types:
-        raise InputError(f"bag has no topic {topic!r}. Topics: {listing}", path=path)
-    elif types[topic] != LASERSCAN:
-        raise InputError(f"topic {topic!r} carries {types[topic]}, not {LASERSCAN}", path=path)
+    ]
+    topic = _choose_topic(topics, topic, path)
     store = get_typestore(Stores.ROS1_NOETIC)
     chosen = sorted((m for m in raw if m.topic == topic), key=lambda m: m.time_ns)
     for index, m in enumerate(chosen, 1):
