@@ -30,6 +30,7 @@ from ..pose import Pose2D
 from ..scan import Scan
 from ..segmentation import segment_scan
 from ..sim import paper_design
+from .robustness import is_wrong
 
 __all__ = ["RealScanSummary", "real_datasets", "run_real_scans"]
 
@@ -149,11 +150,7 @@ def run_real_scans(
                 err = math.hypot(fix.pose.easting - POSE.easting, fix.pose.northing - POSE.northing)
                 s.errors_mm.append(1e3 * err)
                 s.max_error_mm = max(s.max_error_mm, 1e3 * err)
-                da = abs(math.remainder(fix.pose.azimuth - POSE.azimuth, 2 * math.pi))
-                big = err > 0.05 or da > math.radians(0.25)
-                s.inserted_wrong += big and bool(
-                    np.any(np.abs([err, err, da]) > 5 * fix.adjustment.sigma)
-                )
+                s.inserted_wrong += is_wrong(fix, POSE)
         echo(s.line())
         out.append(s)
     return out

@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from ..locator import Fix, LocatorConfig, locate
+from ..pose import Pose2D
 from ..sim import Scene, drift_scene, hard_scene
 from ..sim.scanner import SimulatedScan
 
@@ -34,11 +35,11 @@ def owed_clean(sim: SimulatedScan) -> bool:
     return sum(len(p) >= 2 for p in seen.values()) >= 2
 
 
-def is_wrong(fix: Fix, sim: SimulatedScan) -> bool:
+def is_wrong(fix: Fix, truth: SimulatedScan | Pose2D) -> bool:
     """More than 5 cm or 0.25 deg off and outside five of its own standard deviations."""
     if not fix.ok or fix.pose is None or fix.adjustment is None:
         return False
-    t = sim.pose
+    t = truth if isinstance(truth, Pose2D) else truth.pose
     err = np.array(
         [
             fix.pose.easting - t.easting,
