@@ -25,8 +25,7 @@ def main(seeds: int = 100) -> None:
     scenes += paper_scenario()
     for scene in scenes:
         for shot, sim in zip(scene.shots, scene.simulate_all(), strict=True):
-            seen = sim.panels_seen(min_points=3)
-            is_owed = sum(len(p) >= 2 for p in seen.values()) >= 2
+            is_owed = sim.owes_fix(min_points=3)
             t0 = time.perf_counter()
             fix = locate(sim.scan, scene.survey)
             times.append(time.perf_counter() - t0)

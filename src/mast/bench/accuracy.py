@@ -73,8 +73,7 @@ def _owed_poses(model: ScannerModel, count: int, seed0: int) -> list[tuple[objec
             scene = random_scene(seed, idx)
             for shot in scene.shots:
                 sim = simulate_scan(scene.world, shot.pose, exact)
-                seen = sim.panels_seen(min_points=3)
-                if sum(len(p) >= 2 for p in seen.values()) >= 2:
+                if sim.owes_fix(min_points=3):
                     out.append((scene, replace(shot, scanner=model)))
                     if len(out) == count:
                         return out

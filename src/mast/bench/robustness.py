@@ -31,8 +31,7 @@ WRONG_AZIMUTH_RAD = math.radians(0.25)
 
 def owed_clean(sim: SimulatedScan) -> bool:
     """Two beacons each show two clean panels (>= 8 returns, >= 15 degrees incidence)."""
-    seen = sim.panels_seen(min_points=8, min_incidence_deg=15.0)
-    return sum(len(p) >= 2 for p in seen.values()) >= 2
+    return sim.owes_fix(min_points=8, min_incidence_deg=15.0)
 
 
 def is_wrong(fix: Fix, truth: SimulatedScan | Pose2D) -> bool:

@@ -166,6 +166,11 @@ class SimulatedScan:
                     self._panel_cache[(s.beacon, s.panel)] = int(c)
         return dict(self._panel_cache)
 
+    def owes_fix(self, *, min_points: int = 3, min_incidence_deg: float = 10.0) -> bool:
+        """Whether two beacons each show two panels (as counted by :meth:`panels_seen`)."""
+        seen = self.panels_seen(min_points=min_points, min_incidence_deg=min_incidence_deg)
+        return sum(len(p) >= 2 for p in seen.values()) >= 2
+
     def panels_seen(
         self, *, min_points: int = 5, min_incidence_deg: float = 10.0
     ) -> dict[str, list[int]]:
