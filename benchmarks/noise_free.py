@@ -12,7 +12,7 @@ import time
 
 import numpy as np
 
-from mast.locator import locate
+from mast.pipeline.locator import locate
 from mast.sim import paper_scenario, random_scene
 
 

@@ -6,10 +6,10 @@ surveyed wall-mounted three-panel beacons.
 
 from importlib.metadata import PackageNotFoundError, version
 
-from .beacon import Beacon, BeaconTemplate, IdentifiabilityRules, Survey
-from .errors import BeaconError, InputError, MastError, NoFixError
-from .pose import Pose2D, format_dms, parse_azimuth
-from .scan import Scan
+from mast.core.beacon import Beacon, BeaconTemplate, IdentifiabilityRules, Survey
+from mast.core.pose import Pose2D, format_dms, parse_azimuth
+from mast.core.scan import Scan
+from mast.errors import BeaconError, InputError, MastError, NoFixError
 
 try:
     __version__ = version("mast-survey")

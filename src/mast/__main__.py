@@ -1,5 +1,5 @@
 """``python -m mast`` runs the command line."""
 
-from .cli import main
+from mast.apps.cli import main
 
 main()

@@ -4,9 +4,9 @@ Every reader raises :class:`mast.errors.InputError` naming the file, the line
 (where there is one) and the problem.
 """
 
-from .bags import bag_kind, list_topics, read_laserscans, write_laserscans
-from .beacons_csv import read_survey, write_survey
-from .scan_csv import read_scan_csv, write_scan_csv
+from mast.io.bags import bag_kind, list_topics, read_laserscans, write_laserscans
+from mast.io.beacons_csv import read_survey, write_survey
+from mast.io.scan_csv import read_scan_csv, write_scan_csv
 
 __all__ = [
     "bag_kind",

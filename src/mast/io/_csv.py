@@ -8,7 +8,7 @@ import math
 from collections.abc import Iterator
 from pathlib import Path
 
-from ..errors import InputError
+from mast.errors import InputError
 
 __all__ = ["CsvRows", "parse_number"]
 

@@ -16,8 +16,8 @@ from typing import Any, Literal
 
 import numpy as np
 
-from ..errors import InputError
-from ..scan import Scan
+from mast.core.scan import Scan
+from mast.errors import InputError
 
 __all__ = ["BagKind", "bag_kind", "list_topics", "read_laserscans", "write_laserscans"]
 
@@ -172,7 +172,7 @@ def _read_tolerant(path: Path, topic: str | None, strict_error: InputError) -> I
     """ROS 1 messages by walking the records (see :mod:`mast.io.ros1_tolerant`)."""
     from rosbags.typesys import Stores, get_typestore
 
-    from .ros1_tolerant import BagFormatError, walk_ros1_bag
+    from mast.io.ros1_tolerant import BagFormatError, walk_ros1_bag
 
     try:
         raw = walk_ros1_bag(path)

@@ -8,9 +8,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..beacon import Beacon, IdentifiabilityRules, Survey
-from ..errors import BeaconError, InputError
-from ._csv import CsvRows, parse_number
+from mast.core.beacon import Beacon, IdentifiabilityRules, Survey
+from mast.errors import BeaconError, InputError
+from mast.io._csv import CsvRows, parse_number
 
 __all__ = ["read_survey", "write_survey"]
 

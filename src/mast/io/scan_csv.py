@@ -8,9 +8,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import InputError
-from ..scan import Scan
-from ._csv import CsvRows, parse_number
+from mast.core.scan import Scan
+from mast.errors import InputError
+from mast.io._csv import CsvRows, parse_number
 
 __all__ = ["read_scan_csv", "write_scan_csv"]
 

@@ -16,8 +16,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import InputError
-from ..scan import Scan
+from mast.core.scan import Scan
+from mast.errors import InputError
 
 __all__ = ["URG04LX_BEAMS", "read_urg_log"]
 

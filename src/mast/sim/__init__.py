@@ -4,10 +4,10 @@ Ray casting is vectorised over beams; every beam keeps what it really hit,
 so tests and benchmarks know which panels a scan saw.
 """
 
-from .design import BeaconDesign, paper_design, polyline_design, random_design
-from .hard import drift_scene, hard_scene
-from .scanner import SCANNERS, ScannerModel, SimulatedScan, scanner_model, simulate_scan
-from .scenarios import (
+from mast.sim.design import BeaconDesign, paper_design, polyline_design, random_design
+from mast.sim.hard import drift_scene, hard_scene
+from mast.sim.scanner import SCANNERS, ScannerModel, SimulatedScan, scanner_model, simulate_scan
+from mast.sim.scenarios import (
     PAPER_VARIANTS,
     SCENARIOS,
     Scene,
@@ -19,8 +19,8 @@ from .scenarios import (
     random_scene,
     write_scenario,
 )
-from .tunnel import Roughness, Tunnel, roughen
-from .world import Surface, World, WorldBuilder
+from mast.sim.tunnel import Roughness, Tunnel, roughen
+from mast.sim.world import Surface, World, WorldBuilder
 
 __all__ = [
     "PAPER_VARIANTS",

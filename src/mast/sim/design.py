@@ -4,7 +4,7 @@ Geometry (local design frame, metres): the wall is the x axis, the tunnel
 lies at +y. The polyline ``e1 e2 e3 e4`` runs in +x; the beacon stands out
 of the wall towards +y. Walking e1 to e4 the panels turn clockwise, so both
 deflection angles are negative (counter-clockwise positive, as in
-:class:`mast.beacon.BeaconTemplate`).
+:class:`mast.core.beacon.BeaconTemplate`).
 
 :func:`paper_design` is the paper's three-panel "hat" (Figure 1): panel
 lengths in the ratio ``p1:p2:p3`` (default 2:3:1); P1 rises from the wall at
@@ -29,8 +29,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.optimize import brentq
 
-from ..beacon import Beacon
-from ..errors import InputError
+from mast.core.beacon import Beacon
+from mast.errors import InputError
 
 __all__ = ["BeaconDesign", "paper_design", "polyline_design", "random_design"]
 

@@ -9,13 +9,13 @@ import math
 import numpy as np
 from numpy.typing import NDArray
 
-from ..beacon import Beacon, Survey
-from ..pose import Pose2D
-from .design import BeaconDesign, paper_design, polyline_design, random_design
-from .scanner import ScannerModel
-from .scenarios import Scene, Shot
-from .tunnel import Roughness, Tunnel, project_station, roughen
-from .world import Surface, WorldBuilder
+from mast.core.beacon import Beacon, Survey
+from mast.core.pose import Pose2D
+from mast.sim.design import BeaconDesign, paper_design, polyline_design, random_design
+from mast.sim.scanner import ScannerModel
+from mast.sim.scenarios import Scene, Shot
+from mast.sim.tunnel import Roughness, Tunnel, project_station, roughen
+from mast.sim.world import Surface, WorldBuilder
 
 __all__ = ["drift_scene", "hard_scene"]
 

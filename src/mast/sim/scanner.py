@@ -8,10 +8,10 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from numpy.typing import NDArray
 
-from ..errors import InputError
-from ..pose import Pose2D
-from ..scan import Scan
-from .world import Surface, World
+from mast.core.pose import Pose2D
+from mast.core.scan import Scan
+from mast.errors import InputError
+from mast.sim.world import Surface, World
 
 __all__ = ["SCANNERS", "ScannerModel", "SimulatedScan", "scanner_model", "simulate_scan"]
 

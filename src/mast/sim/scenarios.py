@@ -16,14 +16,14 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from ..beacon import Beacon, Survey
-from ..errors import InputError
-from ..io import write_laserscans, write_scan_csv, write_survey
-from ..pose import Pose2D
-from .design import BeaconDesign, paper_design, random_design
-from .scanner import SCANNERS, ScannerModel, SimulatedScan, simulate_scan
-from .tunnel import Roughness, Tunnel, project_station, roughen
-from .world import Surface, World, WorldBuilder
+from mast.core.beacon import Beacon, Survey
+from mast.core.pose import Pose2D
+from mast.errors import InputError
+from mast.io import write_laserscans, write_scan_csv, write_survey
+from mast.sim.design import BeaconDesign, paper_design, random_design
+from mast.sim.scanner import SCANNERS, ScannerModel, SimulatedScan, simulate_scan
+from mast.sim.tunnel import Roughness, Tunnel, project_station, roughen
+from mast.sim.world import Surface, World, WorldBuilder
 
 __all__ = [
     "SCENARIOS",

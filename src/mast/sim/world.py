@@ -7,7 +7,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ..geometry import first_hits
+from mast.core.geometry import first_hits
 
 __all__ = ["Surface", "World", "WorldBuilder"]
 

@@ -1,0 +1,148 @@
+"""Robustness benchmark: hostile scenes and a many-beacon drift, thousands of scans.
+
+Counts, per family: scans, scans owed a fix (two beacons each show two clean
+panels: at least 8 returns seen at 15 degrees or more), the fix rate on
+those, wrong fixes (a fix more than 5 cm or 0.25 degrees off *and* outside
+five of its own standard deviations), and the no-fix reasons.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+import time
+from collections import Counter
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from mast.core.pose import Pose2D
+from mast.pipeline.locator import Fix, LocatorConfig, locate
+from mast.sim import Scene, drift_scene, hard_scene
+from mast.sim.scanner import SimulatedScan
+
+__all__ = ["RobustnessSummary", "is_wrong", "owed_clean", "run_robustness"]
+
+WRONG_POSITION_M = 0.05
+WRONG_AZIMUTH_RAD = math.radians(0.25)
+
+
+def owed_clean(sim: SimulatedScan) -> bool:
+    """Two beacons each show two clean panels (>= 8 returns, >= 15 degrees incidence)."""
+    return sim.owes_fix(min_points=8, min_incidence_deg=15.0)
+
+
+def is_wrong(fix: Fix, truth: SimulatedScan | Pose2D) -> bool:
+    """More than 5 cm or 0.25 deg off and outside five of its own standard deviations."""
+    if not fix.ok or fix.pose is None or fix.adjustment is None:
+        return False
+    t = truth if isinstance(truth, Pose2D) else truth.pose
+    err = np.array(
+        [
+            fix.pose.easting - t.easting,
+            fix.pose.northing - t.northing,
+            math.remainder(fix.pose.azimuth - t.azimuth, 2 * math.pi),
+        ]
+    )
+    big = math.hypot(err[0], err[1]) > WRONG_POSITION_M or abs(err[2]) > WRONG_AZIMUTH_RAD
+    outside = bool(np.any(np.abs(err) > 5 * fix.adjustment.sigma))
+    return big and outside
+
+
+@dataclass
+class RobustnessSummary:
+    family: str
+    scans: int = 0
+    owed: int = 0
+    owed_fixed: int = 0
+    fixes: int = 0
+    wrong: int = 0
+    reasons: Counter[str] = field(default_factory=Counter)
+    seconds: float = 0.0
+
+    @property
+    def fix_rate_owed(self) -> float:
+        return self.owed_fixed / self.owed if self.owed else math.nan
+
+    def line(self) -> str:
+        reasons = ", ".join(f"{k} {v}" for k, v in self.reasons.most_common())
+        return (
+            f"{self.family:<7} scans {self.scans:5d}  owed {self.owed:5d}  fixed where owed "
+            f"{self.owed_fixed:5d} ({100 * self.fix_rate_owed:5.1f} %)  fixes {self.fixes:5d}  "
+            f"WRONG {self.wrong}  no-fix: {reasons}  ({self.seconds:.0f} s)"
+        )
+
+
+def _scenes(family: str, scenes: int, seed: int) -> Iterator[Scene]:
+    for i in range(scenes):
+        if family == "hard":
+            yield hard_scene(seed + i // 4, i % 4, poses=5)
+        else:
+            yield drift_scene(seed + i, 0, poses=10)
+
+
+def run_robustness(
+    *,
+    hard_scenes: int = 400,
+    drift_scenes: int = 60,
+    seed: int = 0,
+    out_dir: Path | None = None,
+    echo: Callable[[str], object] = print,
+) -> list[RobustnessSummary]:
+    """Run both families; write ``robustness_<family>.csv`` (one row per scan) when asked."""
+    out: list[RobustnessSummary] = []
+    cfg = LocatorConfig(range_sigma_m=0.012)
+    for family, count in (("hard", hard_scenes), ("drift", drift_scenes)):
+        t0 = time.perf_counter()
+        s = RobustnessSummary(family)
+        rows: list[dict[str, object]] = []
+        for scene in _scenes(family, count, seed):
+            for shot, sim in zip(scene.shots, scene.simulate_all(), strict=True):
+                fix = locate(sim.scan, scene.survey, config=cfg)
+                owed = owed_clean(sim)
+                wrong = is_wrong(fix, sim)
+                s.scans += 1
+                s.owed += owed
+                s.owed_fixed += owed and fix.ok
+                s.fixes += fix.ok
+                s.wrong += wrong
+                if not fix.ok:
+                    s.reasons[fix.reason or "?"] += 1
+                if wrong:
+                    echo(
+                        f"  WRONG FIX {scene.name} {shot.label}: {fix.pose} "
+                        f"(true {shot.pose}), {fix.beacons}"
+                    )
+                rows.append(
+                    {
+                        "scene": scene.name,
+                        "shot": shot.label,
+                        "owed": int(owed),
+                        "status": fix.status,
+                        "reason": fix.reason or "",
+                        "wrong": int(wrong),
+                        "beacons": " ".join(fix.beacons),
+                        "error_m": (
+                            math.hypot(
+                                fix.pose.easting - shot.pose.easting,
+                                fix.pose.northing - shot.pose.northing,
+                            )
+                            if fix.pose is not None
+                            else ""
+                        ),
+                    }
+                )
+        s.seconds = time.perf_counter() - t0
+        out.append(s)
+        echo(s.line())
+        if out_dir is not None:
+            out_dir.mkdir(parents=True, exist_ok=True)
+            with (out_dir / f"robustness_{family}.csv").open(
+                "w", newline="", encoding="utf-8"
+            ) as fh:
+                w = csv.DictWriter(fh, fieldnames=list(rows[0]))
+                w.writeheader()
+                w.writerows(rows)
+    return out

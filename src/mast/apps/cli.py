@@ -1,0 +1,376 @@
+"""The ``mast`` command line.
+
+Each command loads its inputs, calls one library function and prints or
+saves what it returns. Errors the library raises on purpose become one line
+on stderr and an exit status: 2 bad input, 3 no fix.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+import tempfile
+from dataclasses import replace
+from enum import StrEnum
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from mast import __version__
+from mast.core.scan import Scan
+from mast.errors import InputError, MastError, NoFixError
+
+EXIT_OK = 0
+EXIT_BAD_INPUT = 2
+EXIT_NO_FIX = 3
+
+app = typer.Typer(
+    name="mast",
+    help=(
+        "MAST: Mobile Automated Scanner Triangulateration. Fix a 2D laser scanner's "
+        "position and azimuth in the mine grid from surveyed wall beacons.\n\n"
+        "Exit status: 0 success (a fix), 2 bad input, 3 no fix."
+    ),
+    no_args_is_help=True,
+    add_completion=False,
+    pretty_exceptions_enable=False,
+    rich_markup_mode=None,
+)
+
+
+def _version(value: bool) -> None:
+    if value:
+        typer.echo(f"mast {__version__}")
+        raise typer.Exit()
+
+
+@app.callback()
+def _root(
+    version: Annotated[
+        bool,
+        typer.Option(
+            "--version", callback=_version, is_eager=True, help="Show the version and exit."
+        ),
+    ] = False,
+) -> None:
+    """MAST command line."""
+
+
+class ScanFormat(StrEnum):
+    csv = "csv"
+    bag = "bag"
+    ros2 = "ros2"
+    mcap = "mcap"
+
+
+@app.command()
+def simulate(
+    out: Annotated[Path, typer.Option("--out", help="Folder to write into (created if missing).")],
+    scenario: Annotated[
+        str, typer.Option("--scenario", help="Scenario name: paper or random.")
+    ] = "paper",
+    seed: Annotated[int, typer.Option("--seed", help="Random seed (noise, random scenes).")] = 0,
+    fmt: Annotated[
+        ScanFormat,
+        typer.Option(
+            "--format",
+            help=(
+                "csv: one file per scan; bag: ROS 1 bag; "
+                "ros2: ROS 2 sqlite3 bag; mcap: ROS 2 MCAP bag."
+            ),
+        ),
+    ] = ScanFormat.csv,
+    noise: Annotated[
+        bool, typer.Option("--noise/--no-noise", help="Add realistic range noise.")
+    ] = False,
+) -> None:
+    """Simulate a scenario: per scene, beacons.csv, the scans and truth.csv."""
+    from mast.sim import build_scenario, write_scenario
+
+    scenes = build_scenario(scenario, seed, noise=noise)
+    written = write_scenario(scenes, out, fmt=fmt.value, scenario=scenario, seed=seed)
+    for w in written:
+        typer.echo(f"{w.folder}: {w.count} scan(s), survey {w.survey.name}, truth {w.truth.name}")
+    typer.echo(f"wrote {sum(w.count for w in written)} scan(s) in {len(written)} scene(s) to {out}")
+
+
+class OutputFormat(StrEnum):
+    text = "text"
+    json = "json"
+
+
+def _load_scans(
+    path: Path, *, topic: str | None, range_min: float | None, range_max: float | None
+) -> tuple[list[Scan], bool]:
+    """The scans in a file: one for a CSV, all LaserScans of a topic for a bag."""
+    from mast.io import read_laserscans, read_scan_csv
+    from mast.io.bags import bag_kind
+
+    if path.is_file() and path.suffix.lower() in {".csv", ".txt"}:
+        scan = read_scan_csv(path, range_min_m=range_min or 0.0, range_max_m=range_max or math.inf)
+        return [scan], False
+    bag_kind(path)  # a clear error for anything that is neither
+    scans = list(read_laserscans(path, topic=topic))
+    if range_min is not None or range_max is not None:
+        scans = [
+            Scan(
+                s.angles_rad,
+                s.ranges_m,
+                s.intensities,
+                range_min if range_min is not None else s.range_min_m,
+                range_max if range_max is not None else s.range_max_m,
+                s.stamp_ns,
+                s.frame_id,
+            )
+            for s in scans
+        ]
+    if not scans:
+        raise InputError("bag holds no LaserScan message on that topic", path=path)
+    return scans, True
+
+
+def _parse_near(text: str, radius: float, az_tol_deg: float) -> dict[str, object]:
+    from mast.core.pose import Pose2D, parse_azimuth
+
+    parts = [p.strip() for p in text.split(",")]
+    if len(parts) not in (2, 3):
+        raise InputError(f"--near {text!r}: expected E,N or E,N,AZ")
+    try:
+        e, n = float(parts[0]), float(parts[1])
+    except ValueError:
+        raise InputError(f"--near {text!r}: easting and northing must be numbers") from None
+    if not (math.isfinite(e) and math.isfinite(n)):
+        raise InputError(f"--near {text!r}: easting and northing must be finite")
+    if not (math.isfinite(radius) and radius > 0):
+        raise InputError("--radius must be a positive number")
+    az = parse_azimuth(parts[2]) if len(parts) == 3 else 0.0
+    return {
+        "near": Pose2D.from_degrees(e, n, az),
+        "near_radius_m": radius,
+        "near_azimuth_tol_rad": math.radians(az_tol_deg) if len(parts) == 3 else None,
+    }
+
+
+@app.command()
+def locate(
+    scan_path: Annotated[
+        Path, typer.Argument(metavar="SCAN", help="A scan CSV, a ROS 1 bag or a ROS 2 bag folder.")
+    ],
+    beacons: Annotated[Path, typer.Option("--beacons", "-b", help="Beacon survey CSV.")],
+    range_sigma: Annotated[
+        float | None, typer.Option("--range-sigma", help="Range standard deviation, metres.")
+    ] = None,
+    angle_sigma: Annotated[
+        float | None, typer.Option("--angle-sigma", help="Beam angle standard deviation, radians.")
+    ] = None,
+    scanner: Annotated[
+        str | None,
+        typer.Option(
+            "--scanner", help="Named scanner model giving the default sigmas (see mast scanners)."
+        ),
+    ] = None,
+    fmt: Annotated[
+        OutputFormat, typer.Option("--format", help="text report or JSON (JSON Lines for a bag).")
+    ] = OutputFormat.text,
+    plot: Annotated[
+        Path | None,
+        typer.Option(
+            "--plot",
+            help="Write the paper's Figure 3 for the scan (PNG); numbered per scan for a bag.",
+        ),
+    ] = None,
+    topic: Annotated[str | None, typer.Option("--topic", help="LaserScan topic in a bag.")] = None,
+    range_min: Annotated[
+        float | None, typer.Option("--range-min", help="Shortest valid range, metres.")
+    ] = None,
+    range_max: Annotated[
+        float | None, typer.Option("--range-max", help="Longest valid range, metres.")
+    ] = None,
+    near: Annotated[
+        str | None,
+        typer.Option(
+            "--near",
+            help="Prior position E,N[,AZ] (azimuth in degrees or D°M'S): narrows the search.",
+        ),
+    ] = None,
+    radius: Annotated[
+        float, typer.Option("--radius", help="Radius of the --near prior, metres.")
+    ] = 10.0,
+    azimuth_tolerance: Annotated[
+        float,
+        typer.Option("--azimuth-tolerance", help="With an azimuth in --near: degrees allowed."),
+    ] = 30.0,
+) -> None:
+    """Fix position and azimuth from one scan (or every scan of a bag).
+
+    Exit status 0 when a scan is fixed (for a bag: at least one), 3 when none
+    is, 2 for bad input.
+    """
+    import json
+
+    from mast.apps.report import fix_record, fix_text
+    from mast.io import read_survey
+    from mast.pipeline.locator import LocatorConfig
+    from mast.pipeline.locator import locate as run_locate
+    from mast.sim import scanner_model
+
+    cfg = LocatorConfig()
+    if scanner is not None:
+        model = scanner_model(scanner)
+        cfg = replace(
+            cfg, range_sigma_m=max(model.range_sigma_m, 1e-4), angle_sigma_rad=model.angle_sigma_rad
+        )
+    for name, value in (("--range-sigma", range_sigma), ("--angle-sigma", angle_sigma)):
+        if value is not None and not (math.isfinite(value) and value >= 0):
+            raise InputError(f"{name} must be a non-negative number, got {value}")
+    if range_sigma is not None:
+        if range_sigma <= 0:
+            raise InputError("--range-sigma must be positive")
+        cfg = replace(cfg, range_sigma_m=range_sigma)
+    if angle_sigma is not None:
+        cfg = replace(cfg, angle_sigma_rad=angle_sigma)
+    if near is not None:
+        cfg = replace(cfg, **_parse_near(near, radius, azimuth_tolerance))  # type: ignore[arg-type]
+    survey = read_survey(beacons)
+    scans, many = _load_scans(scan_path, topic=topic, range_min=range_min, range_max=range_max)
+    fixed = 0
+    for i, scan in enumerate(scans):
+        fix = run_locate(scan, survey, config=cfg)
+        fixed += fix.ok
+        label = f"{scan_path}#{i}" if many else str(scan_path)
+        if fmt is OutputFormat.json:
+            typer.echo(
+                json.dumps(fix_record(fix, source=str(scan_path), index=i if many else None))
+            )
+        else:
+            if i:
+                typer.echo("")
+            typer.echo(fix_text(fix, source=label))
+        if plot is not None:
+            from mast.apps.plot import plot_fix
+
+            target = plot if not many else plot.with_name(f"{plot.stem}_{i:04d}{plot.suffix}")
+            plot_fix(scan, survey, fix, target, title=label)
+    if fixed == 0:
+        raise typer.Exit(EXIT_NO_FIX)
+
+
+bench_app = typer.Typer(
+    help="Benchmarks that print figures (not timed tests).", no_args_is_help=True
+)
+app.add_typer(bench_app, name="bench")
+
+
+@bench_app.command("accuracy")
+def bench_accuracy(
+    out: Annotated[Path | None, typer.Option("--out", help="Folder for the CSV files.")] = None,
+    poses: Annotated[
+        int, typer.Option("--poses", min=1, help="Owed poses per configuration.")
+    ] = 40,
+    draws: Annotated[int, typer.Option("--draws", min=1, help="Noise draws per pose.")] = 30,
+    seed: Annotated[int, typer.Option("--seed", help="First scene seed.")] = 0,
+) -> None:
+    """RMS error against the Cramer-Rao bound and coverage of the 95 % intervals,
+    for the four scanner configurations (270° at 0.5° and 0.25°, 190° at 1/6°, 360° at 0.2°)."""
+    from mast.apps.bench import run_accuracy
+
+    run_accuracy(poses=poses, draws=draws, seed=seed, out_dir=out, echo=typer.echo)
+
+
+@bench_app.command("robustness")
+def bench_robustness(
+    out: Annotated[Path | None, typer.Option("--out", help="Folder for the CSV files.")] = None,
+    hard: Annotated[
+        int, typer.Option("--hard", min=0, help="Hostile scenes (5 scans each).")
+    ] = 200,
+    drift: Annotated[
+        int, typer.Option("--drift", min=0, help="Many-beacon drifts (10 scans each).")
+    ] = 40,
+    seed: Annotated[int, typer.Option("--seed", help="First scene seed.")] = 0,
+) -> None:
+    """Fix rate where two beacons each show two clean panels, wrong fixes and no-fix
+    reasons, over hostile scenes and a many-beacon drift."""
+    from mast.apps.bench.robustness import run_robustness
+
+    run_robustness(hard_scenes=hard, drift_scenes=drift, seed=seed, out_dir=out, echo=typer.echo)
+
+
+@bench_app.command("real")
+def bench_real(
+    data: Annotated[
+        Path, typer.Option("--data", help="Folder of real scans (../shared/data).")
+    ] = Path("../shared/data"),
+    every: Annotated[
+        int, typer.Option("--every", min=1, help="Insert beacons into every Nth scan.")
+    ] = 10,
+) -> None:
+    """Real scans by others: no fix without beacons; fixes with beacons ray-cast into them."""
+    from mast.apps.bench.realscans import run_real_scans
+
+    if not data.is_dir():
+        raise InputError("folder of real scans not found", path=data)
+    run_real_scans(data, every=every, echo=typer.echo)
+
+
+reproduce_app = typer.Typer(help="Re-run published experiments.", no_args_is_help=True)
+app.add_typer(reproduce_app, name="reproduce")
+
+
+@reproduce_app.command("paper")
+def reproduce_paper_cmd(
+    out: Annotated[
+        Path, typer.Option("--out", help="Folder for report.md, figures and results.csv.")
+    ],
+    draws: Annotated[int, typer.Option("--draws", min=1, help="Noisy draws per shot.")] = 30,
+    seed: Annotated[int, typer.Option("--seed", help="Noise seed.")] = 0,
+) -> None:
+    """The MAST paper's experiments (Table 2 positions, wall yaws, beacon sizes), noise-free
+    and with 12 mm range noise, reported beside the paper's published values."""
+    from mast.apps.reproduce import reproduce_paper
+
+    reproduce_paper(out, draws=draws, seed=seed, echo=typer.echo)
+
+
+@app.command()
+def scanners() -> None:
+    """List the named scanner models (field of view, resolution, range noise)."""
+    from mast.sim import SCANNERS
+
+    for m in SCANNERS.values():
+        typer.echo(
+            f"{m.name:<18} {m.fov_deg:5.0f}° at {m.resolution_deg:.4g}°, "
+            f"{m.range_min_m:g}–{m.range_max_m:g} m, σ {1e3 * m.range_sigma_m:g} mm"
+        )
+
+
+@app.command()
+def demo(
+    out: Annotated[
+        Path | None,
+        typer.Option("--out", help="Keep the simulated files here (default: a temporary folder)."),
+    ] = None,
+) -> None:
+    """Simulate the paper's layout, locate every scan, and compare with the truth (Table 2)."""
+    from mast.apps.demo import run_demo
+
+    with tempfile.TemporaryDirectory(prefix="mast-demo-") as tmp:
+        run_demo(out if out is not None else Path(tmp), echo=typer.echo, keep=out is not None)
+
+
+def main() -> None:
+    """Entry point: run the app, turning MAST's own errors into one line and an exit status."""
+    try:
+        app(standalone_mode=True)
+    except NoFixError as err:
+        print(f"mast: {err}", file=sys.stderr)
+        sys.exit(EXIT_NO_FIX)
+    except InputError as err:
+        print(f"mast: error: {err}", file=sys.stderr)
+        sys.exit(EXIT_BAD_INPUT)
+    except MastError as err:
+        print(f"mast: error: {err}", file=sys.stderr)
+        sys.exit(EXIT_BAD_INPUT)
+    except KeyboardInterrupt:
+        print("mast: interrupted", file=sys.stderr)
+        sys.exit(130)

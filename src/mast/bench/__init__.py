@@ -1,6 +1,0 @@
-"""Benchmarks that print and write figures (not timed tests): accuracy against the
-Cramer-Rao bound and the honesty of the reported uncertainty."""
-
-from .accuracy import ACCURACY_CONFIGS, AccuracySummary, run_accuracy
-
-__all__ = ["ACCURACY_CONFIGS", "AccuracySummary", "run_accuracy"]

@@ -1,0 +1,154 @@
+"""Plane geometry shared by the locator and the simulator: rays against segments,
+points against panels."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from mast.core.beacon import Survey
+
+__all__ = ["PanelSet", "first_hits"]
+
+
+def first_hits(
+    origin: NDArray[np.float64],
+    directions: NDArray[np.float64],
+    seg_a: NDArray[np.float64],
+    seg_b: NDArray[np.float64],
+    *,
+    chunk_elements: int = 2_000_000,
+) -> tuple[NDArray[np.float64], NDArray[np.intp]]:
+    """Distance along each ray to the first segment it crosses.
+
+    Parameters
+    ----------
+    origin : ndarray, shape (2,)
+    directions : ndarray, shape (n, 2)
+        Unit ray directions.
+    seg_a, seg_b : ndarray, shape (m, 2)
+        Segment end points.
+
+    Returns
+    -------
+    t : ndarray, shape (n,)
+        Distance to the first crossing, ``inf`` for none.
+    index : ndarray of int, shape (n,)
+        Index of the segment crossed first, -1 for none.
+    """
+    n = directions.shape[0]
+    best = np.full(n, np.inf)
+    which = np.full(n, -1, dtype=np.intp)
+    m = seg_a.shape[0]
+    if m == 0 or n == 0:
+        return best, which
+    e = seg_b - seg_a
+    w = seg_a - origin
+    # o + t d = a + s e:  t = (w x e) / (d x e),  s = (w x d) / (d x e)
+    w_x_e = w[:, 0] * e[:, 1] - w[:, 1] * e[:, 0]
+    step = max(1, chunk_elements // m)
+    for lo in range(0, n, step):
+        d = directions[lo : lo + step]
+        den = d[:, :1] * e[None, :, 1] - d[:, 1:] * e[None, :, 0]
+        w_x_d = w[None, :, 0] * d[:, 1:] - w[None, :, 1] * d[:, :1]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = w_x_e[None, :] / den
+            s = w_x_d / den
+        ok = (den != 0) & (t > 1e-12) & (s >= 0.0) & (s <= 1.0)
+        t = np.where(ok, t, np.inf)
+        j = np.argmin(t, axis=1)
+        tj = t[np.arange(t.shape[0]), j]
+        hit = np.isfinite(tj)
+        best[lo : lo + step] = tj
+        which[lo : lo + step] = np.where(hit, j, -1)
+    return best, which
+
+
+@dataclass(frozen=True, eq=False)
+class PanelSet:
+    """Every surveyed panel of a survey as arrays, mine frame.
+
+    Attributes
+    ----------
+    a, b : ndarray, shape (k, 2)
+        Panel end points (edges ``e_j`` and ``e_j+1``).
+    direction, normal : ndarray, shape (k, 2)
+    length : ndarray, shape (k,)
+    beacon : ndarray of int, shape (k,)
+        Index of the beacon in ``ids``.
+    panel : ndarray of int, shape (k,)
+        Panel number 1..3.
+    ids : tuple of str
+    """
+
+    a: NDArray[np.float64]
+    b: NDArray[np.float64]
+    direction: NDArray[np.float64]
+    normal: NDArray[np.float64]
+    length: NDArray[np.float64]
+    beacon: NDArray[np.intp]
+    panel: NDArray[np.intp]
+    ids: tuple[str, ...]
+
+    @classmethod
+    def from_survey(cls, survey: Survey) -> PanelSet:
+        a, b, bi, pi = [], [], [], []
+        for k, beacon in enumerate(survey):
+            for j in range(3):
+                a.append(beacon.edges[j])
+                b.append(beacon.edges[j + 1])
+                bi.append(k)
+                pi.append(j + 1)
+        aa = np.array(a, dtype=float).reshape(-1, 2)
+        bb = np.array(b, dtype=float).reshape(-1, 2)
+        v = bb - aa
+        length = np.hypot(v[:, 0], v[:, 1])
+        d = v / length[:, None]
+        nrm = np.stack([-d[:, 1], d[:, 0]], axis=1)
+        return cls(
+            aa,
+            bb,
+            d,
+            nrm,
+            length,
+            np.array(bi, dtype=np.intp),
+            np.array(pi, dtype=np.intp),
+            tuple(survey.ids),
+        )
+
+    def __len__(self) -> int:
+        return int(self.length.size)
+
+    def associate(
+        self,
+        points_mine: NDArray[np.float64],
+        gate: float | NDArray[np.float64],
+        *,
+        subset: NDArray[np.intp] | None = None,
+    ) -> tuple[NDArray[np.intp], NDArray[np.float64]]:
+        """Nearest panel of each point, within ``gate`` of its line and inside its extent.
+
+        Returns the panel index per point (-1 for none) and the signed distance
+        from the panel's line (along its normal).
+        """
+        n = points_mine.shape[0]
+        idx = np.full(n, -1, dtype=np.intp)
+        dist = np.full(n, np.inf)
+        panels = np.arange(len(self)) if subset is None else subset
+        if n == 0 or panels.size == 0:
+            return idx, dist
+        rel = points_mine[:, None, :] - self.a[None, panels, :]
+        t = np.einsum("nkj,kj->nk", rel, self.direction[panels])
+        s = np.einsum("nkj,kj->nk", rel, self.normal[panels])
+        g = np.broadcast_to(
+            np.asarray(gate, dtype=float).reshape(-1, 1) if np.ndim(gate) else gate, s.shape
+        )
+        ok = (t >= 0) & (t <= self.length[panels][None, :]) & (np.abs(s) <= g)
+        score = np.where(ok, np.abs(s), np.inf)
+        j = np.argmin(score, axis=1)
+        found = np.isfinite(score[np.arange(n), j])
+        idx[found] = panels[j[found]]
+        dist[found] = s[np.arange(n), j][found]
+        return idx, dist

@@ -1,0 +1,148 @@
+"""One horizontal 2D laser scan, with ``sensor_msgs/LaserScan`` semantics."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from mast.errors import InputError
+
+__all__ = ["Scan"]
+
+
+def _frozen(a: ArrayLike) -> NDArray[np.float64]:
+    arr: NDArray[np.float64] = np.array(a, dtype=np.float64, copy=True).reshape(-1)
+    arr.setflags(write=False)
+    return arr
+
+
+@dataclass(frozen=True, eq=False)
+class Scan:
+    """A single scan in the scanner frame (REP 103: x forward, y left).
+
+    Attributes
+    ----------
+    angles_rad : ndarray, shape (n,)
+        Beam angles, counter-clockwise from +x, strictly increasing.
+    ranges_m : ndarray, shape (n,)
+        Measured ranges; ``nan``, ``inf``, ``0`` or a value outside
+        ``[range_min_m, range_max_m]`` means no return.
+    intensities : ndarray, shape (n,), optional
+    range_min_m, range_max_m : float
+        The scanner's stated range limits.
+    stamp_ns : int
+        Time stamp, nanoseconds.
+    frame_id : str
+    """
+
+    angles_rad: NDArray[np.float64]
+    ranges_m: NDArray[np.float64]
+    intensities: NDArray[np.float64] | None = None
+    range_min_m: float = 0.0
+    range_max_m: float = math.inf
+    stamp_ns: int = 0
+    frame_id: str = "laser"
+    _valid: NDArray[np.bool_] = field(init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        angles = _frozen(self.angles_rad)
+        ranges = _frozen(self.ranges_m)
+        object.__setattr__(self, "angles_rad", angles)
+        object.__setattr__(self, "ranges_m", ranges)
+        if angles.shape != ranges.shape:
+            raise InputError(
+                f"scan has {angles.size} angles but {ranges.size} ranges; they must match"
+            )
+        if self.intensities is not None:
+            inten: NDArray[np.float64] | None = _frozen(self.intensities)
+            if inten is not None and inten.size == 0:
+                inten = None
+            elif inten is not None and inten.shape != ranges.shape:
+                raise InputError(
+                    f"scan has {inten.size} intensities for {ranges.size} ranges; they must match"
+                )
+            object.__setattr__(self, "intensities", inten)
+        if not np.all(np.isfinite(angles)):
+            raise InputError("scan has a beam angle that is not a finite number")
+        if angles.size > 1 and not np.all(np.diff(angles) > 0):
+            i = int(np.argmin(np.diff(angles) > 0))
+            raise InputError(
+                f"scan angles must strictly increase, but beam {i + 1} "
+                f"({angles[i + 1]!r} rad) follows {angles[i]!r} rad"
+            )
+        rmin, rmax = float(self.range_min_m), float(self.range_max_m)
+        if math.isnan(rmin) or math.isnan(rmax) or rmin < 0 or rmax <= rmin:
+            raise InputError(f"scan range limits [{rmin}, {rmax}] m are not a valid interval")
+        object.__setattr__(self, "range_min_m", rmin)
+        object.__setattr__(self, "range_max_m", rmax)
+        with np.errstate(invalid="ignore"):
+            valid = np.isfinite(ranges) & (ranges > 0) & (ranges >= rmin) & (ranges <= rmax)
+        valid.setflags(write=False)
+        object.__setattr__(self, "_valid", valid)
+
+    @classmethod
+    def from_laserscan(
+        cls,
+        *,
+        angle_min: float,
+        angle_increment: float,
+        ranges: ArrayLike,
+        range_min: float = 0.0,
+        range_max: float = math.inf,
+        intensities: ArrayLike | None = None,
+        stamp_ns: int = 0,
+        frame_id: str = "laser",
+    ) -> Scan:
+        """Build a scan from the fields of a ``sensor_msgs/LaserScan`` message."""
+        r: NDArray[np.float64] = np.asarray(ranges, dtype=np.float64).reshape(-1)
+        if not (math.isfinite(angle_min) and math.isfinite(angle_increment)):
+            raise InputError("LaserScan angle_min and angle_increment must be finite")
+        if angle_increment <= 0 and r.size > 1:
+            raise InputError(
+                f"LaserScan angle_increment {angle_increment!r} must be positive "
+                "(beams in increasing angle order)"
+            )
+        angles = np.asarray(angle_min + angle_increment * np.arange(r.size), dtype=np.float64)
+        inten = None if intensities is None else np.asarray(intensities, dtype=np.float64)
+        return cls(angles, r, inten, range_min, range_max, stamp_ns, frame_id)
+
+    def __len__(self) -> int:
+        return int(self.ranges_m.size)
+
+    @property
+    def valid(self) -> NDArray[np.bool_]:
+        """Mask of beams with a usable return."""
+        return self._valid
+
+    @property
+    def angle_increment(self) -> float:
+        """Median spacing between beams, radians (nan for fewer than two beams)."""
+        if self.angles_rad.size < 2:
+            return math.nan
+        return float(np.median(np.diff(self.angles_rad)))
+
+    @property
+    def is_uniform(self) -> bool:
+        """True when beams are evenly spaced (as a LaserScan message requires)."""
+        if self.angles_rad.size < 3:
+            return True
+        d = np.diff(self.angles_rad)
+        return bool(np.ptp(d) <= 1e-9 * max(1.0, abs(float(np.mean(d)))) + 1e-12)
+
+    def points(self) -> tuple[NDArray[np.intp], NDArray[np.float64]]:
+        """Valid returns as points in the scanner frame.
+
+        Returns
+        -------
+        index : ndarray of int, shape (m,)
+            Beam indices of the valid returns.
+        points_scanner : ndarray, shape (m, 2)
+            ``x = r cos(phi)``, ``y = r sin(phi)``, metres.
+        """
+        idx = np.flatnonzero(self._valid)
+        r = self.ranges_m[idx]
+        a = self.angles_rad[idx]
+        return idx, np.stack([r * np.cos(a), r * np.sin(a)], axis=-1)

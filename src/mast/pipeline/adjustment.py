@@ -1,0 +1,226 @@
+"""Stage 5: least-squares adjustment of the pose from the measured ranges.
+
+Adjustment of indirect observations (Wolf and Ghilani 1997, ch. 11; Gracie
+and Mikhail 1981): every return ``r_i`` on a surveyed panel line
+``{x : n . x = c}`` is an observation of
+
+    rho_i(E, N, A) = (c - n . P) / (n . u_i),   u_i = (sin(A - phi_i), cos(A - phi_i)),
+
+the distance from the scanner at ``P = (E, N)`` along beam ``phi_i`` to the
+line. Gauss-Newton on ``v = r - rho`` with weights ``1 / sigma_i^2``, where
+``sigma_i^2 = sigma_r^2 + (d rho / d phi)^2 sigma_phi^2`` carries both the
+range and the beam-angle precision into the range direction. The same
+Jacobian rows ``g_i`` build the Cramer-Rao bound (Censi 2007).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy import stats
+
+from mast.core.pose import Pose2D
+
+__all__ = ["Adjustment", "ErrorEllipse", "adjust_pose", "range_model"]
+
+#: Beams closer than this to grazing a panel (|n . u| below) carry no usable range.
+MIN_INCIDENCE_COS = math.sin(math.radians(2.0))
+
+
+@dataclass(frozen=True, slots=True)
+class ErrorEllipse:
+    """Confidence ellipse of the position.
+
+    Attributes
+    ----------
+    semi_major_m, semi_minor_m : float
+    azimuth_rad : float
+        Azimuth of the semi-major axis (clockwise from north, in [0, pi)).
+    confidence : float
+    """
+
+    semi_major_m: float
+    semi_minor_m: float
+    azimuth_rad: float
+    confidence: float
+
+
+def range_model(
+    pose: Pose2D,
+    angles_rad: NDArray[np.float64],
+    normals: NDArray[np.float64],
+    offsets: NDArray[np.float64],
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """Predicted ranges to lines ``n . x = c``, their Jacobian and d rho / d phi.
+
+    Returns
+    -------
+    rho : ndarray, shape (n,)
+    jac : ndarray, shape (n, 3)
+        d rho / d (E, N, A), A in radians.
+    d_phi : ndarray, shape (n,)
+        d rho / d phi (equal to minus the azimuth column).
+    """
+    u = pose.beam_directions(angles_rad)
+    u_a = np.stack([u[:, 1], -u[:, 0]], axis=1)  # du/dA = (cos(A - phi), -sin(A - phi))
+    nu = np.einsum("ij,ij->i", normals, u)
+    # Offsets relative to the scanner keep precision at large mine coordinates.
+    c_rel = offsets - normals @ pose.position
+    rho = c_rel / nu
+    n_ua = np.einsum("ij,ij->i", normals, u_a)
+    jac = np.column_stack([-normals[:, 0] / nu, -normals[:, 1] / nu, -rho * n_ua / nu])
+    return rho, jac, -jac[:, 2]
+
+
+@dataclass(frozen=True, eq=False)
+class Adjustment:
+    """The adjusted pose with its statistics.
+
+    Attributes
+    ----------
+    pose : Pose2D
+    cofactor : ndarray, shape (3, 3)
+        ``(G^T W G)^-1`` for (E [m], N [m], A [rad]): the a-priori covariance.
+    covariance : ndarray, shape (3, 3)
+        The covariance reported: the cofactor scaled by the reference variance
+        when the global test rejects it as too large (the a-priori precisions
+        were too optimistic), otherwise the cofactor itself.
+    reference_variance : float
+        A-posteriori ``sigma_0^2 = v^T W v / (n - 3)``.
+    dof : int
+    chi2_lower, chi2_upper : float
+        Two-sided 95 % acceptance bounds for ``sigma_0^2``.
+    residuals_m : ndarray, shape (n,)
+        ``v = r - rho`` at the solution.
+    sigmas_m : ndarray, shape (n,)
+        A-priori standard deviation of each observation.
+    iterations : int
+    jacobian : ndarray, shape (n, 3)
+    """
+
+    pose: Pose2D
+    cofactor: NDArray[np.float64]
+    covariance: NDArray[np.float64]
+    reference_variance: float
+    dof: int
+    chi2_lower: float
+    chi2_upper: float
+    residuals_m: NDArray[np.float64]
+    sigmas_m: NDArray[np.float64]
+    iterations: int
+    jacobian: NDArray[np.float64]
+
+    @property
+    def test_passed(self) -> bool:
+        """Global (chi-square) test of the reference variance at 5 %, two-sided."""
+        return self.chi2_lower <= self.reference_variance <= self.chi2_upper
+
+    @property
+    def test_verdict(self) -> str:
+        if self.reference_variance < self.chi2_lower:
+            return "too small (a-priori precisions pessimistic)"
+        if self.reference_variance > self.chi2_upper:
+            return "too large (model or precisions do not fit)"
+        return "passed"
+
+    @property
+    def sigma(self) -> NDArray[np.float64]:
+        """Standard deviations of (E [m], N [m], A [rad])."""
+        return np.sqrt(np.diag(self.covariance))
+
+    @property
+    def scaled(self) -> bool:
+        """Whether the covariance was scaled by the reference variance (test rejected high)."""
+        return self.reference_variance > self.chi2_upper
+
+    def quantile95(self) -> float:
+        """Two-sided 95 % factor: normal for a-priori, Student t for a-posteriori scaling."""
+        if self.scaled:
+            return float(stats.t.ppf(0.975, max(self.dof, 1)))
+        return float(stats.norm.ppf(0.975))
+
+    def interval95(self) -> NDArray[np.float64]:
+        """Half-widths of the 95 % intervals for (E [m], N [m], A [rad])."""
+        return self.quantile95() * self.sigma
+
+    def ellipse(self, confidence: float = 0.95) -> ErrorEllipse:
+        """Position confidence ellipse (chi-square with 2 degrees of freedom)."""
+        c = self.covariance[:2, :2]
+        w, v = np.linalg.eigh(c)
+        if self.scaled:
+            k = math.sqrt(2 * float(stats.f.ppf(confidence, 2, max(self.dof, 1))))
+        else:
+            k = math.sqrt(float(stats.chi2.ppf(confidence, 2)))
+        major = v[:, 1]
+        az = math.atan2(major[0], major[1]) % math.pi
+        return ErrorEllipse(
+            k * math.sqrt(max(w[1], 0.0)), k * math.sqrt(max(w[0], 0.0)), az, confidence
+        )
+
+
+def adjust_pose(
+    pose: Pose2D,
+    angles_rad: NDArray[np.float64],
+    ranges_m: NDArray[np.float64],
+    normals: NDArray[np.float64],
+    offsets: NDArray[np.float64],
+    *,
+    range_sigma_m: float,
+    angle_sigma_rad: float = 0.0,
+    max_iterations: int = 20,
+) -> Adjustment:
+    """Weighted least squares for (E, N, A) from ranges to known lines.
+
+    Parameters
+    ----------
+    pose : Pose2D
+        Starting pose (from ICP).
+    angles_rad, ranges_m : ndarray, shape (n,)
+        Beam angles (scanner frame) and measured ranges.
+    normals : ndarray, shape (n, 2); offsets : ndarray, shape (n,)
+        The surveyed line each return lies on, ``n . x = c``, mine frame.
+    range_sigma_m, angle_sigma_rad : float
+        A-priori precision of a range and of a beam angle.
+
+    Raises
+    ------
+    numpy.linalg.LinAlgError
+        When the normal matrix is singular (degenerate geometry).
+    """
+    n = angles_rad.size
+    p = pose
+    it = 0
+    for it in range(1, max_iterations + 1):  # noqa: B007 - the count is reported
+        rho, jac, d_phi = range_model(p, angles_rad, normals, offsets)
+        var = range_sigma_m**2 + (d_phi * angle_sigma_rad) ** 2
+        w = 1.0 / var
+        v = ranges_m - rho
+        N = jac.T @ (w[:, None] * jac)
+        t = jac.T @ (w * v)
+        delta = np.linalg.solve(N, t)
+        p = Pose2D(
+            p.easting + float(delta[0]),
+            p.northing + float(delta[1]),
+            (p.azimuth + float(delta[2])) % (2 * math.pi),
+        )
+        tol_m = max(1e-11, 4 * np.spacing(max(abs(p.easting), abs(p.northing), 1.0)))
+        if math.hypot(delta[0], delta[1]) < tol_m and abs(delta[2]) < 1e-13:
+            break
+    rho, jac, d_phi = range_model(p, angles_rad, normals, offsets)
+    var = range_sigma_m**2 + (d_phi * angle_sigma_rad) ** 2
+    w = 1.0 / var
+    v = ranges_m - rho
+    N = jac.T @ (w[:, None] * jac)
+    Q: NDArray[np.float64] = np.asarray(np.linalg.inv(N), dtype=np.float64)
+    dof = n - 3
+    s0 = float(v @ (w * v) / dof) if dof > 0 else math.nan
+    lo = float(stats.chi2.ppf(0.025, dof) / dof) if dof > 0 else 0.0
+    hi = float(stats.chi2.ppf(0.975, dof) / dof) if dof > 0 else math.inf
+    # Surveying practice: when the global test passes, the a-priori precisions
+    # stand (sigma_0 = 1); when it rejects high, they were too optimistic and
+    # the covariance is scaled by the a-posteriori reference variance.
+    cov: NDArray[np.float64] = Q * s0 if s0 > hi else Q.copy()
+    return Adjustment(p, Q, cov, s0, dof, lo, hi, v, np.sqrt(var), it, jac)

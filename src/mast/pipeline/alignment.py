@@ -1,0 +1,184 @@
+"""Stage 4: align the scan to the mine frame.
+
+First a four-parameter (similarity) transformation from matched points, as in
+the paper (after Wolf and Ghilani); then point-to-line ICP of the panel
+returns against the surveyed panel lines, linearised for a small rotation as
+in Low (2004).
+
+References
+----------
+K.-L. Low, "Linear least-squares optimization for point-to-plane ICP surface
+registration", Technical Report TR04-004, UNC Chapel Hill, 2004.
+P. R. Wolf and C. D. Ghilani, *Adjustment Computations*, 1997, ch. 18.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from mast.core.geometry import PanelSet
+from mast.core.pose import Pose2D
+
+__all__ = ["IcpResult", "Similarity", "icp_point_to_line", "similarity_transform"]
+
+
+@dataclass(frozen=True, slots=True)
+class Similarity:
+    """``mine = scale * R(rotation) @ scanner + translation``.
+
+    Attributes
+    ----------
+    scale : float
+        Uniform scale (1 for a perfect rigid match; a diagnostic here).
+    rotation_rad : float
+        Counter-clockwise rotation from the scanner frame to the mine frame.
+    translation : ndarray, shape (2,)
+        Image of the scanner origin.
+    rms_m : float
+        RMS of the point residuals.
+    """
+
+    scale: float
+    rotation_rad: float
+    translation: NDArray[np.float64]
+    rms_m: float
+
+    def pose(self) -> Pose2D:
+        """The scanner pose it implies (the rotation is ``pi/2 - azimuth``)."""
+        return Pose2D(
+            float(self.translation[0]),
+            float(self.translation[1]),
+            (math.pi / 2 - self.rotation_rad) % (2 * math.pi),
+        )
+
+
+def similarity_transform(
+    points_scanner: NDArray[np.float64], points_mine: NDArray[np.float64]
+) -> Similarity:
+    """Least-squares four-parameter transformation from two or more point pairs.
+
+    Each pair gives the rows ``[x -y 1 0; y x 0 1]`` of the design matrix for
+    the unknowns ``(a, b, tx, ty)`` with ``a = s cos(alpha)``, ``b = s sin(alpha)``
+    (the paper's eq. for ``N = u R P + t``). Coordinates are centred first so
+    large mine coordinates do not spoil the conditioning.
+    """
+    p = np.asarray(points_scanner, dtype=float).reshape(-1, 2)
+    q = np.asarray(points_mine, dtype=float).reshape(-1, 2)
+    if p.shape[0] < 2:
+        raise ValueError("a similarity transformation needs at least two points")
+    pc, qc = p.mean(axis=0), q.mean(axis=0)
+    x, y = (p - pc).T
+    n = p.shape[0]
+    A = np.zeros((2 * n, 2))
+    A[0::2, 0], A[0::2, 1] = x, -y
+    A[1::2, 0], A[1::2, 1] = y, x
+    f = (q - qc).reshape(-1)
+    (a, b), *_ = np.linalg.lstsq(A, f, rcond=None)
+    scale = math.hypot(a, b)
+    rot = math.atan2(b, a)
+    R = np.array([[a, -b], [b, a]])
+    t = qc - R @ pc
+    resid = q - (p @ R.T + t)
+    return Similarity(scale, rot, t, float(np.sqrt(np.mean(np.sum(resid**2, axis=1)))))
+
+
+@dataclass(frozen=True, slots=True)
+class IcpResult:
+    """Outcome of point-to-line ICP.
+
+    Attributes
+    ----------
+    pose : Pose2D
+    iterations : int
+    converged : bool
+    panel : ndarray of int, shape (n,)
+        Panel (index into the PanelSet) each point was matched to; -1 for none.
+    residual_m : ndarray, shape (n,)
+        Signed point-to-line distance of each matched point (``nan`` if none).
+    """
+
+    pose: Pose2D
+    iterations: int
+    converged: bool
+    panel: NDArray[np.intp]
+    residual_m: NDArray[np.float64]
+
+    @property
+    def inliers(self) -> int:
+        return int(np.count_nonzero(self.panel >= 0))
+
+    @property
+    def rms_m(self) -> float:
+        r = self.residual_m[self.panel >= 0]
+        return float(np.sqrt(np.mean(r**2))) if r.size else math.inf
+
+
+def icp_point_to_line(
+    points_scanner: NDArray[np.float64],
+    pose: Pose2D,
+    panels: PanelSet,
+    *,
+    gates_m: Sequence[float],
+    max_iterations: int = 50,
+    tolerance_m: float = 1e-10,
+    tolerance_rad: float = 1e-12,
+    subset: NDArray[np.intp] | None = None,
+) -> IcpResult:
+    """Refine ``pose`` by point-to-line ICP against surveyed panels.
+
+    Each iteration matches every point to its nearest panel within the current
+    gate (and inside the panel's extent), then solves the linearised problem
+    ``min sum ((R s_i + t - d_i) . n_i)^2`` for a small rotation about the
+    scanner position and a translation (Low 2004). The gate shrinks through
+    ``gates_m`` as each stage converges.
+
+    Parameters
+    ----------
+    points_scanner : ndarray, shape (n, 2)
+    pose : Pose2D
+        Starting pose.
+    panels : PanelSet
+    gates_m : sequence of float
+        Decreasing association gates, metres.
+    """
+    p = pose
+    total = 0
+    converged = False
+    panel = np.full(points_scanner.shape[0], -1, dtype=np.intp)
+    resid = np.full(points_scanner.shape[0], np.nan)
+    for gate in gates_m:
+        converged = False
+        for _ in range(max_iterations):
+            total += 1
+            m = p.scanner_to_mine(points_scanner)
+            panel, dist = panels.associate(m, gate, subset=subset)
+            ok = panel >= 0
+            if np.count_nonzero(ok) < 3:
+                break
+            nrm = panels.normal[panel[ok]]
+            rel = m[ok] - p.position
+            # d/d(omega) of n.(m) for a rotation about the scanner: n . J rel, J = [[0,-1],[1,0]]
+            jw = nrm[:, 1] * rel[:, 0] - nrm[:, 0] * rel[:, 1]
+            A = np.column_stack([nrm, jw])
+            b = -dist[ok]
+            x, *_ = np.linalg.lstsq(A, b, rcond=None)
+            omega = math.pi / 2 - p.azimuth + float(x[2])
+            p = Pose2D(
+                p.easting + float(x[0]),
+                p.northing + float(x[1]),
+                (math.pi / 2 - omega) % (2 * math.pi),
+            )
+            # A step below the spacing of doubles at these coordinates cannot change them.
+            tol_m = max(tolerance_m, 4 * np.spacing(max(abs(p.easting), abs(p.northing), 1.0)))
+            if math.hypot(x[0], x[1]) < tol_m and abs(x[2]) < max(tolerance_rad, tol_m / 100.0):
+                converged = True
+                break
+    m = p.scanner_to_mine(points_scanner)
+    panel, dist = panels.associate(m, gates_m[-1], subset=subset)
+    resid = np.where(panel >= 0, dist, np.nan)
+    return IcpResult(p, total, converged, panel, resid)

@@ -1,0 +1,237 @@
+"""Stage 2: identify beacon panels among the segments (the paper's Table 1).
+
+Every corner (two consecutive segments of one run) is tested against every
+beacon's template, at both of its nodes (e2, e3) and in both directions of
+travel (the scan sweeps counter-clockwise, so it meets a beacon's edges as
+``e1 -> e4`` or ``e4 -> e1``). Four tests, as in the paper:
+
+* ``p1`` and ``p2``: the lengths of the two panels (``P_j``, ``P_j+1`` in
+  beacon order), measured from the node, since the node is found as the
+  intersection of the lines and not from end points. One-sided: a scanned
+  panel is shorter than the surveyed one by up to the beam spacing at its far
+  end (a return rarely falls on an edge), never longer beyond the noise.
+* ``theta``: the deflection angle at the node.
+* ``c``: the distance between the two panels' centroids, allowing each
+  centroid to shift by half the unseen length at each end.
+
+The outcome is the paper's option 1-6; the deflection must always hold and
+at least one panel length must. A segment longer than its panel can be
+excluded outright (it is not that panel).
+
+Single segments are also tested against every panel length (reported for
+diagnosis; a lone segment is too ambiguous to start a hypothesis).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from mast.core.beacon import Beacon, Survey
+from mast.pipeline.segmentation import Corner, Segment, Segmentation
+
+__all__ = [
+    "IdentificationConfig",
+    "NodeMatch",
+    "PanelIdentification",
+    "SingleMatch",
+    "identify_panels",
+]
+
+#: (p1, p2, theta, c) -> Table 1 option
+_OPTIONS: dict[tuple[bool, bool, bool, bool], int] = {
+    (True, True, True, True): 1,
+    (True, True, True, False): 2,
+    (False, True, True, True): 3,
+    (True, False, True, True): 4,
+    (True, False, True, False): 5,
+    (False, True, True, False): 6,
+}
+
+
+@dataclass(frozen=True, slots=True)
+class IdentificationConfig:
+    """Tolerances of panel identification beyond what the scan's own noise gives.
+
+    Attributes
+    ----------
+    survey_sigma_m : float
+        Standard deviation of a surveyed edge coordinate.
+    sigmas : float
+        Width of every test in standard deviations.
+    min_deflection_tol_rad : float
+        Floor on the deflection tolerance.
+    """
+
+    survey_sigma_m: float = 0.003
+    sigmas: float = 4.0
+    min_deflection_tol_rad: float = math.radians(0.5)
+
+
+@dataclass(frozen=True, slots=True)
+class NodeMatch:
+    """A corner identified as edge ``edge`` (2 or 3) of ``beacon``.
+
+    Attributes
+    ----------
+    beacon : str
+    edge : int
+        2 (P1/P2) or 3 (P2/P3).
+    forward : bool
+        True when the scan meets the beacon in the order e1 -> e4.
+    option : int
+        The paper's Table 1 option (1-6).
+    segments : tuple[int, int]
+        Segment indices in scan order.
+    panels : tuple[int, int]
+        Beacon panel numbers of those segments, in scan order.
+    identified : tuple[bool, bool]
+        Whether each segment passed its length test (is an identified panel).
+    node_scanner : ndarray, shape (2,)
+        The edge in the scanner frame (intersection of the two lines).
+    tests : dict
+        Measured and design values of each test, for people debugging.
+    """
+
+    beacon: str
+    edge: int
+    forward: bool
+    option: int
+    segments: tuple[int, int]
+    panels: tuple[int, int]
+    identified: tuple[bool, bool]
+    node_scanner: NDArray[np.float64]
+    tests: dict[str, float]
+
+
+@dataclass(frozen=True, slots=True)
+class SingleMatch:
+    """A lone segment whose length fits panel ``panel`` of ``beacon``."""
+
+    beacon: str
+    panel: int
+    segment: int
+
+
+@dataclass(frozen=True, eq=False)
+class PanelIdentification:
+    nodes: tuple[NodeMatch, ...]
+    singles: tuple[SingleMatch, ...]
+
+
+def _extent_from_node(seg: Segment, node: NDArray[np.float64], before: bool) -> tuple[float, float]:
+    """(near, far) distances of a segment's returns from the node along its line."""
+    t = (seg.points - node) @ seg.direction
+    if before:
+        t = -t
+    return float(t.min()), float(t.max())
+
+
+def _test_corner(
+    corner: Corner, a: Segment, b: Segment, beacon: Beacon, noise: float, cfg: IdentificationConfig
+) -> list[NodeMatch]:
+    tpl = beacon.template
+    out: list[NodeMatch] = []
+    near_a, far_a = _extent_from_node(a, corner.node, before=True)
+    near_b, far_b = _extent_from_node(b, corner.node, before=False)
+    sin_d = max(abs(math.sin(corner.deflection)), 1e-3)
+    # Along-line uncertainty of the node and of the ends: noise over the corner's sine.
+    sig_along = noise * (1.0 + 1.0 / sin_d) + cfg.survey_sigma_m
+    tol = cfg.sigmas * sig_along
+    if near_a < -tol or near_b < -tol:
+        return out  # the lines meet inside a segment: not a corner of two panels
+    sig_theta = math.hypot(a.sigma_direction, b.sigma_direction)
+    for forward in (True, False):
+        for edge in (2, 3):
+            j = edge - 2  # pair (P_{j+1}, P_{j+2}) in 0-based panel numbers j, j+1
+            design_theta = float(tpl.deflections[j])
+            if forward:
+                pa, pb = j, j + 1
+                theta = design_theta
+            else:
+                pa, pb = j + 1, j
+                theta = -design_theta
+            la, lb = float(tpl.panel_lengths[pa]), float(tpl.panel_lengths[pb])
+            survey_theta = cfg.survey_sigma_m * math.sqrt(2.0) * math.hypot(1 / la, 1 / lb)
+            theta_tol = max(
+                cfg.min_deflection_tol_rad, cfg.sigmas * math.hypot(sig_theta, survey_theta)
+            )
+            d_theta = math.remainder(corner.deflection - theta, 2 * math.pi)
+            if abs(d_theta) > theta_tol:
+                continue
+            # One-sided length tests from the node: never longer, shorter by at most the
+            # far-end beam spacing (plus the near gap at the node).
+            if far_a > la + tol or far_b > lb + tol:
+                continue
+            ok_a = far_a >= la - a.spacing_start - tol
+            ok_b = far_b >= lb - b.spacing_end - tol
+            # Centroid of the seen extent (mid-point), not the mean of the returns,
+            # which crowd towards the scanner.
+            c_meas = float(np.hypot(*(a.midpoint - b.midpoint)))
+            c_design = float(tpl.centroid_distances[j])
+            slack = 0.5 * (max(near_a, 0) + (la - far_a) + max(near_b, 0) + (lb - far_b))
+            ok_c = abs(c_meas - c_design) <= abs(slack) + tol
+            # beacon order: P_j is the first of the pair
+            first_ok, second_ok = (ok_a, ok_b) if forward else (ok_b, ok_a)
+            option = _OPTIONS.get((first_ok, second_ok, True, ok_c))
+            if option is None:
+                continue
+            out.append(
+                NodeMatch(
+                    beacon=beacon.id,
+                    edge=edge,
+                    forward=forward,
+                    option=option,
+                    segments=(a.index, b.index),
+                    panels=(pa + 1, pb + 1),
+                    identified=(ok_a, ok_b),
+                    node_scanner=corner.node,
+                    tests={
+                        "length_a_m": far_a,
+                        "length_b_m": far_b,
+                        "design_a_m": la,
+                        "design_b_m": lb,
+                        "deflection_rad": corner.deflection,
+                        "design_deflection_rad": theta,
+                        "deflection_tol_rad": theta_tol,
+                        "centroid_distance_m": c_meas,
+                        "design_centroid_distance_m": c_design,
+                        "length_tol_m": tol,
+                    },
+                )
+            )
+    return out
+
+
+def identify_panels(
+    segmentation: Segmentation,
+    survey: Survey,
+    config: IdentificationConfig = IdentificationConfig(),
+) -> PanelIdentification:
+    """Test every corner and every segment against every beacon template.
+
+    Returns
+    -------
+    PanelIdentification
+        ``nodes``: corners identified as a beacon edge with their Table 1
+        option; ``singles``: lone segments whose length fits a panel.
+    """
+    segs = segmentation.segments
+    nodes: list[NodeMatch] = []
+    for corner in segmentation.corners:
+        a, b = segs[corner.first], segs[corner.second]
+        for beacon in survey:
+            nodes.extend(_test_corner(corner, a, b, beacon, segmentation.noise_m, config))
+    singles: list[SingleMatch] = []
+    noise = segmentation.noise_m
+    for seg in segs:
+        tol = config.sigmas * (noise + config.survey_sigma_m)
+        for beacon in survey:
+            for k, length in enumerate(beacon.template.panel_lengths):
+                lo = length - seg.spacing_start - seg.spacing_end - tol
+                if lo <= seg.length <= length + tol:
+                    singles.append(SingleMatch(beacon.id, k + 1, seg.index))
+    return PanelIdentification(tuple(nodes), tuple(singles))

@@ -1,0 +1,420 @@
+"""Stage 1: segment a scan into straight lines (the paper's "Data Segmentation").
+
+Runs of consecutive returns are cut where the gap between neighbours is more
+than the beam spacing can explain (the adaptive breakpoint detector of Borges
+and Aldon, 2004); each run is then partitioned optimally into straight pieces
+(dynamic programming over all break points, each break paid for by a
+penalty that follows the scan's noise). Every line is a total-least-squares
+(principal component) fit.
+
+References
+----------
+G. A. Borges and M.-J. Aldon, "Line extraction in 2D range images for mobile
+robotics", J. Intelligent and Robotic Systems 40, 2004.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from mast.core.scan import Scan
+
+__all__ = ["Corner", "Segment", "Segmentation", "SegmentationConfig", "fit_line", "segment_scan"]
+
+
+@dataclass(frozen=True, slots=True)
+class SegmentationConfig:
+    """Thresholds of the segmentation; all follow the scanner's spacing and noise.
+
+    Attributes
+    ----------
+    min_points : int
+        Fewest returns a line needs.
+    incidence_limit_deg : float
+        Breakpoint detector: the shallowest incidence (degrees between beam
+        and surface) at which neighbouring returns still count as one surface.
+    max_gap_beams : int
+        Most consecutive missing returns bridged inside one run.
+    noise_floor_m : float
+        Lower bound on the noise used for thresholds: keeps rounding in the
+        cumulative moments of a noise-free scan from passing for structure.
+    noise_m : float or None
+        Range noise to use for thresholds; ``None`` estimates it from the scan.
+    """
+
+    min_points: int = 3
+    incidence_limit_deg: float = 8.0
+    max_gap_beams: int = 3
+    noise_floor_m: float = 2e-5
+    noise_m: float | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class LineFit:
+    centroid: NDArray[np.float64]
+    direction: NDArray[np.float64]
+    normal: NDArray[np.float64]
+    rms: float
+    t_spread: float  # sum of squared projections about the centroid
+
+
+def fit_line(points: NDArray[np.float64]) -> LineFit:
+    """Total least squares line through ``(n, 2)`` points (principal component).
+
+    The direction points from the first point towards the last.
+    """
+    c = points.mean(axis=0)
+    q = points - c
+    cov = q.T @ q
+    _, v = np.linalg.eigh(cov)
+    d = v[:, 1]
+    if np.dot(points[-1] - points[0], d) < 0:
+        d = -d
+    n = np.array([-d[1], d[0]])
+    resid = q @ n
+    t = q @ d
+    return LineFit(c, d, n, float(np.sqrt(np.mean(resid**2))), float(np.sum(t**2)))
+
+
+@dataclass(frozen=True, eq=False)
+class Segment:
+    """A straight piece of the scan, in the scanner frame.
+
+    Attributes
+    ----------
+    index : int
+        Position in the segmentation's list.
+    run : int
+        Run (stretch without a breakpoint) it belongs to.
+    beams : ndarray of int
+        Beam indices of its returns, increasing.
+    points : ndarray, shape (n, 2)
+    centroid, direction, normal : ndarray, shape (2,)
+        TLS fit; ``direction`` follows increasing beam angle, ``normal`` is it
+        turned +90 degrees.
+    length : float
+        Extent of the projected returns along the line, metres.
+    start, end : ndarray, shape (2,)
+        First and last return projected on the line.
+    rms : float
+        RMS perpendicular residual of the fit, metres.
+    sigma_direction : float
+        Standard deviation of the direction, radians, for the noise in use.
+    spacing_start, spacing_end : float
+        Distance along the line between the two first and the two last returns:
+        how far the true end of the surface may lie beyond ``start``/``end``.
+    """
+
+    index: int
+    run: int
+    beams: NDArray[np.intp]
+    points: NDArray[np.float64]
+    centroid: NDArray[np.float64]
+    direction: NDArray[np.float64]
+    normal: NDArray[np.float64]
+    length: float
+    start: NDArray[np.float64]
+    end: NDArray[np.float64]
+    rms: float
+    sigma_direction: float
+    spacing_start: float
+    spacing_end: float
+
+    @property
+    def midpoint(self) -> NDArray[np.float64]:
+        """Middle of the seen extent along the line."""
+        return np.asarray(0.5 * (self.start + self.end))
+
+    @property
+    def first_beam(self) -> int:
+        return int(self.beams[0])
+
+    @property
+    def last_beam(self) -> int:
+        return int(self.beams[-1])
+
+    def __len__(self) -> int:
+        return int(self.beams.size)
+
+
+@dataclass(frozen=True, slots=True)
+class Corner:
+    """Two consecutive segments of one run and where their lines meet.
+
+    ``deflection`` is the signed turn (counter-clockwise positive, radians)
+    from the first segment's direction to the second's; ``node`` is the
+    intersection of the two lines (a beacon edge when both are panels).
+    """
+
+    first: int
+    second: int
+    deflection: float
+    node: NDArray[np.float64]
+
+
+@dataclass(frozen=True, eq=False)
+class Segmentation:
+    segments: tuple[Segment, ...]
+    corners: tuple[Corner, ...]
+    noise_m: float
+    """Noise standard deviation used for the thresholds (estimated or given)."""
+
+
+#: Quantile of the triple deviations used for the noise estimate, and that
+#: quantile of a unit half-normal distribution.
+NOISE_QUANTILE = 0.5
+_HALF_NORMAL_Q = 0.6745
+
+
+def estimate_noise(points: NDArray[np.float64], run_ids: NDArray[np.intp]) -> float:
+    """Robust estimate of the range noise from triples of consecutive returns.
+
+    For three neighbours on a straight surface, the middle one's distance
+    from the line through the outer two has variance about 1.5 sigma_perp^2,
+    and a range error e moves a return by e |n . u| across the surface (n
+    the surface normal, u the beam). Dividing by |n . u| gives the range
+    noise, which bounds the noise across every surface; triples seen within
+    about 17 degrees of grazing are left out. The median is used: triples
+    on corners only lengthen the upper tail (rough rock, whose bumps are
+    shape, raises it, which only makes the segmentation more cautious).
+    """
+    if points.shape[0] < 3:
+        return 0.0
+    a, b, c = points[:-2], points[1:-1], points[2:]
+    same = (run_ids[:-2] == run_ids[1:-1]) & (run_ids[1:-1] == run_ids[2:])
+    if not np.any(same):
+        return 0.0
+    ac = c - a
+    length = np.hypot(ac[:, 0], ac[:, 1])
+    rb = np.hypot(b[:, 0], b[:, 1])
+    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+        # |n . u| = |sin(angle between the surface and the beam)|
+        nu = np.abs(ac[:, 0] * b[:, 1] - ac[:, 1] * b[:, 0]) / (length * rb)
+    ok = same & (length > 0) & (rb > 0) & (nu > 0.3)
+    if not np.any(ok):
+        return 0.0
+    dist = (
+        np.abs(ac[ok, 0] * (b[ok, 1] - a[ok, 1]) - ac[ok, 1] * (b[ok, 0] - a[ok, 0])) / length[ok]
+    )
+    # median of |N(0, s)| = 0.6745 s, s^2 = 1.5 sigma^2
+    return float(np.quantile(dist / nu[ok], NOISE_QUANTILE) / _HALF_NORMAL_Q / math.sqrt(1.5))
+
+
+def _sse(points: NDArray[np.float64]) -> float:
+    """Total-least-squares residual sum of squares (smallest singular value squared)."""
+    if points.shape[0] < 3:
+        return 0.0
+    q = points - points.mean(axis=0)
+    return float(np.linalg.svd(q, compute_uv=False)[-1] ** 2)
+
+
+def _penalty(n: int) -> float:
+    """SSE, in noise variances, that one more line must buy (BIC-like, grows as ln n).
+
+    A new line adds two parameters and a break point chosen among n; the
+    margin is wide because a false break costs a panel its identity.
+    """
+    return 4.0 * math.log(max(n, 2)) + 12.0
+
+
+def _partition(
+    points: NDArray[np.float64], var: float, max_piece: int = 128
+) -> list[tuple[int, int]]:
+    """Optimal partition of one run into straight pieces (dynamic programming).
+
+    Minimises, over all partitions, the sum over pieces of
+
+        SSE_TLS(piece) / (var * mean((n . u_i)^2)) + penalty(n) + 4 * (returns in a piece of 1 or 2)
+
+    where ``var`` is the range noise variance and ``(n . u_i)^2`` turns it
+    into the noise across the piece's line for each beam ``u_i``: costs are in
+    chi-square units, so a face-on panel and an oblique wall are judged
+    alike. Every break must buy more than :func:`_penalty` (the optimal
+    partitioning changepoint method, Jackson et al. 2005). Returns left in a
+    piece of one or two cost like outliers, so exact ties break towards real
+    lines. Pieces hold at most ``max_piece`` returns, which bounds the work
+    to ``n * max_piece``; cuts that only the cap made are undone after.
+    Every candidate piece's SSE and normal come at once from cumulative
+    moments.
+
+    References
+    ----------
+    B. Jackson et al., "An algorithm for optimal partitioning of data on an
+    interval", IEEE Signal Processing Letters 12, 2005.
+    """
+    with np.errstate(over="ignore", invalid="ignore"):
+        return _partition_impl(points, var, max_piece)
+
+
+def _partition_impl(
+    points: NDArray[np.float64], var: float, max_piece: int
+) -> list[tuple[int, int]]:
+    n = points.shape[0]
+    c = points - points.mean(axis=0)
+    r = np.hypot(points[:, 0], points[:, 1])
+    u = points / np.where(r > 0, r, 1.0)[:, None]
+    z = np.zeros(1)
+
+    def cum(v: NDArray[np.float64]) -> NDArray[np.float64]:
+        return np.concatenate([z, np.cumsum(v)])
+
+    sx, sy = cum(c[:, 0]), cum(c[:, 1])
+    sxx, syy, sxy = cum(c[:, 0] ** 2), cum(c[:, 1] ** 2), cum(c[:, 0] * c[:, 1])
+    uxx, uyy, uxy = cum(u[:, 0] ** 2), cum(u[:, 1] ** 2), cum(u[:, 0] * u[:, 1])
+    w = min(n, max_piece)
+    d = np.arange(1, w + 1)  # piece lengths
+    j = np.arange(1, n + 1)[:, None]  # piece ends (exclusive)
+    i = j - d[None, :]  # piece starts
+    ok = i >= 0
+    ii = np.where(ok, i, 0)
+    m = d[None, :].astype(float)
+    ax, ay = sx[j] - sx[ii], sy[j] - sy[ii]
+    vxx = sxx[j] - sxx[ii] - ax * ax / m
+    vyy = syy[j] - syy[ii] - ay * ay / m
+    vxy = sxy[j] - sxy[ii] - ax * ay / m
+    half = 0.5 * (vxx + vyy)
+    sse = np.maximum(half - np.sqrt(np.maximum(0.25 * (vxx - vyy) ** 2 + vxy**2, 0.0)), 0.0)
+    theta = 0.5 * np.arctan2(2.0 * vxy, vxx - vyy)  # direction of the piece's line
+    nx, ny = -np.sin(theta), np.cos(theta)
+    nu2 = (
+        nx * nx * (uxx[j] - uxx[ii])
+        + 2 * nx * ny * (uxy[j] - uxy[ii])
+        + ny * ny * (uyy[j] - uyy[ii])
+    ) / m
+    scale = var * np.maximum(nu2, 0.05)
+    pen = _penalty(n)
+    cost = np.where(ok, sse / scale + pen + 4.0 * np.where(m < 3, m, 0.0), np.inf)
+    best = np.empty(n + 1)
+    best[0] = -pen
+    last = np.zeros(n + 1, dtype=np.intp)
+    for jj in range(1, n + 1):
+        k = min(jj, w)
+        total = best[jj - 1 :: -1][:k] + cost[jj - 1, :k]
+        arg = int(np.argmin(total))
+        best[jj] = total[arg]
+        last[jj] = jj - 1 - arg
+    pieces: list[tuple[int, int]] = []
+    e = n
+    while e > 0:
+        pieces.append((int(last[e]), e))
+        e = int(last[e])
+    pieces.reverse()
+    # Undo the cuts that only the cap on piece length made.
+    merged: list[tuple[int, int]] = []
+    for a0, b0 in pieces:
+        if merged and b0 - merged[-1][0] > w:
+            s0 = merged[-1][0]
+            fit = fit_line(points[s0:b0])
+            nu = u[s0:b0] @ fit.normal
+            gain = _sse(points[s0:b0]) - _sse(points[s0:a0]) - _sse(points[a0:b0])
+            if gain / (var * max(float(np.mean(nu**2)), 0.05)) <= pen:
+                merged[-1] = (s0, b0)
+                continue
+        merged.append((a0, b0))
+    return merged
+
+
+def _make_segment(
+    index: int, run: int, beams: NDArray[np.intp], pts: NDArray[np.float64], noise: float
+) -> Segment:
+    fit = fit_line(pts)
+    t = (pts - fit.centroid) @ fit.direction
+    start = fit.centroid + t[0] * fit.direction
+    end = fit.centroid + t[-1] * fit.direction
+    # range noise seen across this line: sigma_r * rms(n . u) over its beams
+    u = pts / np.hypot(pts[:, 0], pts[:, 1])[:, None]
+    perp = noise * math.sqrt(max(float(np.mean((u @ fit.normal) ** 2)), 1e-6))
+    sigma_dir = perp / math.sqrt(fit.t_spread) if fit.t_spread > 0 else math.inf
+    return Segment(
+        index=index,
+        run=run,
+        beams=beams,
+        points=pts,
+        centroid=fit.centroid,
+        direction=fit.direction,
+        normal=fit.normal,
+        length=float(t[-1] - t[0]),
+        start=start,
+        end=end,
+        rms=fit.rms,
+        sigma_direction=sigma_dir,
+        spacing_start=float(abs(t[1] - t[0])) if t.size > 1 else 0.0,
+        spacing_end=float(abs(t[-1] - t[-2])) if t.size > 1 else 0.0,
+    )
+
+
+def segment_scan(scan: Scan, config: SegmentationConfig = SegmentationConfig()) -> Segmentation:
+    """Split a scan into straight segments and the corners between them.
+
+    Parameters
+    ----------
+    scan : Scan
+    config : SegmentationConfig
+
+    Returns
+    -------
+    Segmentation
+        Segments in increasing beam order, the corners between consecutive
+        segments of a run, and the noise level the thresholds used.
+    """
+    beams, pts = scan.points()
+    if beams.size == 0:
+        return Segmentation((), (), config.noise_floor_m)
+    r = scan.ranges_m[beams]
+    ang = scan.angles_rad[beams]
+    # Breakpoints: a jump larger than a surface at the limiting incidence explains.
+    gap_beams = np.diff(beams)
+    dphi = np.diff(ang)
+    lam = math.radians(config.incidence_limit_deg)
+    step = np.hypot(*np.diff(pts, axis=0).T)
+    noise_guess = config.noise_m
+    run_ids = np.zeros(beams.size, dtype=np.intp)
+    if beams.size > 1:
+        with np.errstate(invalid="ignore", divide="ignore"):
+            dmax = r[:-1] * np.sin(dphi) / np.sin(np.maximum(lam - dphi, 1e-6))
+        dmax = dmax + 3.0 * (noise_guess if noise_guess is not None else 0.0)
+        brk = (gap_beams > config.max_gap_beams + 1) | (step > dmax) | (dphi >= lam)
+        run_ids[1:] = np.cumsum(brk)
+    noise = noise_guess if noise_guess is not None else estimate_noise(pts, run_ids)
+    noise = max(noise, config.noise_floor_m)
+    if noise_guess is None and beams.size > 1:
+        # Second pass with the estimated noise, so noisy returns do not cut runs.
+        brk = (gap_beams > config.max_gap_beams + 1) | (step > dmax + 3.0 * noise) | (dphi >= lam)
+        run_ids[1:] = np.cumsum(brk)
+    segments: list[Segment] = []
+    corners: list[Corner] = []
+    for run in np.unique(run_ids):
+        sel = np.flatnonzero(run_ids == run)
+        if sel.size < config.min_points:
+            continue
+        p = pts[sel]
+        pieces = _partition(p, noise**2)
+        prev: Segment | None = None
+        for i, j in pieces:
+            if j - i < config.min_points:
+                continue
+            seg = _make_segment(len(segments), int(run), beams[sel[i:j]], p[i:j], noise)
+            if prev is not None and prev.last_beam + 1 + config.max_gap_beams >= seg.first_beam:
+                corner = _corner(prev, seg)
+                if corner is not None:
+                    corners.append(corner)
+            segments.append(seg)
+            prev = seg
+    return Segmentation(tuple(segments), tuple(corners), noise)
+
+
+def _corner(a: Segment, b: Segment) -> Corner | None:
+    cross = a.direction[0] * b.direction[1] - a.direction[1] * b.direction[0]
+    dot = float(a.direction @ b.direction)
+    defl = math.atan2(cross, dot)
+    if abs(cross) < 1e-12:
+        return None
+    # a.centroid + s a.dir = b.centroid + u b.dir
+    w = b.centroid - a.centroid
+    s = (w[0] * b.direction[1] - w[1] * b.direction[0]) / cross
+    node = a.centroid + s * a.direction
+    return Corner(a.index, b.index, defl, node)

@@ -1,0 +1,67 @@
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+from numpy.testing import assert_allclose
+
+from mast import Pose2D
+from mast.core.geometry import PanelSet
+from mast.pipeline.alignment import icp_point_to_line, similarity_transform
+from mast.sim import paper_scene
+
+
+@given(
+    st.floats(0.5, 2.0),
+    st.floats(-math.pi, math.pi),
+    st.floats(-1e6, 1e6),
+    st.floats(-1e6, 1e7),
+)
+def test_similarity_recovers_a_known_transform(
+    scale: float, rot: float, tx: float, ty: float
+) -> None:
+    rng = np.random.default_rng(0)
+    p = rng.uniform(-10, 10, (5, 2))
+    c, s = math.cos(rot), math.sin(rot)
+    q = scale * p @ np.array([[c, -s], [s, c]]).T + [tx, ty]
+    sim = similarity_transform(p, q)
+    assert sim.scale == pytest.approx(scale, rel=1e-9)
+    assert math.remainder(sim.rotation_rad - rot, 2 * math.pi) == pytest.approx(0.0, abs=1e-9)
+    assert_allclose(sim.translation, [tx, ty], atol=1e-8 * (1 + abs(tx) + abs(ty)))
+
+
+def test_similarity_pose_matches_design_convention() -> None:
+    pose = Pose2D.from_degrees(500.0, 700.0, 123.0)
+    p = np.array([[1.0, 0.0], [0.0, 2.0], [3.0, -1.0]])
+    sim = similarity_transform(p, pose.scanner_to_mine(p))
+    got = sim.pose()
+    assert got.easting == pytest.approx(500.0)
+    assert got.azimuth_deg == pytest.approx(123.0)
+
+
+def test_similarity_needs_two_points() -> None:
+    with pytest.raises(ValueError, match="at least two points"):
+        similarity_transform(np.zeros((1, 2)), np.zeros((1, 2)))
+
+
+@pytest.mark.parametrize(("de", "dn", "da_deg"), [(0.05, -0.03, 0.5), (-0.08, 0.02, -1.0)])
+def test_icp_converges_to_the_true_pose(de: float, dn: float, da_deg: float) -> None:
+    scene = paper_scene("divergent")
+    shot, sim = scene.shots[1], scene.simulate_all()[1]
+    beacon_beams = sim.beacon_mask()
+    ang, r = sim.scan.angles_rad[beacon_beams], sim.scan.ranges_m[beacon_beams]
+    pts = np.stack([r * np.cos(ang), r * np.sin(ang)], axis=1)
+    start = Pose2D(
+        shot.pose.easting + de, shot.pose.northing + dn, shot.pose.azimuth + math.radians(da_deg)
+    )
+    res = icp_point_to_line(
+        pts, start, PanelSet.from_survey(scene.survey), gates_m=(0.3, 0.05, 0.01)
+    )
+    assert res.converged
+    assert res.pose.easting == pytest.approx(shot.pose.easting, abs=1e-9)
+    assert res.pose.northing == pytest.approx(shot.pose.northing, abs=1e-9)
+    assert math.remainder(res.pose.azimuth - shot.pose.azimuth, 2 * math.pi) == pytest.approx(
+        0.0, abs=1e-11
+    )
+    assert res.inliers == int(beacon_beams.sum())

@@ -1,0 +1,78 @@
+import numpy as np
+
+from mast import Pose2D
+from mast.pipeline.identification import identify_panels
+from mast.pipeline.segmentation import segment_scan
+from mast.sim import (
+    Surface,
+    WorldBuilder,
+    paper_design,
+    paper_scene,
+    polyline_design,
+    simulate_scan,
+)
+
+
+def test_fully_seen_pairs_are_option_1() -> None:
+    scene = paper_scene("parallel")
+    sim = scene.simulate_all()[1]  # P4, both beacons in full view
+    ident = identify_panels(segment_scan(sim.scan), scene.survey)
+    best = {(n.beacon, n.edge): n.option for n in ident.nodes if n.option == 1}
+    assert ("B1", 2) in best
+    assert ("B2", 2) in best
+    # the scan meets B1 (east wall, e1 south) e1 -> e4 and the mirrored B2 e4 -> e1
+    forward = {n.beacon: n.forward for n in ident.nodes if n.option == 1}
+    assert forward == {"B1": True, "B2": False}
+
+
+def _scene_with_occluder(fraction: float):  # type: ignore[no-untyped-def]
+    scene = paper_scene("parallel", resolutions_deg=(0.25,))
+    shot = scene.shots[1]
+    wb = WorldBuilder()
+    wb._a.append(scene.world.seg_a)
+    wb._b.append(scene.world.seg_b)
+    wb._seg_s.extend(scene.world.seg_surface.tolist())
+    wb._surfaces.extend(scene.world.surfaces)
+    e1, e2 = scene.survey["B2"].edges[:2]
+    p = shot.pose.position
+    target = e1 + fraction * (e2 - e1)
+    wb.polyline(
+        [p + 0.5 * (e1 - p) - 0.01 * (target - e1), p + 0.5 * (target - p)], Surface("clutter")
+    )
+    return scene, shot, simulate_scan(wb.build(), shot.pose, shot.scanner)
+
+
+def test_partly_hidden_panel_gives_a_one_panel_option() -> None:
+    scene, _shot, sim = _scene_with_occluder(0.6)
+    ident = identify_panels(segment_scan(sim.scan), scene.survey)
+    b2 = [n for n in ident.nodes if n.beacon == "B2" and n.edge == 2]
+    assert b2
+    assert all(n.option in (3, 4, 5, 6) for n in b2)
+    # the panel that passed its length test is the unoccluded P2
+    n = b2[0]
+    assert dict(zip(n.panels, n.identified, strict=True))[2] is True
+    assert dict(zip(n.panels, n.identified, strict=True))[1] is False
+
+
+def test_a_look_alike_with_other_angles_is_not_identified() -> None:
+    survey_design = paper_design(1.0, 0.2)
+    fake = polyline_design((0.41, 0.61, 0.2), (-1.2, -0.4))  # same lengths, other deflections
+    wb = WorldBuilder()
+    wb.polyline([[-30.0, 3.0], [30.0, 3.0]], Surface("wall"))
+    wb.panels(fake.mounted([0.0, 3.0], [1.0, 0.0], tunnel_side=-1), "fake", kind="lookalike")
+    from mast import Survey
+
+    survey = Survey([survey_design.beacon("B", [100.0, 100.0], [1.0, 0.0])])
+    from mast.sim import ScannerModel
+
+    sim = simulate_scan(wb.build(), Pose2D(0.0, 0.0, 0.0), ScannerModel("s", 270.0, 0.25))
+    ident = identify_panels(segment_scan(sim.scan), survey)
+    assert not [n for n in ident.nodes if n.option in (1, 2)]
+
+
+def test_single_segments_report_fitting_panels() -> None:
+    scene = paper_scene("parallel")
+    sim = scene.simulate_all()[1]
+    ident = identify_panels(segment_scan(sim.scan), scene.survey)
+    assert {(s.beacon, s.panel) for s in ident.singles} >= {("B1", 2), ("B2", 2)}
+    assert np.all([s.panel in (1, 2, 3) for s in ident.singles])

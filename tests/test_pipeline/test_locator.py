@@ -1,0 +1,198 @@
+"""The locator end to end, on the simulator: exact when noise-free, never a wrong fix."""
+
+import math
+
+import numpy as np
+import pytest
+
+from mast import Beacon, Pose2D, Survey
+from mast.apps.report import fix_record, fix_text
+from mast.pipeline.locator import NO_FIX_REASONS, LocatorConfig, locate
+from mast.sim import (
+    ScannerModel,
+    WorldBuilder,
+    paper_scenario,
+    random_scene,
+    simulate_scan,
+)
+
+ARCSEC = math.radians(1 / 3600)
+
+
+def _errors(fix, pose: Pose2D) -> tuple[float, float]:  # type: ignore[no-untyped-def]
+    d = math.hypot(fix.pose.easting - pose.easting, fix.pose.northing - pose.northing)
+    a = abs(math.remainder(fix.pose.azimuth - pose.azimuth, 2 * math.pi))
+    return d, a
+
+
+def test_paper_scenario_noise_free_is_exact() -> None:
+    for scene in paper_scenario():
+        for shot, sim in zip(scene.shots, scene.simulate_all(), strict=True):
+            fix = locate(sim.scan, scene.survey)
+            assert fix.ok, (scene.name, shot.label, fix.reason, fix.detail)
+            d, a = _errors(fix, shot.pose)
+            assert d < 1e-7, (scene.name, shot.label, d)
+            assert a < 0.01 * ARCSEC
+            assert set(fix.beacons) == {"B1", "B2"}
+
+
+# Seeded random drifts: random widths, bends, beacon shapes (not only 2:3:1), both
+# resolutions, mine coordinates from 0 to UTM-sized; noise-free.
+RANDOM_SEEDS = range(12)
+
+
+@pytest.mark.parametrize("seed", RANDOM_SEEDS)
+def test_random_scenes_every_owed_fix_is_exact(seed: int) -> None:
+    owed = found = 0
+    for index in range(4):
+        scene = random_scene(seed, index)
+        for shot, sim in zip(scene.shots, scene.simulate_all(), strict=True):
+            seen = sim.panels_seen(min_points=3)
+            is_owed = sum(len(p) >= 2 for p in seen.values()) >= 2
+            fix = locate(sim.scan, scene.survey)
+            owed += is_owed
+            if is_owed:
+                assert fix.ok, (scene.name, shot.label, fix.reason, fix.detail, seen)
+                found += 1
+            if fix.ok:
+                d, a = _errors(fix, shot.pose)
+                # exact to numerical precision, whether owed or a bonus
+                assert d < 1e-4, (scene.name, shot.label, d)
+                assert a < ARCSEC, (scene.name, shot.label, a / ARCSEC)
+            else:
+                assert fix.reason in NO_FIX_REASONS
+    assert found == owed
+
+
+def test_partial_segmentation_still_fixes() -> None:
+    # B2's P1 mostly hidden behind a post: that beacon shows one panel and a deflection.
+    from tests.test_pipeline.test_identification import _scene_with_occluder
+
+    scene, shot, sim = _scene_with_occluder(0.7)
+    fix = locate(sim.scan, scene.survey)
+    assert fix.ok, fix.detail
+    options = {n.option for n in fix.identification.nodes if n.beacon == "B2"}
+    assert options <= {3, 4, 5, 6}
+    d, a = _errors(fix, shot.pose)
+    assert d < 1e-7
+    assert a < 0.01 * ARCSEC
+
+
+def test_no_beacon_in_view_is_no_fix() -> None:
+    scene = random_scene(3, 0)
+    wb = WorldBuilder()
+    for a, b, s in zip(scene.world.seg_a, scene.world.seg_b, scene.world.seg_surface, strict=True):
+        if scene.world.surfaces[s].kind != "beacon":
+            wb.polyline([a, b], scene.world.surfaces[s])
+    world = wb.build()
+    for shot in scene.shots:
+        fix = locate(simulate_scan(world, shot.pose, shot.scanner).scan, scene.survey)
+        assert not fix.ok
+        assert fix.reason in ("no_beacon", "one_beacon", "inconsistent")
+
+
+def test_survey_of_another_site_is_no_fix() -> None:
+    here, elsewhere = random_scene(4, 1), random_scene(9, 2)
+    for shot, sim in zip(here.shots, here.simulate_all(), strict=True):
+        fix = locate(sim.scan, elsewhere.survey)
+        assert not fix.ok, shot.label
+
+
+def test_a_moved_beacon_refuses_the_fix() -> None:
+    scene = paper_scenario()[1]
+    b1 = scene.survey["B1"]
+    moved = Survey([Beacon("B1", b1.edges + [0.0, 0.5]), scene.survey["B2"]])
+    for shot, sim in zip(scene.shots, scene.simulate_all(), strict=True):
+        fix = locate(sim.scan, moved)
+        assert not fix.ok, (shot.label, fix.pose)
+        assert fix.reason in ("inconsistent", "one_beacon")
+
+
+def test_one_beacon_is_not_enough() -> None:
+    scene = paper_scenario()[1]
+    only = Survey([scene.survey["B1"]])
+    fix = locate(scene.simulate_all()[1].scan, only)
+    assert fix.reason == "one_beacon"
+
+
+def test_fix_record_follows_the_contract() -> None:
+    scene = paper_scenario()[0]
+    sim = scene.simulate_all()[0]
+    fix = locate(sim.scan, scene.survey, config=LocatorConfig(range_sigma_m=0.005))
+    rec = fix_record(fix)
+    for key in (
+        "status",
+        "easting",
+        "northing",
+        "azimuth_deg",
+        "sigma_easting_m",
+        "sigma_northing_m",
+        "sigma_azimuth_deg",
+        "reference_variance",
+        "beacons",
+        "points_used",
+    ):
+        assert key in rec
+    assert rec["status"] == "fix"
+    assert rec["beacons"] == ["B1", "B2"]
+    assert rec["points_used"] == fix.points_used > 0
+    assert 0 <= rec["azimuth_deg"] < 360
+    text = fix_text(fix)
+    assert "Easting" in text
+    assert "Ref. var." in text
+    nofix = locate(sim.scan, Survey([scene.survey["B1"]]))
+    rec = fix_record(nofix)
+    assert rec["status"] == "no_fix"
+    assert rec["reason"] == "one_beacon"
+    assert rec["easting"] is None
+    assert "NO FIX" in fix_text(nofix)
+
+
+def test_noisy_fixes_are_consistent_with_their_sigmas() -> None:
+    # Not a coverage study (see the benchmark): no fix may sit far outside its own sigmas.
+    for scene in paper_scenario(seed=3, noise=True):
+        for shot, sim in zip(scene.shots, scene.simulate_all(), strict=True):
+            fix = locate(sim.scan, scene.survey, config=LocatorConfig(range_sigma_m=0.012))
+            if not fix.ok:
+                continue
+            assert fix.adjustment is not None
+            sig = fix.adjustment.sigma
+            err = np.array(
+                [
+                    fix.pose.easting - shot.pose.easting,
+                    fix.pose.northing - shot.pose.northing,
+                    math.remainder(fix.pose.azimuth - shot.pose.azimuth, 2 * math.pi),
+                ]
+            )
+            assert np.all(np.abs(err) < 5 * sig), (scene.name, shot.label, err / sig)
+
+
+def test_empty_and_single_beam_scans_are_no_fix() -> None:
+    from mast import Scan
+
+    scene = paper_scenario()[0]
+    for scan in (
+        Scan.from_laserscan(angle_min=0.0, angle_increment=0.01, ranges=np.full(100, np.nan)),
+        Scan([0.0], [5.0]),
+        Scan(np.zeros(0), np.zeros(0)),
+    ):
+        fix = locate(scan, scene.survey)
+        assert fix.reason == "no_beacon"
+
+
+def test_lookalike_beside_real_beacons_does_not_confuse() -> None:
+    scene = paper_scenario()[1]
+    wb = WorldBuilder()
+    for a, b, s in zip(scene.world.seg_a, scene.world.seg_b, scene.world.seg_surface, strict=True):
+        wb.polyline([a, b], scene.world.surfaces[s])
+    # a copy of B1's shape 3 m further north on the same wall, not in the survey
+    wb.panels(scene.survey["B1"].edges + [0.0, 3.0], "copy", kind="lookalike")
+    world = wb.build()
+    for shot in scene.shots:
+        sim = simulate_scan(world, shot.pose, ScannerModel("s", 270.0, shot.scanner.resolution_deg))
+        fix = locate(sim.scan, scene.survey)
+        if fix.ok:
+            d, a = _errors(fix, shot.pose)
+            assert d < 1e-6, shot.label
+        else:
+            assert fix.reason in ("ambiguous", "inconsistent", "one_beacon")
