@@ -6,6 +6,7 @@ from numpy.testing import assert_allclose
 
 from mast import Pose2D
 from mast.core.geometry import PanelSet
+from mast.core.noise import NoiseModel
 from mast.pipeline.adjustment import adjust_pose, range_model
 from mast.sim import paper_scene
 
@@ -42,7 +43,7 @@ def test_jacobian_matches_finite_differences() -> None:
 def test_noise_free_ranges_give_the_pose_exactly() -> None:
     pose, ang, r, nrm, off = _observations()
     start = Pose2D(pose.easting + 0.02, pose.northing - 0.01, pose.azimuth + 0.003)
-    adj = adjust_pose(start, ang, r, nrm, off, range_sigma_m=0.01)
+    adj = adjust_pose(start, ang, r, nrm, off, noise=NoiseModel(0.01, 0.0, 0.0))
     assert adj.pose.easting == pytest.approx(pose.easting, abs=1e-12)
     assert adj.pose.northing == pytest.approx(pose.northing, abs=1e-12)
     assert math.remainder(adj.pose.azimuth - pose.azimuth, 2 * math.pi) == pytest.approx(
@@ -58,7 +59,7 @@ def test_intervals_cover_the_truth_about_95_percent() -> None:
     n = 300
     for seed in range(n):
         pose, ang, r, nrm, off = _observations(0.012, seed)
-        adj = adjust_pose(pose, ang, r, nrm, off, range_sigma_m=0.012)
+        adj = adjust_pose(pose, ang, r, nrm, off, noise=NoiseModel(0.012, 0.0, 0.0))
         err = np.array(
             [
                 adj.pose.easting - pose.easting,
@@ -75,7 +76,9 @@ def test_intervals_cover_the_truth_about_95_percent() -> None:
 
 def test_ellipse_axes_match_the_covariance() -> None:
     pose, ang, r, nrm, off = _observations()
-    adj = adjust_pose(pose, ang, r + 1e-4 * np.sin(np.arange(r.size)), nrm, off, range_sigma_m=0.01)
+    adj = adjust_pose(
+        pose, ang, r + 1e-4 * np.sin(np.arange(r.size)), nrm, off, noise=NoiseModel(0.01, 0.0, 0.0)
+    )
     ell = adj.ellipse()
     c = adj.covariance[:2, :2]
     k2 = -2 * math.log(0.05)  # chi-square(2) 95 %

@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from mast import Beacon, Pose2D, Survey
+from mast import Beacon, Pose2D, Scan, Survey
 from mast.apps.report import fix_record, fix_text
 from mast.pipeline.locator import NO_FIX_REASONS, LocatorConfig, locate
 from mast.sim import (
@@ -196,3 +196,44 @@ def test_lookalike_beside_real_beacons_does_not_confuse() -> None:
             assert d < 1e-6, shot.label
         else:
             assert fix.reason in ("ambiguous", "inconsistent", "one_beacon")
+
+
+def _tracking_case() -> tuple[Scan, Survey, Pose2D]:
+    scene = paper_scenario()[1]
+    shot, sim = scene.shots[1], scene.simulate_all()[1]
+    return sim.scan, scene.survey, shot.pose
+
+
+def test_a_good_prior_fixes_without_identification() -> None:
+    from mast.pipeline.tracking import Prior
+
+    scan, survey, truth = _tracking_case()
+    for de, dn, da in ((0.3, -0.3, 4.0), (-0.35, 0.2, -4.5), (0.0, 0.45, 0.0)):
+        start = Pose2D(truth.easting + de, truth.northing + dn, truth.azimuth + math.radians(da))
+        prior = Prior(start, 0.5, math.radians(5.0))
+        fix = locate(scan, survey, config=LocatorConfig(prior=prior))
+        assert fix.ok, fix.detail
+        assert fix.chosen is not None and fix.chosen.hypothesis.kind == "prior"
+        assert fix.pose is not None
+        assert (
+            math.hypot(fix.pose.easting - truth.easting, fix.pose.northing - truth.northing) < 1e-6
+        )
+
+
+def test_a_wrong_prior_refuses_rather_than_follow_it() -> None:
+    from mast.pipeline.tracking import Prior
+
+    scan, survey, truth = _tracking_case()
+    for de, dn, da in ((2.0, 0.0, 0.0), (0.0, 0.0, 20.0), (-1.5, 1.5, 0.0)):
+        start = Pose2D(truth.easting + de, truth.northing + dn, truth.azimuth + math.radians(da))
+        fix = locate(scan, survey, config=LocatorConfig(prior=Prior(start, 0.5, math.radians(5.0))))
+        assert not fix.ok, (de, dn, da, fix.pose)
+        assert fix.reason in NO_FIX_REASONS
+
+
+def test_survey_sigma_is_in_every_record() -> None:
+    scan, survey, _ = _tracking_case()
+    rec = fix_record(locate(scan, survey, config=LocatorConfig(survey_sigma_m=0.0)))
+    assert rec["survey_sigma_m"] == 0.0
+    assert rec["range_sigma_m"] == 0.01
+    assert rec["angle_sigma_rad"] == 0.0

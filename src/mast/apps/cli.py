@@ -20,6 +20,7 @@ import typer
 from mast import __version__
 from mast.core.scan import Scan
 from mast.errors import InputError, MastError, NoFixError
+from mast.pipeline.tracking import Prior
 
 EXIT_OK = 0
 EXIT_BAD_INPUT = 2
@@ -130,8 +131,9 @@ def _load_scans(
     return scans, True
 
 
-def _parse_near(text: str, radius: float, az_tol_deg: float) -> dict[str, object]:
+def _parse_near(text: str, radius: float, az_tol_deg: float) -> Prior:
     from mast.core.pose import Pose2D, parse_azimuth
+    from mast.pipeline.tracking import Prior
 
     parts = [p.strip() for p in text.split(",")]
     if len(parts) not in (2, 3):
@@ -144,12 +146,14 @@ def _parse_near(text: str, radius: float, az_tol_deg: float) -> dict[str, object
         raise InputError(f"--near {text!r}: easting and northing must be finite")
     if not (math.isfinite(radius) and radius > 0):
         raise InputError("--radius must be a positive number")
+    if not (math.isfinite(az_tol_deg) and 0 < az_tol_deg <= 180):
+        raise InputError("--azimuth-tolerance must be a number of degrees in (0, 180]")
     az = parse_azimuth(parts[2]) if len(parts) == 3 else 0.0
-    return {
-        "near": Pose2D.from_degrees(e, n, az),
-        "near_radius_m": radius,
-        "near_azimuth_tol_rad": math.radians(az_tol_deg) if len(parts) == 3 else None,
-    }
+    return Prior(
+        Pose2D.from_degrees(e, n, az),
+        radius,
+        math.radians(az_tol_deg) if len(parts) == 3 else None,
+    )
 
 
 @app.command()
@@ -201,6 +205,13 @@ def locate(
         float,
         typer.Option("--azimuth-tolerance", help="With an azimuth in --near: degrees allowed."),
     ] = 30.0,
+    survey_sigma: Annotated[
+        float | None,
+        typer.Option(
+            "--survey-sigma",
+            help="Standard deviation of a surveyed edge coordinate, metres (default 0.003).",
+        ),
+    ] = None,
 ) -> None:
     """Fix position and azimuth from one scan (or every scan of a bag).
 
@@ -211,8 +222,7 @@ def locate(
 
     from mast.apps.report import fix_record, fix_text
     from mast.io import read_survey
-    from mast.pipeline.locator import LocatorConfig
-    from mast.pipeline.locator import locate as run_locate
+    from mast.pipeline.locator import LocatorConfig, locate_sequence
     from mast.sim import scanner_model
 
     cfg = LocatorConfig()
@@ -221,7 +231,12 @@ def locate(
         cfg = replace(
             cfg, range_sigma_m=max(model.range_sigma_m, 1e-4), angle_sigma_rad=model.angle_sigma_rad
         )
-    for name, value in (("--range-sigma", range_sigma), ("--angle-sigma", angle_sigma)):
+    checks = (
+        ("--range-sigma", range_sigma),
+        ("--angle-sigma", angle_sigma),
+        ("--survey-sigma", survey_sigma),
+    )
+    for name, value in checks:
         if value is not None and not (math.isfinite(value) and value >= 0):
             raise InputError(f"{name} must be a non-negative number, got {value}")
     if range_sigma is not None:
@@ -230,13 +245,16 @@ def locate(
         cfg = replace(cfg, range_sigma_m=range_sigma)
     if angle_sigma is not None:
         cfg = replace(cfg, angle_sigma_rad=angle_sigma)
+    if survey_sigma is not None:
+        cfg = replace(cfg, survey_sigma_m=survey_sigma)
     if near is not None:
-        cfg = replace(cfg, **_parse_near(near, radius, azimuth_tolerance))  # type: ignore[arg-type]
+        cfg = replace(cfg, prior=_parse_near(near, radius, azimuth_tolerance))
     survey = read_survey(beacons)
     scans, many = _load_scans(scan_path, topic=topic, range_min=range_min, range_max=range_max)
     fixed = 0
-    for i, scan in enumerate(scans):
-        fix = run_locate(scan, survey, config=cfg)
+    for i, (scan, fix) in enumerate(
+        zip(scans, locate_sequence(scans, survey, config=cfg), strict=True)
+    ):
         fixed += fix.ok
         label = f"{scan_path}#{i}" if many else str(scan_path)
         if fmt is OutputFormat.json:

@@ -90,6 +90,17 @@ def fix_record(fix: Fix, *, source: str | None = None, index: int | None = None)
     if sim is not None:
         rec["similarity_scale"] = _r(sim.scale, 9)
         rec["icp_iterations"] = fix.icp_iterations
+    noise = fix.config.noise
+    rec["range_sigma_m"] = noise.range_sigma_m
+    rec["angle_sigma_rad"] = noise.angle_sigma_rad
+    rec["survey_sigma_m"] = noise.survey_sigma_m
+    if fix.config.prior is not None:
+        rec["prior"] = {
+            "easting": fix.config.prior.pose.easting,
+            "northing": fix.config.prior.pose.northing,
+            "azimuth_deg": fix.config.prior.pose.azimuth_deg,
+            "radius_m": fix.config.prior.radius_m,
+        }
     rec["elapsed_ms"] = round(fix.elapsed_s * 1e3, 3)
     return rec
 

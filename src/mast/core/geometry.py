@@ -121,6 +121,12 @@ class PanelSet:
     def __len__(self) -> int:
         return int(self.length.size)
 
+    def near(self, position: NDArray[np.float64], radius_m: float) -> NDArray[np.intp]:
+        """Indices of the panels any part of which lies within ``radius_m`` of ``position``."""
+        mid = 0.5 * (self.a + self.b)
+        d = np.hypot(mid[:, 0] - position[0], mid[:, 1] - position[1])
+        return np.flatnonzero(d <= radius_m + 0.5 * self.length)
+
     def associate(
         self,
         points_mine: NDArray[np.float64],

@@ -11,6 +11,22 @@ with :mod:`~mast.pipeline.integrity` (data snooping, beacon tests),
 :mod:`~mast.pipeline.locator`, which chains them: ``locate(scan, survey) -> Fix``.
 """
 
-from mast.pipeline.locator import NO_FIX_REASONS, Fix, LocatorConfig, locate
+from mast.pipeline.locator import (
+    NO_FIX_REASONS,
+    Fix,
+    LocatorConfig,
+    SequenceConfig,
+    locate,
+    locate_sequence,
+)
+from mast.pipeline.tracking import Prior
 
-__all__ = ["NO_FIX_REASONS", "Fix", "LocatorConfig", "locate"]
+__all__ = [
+    "NO_FIX_REASONS",
+    "Fix",
+    "LocatorConfig",
+    "Prior",
+    "SequenceConfig",
+    "locate",
+    "locate_sequence",
+]

@@ -22,9 +22,20 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import stats
 
+from mast.core.geometry import PanelSet, first_hits
+from mast.core.noise import NoiseModel
 from mast.core.pose import Pose2D
+from mast.core.scan import Scan
 
-__all__ = ["Adjustment", "ErrorEllipse", "adjust_pose", "range_model"]
+__all__ = [
+    "Adjustment",
+    "ErrorEllipse",
+    "Observations",
+    "adjust_on_panels",
+    "adjust_pose",
+    "range_model",
+    "survey_covariance",
+]
 
 #: Beams closer than this to grazing a panel (|n . u| below) carry no usable range.
 MIN_INCIDENCE_COS = math.sin(math.radians(2.0))
@@ -168,8 +179,7 @@ def adjust_pose(
     normals: NDArray[np.float64],
     offsets: NDArray[np.float64],
     *,
-    range_sigma_m: float,
-    angle_sigma_rad: float = 0.0,
+    noise: NoiseModel,
     max_iterations: int = 20,
 ) -> Adjustment:
     """Weighted least squares for (E, N, A) from ranges to known lines.
@@ -182,7 +192,7 @@ def adjust_pose(
         Beam angles (scanner frame) and measured ranges.
     normals : ndarray, shape (n, 2); offsets : ndarray, shape (n,)
         The surveyed line each return lies on, ``n . x = c``, mine frame.
-    range_sigma_m, angle_sigma_rad : float
+    noise : NoiseModel
         A-priori precision of a range and of a beam angle.
 
     Raises
@@ -195,7 +205,7 @@ def adjust_pose(
     it = 0
     for it in range(1, max_iterations + 1):  # noqa: B007 - the count is reported
         rho, jac, d_phi = range_model(p, angles_rad, normals, offsets)
-        var = range_sigma_m**2 + (d_phi * angle_sigma_rad) ** 2
+        var = noise.variance(d_phi)
         w = 1.0 / var
         v = ranges_m - rho
         N = jac.T @ (w[:, None] * jac)
@@ -210,7 +220,7 @@ def adjust_pose(
         if math.hypot(delta[0], delta[1]) < tol_m and abs(delta[2]) < 1e-13:
             break
     rho, jac, d_phi = range_model(p, angles_rad, normals, offsets)
-    var = range_sigma_m**2 + (d_phi * angle_sigma_rad) ** 2
+    var = noise.variance(d_phi)
     w = 1.0 / var
     v = ranges_m - rho
     N = jac.T @ (w[:, None] * jac)
@@ -224,3 +234,209 @@ def adjust_pose(
     # the covariance is scaled by the a-posteriori reference variance.
     cov: NDArray[np.float64] = Q * s0 if s0 > hi else Q.copy()
     return Adjustment(p, Q, cov, s0, dof, lo, hi, v, np.sqrt(var), it, jac)
+
+
+@dataclass(frozen=True, eq=False)
+class Observations:
+    """Ranges to surveyed panel lines, and which beam, beacon and panel each is."""
+
+    beam: NDArray[np.intp]
+    angles_rad: NDArray[np.float64]
+    ranges_m: NDArray[np.float64]
+    normals: NDArray[np.float64]
+    offsets: NDArray[np.float64]
+    panel: NDArray[np.intp]
+    beacon: NDArray[np.intp]
+
+    def subset(self, keep: NDArray[np.bool_]) -> Observations:
+        return Observations(
+            self.beam[keep],
+            self.angles_rad[keep],
+            self.ranges_m[keep],
+            self.normals[keep],
+            self.offsets[keep],
+            self.panel[keep],
+            self.beacon[keep],
+        )
+
+    def __len__(self) -> int:
+        return int(self.ranges_m.size)
+
+    def survey_levers(self, pose: Pose2D) -> NDArray[np.float64]:
+        """``1 / |n . u|``: how far each range moves per metre its panel is surveyed off."""
+        u = pose.beam_directions(self.angles_rad)
+        return np.asarray(1.0 / np.abs(np.einsum("ij,ij->i", self.normals, u)))
+
+    def adjust(self, pose: Pose2D, noise: NoiseModel) -> Adjustment:
+        return adjust_pose(
+            pose,
+            self.angles_rad,
+            self.ranges_m,
+            self.normals,
+            self.offsets,
+            noise=noise,
+        )
+
+
+def _ray_association(
+    scan: Scan,
+    pose: Pose2D,
+    panels: PanelSet,
+    keep: NDArray[np.intp],
+    noise: NoiseModel,
+    gate_sigmas: float,
+    pose_cofactor: NDArray[np.float64] | None,
+) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+    """Beams whose ray, cast from ``pose``, first meets a kept panel, and that panel.
+
+    Casting the ray decides which panel a beam near a corner hits (the nearer
+    one), where the nearest line to the return would be a coin toss within
+    the noise. A return is kept when it lies within ``gate_sigmas`` standard
+    deviations of the predicted range, counting the pose's own uncertainty
+    (``g^T Q g``, once an adjustment gives ``Q``): a beam that meets a panel
+    obliquely, far away, is very sensitive to the azimuth and would otherwise
+    be gated out exactly when it carries the most information. Beams within
+    2 degrees of grazing are left out.
+    """
+    beams = np.flatnonzero(scan.valid)
+    dirs = pose.beam_directions(scan.angles_rad[beams])
+    t, j = first_hits(pose.position, dirs, panels.a[keep], panels.b[keep])
+    hit = j >= 0
+    pk = keep[np.maximum(j, 0)]
+    nrm = panels.normal[pk]
+    nu = np.abs(np.einsum("ij,ij->i", nrm, dirs))
+    gate = np.full(beams.size, gate_sigmas * noise.gate_sigma_m)
+    if pose_cofactor is not None and np.any(hit):
+        offsets = np.einsum("ij,ij->i", nrm, panels.a[pk])
+        _rho, jac, d_phi = range_model(pose, scan.angles_rad[beams], nrm, offsets)
+        pred = np.einsum("ij,jk,ik->i", jac, pose_cofactor, jac)
+        var = noise.gate_variance(d_phi) + np.where(np.isfinite(pred), pred, 0.0)
+        gate = gate_sigmas * np.sqrt(var)
+    ok = hit & (np.abs(scan.ranges_m[beams] - t) <= gate) & (nu > MIN_INCIDENCE_COS)
+    return beams[ok], pk[ok]
+
+
+def _robust_inliers(
+    adj: Adjustment,
+    angles_rad: NDArray[np.float64],
+    ranges_m: NDArray[np.float64],
+    normals: NDArray[np.float64],
+    offsets: NDArray[np.float64],
+    noise: NoiseModel,
+    gate_sigmas: float,
+) -> NDArray[np.bool_]:
+    """Observations within ``gate_sigmas`` robust standard deviations of the prediction.
+
+    The standard deviation of ``r - rho`` is that of the range and of the
+    predicted range (``g^T Q g``, the pose's uncertainty seen along the beam),
+    both scaled by 1.4826 times the median absolute standardised residual of
+    the previous adjustment, capped at 1 (the a-priori precision): the test
+    tightens on clean data, and never below a numerical floor.
+    """
+    std = adj.residuals_m / adj.sigmas_m
+    scale = 1.0
+    if std.size:
+        mad = stats.median_abs_deviation(std, scale="normal", center=lambda x, axis: 0.0)
+        scale = min(1.0, float(mad))
+    rho, jac, d_phi = range_model(adj.pose, angles_rad, normals, offsets)
+    pred = np.einsum("ij,jk,ik->i", jac, adj.cofactor, jac)
+    sig = np.sqrt(noise.variance(d_phi) + pred)
+    floor = 1e-7 * (1.0 + np.abs(rho))
+    return np.asarray(np.abs(ranges_m - rho) <= gate_sigmas * np.maximum(scale * sig, floor))
+
+
+def _scaled(q: NDArray[np.float64]) -> NDArray[np.float64]:
+    d = np.sqrt(np.abs(np.diag(q)))
+    d[d == 0] = 1.0
+    return np.asarray(q / np.outer(d, d))
+
+
+#: Most association and adjustment rounds before the returns used settle.
+MAX_ASSOCIATION_ROUNDS = 8
+#: Condition number of the correlation matrix beyond which (E, N, A) are not determined.
+MAX_CONDITION = 1e10
+
+
+def adjust_on_panels(
+    scan: Scan,
+    pose: Pose2D,
+    panels: PanelSet,
+    keep: NDArray[np.intp],
+    *,
+    noise: NoiseModel,
+    gate_sigmas: float,
+) -> tuple[Observations, Adjustment] | str:
+    """Adjust the pose on the returns of the ``keep`` panels, re-associating as it moves.
+
+    Each round casts every beam from the current pose (:func:`_ray_association`),
+    drops returns far outside the robust spread of the last round's residuals,
+    and adjusts; it stops when the returns used no longer change.
+
+    Returns
+    -------
+    (Observations, Adjustment), or a sentence saying why the panels seen do
+    not determine the pose.
+    """
+    adj: Adjustment | None = None
+    used = np.zeros(0, dtype=np.intp)
+    used_panels = np.zeros(0, dtype=np.intp)
+    for _ in range(MAX_ASSOCIATION_ROUNDS):
+        beams, pk = _ray_association(
+            scan, pose, panels, keep, noise, gate_sigmas, None if adj is None else adj.cofactor
+        )
+        nrm = panels.normal[pk]
+        offsets = np.einsum("ij,ij->i", nrm, panels.a[pk])
+        if adj is not None:
+            good = _robust_inliers(
+                adj, scan.angles_rad[beams], scan.ranges_m[beams], nrm, offsets, noise, gate_sigmas
+            )
+            beams, pk, nrm, offsets = beams[good], pk[good], nrm[good], offsets[good]
+        if np.array_equal(beams, used) and adj is not None:
+            break
+        if beams.size < 4:
+            return f"only {beams.size} returns on the panels"
+        try:
+            adj = adjust_pose(
+                pose, scan.angles_rad[beams], scan.ranges_m[beams], nrm, offsets, noise=noise
+            )
+        except np.linalg.LinAlgError:
+            adj = None
+        if (
+            adj is None
+            or not np.all(np.isfinite(adj.cofactor))
+            or np.linalg.cond(_scaled(adj.cofactor)) > MAX_CONDITION
+        ):
+            return "the panels seen do not constrain all of E, N and azimuth"
+        used, used_panels = beams, pk
+        pose = adj.pose
+    assert adj is not None
+    nrm = panels.normal[used_panels]
+    obs = Observations(
+        used,
+        scan.angles_rad[used],
+        scan.ranges_m[used],
+        nrm,
+        np.einsum("ij,ij->i", nrm, panels.a[used_panels]),
+        used_panels,
+        panels.beacon[used_panels],
+    )
+    return obs, adj
+
+
+def survey_covariance(
+    adj: Adjustment, obs: Observations, survey_sigma_m: float
+) -> NDArray[np.float64]:
+    """Pose covariance from the surveyed panels' own position errors.
+
+    A panel surveyed ``sigma_s`` off across its face moves every range to it by
+    ``sigma_s / |n . u|`` together; through the estimator ``K = Q G^T W`` that
+    adds ``K S K^T`` to the noise covariance (S: those shared range errors).
+    """
+    lever = obs.survey_levers(adj.pose)
+    k = adj.cofactor @ (adj.jacobian / (adj.sigmas_m**2)[:, None]).T  # (3, n)
+    out = np.zeros((3, 3))
+    for p in np.unique(obs.panel):
+        sel = obs.panel == p
+        col = k[:, sel] @ lever[sel]
+        out += survey_sigma_m**2 * np.outer(col, col)
+    return out

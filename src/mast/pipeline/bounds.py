@@ -20,6 +20,7 @@ from numpy.typing import NDArray
 
 from mast.core.beacon import Survey
 from mast.core.geometry import PanelSet, first_hits
+from mast.core.noise import NoiseModel
 from mast.core.pose import Pose2D
 from mast.pipeline.adjustment import MIN_INCIDENCE_COS, range_model
 
@@ -32,8 +33,7 @@ def cramer_rao_bound(
     normals: NDArray[np.float64],
     offsets: NDArray[np.float64],
     *,
-    range_sigma_m: float,
-    angle_sigma_rad: float = 0.0,
+    noise: NoiseModel,
 ) -> NDArray[np.float64]:
     """Covariance bound ``(sum g g^T / sigma^2)^-1`` for (E [m], N [m], A [rad]).
 
@@ -45,7 +45,7 @@ def cramer_rao_bound(
         Beam angles of the returns on panels.
     normals, offsets : ndarray, shapes (n, 2) and (n,)
         The panel line each beam hits, ``n . x = c``, mine frame.
-    range_sigma_m, angle_sigma_rad : float
+    noise : NoiseModel
         Noise of a range and of a beam angle (the angle term enters through
         ``d rho / d phi``, as in the adjustment).
 
@@ -55,7 +55,7 @@ def cramer_rao_bound(
         ``inf`` on the diagonal when the beams do not determine the pose.
     """
     _, jac, d_phi = range_model(pose, angles_rad, normals, offsets)
-    var = range_sigma_m**2 + (d_phi * angle_sigma_rad) ** 2
+    var = noise.variance(d_phi)
     info = jac.T @ (jac / var[:, None])
     try:
         out: NDArray[np.float64] = np.asarray(np.linalg.inv(info), dtype=np.float64)
@@ -72,8 +72,7 @@ def truth_bound(
     valid: NDArray[np.bool_],
     survey: Survey,
     *,
-    range_sigma_m: float,
-    angle_sigma_rad: float = 0.0,
+    noise: NoiseModel,
     beacon_beams: NDArray[np.bool_] | None = None,
 ) -> NDArray[np.float64]:
     """The bound from every valid beam that, at ``pose``, first hits a surveyed panel.
@@ -98,6 +97,5 @@ def truth_bound(
         angles_rad[use][keep],
         nrm[keep],
         off[keep],
-        range_sigma_m=range_sigma_m,
-        angle_sigma_rad=angle_sigma_rad,
+        noise=noise,
     )

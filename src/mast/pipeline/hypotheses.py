@@ -1,10 +1,18 @@
-"""Stage 3: template matching — which surveyed edges the identified nodes are.
+"""Stage 3: template matching — pose hypotheses from the identified nodes.
 
-Every pair of identified nodes (on different beacons, or the two nodes of one
-beacon) is a hypothesis: its scanned distance must equal the surveyed one,
-and the rotation it implies must agree with the directions of the panels
-each node was identified with. Geometric consistency between beacons decides,
-never the order in which they appear in the scan.
+Identification may be generous; acceptance stays strict (verification and the
+adjustment decide). Two kinds of hypothesis come out of here:
+
+* a **node pair**: two identified nodes whose scanned distance equals the
+  surveyed one within the nodes' own covariance (the intersection of two
+  total-least-squares lines, each with its offset and direction uncertainty),
+  and whose implied rotation agrees with the panels each node was identified
+  with. Candidate surveyed edge pairs come from the survey's index, a lookup
+  by design and distance, never a loop over every pair of beacons;
+* a **single node**: one identified node and the panels it was identified
+  with fix a whole pose on their own (a point and a direction). Weaker, so it
+  is offered after the pairs; verification against every beam must then find
+  a second beacon where the pose says it is.
 """
 
 from __future__ import annotations
@@ -13,57 +21,69 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import NDArray
 
-from mast.core.beacon import Survey
+from mast.core.index import SurveyIndex
 from mast.pipeline.alignment import Similarity, similarity_transform
 from mast.pipeline.identification import NodeMatch, PanelIdentification
-from mast.pipeline.segmentation import Segmentation
+from mast.pipeline.segmentation import Segment, Segmentation
 
-__all__ = ["Hypothesis", "MatchingConfig", "node_sigma", "pose_hypotheses"]
+__all__ = [
+    "Hypothesis",
+    "HypothesisConfig",
+    "node_covariance",
+    "node_sigma",
+    "pose_hypotheses",
+]
 
 
 @dataclass(frozen=True, slots=True)
-class MatchingConfig:
+class HypothesisConfig:
     """Tolerances of the consistency tests between nodes.
 
     Attributes
     ----------
-    survey_sigma_m : float
-        Standard deviation of a surveyed edge coordinate.
     sigmas : float
-        Width of every test in standard deviations.
+        Width of every test in standard deviations: generous, since every
+        hypothesis is verified against all the beams afterwards.
     min_rotation_tol_rad : float
         Floor on the rotation tolerance.
     min_node_separation_m : float
         Two nodes closer than this cannot fix a rotation.
-    max_hypotheses : int
-        Most hypotheses passed on to verification (best-consistent first).
+    max_pair_hypotheses : int
+        Most node-pair hypotheses passed on to verification (best first).
+    max_single_hypotheses : int
+        Most single-node hypotheses passed on (lowest Table 1 option first).
     """
 
-    survey_sigma_m: float = 0.003
-    sigmas: float = 4.0
+    sigmas: float = 5.0
     min_rotation_tol_rad: float = math.radians(0.25)
     min_node_separation_m: float = 0.2
-    max_hypotheses: int = 200
+    max_pair_hypotheses: int = 200
+    max_single_hypotheses: int = 60
 
 
 @dataclass(frozen=True, eq=False)
 class Hypothesis:
-    """A pose implied by two node correspondences.
+    """A pose implied by one or two node correspondences.
 
     Attributes
     ----------
     nodes : tuple of NodeMatch
-        The two identified nodes.
+        The identified node(s), each with the beacon edge it is taken for.
     similarity : Similarity
-        The four-parameter transformation from their scanner to mine points.
+        Scanner to mine transformation they imply.
     misfit : float
         Largest normalised disagreement of the consistency tests (<= 1 passes).
+    kind : str
+        ``"pair"`` (two nodes), ``"single"`` (one node and its panels) or
+        ``"prior"`` (a prior pose searched by the tracker).
     """
 
-    nodes: tuple[NodeMatch, NodeMatch]
+    nodes: tuple[NodeMatch, ...]
     similarity: Similarity
     misfit: float
+    kind: str = "pair"
 
     @property
     def beacons(self) -> tuple[str, ...]:
@@ -74,11 +94,51 @@ def _wrap(a: float) -> float:
     return math.remainder(a, 2 * math.pi)
 
 
+def _line_variances(seg: Segment, noise: float, node: NDArray[np.float64]) -> float:
+    """Variance of a fitted line's offset at the node: offset and direction errors.
+
+    For a TLS line through ``n`` returns with noise ``s`` across it, the offset
+    at the centroid has variance ``s^2 / n`` and the direction
+    ``sigma_direction^2``; at a distance ``t`` from the centroid along the
+    line the offset varies by ``s^2/n + t^2 sigma_direction^2``.
+    """
+    t = float(np.dot(node - seg.centroid, seg.direction))
+    return noise**2 / max(len(seg), 1) + (t * seg.sigma_direction) ** 2
+
+
+def node_covariance(node: NodeMatch, segmentation: Segmentation) -> NDArray[np.float64]:
+    """2x2 covariance of an identified node, scanner frame.
+
+    The node solves ``n_k . x = o_k`` for the two lines ``k``; a perturbation
+    ``d o_k`` of each line's offset at the node moves it by ``N^-1 d o``
+    (``N`` the rows ``n_k``), so ``C = N^-1 diag(var_k) N^-T``.
+    """
+    a, b = (segmentation.segments[i] for i in node.segments)
+    noise = segmentation.noise_m
+    nmat = np.array([a.normal, b.normal])
+    det = float(np.linalg.det(nmat))
+    if abs(det) < 1e-3:
+        nmat = nmat + np.array([[0.0, 0.0], [1e-3, 0.0]])
+    inv = np.linalg.inv(nmat)
+    var = np.diag(
+        [
+            _line_variances(a, noise, node.node_scanner),
+            _line_variances(b, noise, node.node_scanner),
+        ]
+    )
+    return np.asarray(inv @ var @ inv.T)
+
+
+def node_sigma(node: NodeMatch, segmentation: Segmentation) -> float:
+    """Largest standard deviation of an identified node's position (the ellipse's major axis)."""
+    return math.sqrt(float(np.linalg.eigvalsh(node_covariance(node, segmentation))[-1]))
+
+
 def _node_rotations(
-    node: NodeMatch, seg: Segmentation, survey: Survey
+    node: NodeMatch, seg: Segmentation, index: SurveyIndex
 ) -> list[tuple[float, float]]:
     """(rotation, sigma) implied by each identified panel of a node: mine dir vs scan dir."""
-    tpl = survey[node.beacon].template
+    tpl = index.survey[node.beacon].template
     out = []
     for s_idx, panel, ok in zip(node.segments, node.panels, node.identified, strict=True):
         if not ok:
@@ -90,54 +150,109 @@ def _node_rotations(
     return out
 
 
-def node_sigma(node: NodeMatch, noise: float) -> float:
-    """Standard deviation of an identified node's position: the noise over the corner's sine."""
-    d = node.tests["deflection_rad"]
-    return noise * (1.0 + 1.0 / max(abs(math.sin(d)), 1e-3))
+def _node_beacons(node: NodeMatch, index: SurveyIndex) -> tuple[str, ...]:
+    """Every surveyed beacon of the node's design (one, unless designs are repeated)."""
+    return index.beacons_like(node.beacon)
+
+
+def _single_hypothesis(
+    node: NodeMatch, beacon: str, seg: Segmentation, index: SurveyIndex
+) -> Hypothesis | None:
+    """The pose one node and its identified panels imply on their own."""
+    rots = _node_rotations(node, seg, index)
+    if not rots:
+        return None
+    w = np.array([1.0 / max(s, 1e-9) ** 2 for _, s in rots])
+    ref = rots[0][0]
+    rot = ref + float(np.sum(w * np.array([_wrap(r - ref) for r, _ in rots])) / np.sum(w))
+    c, s = math.cos(rot), math.sin(rot)
+    edge = index.survey[beacon].edges[node.edge - 1]
+    t = edge - np.array([[c, -s], [s, c]]) @ node.node_scanner
+    sim = Similarity(1.0, _wrap(rot), np.asarray(t, dtype=float), 0.0)
+    return Hypothesis(
+        (node,) if node.beacon == beacon else (_rename(node, beacon),), sim, 0.0, "single"
+    )
+
+
+def _rename(node: NodeMatch, beacon: str) -> NodeMatch:
+    """The same identified node, taken for a beacon of the same design."""
+    from dataclasses import replace
+
+    return replace(node, beacon=beacon)
 
 
 def pose_hypotheses(
     identification: PanelIdentification,
     segmentation: Segmentation,
-    survey: Survey,
-    config: MatchingConfig = MatchingConfig(),
+    index: SurveyIndex,
+    config: HypothesisConfig = HypothesisConfig(),
+    *,
+    survey_sigma_m: float = 0.0,
+    max_range_m: float = math.inf,
 ) -> list[Hypothesis]:
-    """Every consistent pair of node correspondences, most consistent first."""
+    """Pose hypotheses from the identified nodes: consistent pairs first, then single nodes.
+
+    Parameters
+    ----------
+    identification, segmentation
+        Stages 1 and 2 of this scan.
+    index : SurveyIndex
+        The survey's design and edge-pair index.
+    config : HypothesisConfig
+    survey_sigma_m : float
+        Standard deviation of a surveyed edge coordinate.
+    max_range_m : float
+        Longest range of the scanner: surveyed edge pairs farther apart than
+        twice this cannot both be in one scan.
+    """
     nodes = identification.nodes
-    noise = segmentation.noise_m
-    mine = [survey[n.beacon].edges[n.edge - 1] for n in nodes]
-    rots = [_node_rotations(n, segmentation, survey) for n in nodes]
-    sig = [node_sigma(n, noise) for n in nodes]
-    out: list[Hypothesis] = []
+    cov = [node_covariance(n, segmentation) for n in nodes]
+    rots = [_node_rotations(n, segmentation, index) for n in nodes]
+    pairs: list[Hypothesis] = []
     for i in range(len(nodes)):
         for j in range(i + 1, len(nodes)):
             a, b = nodes[i], nodes[j]
             if set(a.segments) & set(b.segments) and a.beacon != b.beacon:
                 continue
-            if a.beacon == b.beacon and (a.edge == b.edge or a.forward != b.forward):
-                continue
-            dm_vec = mine[j] - mine[i]
+            same_design = index.design_of(a.beacon) == index.design_of(b.beacon)
             ds_vec = b.node_scanner - a.node_scanner
-            dm, ds = float(np.hypot(*dm_vec)), float(np.hypot(*ds_vec))
-            if dm < config.min_node_separation_m:
+            ds = float(np.hypot(*ds_vec))
+            if ds < config.min_node_separation_m:
                 continue
-            s_d = math.sqrt(sig[i] ** 2 + sig[j] ** 2 + 2 * config.survey_sigma_m**2)
+            u = ds_vec / ds
+            s_d = math.sqrt(float(u @ (cov[i] + cov[j]) @ u) + 2 * survey_sigma_m**2)
             tol_d = config.sigmas * s_d
-            mis_d = abs(ds - dm) / tol_d
-            if mis_d > 1.0:
-                continue
-            rot = _wrap(math.atan2(dm_vec[1], dm_vec[0]) - math.atan2(ds_vec[1], ds_vec[0]))
-            s_rot = s_d / dm
-            mis_r = 0.0
-            for r_k, s_k in rots[i] + rots[j]:
-                tol = max(config.min_rotation_tol_rad, config.sigmas * math.hypot(s_rot, s_k))
-                mis_r = max(mis_r, abs(_wrap(r_k - rot)) / tol)
-            if mis_r > 1.0:
-                continue
-            sim = similarity_transform(
-                np.array([a.node_scanner, b.node_scanner]), np.array([mine[i], mine[j]])
-            )
-            out.append(Hypothesis((a, b), sim, max(mis_d, mis_r)))
+            for ba, bb, edge_a, edge_b in index.edge_pairs(
+                a.beacon, a.edge, b.beacon, b.edge, ds, tol_d, same_beacon=same_design
+            ):
+                if ba == bb and (a.edge == b.edge or a.forward != b.forward):
+                    continue
+                if ba != bb and set(a.segments) & set(b.segments):
+                    continue
+                dm_vec = edge_b - edge_a
+                dm = float(np.hypot(*dm_vec))
+                mis_d = abs(ds - dm) / tol_d
+                rot = _wrap(math.atan2(dm_vec[1], dm_vec[0]) - math.atan2(ds_vec[1], ds_vec[0]))
+                v_perp = np.array([-u[1], u[0]])
+                s_rot = math.sqrt(float(v_perp @ (cov[i] + cov[j]) @ v_perp)) / dm
+                mis_r = 0.0
+                for r_k, s_k in rots[i] + rots[j]:
+                    tol = max(config.min_rotation_tol_rad, config.sigmas * math.hypot(s_rot, s_k))
+                    mis_r = max(mis_r, abs(_wrap(r_k - rot)) / tol)
+                if mis_r > 1.0:
+                    continue
+                sim = similarity_transform(
+                    np.array([a.node_scanner, b.node_scanner]), np.array([edge_a, edge_b])
+                )
+                na = a if ba == a.beacon else _rename(a, ba)
+                nb = b if bb == b.beacon else _rename(b, bb)
+                pairs.append(Hypothesis((na, nb), sim, max(mis_d, mis_r), "pair"))
     # Prefer hypotheses whose nodes were identified with more panels (lower Table 1 option).
-    out.sort(key=lambda h: (sum(n.option for n in h.nodes), h.misfit))
-    return out[: config.max_hypotheses]
+    pairs.sort(key=lambda h: (sum(n.option for n in h.nodes), h.misfit))
+    singles: list[Hypothesis] = []
+    for n in sorted(nodes, key=lambda n: n.option):
+        for beacon in _node_beacons(n, index):
+            h = _single_hypothesis(n, beacon, segmentation, index)
+            if h is not None:
+                singles.append(h)
+    return pairs[: config.max_pair_hypotheses] + singles[: config.max_single_hypotheses]

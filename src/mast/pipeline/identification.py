@@ -25,12 +25,13 @@ diagnosis; a lone segment is too ambiguous to start a hypothesis).
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable
 from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
 
-from mast.core.beacon import Beacon, Survey
+from mast.core.beacon import Beacon
 from mast.pipeline.segmentation import Corner, Segment, Segmentation
 
 __all__ = [
@@ -58,15 +59,12 @@ class IdentificationConfig:
 
     Attributes
     ----------
-    survey_sigma_m : float
-        Standard deviation of a surveyed edge coordinate.
     sigmas : float
         Width of every test in standard deviations.
     min_deflection_tol_rad : float
         Floor on the deflection tolerance.
     """
 
-    survey_sigma_m: float = 0.003
     sigmas: float = 4.0
     min_deflection_tol_rad: float = math.radians(0.5)
 
@@ -131,7 +129,13 @@ def _extent_from_node(seg: Segment, node: NDArray[np.float64], before: bool) -> 
 
 
 def _test_corner(
-    corner: Corner, a: Segment, b: Segment, beacon: Beacon, noise: float, cfg: IdentificationConfig
+    corner: Corner,
+    a: Segment,
+    b: Segment,
+    beacon: Beacon,
+    noise: float,
+    survey_sigma_m: float,
+    cfg: IdentificationConfig,
 ) -> list[NodeMatch]:
     tpl = beacon.template
     out: list[NodeMatch] = []
@@ -139,7 +143,7 @@ def _test_corner(
     near_b, far_b = _extent_from_node(b, corner.node, before=False)
     sin_d = max(abs(math.sin(corner.deflection)), 1e-3)
     # Along-line uncertainty of the node and of the ends: noise over the corner's sine.
-    sig_along = noise * (1.0 + 1.0 / sin_d) + cfg.survey_sigma_m
+    sig_along = noise * (1.0 + 1.0 / sin_d) + survey_sigma_m
     tol = cfg.sigmas * sig_along
     if near_a < -tol or near_b < -tol:
         return out  # the lines meet inside a segment: not a corner of two panels
@@ -155,7 +159,7 @@ def _test_corner(
                 pa, pb = j + 1, j
                 theta = -design_theta
             la, lb = float(tpl.panel_lengths[pa]), float(tpl.panel_lengths[pb])
-            survey_theta = cfg.survey_sigma_m * math.sqrt(2.0) * math.hypot(1 / la, 1 / lb)
+            survey_theta = survey_sigma_m * math.sqrt(2.0) * math.hypot(1 / la, 1 / lb)
             theta_tol = max(
                 cfg.min_deflection_tol_rad, cfg.sigmas * math.hypot(sig_theta, survey_theta)
             )
@@ -208,10 +212,16 @@ def _test_corner(
 
 def identify_panels(
     segmentation: Segmentation,
-    survey: Survey,
+    beacons: Iterable[Beacon],
     config: IdentificationConfig = IdentificationConfig(),
+    *,
+    survey_sigma_m: float = 0.0,
 ) -> PanelIdentification:
     """Test every corner and every segment against every beacon template.
+
+    ``beacons`` is a survey, or one beacon of each design (a survey index's
+    representatives): beacons of one design identify alike. ``survey_sigma_m``
+    is the standard deviation of a surveyed edge coordinate.
 
     Returns
     -------
@@ -221,15 +231,18 @@ def identify_panels(
     """
     segs = segmentation.segments
     nodes: list[NodeMatch] = []
+    beacons = list(beacons)
     for corner in segmentation.corners:
         a, b = segs[corner.first], segs[corner.second]
-        for beacon in survey:
-            nodes.extend(_test_corner(corner, a, b, beacon, segmentation.noise_m, config))
+        for beacon in beacons:
+            nodes.extend(
+                _test_corner(corner, a, b, beacon, segmentation.noise_m, survey_sigma_m, config)
+            )
     singles: list[SingleMatch] = []
     noise = segmentation.noise_m
     for seg in segs:
-        tol = config.sigmas * (noise + config.survey_sigma_m)
-        for beacon in survey:
+        tol = config.sigmas * (noise + survey_sigma_m)
+        for beacon in beacons:
             for k, length in enumerate(beacon.template.panel_lengths):
                 lo = length - seg.spacing_start - seg.spacing_end - tol
                 if lo <= seg.length <= length + tol:

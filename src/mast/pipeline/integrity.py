@@ -25,64 +25,19 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from numpy.typing import NDArray
 from scipy import stats
 
-from mast.core.pose import Pose2D
-from mast.pipeline.adjustment import Adjustment, adjust_pose, range_model
+from mast.core.noise import NoiseModel
+from mast.pipeline.adjustment import Adjustment, Observations, range_model
 
-__all__ = ["BeaconTest", "Observations", "beacon_tests", "snoop"]
-
-
-@dataclass(frozen=True, eq=False)
-class Observations:
-    """Ranges to surveyed panel lines, and which beam, beacon and panel each is."""
-
-    beam: NDArray[np.intp]
-    angles_rad: NDArray[np.float64]
-    ranges_m: NDArray[np.float64]
-    normals: NDArray[np.float64]
-    offsets: NDArray[np.float64]
-    panel: NDArray[np.intp]
-    beacon: NDArray[np.intp]
-
-    def subset(self, keep: NDArray[np.bool_]) -> Observations:
-        return Observations(
-            self.beam[keep],
-            self.angles_rad[keep],
-            self.ranges_m[keep],
-            self.normals[keep],
-            self.offsets[keep],
-            self.panel[keep],
-            self.beacon[keep],
-        )
-
-    def __len__(self) -> int:
-        return int(self.ranges_m.size)
-
-    def survey_levers(self, pose: Pose2D) -> NDArray[np.float64]:
-        """``1 / |n . u|``: how far each range moves per metre its panel is surveyed off."""
-        u = pose.beam_directions(self.angles_rad)
-        return np.asarray(1.0 / np.abs(np.einsum("ij,ij->i", self.normals, u)))
-
-    def adjust(self, pose: Pose2D, range_sigma_m: float, angle_sigma_rad: float) -> Adjustment:
-        return adjust_pose(
-            pose,
-            self.angles_rad,
-            self.ranges_m,
-            self.normals,
-            self.offsets,
-            range_sigma_m=range_sigma_m,
-            angle_sigma_rad=angle_sigma_rad,
-        )
+__all__ = ["BeaconTest", "Observations", "beacon_tests", "exclude_inconsistent", "snoop"]
 
 
 def snoop(
     obs: Observations,
     adj: Adjustment,
     *,
-    range_sigma_m: float,
-    angle_sigma_rad: float,
+    noise: NoiseModel,
     alpha: float = 0.001,
     max_removed: int = 50,
 ) -> tuple[Observations, Adjustment, int]:
@@ -99,7 +54,7 @@ def snoop(
         keep = np.ones(len(obs), dtype=bool)
         keep[i] = False
         obs = obs.subset(keep)
-        adj = obs.adjust(adj.pose, range_sigma_m, angle_sigma_rad)
+        adj = obs.adjust(adj.pose, noise)
         removed += 1
     return obs, adj, removed
 
@@ -126,9 +81,7 @@ def beacon_tests(
     obs: Observations,
     adj: Adjustment,
     *,
-    range_sigma_m: float,
-    angle_sigma_rad: float,
-    survey_sigma_m: float,
+    noise: NoiseModel,
     alpha: float = 0.001,
 ) -> list[BeaconTest]:
     """Leave-one-beacon-out tests for every beacon with returns (needs two or more)."""
@@ -140,7 +93,7 @@ def beacon_tests(
         mine = obs.beacon == b
         rest = obs.subset(~mine)
         try:
-            fit = rest.adjust(adj.pose, range_sigma_m, angle_sigma_rad)
+            fit = rest.adjust(adj.pose, noise)
         except np.linalg.LinAlgError:
             continue
         if not np.all(np.isfinite(fit.cofactor)) or np.linalg.cond(fit.cofactor) > 1e14:
@@ -148,12 +101,12 @@ def beacon_tests(
         o = obs.subset(mine)
         rho, jac, d_phi = range_model(fit.pose, o.angles_rad, o.normals, o.offsets)
         d = o.ranges_m - rho
-        var = range_sigma_m**2 + (d_phi * angle_sigma_rad) ** 2
+        var = noise.variance(d_phi)
         c = np.diag(var) + jac @ fit.cofactor @ jac.T
         # A panel's surveyed position errs once for all its returns: sigma_s / |n . u| each.
         lever = o.survey_levers(fit.pose)
         same = o.panel[:, None] == o.panel[None, :]
-        c += survey_sigma_m**2 * np.outer(lever, lever) * same
+        c += noise.survey_sigma_m**2 * np.outer(lever, lever) * same
         try:
             t = float(d @ np.linalg.solve(c, d))
         except np.linalg.LinAlgError:
@@ -164,3 +117,51 @@ def beacon_tests(
         n = int(d.size)
         out.append(BeaconTest(int(b), t, n, float(stats.chi2.ppf(1 - alpha / ids.size, n))))
     return out
+
+
+def exclude_inconsistent(
+    obs: Observations,
+    adj: Adjustment,
+    *,
+    noise: NoiseModel,
+    min_beacons: int,
+) -> tuple[Observations, Adjustment, list[int], int] | list[int]:
+    """Leave out, one at a time, a beacon whose ranges disagree with the others.
+
+    A beacon is at fault only when its removal alone leaves the others
+    consistent; if no single removal does, or more than one does, the scan
+    cannot tell which beacon moved and a fix would rest on a guess.
+
+    Returns
+    -------
+    (obs, adj, excluded, outliers) when the rest is consistent (``excluded``:
+    beacon indices left out; ``outliers``: returns data snooping removed on
+    the way), or the list of suspect beacon indices when it cannot be made so.
+    """
+    excluded: list[int] = []
+    outliers = 0
+    while True:
+        failed = [t for t in beacon_tests(obs, adj, noise=noise) if t.failed]
+        if not failed:
+            return obs, adj, excluded, outliers
+        culprits = []
+        for b in sorted(set(obs.beacon.tolist())):
+            rest = obs.subset(obs.beacon != b)
+            if len(set(rest.beacon.tolist())) < min_beacons:
+                continue
+            try:
+                rest_adj = rest.adjust(adj.pose, noise)
+            except np.linalg.LinAlgError:
+                continue
+            if (
+                not any(t.failed for t in beacon_tests(rest, rest_adj, noise=noise))
+                and rest_adj.reference_variance <= rest_adj.chi2_upper
+            ):
+                culprits.append(b)
+        if len(culprits) != 1:
+            return culprits or [t.beacon for t in failed]
+        excluded.append(culprits[0])
+        obs = obs.subset(obs.beacon != culprits[0])
+        adj = obs.adjust(adj.pose, noise)
+        obs, adj, more = snoop(obs, adj, noise=noise)
+        outliers += more

@@ -110,8 +110,7 @@ def run_accuracy(
                 truth.scan.angles_rad,
                 truth.scan.valid,
                 scene.survey,  # type: ignore[attr-defined]
-                range_sigma_m=model.range_sigma_m,
-                angle_sigma_rad=model.angle_sigma_rad,
+                noise=cfg.noise,
                 beacon_beams=truth.beacon_mask(),
             )
             crb = np.sqrt(np.diag(bound))

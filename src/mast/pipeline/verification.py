@@ -1,0 +1,379 @@
+"""Verification: what every beam says of a pose hypothesis.
+
+A hypothesis is refined by point-to-line ICP, then judged by all the beams:
+each beam that, at the pose, should meet a surveyed panel either returns there
+(a hit), returns short (something stands in front: allowed), returns beyond
+(it went where the panel should be: evidence against the pose) or not at all.
+From that come
+
+* the beacons that **support** the pose: two of their panels carry returns,
+  most beams that should reach them do, a corner of the scan identified as
+  one of their edges lands on that edge *or* their returns are explained by
+  the beacon better than by clutter (no surface runs on past the beacon's
+  surveyed ends, as a wall or a shelf would);
+* a **log-likelihood ratio** of the pose against background clutter, summed
+  over every beam that should meet a surveyed panel: it rewards hits, charges
+  every beam that passes through a surveyed panel, and so counts every beacon
+  the pose says should be seen. Competing poses are compared by it.
+
+References
+----------
+S. Thrun, W. Burgard and D. Fox, *Probabilistic Robotics*, 2005, sec. 6.3
+(the beam model of range finders).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy import stats
+
+from mast.core.geometry import PanelSet, first_hits
+from mast.core.index import SurveyIndex
+from mast.core.noise import NoiseModel
+from mast.core.pose import Pose2D
+from mast.core.scan import Scan
+from mast.pipeline.alignment import IcpResult, icp_point_to_line
+from mast.pipeline.hypotheses import Hypothesis, node_sigma
+from mast.pipeline.identification import PanelIdentification
+from mast.pipeline.segmentation import Segmentation
+
+__all__ = ["BeamCheck", "VerificationConfig", "Verified", "check_beams", "verify"]
+
+
+@dataclass(frozen=True, slots=True)
+class VerificationConfig:
+    """Thresholds of verification.
+
+    Attributes
+    ----------
+    min_panel_points : int
+        Returns a panel needs to count as seen.
+    gate_sigmas : float
+        Returns farther than this many standard deviations from their panel
+        are not hits.
+    coarse_gates_m : tuple of float
+        ICP association gates while the pose is still rough.
+    max_violation_fraction : float
+        Fraction of the beams that should hit a surveyed panel but pass
+        through it, beyond which a hypothesis is refused (never fewer than
+        ``min_violations``).
+    min_violations : int
+        Through-beams always tolerated (edges, mixed pixels).
+    min_coverage : float
+        Share of the unoccluded beams that should land on a beacon that must,
+        for the beacon to support the pose.
+    edge_margin_m : float
+        Panel ends shrunk by this much when predicting which beams must hit.
+    min_check_incidence_deg : float
+        Beams closer than this to a panel's plane are not predicted to hit it.
+    overrun_reach_m : float
+        How far past a panel's surveyed end returns on its line are looked for.
+    max_overrun_fraction : float
+        Returns running on past a panel's ends, as a fraction of its hits
+        (never fewer than ``min_panel_points``), beyond which the beacon's
+        returns are taken for a longer surface (clutter) and do not support.
+    through_probability : float
+        Probability of a return beyond a surveyed panel at the true pose
+        (edges, mixed pixels): what each through-beam costs in the likelihood.
+    straight_alpha : float
+        Significance at which the returns on a beacon must reject one straight
+        line through them, for the beacon to support without an identified node.
+    corner_reach_m : float
+        A corner of the scan this close to a beacon's node edge, but not on
+        it, keeps the beacon from supporting the pose without an identified node.
+    duplicate_m, duplicate_rad : float
+        A hypothesis starting this close to an already verified pose is not
+        verified again.
+    """
+
+    min_panel_points: int = 3
+    gate_sigmas: float = 4.0
+    coarse_gates_m: tuple[float, ...] = (0.15, 0.05)
+    max_violation_fraction: float = 0.1
+    min_violations: int = 3
+    min_coverage: float = 0.5
+    edge_margin_m: float = 0.02
+    min_check_incidence_deg: float = 10.0
+    overrun_reach_m: float = 0.3
+    max_overrun_fraction: float = 0.25
+    through_probability: float = 0.01
+    corner_reach_m: float = 0.3
+    straight_alpha: float = 1e-3
+    duplicate_m: float = 0.05
+    duplicate_rad: float = math.radians(0.5)
+
+
+@dataclass(frozen=True, slots=True)
+class BeamCheck:
+    """What the beams predicted to land on one beacon's panels actually did.
+
+    ``hit``: returned within the gate of the predicted range; ``occluded``:
+    returned short (something stood in front: allowed); ``through``: returned
+    beyond the panel (the beam went where the beacon should be: evidence
+    against the pose); ``missing``: no return. ``log_likelihood`` is the
+    beam-model log-likelihood ratio of these beams against background clutter.
+    """
+
+    hit: int = 0
+    occluded: int = 0
+    through: int = 0
+    missing: int = 0
+    log_likelihood: float = 0.0
+
+    @property
+    def coverage(self) -> float:
+        """Share of the unoccluded returns that landed on the panels."""
+        seen = self.hit + self.through
+        return self.hit / seen if seen else 0.0
+
+
+def check_beams(
+    scan: Scan,
+    pose: Pose2D,
+    panels: PanelSet,
+    noise: NoiseModel,
+    cfg: VerificationConfig,
+    subset: NDArray[np.intp] | None = None,
+) -> dict[str, BeamCheck]:
+    """Predict, at ``pose``, every beam that must cross a surveyed panel and compare.
+
+    Panel ends are shrunk by ``edge_margin_m`` and beams near a panel's plane
+    are left out: near an edge or at grazing incidence a beam may
+    legitimately miss. The log-likelihood ratio of a hit is that of a
+    Gaussian about the predicted range against a return anywhere in the
+    scanner's range; a through-beam costs ``log(through_probability)``.
+    """
+    sel = np.arange(len(panels)) if subset is None else subset
+    dirs = pose.beam_directions(scan.angles_rad)
+    a = panels.a[sel] + cfg.edge_margin_m * panels.direction[sel]
+    b = panels.b[sel] - cfg.edge_margin_m * panels.direction[sel]
+    t, jj = first_hits(pose.position, dirs, a, b)
+    j = np.where(jj >= 0, sel[np.maximum(jj, 0)], -1)
+    hit = (j >= 0) & (t <= scan.range_max_m) & (t >= scan.range_min_m)
+    nu = np.abs(np.einsum("ij,ij->i", panels.normal[np.maximum(j, 0)], dirs))
+    hit &= nu > math.sin(math.radians(cfg.min_check_incidence_deg))
+    idx = np.flatnonzero(hit)
+    r = scan.ranges_m[idx]
+    valid = scan.valid[idx]
+    sigma = noise.gate_sigma_m
+    gate = cfg.gate_sigmas * sigma
+    res = np.where(valid, r - t[idx], np.nan)
+    kind = np.full(idx.size, 3)  # missing
+    kind[valid & (res < -gate)] = 1
+    kind[valid & (res > gate)] = 2
+    kind[valid & (np.abs(res) <= gate)] = 0
+    span = max(scan.range_max_m, 1.0)
+    hit_ll = math.log(span / (sigma * math.sqrt(2 * math.pi))) - 0.5 * (res / sigma) ** 2
+    beacon = panels.beacon[j[idx]]
+    out: dict[str, BeamCheck] = {}
+    for k in np.unique(beacon):
+        m = beacon == k
+        counts = np.bincount(kind[m], minlength=4)
+        ll = float(np.sum(hit_ll[m & (kind == 0)])) + counts[2] * math.log(cfg.through_probability)
+        hit_n, occ_n, thr_n, mis_n = (int(c) for c in counts)
+        out[panels.ids[k]] = BeamCheck(hit_n, occ_n, thr_n, mis_n, ll)
+    return out
+
+
+@dataclass(frozen=True, eq=False)
+class Verified:
+    """A hypothesis after ICP and its checks against the whole survey."""
+
+    hypothesis: Hypothesis
+    icp: IcpResult
+    panel_points: dict[tuple[str, int], int]
+    supported: tuple[str, ...]
+    checks: dict[str, BeamCheck]
+    cornered: tuple[str, ...] = ()
+    """Supporting beacons on whose surveyed edge an identified corner of the scan lands."""
+
+    @property
+    def pose(self) -> Pose2D:
+        return self.icp.pose
+
+    @property
+    def violations(self) -> int:
+        """Beams that went through where a surveyed panel should be."""
+        return sum(c.through for c in self.checks.values())
+
+    @property
+    def log_likelihood(self) -> float:
+        """Beam-model log-likelihood ratio against clutter, over every predicted beam."""
+        return sum(c.log_likelihood for c in self.checks.values())
+
+    def same_pose(self, other: Pose2D, cfg: VerificationConfig) -> bool:
+        p = self.icp.pose
+        d = math.hypot(other.easting - p.easting, other.northing - p.northing)
+        da = abs(math.remainder(other.azimuth - p.azimuth, 2 * math.pi))
+        return d < cfg.duplicate_m and da < cfg.duplicate_rad
+
+
+def _overrun(
+    points_mine: NDArray[np.float64],
+    panels: PanelSet,
+    beacon_panels: NDArray[np.intp],
+    gate_m: float,
+    cfg: VerificationConfig,
+) -> dict[int, int]:
+    """Returns on each panel's line, past its surveyed ends, on no other panel of the beacon.
+
+    A beacon's panels end at its edges: past a free end lies the rock, past a
+    node the next panel turns away. Returns that run on along a panel's line
+    belong to a longer surface — a wall, a shelf, a door frame — that merely
+    resembles the beacon where it is.
+    """
+    rel_all = points_mine[:, None, :] - panels.a[None, beacon_panels, :]
+    t = np.einsum("nkj,kj->nk", rel_all, panels.direction[beacon_panels])
+    s = np.abs(np.einsum("nkj,kj->nk", rel_all, panels.normal[beacon_panels]))
+    length = panels.length[beacon_panels][None, :]
+    on_panel = (s <= gate_m) & (t >= -gate_m) & (t <= length + gate_m)
+    near_any = on_panel.any(axis=1)
+    margin = 2.0 * gate_m + cfg.edge_margin_m
+    past = (s <= gate_m) & (
+        ((t > length + margin) & (t < length + cfg.overrun_reach_m))
+        | ((t < -margin) & (t > -cfg.overrun_reach_m))
+    )
+    past &= ~near_any[:, None]
+    return {int(k): int(c) for k, c in zip(beacon_panels.tolist(), past.sum(axis=0), strict=True)}
+
+
+def _shows_a_bend(points: NDArray[np.float64], sigma_m: float, alpha: float) -> bool:
+    """Whether returns said to lie on a beacon's panels are not one straight line.
+
+    A flat wall crossing the place where a beacon should be puts returns near
+    its panels too; only a bend that one line cannot explain (the line's
+    chi-square rejected at ``alpha``) is the beacon's shape.
+    """
+    n = points.shape[0]
+    if n < 4:
+        return False
+    q = points - points.mean(axis=0)
+    smallest = float(np.linalg.eigvalsh(q.T @ q)[0])
+    return bool(stats.chi2.sf(smallest / sigma_m**2, n - 2) < alpha)
+
+
+def _support(
+    icp: IcpResult,
+    points_mine: NDArray[np.float64],
+    panels: PanelSet,
+    index: SurveyIndex,
+    ident: PanelIdentification,
+    seg: Segmentation,
+    checks: dict[str, BeamCheck],
+    noise: NoiseModel,
+    cfg: VerificationConfig,
+) -> tuple[dict[tuple[str, int], int], tuple[str, ...], tuple[str, ...]]:
+    """Beacons that confirm a pose, the returns on each panel, and the cornered beacons.
+
+    A beacon confirms the pose when, at that pose, (1) two of its panels
+    carry at least ``min_panel_points`` returns, (2) at least ``min_coverage``
+    of the unoccluded beams that should hit it do, and (3) its returns are
+    the beacon's and not clutter's: a corner of the scan identified as one of
+    its edges lands on that edge, or no panel's returns run on past its ends.
+    """
+    counts: dict[tuple[str, int], int] = {}
+    idx, n = np.unique(icp.panel[icp.panel >= 0], return_counts=True)
+    for k, c in zip(idx, n, strict=True):
+        counts[(panels.ids[panels.beacon[k]], int(panels.panel[k]))] = int(c)
+    per_beacon: dict[str, list[int]] = {}
+    for (b, p), c in counts.items():
+        if c >= cfg.min_panel_points:
+            per_beacon.setdefault(b, []).append(p)
+    candidates = {
+        b
+        for b, ps in per_beacon.items()
+        if len(ps) >= 2 and checks.get(b, BeamCheck()).coverage >= cfg.min_coverage
+    }
+    gate = cfg.gate_sigmas * noise.gate_sigma_m
+    gate_node = cfg.gate_sigmas * math.hypot(seg.noise_m * 3.0, noise.gate_sigma_m)
+    node_ok: set[str] = set()
+    for node in ident.nodes:
+        for b in index.beacons_like(node.beacon):
+            if b not in candidates or b in node_ok:
+                continue
+            mapped = icp.pose.scanner_to_mine(node.node_scanner[None, :])[0]
+            edge = index.survey[b].edges[node.edge - 1]
+            if math.dist(mapped, edge) <= cfg.gate_sigmas * math.hypot(
+                node_sigma(node, seg), noise.survey_sigma_m, noise.range_sigma_m
+            ):
+                node_ok.add(b)
+    supported = set(node_ok)
+    beacon_no = {bid: k for k, bid in enumerate(panels.ids)}
+    corners = (
+        icp.pose.scanner_to_mine(np.array([c.node for c in seg.corners]))
+        if seg.corners
+        else np.zeros((0, 2))
+    )
+    for b in candidates - node_ok:
+        # Corners of the scan near this beacon's edges must be its edges: one that
+        # lands beside an edge says the shape there is another (or the beacon moved).
+        nodes = index.survey[b].edges[1:3]
+        d = np.hypot(*(corners[:, None, :] - nodes[None, :, :]).transpose(2, 0, 1))
+        if np.any((d > gate_node) & (d < cfg.corner_reach_m)):
+            continue
+        mine = np.flatnonzero(panels.beacon == beacon_no[b])
+        on_beacon = points_mine[np.isin(icp.panel, mine)]
+        if not _shows_a_bend(on_beacon, noise.gate_sigma_m, cfg.straight_alpha):
+            continue
+        over = _overrun(points_mine, panels, mine, gate, cfg)
+        clean = all(
+            over[int(k)]
+            <= max(
+                cfg.min_panel_points,
+                cfg.max_overrun_fraction * counts.get((b, int(panels.panel[k])), 0),
+            )
+            for k in mine
+        )
+        if clean:
+            supported.add(b)
+    return counts, tuple(sorted(supported)), tuple(sorted(node_ok))
+
+
+def verify(
+    hypotheses: list[Hypothesis],
+    scan: Scan,
+    panels: PanelSet,
+    index: SurveyIndex,
+    ident: PanelIdentification,
+    seg: Segmentation,
+    noise: NoiseModel,
+    cfg: VerificationConfig,
+) -> list[Verified]:
+    """Refine every hypothesis by ICP and keep those the beams confirm, best first.
+
+    A hypothesis is kept when the beacons it was formed from support the
+    refined pose and few beams pass through surveyed panels. Hypotheses that
+    start where an earlier one ended are skipped (the same pose again).
+    """
+    _, pts = scan.points()
+    final_gate = cfg.gate_sigmas * noise.gate_sigma_m
+    gates = (*cfg.coarse_gates_m, final_gate)
+    reach = scan.range_max_m + 1.0
+    out: list[Verified] = []
+    done: list[Verified] = []
+    for h in hypotheses:
+        start = h.similarity.pose()
+        if any(v.same_pose(start, cfg) for v in done):
+            continue
+        near = panels.near(start.position, reach)
+        if near.size == 0:
+            continue
+        icp = icp_point_to_line(pts, start, panels, gates_m=gates, subset=near)
+        checks = check_beams(scan, icp.pose, panels, noise, cfg, subset=near)
+        counts, supported, cornered = _support(
+            icp, icp.pose.scanner_to_mine(pts), panels, index, ident, seg, checks, noise, cfg
+        )
+        v = Verified(h, icp, counts, supported, checks, cornered)
+        done.append(v)
+        if not set(h.beacons) <= set(supported):
+            continue
+        unoccluded = sum(c.hit + c.through for c in checks.values())
+        if v.violations > max(cfg.min_violations, cfg.max_violation_fraction * unoccluded):
+            continue
+        out.append(v)
+    out.sort(key=lambda v: (len(v.supported), v.log_likelihood), reverse=True)
+    return out
