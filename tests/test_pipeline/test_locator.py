@@ -213,7 +213,8 @@ def test_a_good_prior_fixes_without_identification() -> None:
         prior = Prior(start, 0.5, math.radians(5.0))
         fix = locate(scan, survey, config=LocatorConfig(prior=prior))
         assert fix.ok, fix.detail
-        assert fix.chosen is not None and fix.chosen.hypothesis.kind == "prior"
+        assert fix.chosen is not None
+        assert fix.chosen.hypothesis.kind == "prior"
         assert fix.pose is not None
         assert (
             math.hypot(fix.pose.easting - truth.easting, fix.pose.northing - truth.northing) < 1e-6
