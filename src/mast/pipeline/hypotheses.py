@@ -18,7 +18,7 @@ adjustment decide). Two kinds of hypothesis come out of here:
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -150,11 +150,6 @@ def _node_rotations(
     return out
 
 
-def _node_beacons(node: NodeMatch, index: SurveyIndex) -> tuple[str, ...]:
-    """Every surveyed beacon of the node's design (one, unless designs are repeated)."""
-    return index.beacons_like(node.beacon)
-
-
 def _single_hypothesis(
     node: NodeMatch, beacon: str, seg: Segmentation, index: SurveyIndex
 ) -> Hypothesis | None:
@@ -176,8 +171,6 @@ def _single_hypothesis(
 
 def _rename(node: NodeMatch, beacon: str) -> NodeMatch:
     """The same identified node, taken for a beacon of the same design."""
-    from dataclasses import replace
-
     return replace(node, beacon=beacon)
 
 
@@ -251,7 +244,7 @@ def pose_hypotheses(
     pairs.sort(key=lambda h: (sum(n.option for n in h.nodes), h.misfit))
     singles: list[Hypothesis] = []
     for n in sorted(nodes, key=lambda n: n.option):
-        for beacon in _node_beacons(n, index):
+        for beacon in index.beacons_like(n.beacon):
             h = _single_hypothesis(n, beacon, segmentation, index)
             if h is not None:
                 singles.append(h)
