@@ -78,12 +78,18 @@ class Hypothesis:
     kind : str
         ``"pair"`` (two nodes), ``"single"`` (one node and its panels) or
         ``"prior"`` (a prior pose searched by the tracker).
+    spread_m : float
+        Standard deviation of where the hypothesis puts a return: its node's
+        position error plus its rotation error over twice the node's range
+        (a return as far beyond the node as the scanner is before it). ICP
+        starts with a gate this wide (see :class:`VerificationConfig`).
     """
 
     nodes: tuple[NodeMatch, ...]
     similarity: Similarity
     misfit: float
     kind: str = "pair"
+    spread_m: float = 0.0
 
     @property
     def beacons(self) -> tuple[str, ...]:
@@ -160,12 +166,14 @@ def _single_hypothesis(
     w = np.array([1.0 / max(s, 1e-9) ** 2 for _, s in rots])
     ref = rots[0][0]
     rot = ref + float(np.sum(w * np.array([_wrap(r - ref) for r, _ in rots])) / np.sum(w))
+    sigma_rot = 1.0 / math.sqrt(float(np.sum(w)))
+    spread = node_sigma(node, seg) + 2.0 * float(np.hypot(*node.node_scanner)) * sigma_rot
     c, s = math.cos(rot), math.sin(rot)
     edge = index.survey[beacon].edges[node.edge - 1]
     t = edge - np.array([[c, -s], [s, c]]) @ node.node_scanner
     sim = Similarity(1.0, _wrap(rot), np.asarray(t, dtype=float), 0.0)
     return Hypothesis(
-        (node,) if node.beacon == beacon else (_rename(node, beacon),), sim, 0.0, "single"
+        (node,) if node.beacon == beacon else (_rename(node, beacon),), sim, 0.0, "single", spread
     )
 
 
@@ -239,7 +247,10 @@ def pose_hypotheses(
                 )
                 na = a if ba == a.beacon else _rename(a, ba)
                 nb = b if bb == b.beacon else _rename(b, bb)
-                pairs.append(Hypothesis((na, nb), sim, max(mis_d, mis_r), "pair"))
+                spread = math.sqrt(float(np.linalg.eigvalsh(cov[i])[-1])) + 2.0 * float(
+                    np.hypot(*a.node_scanner)
+                ) * min(s_rot, math.pi)
+                pairs.append(Hypothesis((na, nb), sim, max(mis_d, mis_r), "pair", spread))
     # Prefer hypotheses whose nodes were identified with more panels (lower Table 1 option).
     pairs.sort(key=lambda h: (sum(n.option for n in h.nodes), h.misfit))
     singles: list[Hypothesis] = []

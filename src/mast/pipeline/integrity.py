@@ -4,8 +4,9 @@
   with ``sigma_vi^2 = sigma_i^2 - g_i Q g_i^T``; the largest beyond the
   critical value (0.1 % shared over all returns, Bonferroni: only returns no
   noise explains) is removed and the pose adjusted again, until none is.
-* Beacon test: each beacon in turn is left out, the pose fitted to the others,
-  and the left-out beacon's ranges compared with their prediction:
+* Beacon test: each beacon in turn is left out, the pose fitted to the others
+  (linearised at the joint solution, where the linear model holds best), and
+  the left-out beacon's ranges compared with their prediction:
   ``T_b = d^T C^-1 d`` with ``C = diag(sigma^2) + G_b Q_(-b) G_b^T`` plus the
   survey's uncertainty of each panel's position (shared by its returns). Under
   a correctly surveyed beacon ``T_b`` is chi-square with ``n_b`` degrees of
@@ -28,7 +29,7 @@ import numpy as np
 from scipy import stats
 
 from mast.core.noise import NoiseModel
-from mast.pipeline.adjustment import Adjustment, Observations, range_model
+from mast.pipeline.adjustment import Adjustment, Observations
 
 __all__ = ["BeaconTest", "Observations", "beacon_tests", "exclude_inconsistent", "snoop"]
 
@@ -88,24 +89,26 @@ def beacon_tests(
     ids = np.unique(obs.beacon)
     if ids.size < 2:
         return []
+    g, v, sig = adj.jacobian, adj.residuals_m, adj.sigmas_m
+    w = 1.0 / sig**2
+    lever_all = obs.survey_levers(adj.pose)
     out = []
     for b in ids:
         mine = obs.beacon == b
-        rest = obs.subset(~mine)
-        try:
-            fit = rest.adjust(adj.pose, noise)
-        except np.linalg.LinAlgError:
-            continue
-        if not np.all(np.isfinite(fit.cofactor)) or np.linalg.cond(fit.cofactor) > 1e14:
+        rest = ~mine
+        # The others' fit, linearised at the joint solution: the best-determined pose,
+        # where the linear model holds best (a weak beacon left alone may fit a pose
+        # far enough off for a relinearised prediction to fail the test by itself).
+        n_rest = g[rest].T @ (w[rest, None] * g[rest])
+        if not np.all(np.isfinite(n_rest)) or np.linalg.cond(n_rest) > 1e14:
             continue  # the others alone do not determine the pose: no test
-        o = obs.subset(mine)
-        rho, jac, d_phi = range_model(fit.pose, o.angles_rad, o.normals, o.offsets)
-        d = o.ranges_m - rho
-        var = noise.variance(d_phi)
-        c = np.diag(var) + jac @ fit.cofactor @ jac.T
+        q_rest = np.linalg.inv(n_rest)
+        delta = q_rest @ (g[rest].T @ (w[rest] * v[rest]))
+        d = v[mine] - g[mine] @ delta
+        c = np.diag(sig[mine] ** 2) + g[mine] @ q_rest @ g[mine].T
         # A panel's surveyed position errs once for all its returns: sigma_s / |n . u| each.
-        lever = o.survey_levers(fit.pose)
-        same = o.panel[:, None] == o.panel[None, :]
+        lever = lever_all[mine]
+        same = obs.panel[mine][:, None] == obs.panel[mine][None, :]
         c += noise.survey_sigma_m**2 * np.outer(lever, lever) * same
         try:
             t = float(d @ np.linalg.solve(c, d))
@@ -113,7 +116,10 @@ def beacon_tests(
             continue
         # The others' own misfit, when larger than the a-priori precisions allow for
         # (unmodelled range bias, mixed pixels), widens the test as it widens theirs.
-        t /= max(1.0, fit.reference_variance)
+        v_rest = v[rest] - g[rest] @ delta
+        dof_rest = int(rest.sum()) - 3
+        if dof_rest > 0:
+            t /= max(1.0, float(v_rest @ (w[rest] * v_rest)) / dof_rest)
         n = int(d.size)
         out.append(BeaconTest(int(b), t, n, float(stats.chi2.ppf(1 - alpha / ids.size, n))))
     return out

@@ -86,8 +86,16 @@ class LocatorConfig:
         Of those, beacons on whose surveyed edge an identified corner of the
         scan must land (the others may be confirmed by their returns alone).
     ambiguity_log_ratio : float
-        A second, different pose whose beam log-likelihood is within this of
-        the best one's makes the scan ambiguous.
+        A second, different pose whose tempered beam log-likelihood is within
+        this of the best one's makes the scan ambiguous.
+    likelihood_tempering : float
+        Beams per independent piece of evidence: the beam model's
+        log-likelihoods are divided by this before poses are compared. A
+        panel's returns share its survey and mounting error and mixed pixels
+        come in runs, so independent beams overstate the evidence (Thrun,
+        Burgard and Fox 2005, sec. 6.3.4); untempered, one beam more or less
+        on an edge (some 7 nats) would decide between two poses that two
+        look-alike beacons make equally good.
     reject_alpha : float
         Significance of the global test beyond which a fix is refused: its
         returns do not fit the surveyed beacons (clutter taken for them).
@@ -101,8 +109,9 @@ class LocatorConfig:
     angle_sigma_rad: float = 0.0
     survey_sigma_m: float = 0.003
     min_beacons: int = 2
-    min_cornered: int = 2
+    min_cornered: int = 1
     ambiguity_log_ratio: float = math.log(1e4)
+    likelihood_tempering: float = 10.0
     reject_alpha: float = 1e-3
     prior: Prior | None = None
     segmentation: SegmentationConfig = field(default_factory=SegmentationConfig)
@@ -184,11 +193,9 @@ def _choose(verified: list[Verified], cfg: LocatorConfig) -> tuple[Verified | No
     # Every beacon the beams confirm counts, but a fix needs ``min_cornered`` whose
     # identified corners land on their surveyed edges: shape tells beacons apart.
     # A tracked prior already says which beacon is which.
+    confirmed = [v for v in verified if len(v.supported) >= cfg.min_beacons]
     full = [
-        v
-        for v in verified
-        if len(v.supported) >= cfg.min_beacons
-        and (v.hypothesis.kind == "prior" or len(v.cornered) >= cfg.min_cornered)
+        v for v in confirmed if v.hypothesis.kind == "prior" or len(v.cornered) >= cfg.min_cornered
     ]
     if not full:
         best = verified[0] if verified else None
@@ -196,10 +203,12 @@ def _choose(verified: list[Verified], cfg: LocatorConfig) -> tuple[Verified | No
         return None, "one_beacon", f"only beacon {names} confirmed by the beams"
     full.sort(key=lambda v: v.log_likelihood, reverse=True)
     best = full[0]
-    for other in full[1:]:
-        if other.same_pose(best.pose, cfg.verification):
+    # Any other pose the beams confirm competes, cornered or not.
+    margin = cfg.ambiguity_log_ratio * cfg.likelihood_tempering
+    for other in confirmed:
+        if other is best or other.same_pose(best.pose, cfg.verification):
             continue
-        if other.log_likelihood >= best.log_likelihood - cfg.ambiguity_log_ratio:
+        if other.log_likelihood >= best.log_likelihood - margin:
             return (
                 None,
                 "ambiguous",

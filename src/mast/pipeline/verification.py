@@ -57,6 +57,11 @@ class VerificationConfig:
         are not hits.
     coarse_gates_m : tuple of float
         ICP association gates while the pose is still rough.
+    start_gate_sigmas, max_start_gate_m : float
+        A hypothesis less certain than the first coarse gate (its
+        ``spread_m`` times ``start_gate_sigmas``) starts ICP with a gate that
+        wide, up to ``max_start_gate_m``; certain ones keep the narrow gates,
+        which clutter near the beacons cannot drag away.
     max_violation_fraction : float
         Fraction of the beams that should hit a surveyed panel but pass
         through it, beyond which a hypothesis is refused (never fewer than
@@ -76,6 +81,10 @@ class VerificationConfig:
         Returns running on past a panel's ends, as a fraction of its hits
         (never fewer than ``min_panel_points``), beyond which the beacon's
         returns are taken for a longer surface (clutter) and do not support.
+    overrun_slope_sigmas : float
+        Returns past a panel's end whose offset from its line drifts by more
+        than this many standard deviations of the slope are another surface
+        crossing the line, not the line running on.
     through_probability : float
         Probability of a return beyond a surveyed panel at the true pose
         (edges, mixed pixels): what each through-beam costs in the likelihood.
@@ -93,6 +102,8 @@ class VerificationConfig:
     min_panel_points: int = 3
     gate_sigmas: float = 4.0
     coarse_gates_m: tuple[float, ...] = (0.15, 0.05)
+    start_gate_sigmas: float = 3.0
+    max_start_gate_m: float = 0.5
     max_violation_fraction: float = 0.1
     min_violations: int = 3
     min_coverage: float = 0.5
@@ -100,6 +111,7 @@ class VerificationConfig:
     min_check_incidence_deg: float = 10.0
     overrun_reach_m: float = 0.3
     max_overrun_fraction: float = 0.25
+    overrun_slope_sigmas: float = 3.0
     through_probability: float = 0.01
     corner_reach_m: float = 0.3
     straight_alpha: float = 1e-3
@@ -217,28 +229,50 @@ def _overrun(
     panels: PanelSet,
     beacon_panels: NDArray[np.intp],
     gate_m: float,
+    sigma_m: float,
     cfg: VerificationConfig,
 ) -> dict[int, int]:
-    """Returns on each panel's line, past its surveyed ends, on no other panel of the beacon.
+    """Returns continuing each panel's line past its surveyed ends, on no other panel of the beacon.
 
     A beacon's panels end at its edges: past a free end lies the rock, past a
     node the next panel turns away. Returns that run on along a panel's line
     belong to a longer surface — a wall, a shelf, a door frame — that merely
-    resembles the beacon where it is.
+    resembles the beacon where it is. A surface that only crosses the band
+    about the line (the wall a panel meets at a shallow angle) is not a
+    continuation: the returns past each end count only when the line through
+    them keeps the panel's direction (their lateral drift along the reach is
+    within ``straight`` standard deviations of none).
     """
     rel_all = points_mine[:, None, :] - panels.a[None, beacon_panels, :]
     t = np.einsum("nkj,kj->nk", rel_all, panels.direction[beacon_panels])
-    s = np.abs(np.einsum("nkj,kj->nk", rel_all, panels.normal[beacon_panels]))
+    s = np.einsum("nkj,kj->nk", rel_all, panels.normal[beacon_panels])
     length = panels.length[beacon_panels][None, :]
-    on_panel = (s <= gate_m) & (t >= -gate_m) & (t <= length + gate_m)
+    on_panel = (np.abs(s) <= gate_m) & (t >= -gate_m) & (t <= length + gate_m)
     near_any = on_panel.any(axis=1)
     margin = 2.0 * gate_m + cfg.edge_margin_m
-    past = (s <= gate_m) & (
-        ((t > length + margin) & (t < length + cfg.overrun_reach_m))
-        | ((t < -margin) & (t > -cfg.overrun_reach_m))
-    )
-    past &= ~near_any[:, None]
-    return {int(k): int(c) for k, c in zip(beacon_panels.tolist(), past.sum(axis=0), strict=True)}
+    band = (np.abs(s) <= gate_m) & ~near_any[:, None]
+    out: dict[int, int] = {}
+    for col, k in enumerate(beacon_panels.tolist()):
+        count = 0
+        tk, sk, lk = t[:, col], s[:, col], float(length[0, col])
+        for beyond in (
+            (tk > lk) & (tk < lk + cfg.overrun_reach_m),
+            (tk < 0) & (tk > -cfg.overrun_reach_m),
+        ):
+            ends = band[:, col] & beyond
+            past = ends & ((tk > lk + margin) | (tk < -margin))
+            n = int(past.sum())
+            if n >= 3:
+                # Slope of the lateral offset against the distance along the line,
+                # over every return in the band beyond this end.
+                tt = tk[ends] - tk[ends].mean()
+                spread = float(tt @ tt)
+                slope = float(tt @ sk[ends]) / spread if spread > 0 else 0.0
+                if abs(slope) > cfg.overrun_slope_sigmas * sigma_m / math.sqrt(max(spread, 1e-30)):
+                    continue  # another surface crossing the band
+            count += n
+        out[int(k)] = count
+    return out
 
 
 def _shows_a_bend(points: NDArray[np.float64], sigma_m: float, alpha: float) -> bool:
@@ -311,15 +345,18 @@ def _support(
     for b in candidates - node_ok:
         # Corners of the scan near this beacon's edges must be its edges: one that
         # lands beside an edge says the shape there is another (or the beacon moved).
-        nodes = index.survey[b].edges[1:3]
-        d = np.hypot(*(corners[:, None, :] - nodes[None, :, :]).transpose(2, 0, 1))
-        if np.any((d > gate_node) & (d < cfg.corner_reach_m)):
+        # (A corner on any surveyed edge, the free ends where the beacon meets the
+        # wall included, is the beacon's own.)
+        edges = index.survey[b].edges
+        d = np.hypot(*(corners[:, None, :] - edges[None, :, :]).transpose(2, 0, 1))
+        on_edge = np.any(d <= gate_node, axis=1)
+        if np.any(~on_edge & np.any(d[:, 1:3] < cfg.corner_reach_m, axis=1)):
             continue
         mine = np.flatnonzero(panels.beacon == beacon_no[b])
         on_beacon = points_mine[np.isin(icp.panel, mine)]
         if not _shows_a_bend(on_beacon, noise.gate_sigma_m, cfg.straight_alpha):
             continue
-        over = _overrun(points_mine, panels, mine, gate, cfg)
+        over = _overrun(points_mine, panels, mine, gate, noise.gate_sigma_m, cfg)
         clean = all(
             over[int(k)]
             <= max(
@@ -362,7 +399,11 @@ def verify(
         near = panels.near(start.position, reach)
         if near.size == 0:
             continue
-        icp = icp_point_to_line(pts, start, panels, gates_m=gates, subset=near)
+        start_gate = min(cfg.max_start_gate_m, cfg.start_gate_sigmas * h.spread_m)
+        wide = (start_gate,) if start_gate > gates[0] else ()
+        icp = icp_point_to_line(pts, start, panels, gates_m=(*wide, *gates), subset=near)
+        if any(v.same_pose(icp.pose, cfg) for v in out):
+            continue  # converged onto a pose already confirmed
         checks = check_beams(scan, icp.pose, panels, noise, cfg, subset=near)
         counts, supported, cornered = _support(
             icp, icp.pose.scanner_to_mine(pts), panels, index, ident, seg, checks, noise, cfg
