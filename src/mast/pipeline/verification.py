@@ -300,6 +300,7 @@ def _support(
     checks: dict[str, BeamCheck],
     noise: NoiseModel,
     cfg: VerificationConfig,
+    tracked: bool = False,
 ) -> tuple[dict[tuple[str, int], int], tuple[str, ...], tuple[str, ...]]:
     """Beacons that confirm a pose, the returns on each panel, and the cornered beacons.
 
@@ -307,21 +308,31 @@ def _support(
     carry at least ``min_panel_points`` returns, (2) at least ``min_coverage``
     of the unoccluded beams that should hit it do, and (3) its returns are
     the beacon's and not clutter's: a corner of the scan identified as one of
-    its edges lands on that edge, or no panel's returns run on past its ends.
+    its edges lands on that edge, or no panel's returns run on past its ends
+    and they show a bend one straight line cannot explain. When ``tracked``
+    (a prior already says which beacon is where) (1) is two panels with
+    returns, ``2 * min_panel_points`` in all, and (3) is not asked: panels
+    too short for the noise to show their shape still confirm.
     """
     counts: dict[tuple[str, int], int] = {}
     idx, n = np.unique(icp.panel[icp.panel >= 0], return_counts=True)
     for k, c in zip(idx, n, strict=True):
         counts[(panels.ids[panels.beacon[k]], int(panels.panel[k]))] = int(c)
+    # Tracked, two panels with returns and as many in all as two panels need suffice.
+    per_panel = 1 if tracked else cfg.min_panel_points
     per_beacon: dict[str, list[int]] = {}
-    for (b, p), c in counts.items():
-        if c >= cfg.min_panel_points:
-            per_beacon.setdefault(b, []).append(p)
+    for (b, _panel), c in counts.items():
+        if c >= per_panel:
+            per_beacon.setdefault(b, []).append(c)
     candidates = {
         b
-        for b, ps in per_beacon.items()
-        if len(ps) >= 2 and checks.get(b, BeamCheck()).coverage >= cfg.min_coverage
+        for b, cs in per_beacon.items()
+        if len(cs) >= 2
+        and sum(cs) >= 2 * cfg.min_panel_points
+        and checks.get(b, BeamCheck()).coverage >= cfg.min_coverage
     }
+    if tracked:
+        return counts, tuple(sorted(candidates)), ()
     gate = cfg.gate_sigmas * noise.gate_sigma_m
     gate_node = cfg.gate_sigmas * math.hypot(seg.noise_m * 3.0, noise.gate_sigma_m)
     node_ok: set[str] = set()
@@ -406,7 +417,16 @@ def verify(
             continue  # converged onto a pose already confirmed
         checks = check_beams(scan, icp.pose, panels, noise, cfg, subset=near)
         counts, supported, cornered = _support(
-            icp, icp.pose.scanner_to_mine(pts), panels, index, ident, seg, checks, noise, cfg
+            icp,
+            icp.pose.scanner_to_mine(pts),
+            panels,
+            index,
+            ident,
+            seg,
+            checks,
+            noise,
+            cfg,
+            tracked=h.kind == "prior",
         )
         v = Verified(h, icp, counts, supported, checks, cornered)
         done.append(v)
