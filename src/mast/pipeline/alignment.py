@@ -125,8 +125,8 @@ def icp_point_to_line(
     *,
     gates_m: Sequence[float],
     max_iterations: int = 50,
-    tolerance_m: float = 1e-10,
-    tolerance_rad: float = 1e-12,
+    tolerance_m: float = 1e-7,
+    tolerance_rad: float = 1e-9,
     subset: NDArray[np.intp] | None = None,
 ) -> IcpResult:
     """Refine ``pose`` by point-to-line ICP against surveyed panels.
@@ -145,18 +145,37 @@ def icp_point_to_line(
     panels : PanelSet
     gates_m : sequence of float
         Decreasing association gates, metres.
+    tolerance_m, tolerance_rad : float
+        The last stage stops when a step moves the pose less than this; the
+        pose is a start for the adjustment, which iterates to full precision.
     """
     p = pose
     total = 0
     converged = False
     panel = np.full(points_scanner.shape[0], -1, dtype=np.intp)
     resid = np.full(points_scanner.shape[0], np.nan)
-    for gate in gates_m:
+    for stage, gate in enumerate(gates_m):
         converged = False
+        final = stage == len(gates_m) - 1
+        previous = panel
+        seen: set[bytes] = set()
         for _ in range(max_iterations):
             total += 1
             m = p.scanner_to_mine(points_scanner)
             panel, dist = panels.associate(m, gate, subset=subset)
+            # A coarse stage only has to bring the returns to their panels: once the
+            # matches stop changing, the next (narrower) stage takes over.
+            if not final and np.array_equal(panel, previous):
+                converged = True
+                break
+            # Returns on the gate's edge can flip in and out for ever: a set of
+            # matches met before in this stage closes the loop.
+            key = panel.tobytes()
+            if key in seen and not np.array_equal(panel, previous):
+                converged = True
+                break
+            seen.add(key)
+            previous = panel
             ok = panel >= 0
             if np.count_nonzero(ok) < 3:
                 break
