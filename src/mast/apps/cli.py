@@ -314,6 +314,21 @@ def bench_robustness(
     run_robustness(hard_scenes=hard, drift_scenes=drift, seed=seed, out_dir=out, echo=typer.echo)
 
 
+@bench_app.command("minewide")
+def bench_minewide(
+    poses: Annotated[int, typer.Option("--poses", min=1, help="Owed scans located.")] = 40,
+    copies: Annotated[
+        int, typer.Option("--copies", min=0, help="Copies of the designs surveyed elsewhere.")
+    ] = 184,
+    seed: Annotated[int, typer.Option("--seed", help="First scene seed.")] = 0,
+) -> None:
+    """The same scans against their local survey and a mine-wide one (the local beacons
+    plus copies of their designs in other drifts): same fixes, and the time it costs."""
+    from mast.apps.bench.minewide import run_minewide
+
+    run_minewide(poses=poses, copies=copies, seed=seed, echo=typer.echo)
+
+
 @bench_app.command("real")
 def bench_real(
     data: Annotated[

@@ -17,6 +17,7 @@ adjustment decide). Two kinds of hypothesis come out of here:
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass, replace
 
@@ -160,6 +161,8 @@ def _single_hypothesis(
     node: NodeMatch, beacon: str, seg: Segmentation, index: SurveyIndex
 ) -> Hypothesis | None:
     """The pose one node and its identified panels imply on their own."""
+    if node.beacon != beacon:
+        node = _rename(node, beacon)
     rots = _node_rotations(node, seg, index)
     if not rots:
         return None
@@ -172,9 +175,7 @@ def _single_hypothesis(
     edge = index.survey[beacon].edges[node.edge - 1]
     t = edge - np.array([[c, -s], [s, c]]) @ node.node_scanner
     sim = Similarity(1.0, _wrap(rot), np.asarray(t, dtype=float), 0.0)
-    return Hypothesis(
-        (node,) if node.beacon == beacon else (_rename(node, beacon),), sim, 0.0, "single", spread
-    )
+    return Hypothesis((node,), sim, 0.0, "single", spread)
 
 
 def _rename(node: NodeMatch, beacon: str) -> NodeMatch:
@@ -236,8 +237,14 @@ def pose_hypotheses(
                 rot = _wrap(math.atan2(dm_vec[1], dm_vec[0]) - math.atan2(ds_vec[1], ds_vec[0]))
                 v_perp = np.array([-u[1], u[0]])
                 s_rot = math.sqrt(float(v_perp @ (cov[i] + cov[j]) @ v_perp)) / dm
+                na = a if ba == a.beacon else _rename(a, ba)
+                nb = b if bb == b.beacon else _rename(b, bb)
+                # Each surveyed beacon's own panel directions: look-alikes may face any way.
+                rots_ab = (rots[i] if na is a else _node_rotations(na, segmentation, index)) + (
+                    rots[j] if nb is b else _node_rotations(nb, segmentation, index)
+                )
                 mis_r = 0.0
-                for r_k, s_k in rots[i] + rots[j]:
+                for r_k, s_k in rots_ab:
                     tol = max(config.min_rotation_tol_rad, config.sigmas * math.hypot(s_rot, s_k))
                     mis_r = max(mis_r, abs(_wrap(r_k - rot)) / tol)
                 if mis_r > 1.0:
@@ -245,18 +252,17 @@ def pose_hypotheses(
                 sim = similarity_transform(
                     np.array([a.node_scanner, b.node_scanner]), np.array([edge_a, edge_b])
                 )
-                na = a if ba == a.beacon else _rename(a, ba)
-                nb = b if bb == b.beacon else _rename(b, bb)
                 spread = math.sqrt(float(np.linalg.eigvalsh(cov[i])[-1])) + 2.0 * float(
                     np.hypot(*a.node_scanner)
                 ) * min(s_rot, math.pi)
                 pairs.append(Hypothesis((na, nb), sim, max(mis_d, mis_r), "pair", spread))
     # Prefer hypotheses whose nodes were identified with more panels (lower Table 1 option).
     pairs.sort(key=lambda h: (sum(n.option for n in h.nodes), h.misfit))
-    singles: list[Hypothesis] = []
+    # Single nodes take turns (lowest Table 1 option first), so that one corner's
+    # many look-alikes in a mine-wide survey cannot crowd out another corner's beacon.
+    per_node: list[list[Hypothesis]] = []
     for n in sorted(nodes, key=lambda n: n.option):
-        for beacon in index.beacons_like(n.beacon):
-            h = _single_hypothesis(n, beacon, segmentation, index)
-            if h is not None:
-                singles.append(h)
+        mine = [_single_hypothesis(n, b, segmentation, index) for b in index.beacons_like(n.beacon)]
+        per_node.append([h for h in mine if h is not None])
+    singles = [h for turn in itertools.zip_longest(*per_node) for h in turn if h is not None]
     return pairs[: config.max_pair_hypotheses] + singles[: config.max_single_hypotheses]

@@ -203,12 +203,16 @@ def _choose(verified: list[Verified], cfg: LocatorConfig) -> tuple[Verified | No
         return None, "one_beacon", f"only beacon {names} confirmed by the beams"
     full.sort(key=lambda v: v.log_likelihood, reverse=True)
     best = full[0]
-    # Any other pose the beams confirm competes, cornered or not.
+    # Any other pose the beams confirm competes, cornered or not, within the margin.
+    # A pose one beacon short of a fix competes too when it explains the scan
+    # better than the best confirmed one: then the beacon that made the fix is
+    # the doubtful one (a look-alike read into returns a better pose explains).
     margin = cfg.ambiguity_log_ratio * cfg.likelihood_tempering
-    for other in confirmed:
+    for other in verified:
         if other is best or other.same_pose(best.pose, cfg.verification):
             continue
-        if other.log_likelihood >= best.log_likelihood - margin:
+        slack = margin if len(other.supported) >= cfg.min_beacons else 0.0
+        if other.log_likelihood >= best.log_likelihood - slack:
             return (
                 None,
                 "ambiguous",

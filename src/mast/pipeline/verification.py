@@ -178,7 +178,12 @@ def check_beams(
     kind[valid & (res < -gate)] = 1
     kind[valid & (res > gate)] = 2
     kind[valid & (np.abs(res) <= gate)] = 0
-    span = max(scan.range_max_m, 1.0)
+    # Clutter may return anywhere in the scanner's range (the farthest return
+    # when the scan states no finite maximum).
+    reach = scan.range_max_m
+    if not math.isfinite(reach):
+        reach = float(np.max(scan.ranges_m[scan.valid], initial=1.0))
+    span = max(reach, 1.0)
     hit_ll = math.log(span / (sigma * math.sqrt(2 * math.pi))) - 0.5 * (res / sigma) ** 2
     beacon = panels.beacon[j[idx]]
     out: dict[str, BeamCheck] = {}

@@ -6,7 +6,9 @@ with fresh noise. Reported per configuration: fix rate, median and 95th
 percentile errors, RMS error over the bound for E, N and A (errors are
 normalised by each pose's own bound, then pooled), coverage of the reported
 95 % intervals (per coordinate and by the 95 % ellipse), and the reference
-variance against its chi-square distribution.
+variance against its chi-square distribution. Every draw also carries the
+evidence its pose's noise-free scan holds (:mod:`mast.apps.bench.detection`),
+and the draws binned by it show where the fix rate falls off (``detection.csv``).
 
 The bound comes from the simulator's truth: every beam that really hit a
 beacon panel, so returns the locator failed to use count as lost efficiency.
@@ -25,11 +27,17 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import stats
 
+from mast.apps.bench.detection import (
+    detection_bins,
+    detection_evidence,
+    detection_rows,
+    detection_table,
+)
 from mast.pipeline.bounds import truth_bound
 from mast.pipeline.locator import LocatorConfig, locate
-from mast.sim import ScannerModel, random_scene, simulate_scan
+from mast.sim import ScannerModel, Scene, Shot, random_scene, simulate_scan
 
-__all__ = ["ACCURACY_CONFIGS", "AccuracySummary", "run_accuracy"]
+__all__ = ["ACCURACY_CONFIGS", "OWED_MIN_POINTS", "AccuracySummary", "owed_poses", "run_accuracy"]
 
 #: The issue's four scanner configurations.
 ACCURACY_CONFIGS: tuple[ScannerModel, ...] = (
@@ -63,9 +71,13 @@ class AccuracySummary:
     seconds: float
 
 
-def _owed_poses(model: ScannerModel, count: int, seed0: int) -> list[tuple[object, object]]:
+#: Returns a panel must show, noise-free, to count towards a pose being owed a fix.
+OWED_MIN_POINTS = 3
+
+
+def owed_poses(model: ScannerModel, count: int, seed0: int) -> list[tuple[Scene, Shot]]:
     """(scene, shot) pairs where, noise-free, two beacons each show two panels."""
-    out: list[tuple[object, object]] = []
+    out: list[tuple[Scene, Shot]] = []
     seed = seed0
     exact = model.noise_free()
     while len(out) < count and seed < seed0 + 10_000:
@@ -73,7 +85,7 @@ def _owed_poses(model: ScannerModel, count: int, seed0: int) -> list[tuple[objec
             scene = random_scene(seed, idx)
             for shot in scene.shots:
                 sim = simulate_scan(scene.world, shot.pose, exact)
-                if sim.owes_fix(min_points=3):
+                if sim.owes_fix(min_points=OWED_MIN_POINTS):
                     out.append((scene, replace(shot, scanner=model)))
                     if len(out) == count:
                         return out
@@ -90,9 +102,17 @@ def run_accuracy(
     out_dir: Path | None = None,
     echo: Callable[[str], object] = print,
 ) -> list[AccuracySummary]:
-    """Run the Monte Carlo; write ``accuracy_<config>.csv`` (one row per draw) and
-    ``accuracy_summary.csv`` into ``out_dir`` when given."""
+    """Run the Monte Carlo; write ``accuracy_<config>.csv`` (one row per draw),
+    ``accuracy_summary.csv`` and ``detection.csv`` into ``out_dir`` when given.
+
+    Besides its errors, each draw's row holds its pose's evidence
+    (:class:`~mast.apps.bench.detection.DetectionEvidence`, from the noise-free
+    scan): ``evidence_returns``, ``evidence_range_m`` and
+    ``evidence_direction_sigma_deg``. After the configurations' summary lines,
+    the detection tables (draws binned by that evidence) are echoed.
+    """
     summaries: list[AccuracySummary] = []
+    rows_by_config: dict[str, list[dict[str, object]]] = {}
     for model in configs:
         t0 = time.perf_counter()
         # The simulated survey is exact: no survey error to add to the covariance.
@@ -102,25 +122,25 @@ def run_accuracy(
             survey_sigma_m=0.0,
         )
         rows: list[dict[str, object]] = []
-        for p_idx, (scene_obj, shot_obj) in enumerate(_owed_poses(model, poses, seed)):
-            scene, shot = scene_obj, shot_obj
-            truth = simulate_scan(scene.world, shot.pose, model.noise_free())  # type: ignore[attr-defined]
+        for p_idx, (scene, shot) in enumerate(owed_poses(model, poses, seed)):
+            truth = simulate_scan(scene.world, shot.pose, model.noise_free())
             bound = truth_bound(
-                shot.pose,  # type: ignore[attr-defined]
+                shot.pose,
                 truth.scan.angles_rad,
                 truth.scan.valid,
-                scene.survey,  # type: ignore[attr-defined]
+                scene.survey,
                 noise=cfg.noise,
                 beacon_beams=truth.beacon_mask(),
             )
             crb = np.sqrt(np.diag(bound))
+            evidence = detection_evidence(truth, scene.survey, range_sigma_m=model.range_sigma_m)
             rng = np.random.default_rng([seed, p_idx, 7])
             for d in range(draws):
-                sim = simulate_scan(scene.world, shot.pose, model, rng=rng)  # type: ignore[attr-defined]
-                fix = locate(sim.scan, scene.survey, config=cfg)  # type: ignore[attr-defined]
+                sim = simulate_scan(scene.world, shot.pose, model, rng=rng)
+                fix = locate(sim.scan, scene.survey, config=cfg)
                 row: dict[str, object] = {
                     "config": model.name,
-                    "scene": scene.name,  # type: ignore[attr-defined]
+                    "scene": scene.name,
                     "pose": p_idx,
                     "draw": d,
                     "fixed": int(fix.ok),
@@ -128,10 +148,13 @@ def run_accuracy(
                     "crb_e_m": crb[0],
                     "crb_n_m": crb[1],
                     "crb_a_rad": crb[2],
+                    "evidence_returns": evidence.returns,
+                    "evidence_range_m": evidence.range_m,
+                    "evidence_direction_sigma_deg": evidence.direction_sigma_deg,
                 }
                 if fix.ok and fix.pose is not None and fix.adjustment is not None:
                     adj = fix.adjustment
-                    p = shot.pose  # type: ignore[attr-defined]
+                    p = shot.pose
                     err = np.array(
                         [
                             fix.pose.easting - p.easting,
@@ -162,12 +185,15 @@ def run_accuracy(
                         points_used=fix.points_used,
                     )
                 rows.append(row)
+        rows_by_config[model.name] = rows
         summaries.append(_summarise(model.name, rows, poses, draws, time.perf_counter() - t0))
         if out_dir is not None:
             _write_rows(out_dir / f"accuracy_{model.name}.csv", rows)
         echo(_line(summaries[-1]))
+    echo(detection_table(rows_by_config))
     if out_dir is not None:
         _write_rows(out_dir / "accuracy_summary.csv", [asdict(s) for s in summaries])
+        _write_rows(out_dir / "detection.csv", detection_rows(detection_bins(rows_by_config)))
     return summaries
 
 
