@@ -7,7 +7,6 @@ import math
 from pathlib import Path
 
 import numpy as np
-import pytest
 from numpy.testing import assert_allclose
 
 from mast.apps.bench.accuracy import ACCURACY_CONFIGS, OWED_MIN_POINTS, owed_poses, run_accuracy

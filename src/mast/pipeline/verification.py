@@ -280,6 +280,24 @@ def _overrun(
     return out
 
 
+def _seen_from_front(edges: NDArray[np.float64], position: NDArray[np.float64]) -> bool:
+    """Whether a scanner at ``position`` is on the side the beacon stands out to.
+
+    A beacon is mounted on a wall with its nodes standing out from the chord
+    e1-e4 into the drift; seen from the chord's other side, the scanner would
+    be looking through the wall at the back of the beacon. A design whose
+    nodes do not stand out to one side passes.
+    """
+    chord = edges[3] - edges[0]
+    bump = 0.5 * (edges[1] + edges[2]) - edges[0]
+    out = chord[0] * bump[1] - chord[1] * bump[0]
+    rel = position - edges[0]
+    side = chord[0] * rel[1] - chord[1] * rel[0]
+    if abs(out) < 1e-9 * float(chord @ chord):
+        return True
+    return bool(out * side > 0)
+
+
 def _shows_a_bend(points: NDArray[np.float64], sigma_m: float, alpha: float) -> bool:
     """Whether returns said to lie on a beacon's panels are not one straight line.
 
@@ -335,6 +353,7 @@ def _support(
         if len(cs) >= 2
         and sum(cs) >= 2 * cfg.min_panel_points
         and checks.get(b, BeamCheck()).coverage >= cfg.min_coverage
+        and _seen_from_front(index.survey[b].edges, icp.pose.position)
     }
     if tracked:
         return counts, tuple(sorted(candidates)), ()
@@ -410,31 +429,40 @@ def verify(
     done: list[Verified] = []
     for h in hypotheses:
         start = h.similarity.pose()
-        if any(v.same_pose(start, cfg) for v in done):
-            continue
-        near = panels.near(start.position, reach)
-        if near.size == 0:
-            continue
-        start_gate = min(cfg.max_start_gate_m, cfg.start_gate_sigmas * h.spread_m)
-        wide = (start_gate,) if start_gate > gates[0] else ()
-        icp = icp_point_to_line(pts, start, panels, gates_m=(*wide, *gates), subset=near)
-        if any(v.same_pose(icp.pose, cfg) for v in out):
-            continue  # converged onto a pose already confirmed
-        checks = check_beams(scan, icp.pose, panels, noise, cfg, subset=near)
-        counts, supported, cornered = _support(
-            icp,
-            icp.pose.scanner_to_mine(pts),
-            panels,
-            index,
-            ident,
-            seg,
-            checks,
-            noise,
-            cfg,
-            tracked=h.kind == "prior",
-        )
-        v = Verified(h, icp, counts, supported, checks, cornered)
-        done.append(v)
+        again = next((v for v in done if v.same_pose(start, cfg)), None)
+        if again is not None:
+            # The same start refines to the same pose: judge it again under this
+            # hypothesis' labels (another beacon's name may be the right one).
+            if any(o.same_pose(again.pose, cfg) for o in out):
+                continue
+            v = Verified(
+                h, again.icp, again.panel_points, again.supported, again.checks, again.cornered
+            )
+        else:
+            near = panels.near(start.position, reach)
+            if near.size == 0:
+                continue
+            start_gate = min(cfg.max_start_gate_m, cfg.start_gate_sigmas * h.spread_m)
+            wide = (start_gate,) if start_gate > gates[0] else ()
+            icp = icp_point_to_line(pts, start, panels, gates_m=(*wide, *gates), subset=near)
+            if any(v.same_pose(icp.pose, cfg) for v in out):
+                continue  # converged onto a pose already confirmed
+            checks = check_beams(scan, icp.pose, panels, noise, cfg, subset=near)
+            counts, supported, cornered = _support(
+                icp,
+                icp.pose.scanner_to_mine(pts),
+                panels,
+                index,
+                ident,
+                seg,
+                checks,
+                noise,
+                cfg,
+                tracked=h.kind == "prior",
+            )
+            v = Verified(h, icp, counts, supported, checks, cornered)
+            done.append(v)
+        supported, checks = v.supported, v.checks
         if not set(h.beacons) <= set(supported):
             continue
         unoccluded = sum(c.hit + c.through for c in checks.values())
