@@ -329,6 +329,23 @@ def bench_minewide(
     run_minewide(poses=poses, copies=copies, seed=seed, echo=typer.echo)
 
 
+@bench_app.command("clutter")
+def bench_clutter(
+    data: Annotated[
+        Path, typer.Option("--data", help="Folder of real scans (../shared/data).")
+    ] = Path("../shared/data"),
+    beacons: Annotated[int, typer.Option("--beacons", min=2, help="Beacons mounted per log.")] = 29,
+    seed: Annotated[int, typer.Option("--seed", help="Seed of the designs and the noise.")] = 0,
+) -> None:
+    """Real clutter: beacons mounted on the real walls of CARMEN logs with corrected
+    poses, ray-cast into every scan; fixes where owed and wrong fixes per log."""
+    from mast.apps.bench.clutter import run_real_clutter
+
+    if not data.is_dir():
+        raise InputError("folder of real scans not found", path=data)
+    run_real_clutter(data, beacons=beacons, seed=seed, echo=typer.echo)
+
+
 @bench_app.command("real")
 def bench_real(
     data: Annotated[
