@@ -25,7 +25,7 @@ S. Thrun, W. Burgard and D. Fox, *Probabilistic Robotics*, 2005, sec. 6.3
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -246,7 +246,7 @@ def _overrun(
     about the line (the wall a panel meets at a shallow angle) is not a
     continuation: the returns past each end count only when the line through
     them keeps the panel's direction (their lateral drift along the reach is
-    within ``straight`` standard deviations of none).
+    within ``overrun_slope_sigmas`` standard deviations of none).
     """
     rel_all = points_mine[:, None, :] - panels.a[None, beacon_panels, :]
     t = np.einsum("nkj,kj->nk", rel_all, panels.direction[beacon_panels])
@@ -435,9 +435,7 @@ def verify(
             # hypothesis' labels (another beacon's name may be the right one).
             if any(o.same_pose(again.pose, cfg) for o in out):
                 continue
-            v = Verified(
-                h, again.icp, again.panel_points, again.supported, again.checks, again.cornered
-            )
+            v = replace(again, hypothesis=h)
         else:
             near = panels.near(start.position, reach)
             if near.size == 0:

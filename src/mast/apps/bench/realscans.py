@@ -21,9 +21,9 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
+from mast.apps.bench.clutter import cast_beacons
 from mast.apps.bench.robustness import is_wrong
 from mast.core.beacon import Beacon, Survey
-from mast.core.geometry import first_hits
 from mast.core.pose import Pose2D
 from mast.core.scan import Scan
 from mast.io import read_laserscans
@@ -96,24 +96,6 @@ def _mount(mid: NDArray[np.float64], direction: NDArray[np.float64]) -> NDArray[
     return DESIGN.mounted(mid, direction, tunnel_side=side)
 
 
-def _insert(
-    scan: Scan, beacons_scanner: list[NDArray[np.float64]], rng: np.random.Generator
-) -> Scan:
-    a = np.vstack([e[:-1] for e in beacons_scanner])
-    b = np.vstack([e[1:] for e in beacons_scanner])
-    dirs = np.stack([np.cos(scan.angles_rad), np.sin(scan.angles_rad)], axis=1)
-    t, j = first_hits(np.zeros(2), dirs, a, b)
-    r = scan.ranges_m.copy()
-    real = np.where(scan.valid, r, np.inf)
-    hit = (j >= 0) & (t < real) & (t >= scan.range_min_m) & (t <= scan.range_max_m)
-    # the panels are measured by the same scanner: its own noise level, from the scan
-    sigma = segment_scan(scan).noise_m
-    r[hit] = t[hit] + rng.normal(0.0, sigma, int(hit.sum()))
-    return Scan(
-        scan.angles_rad, r, None, scan.range_min_m, scan.range_max_m, scan.stamp_ns, scan.frame_id
-    )
-
-
 def run_real_scans(
     data_dir: Path, *, every: int = 10, echo: Callable[[str], object] = print
 ) -> list[RealScanSummary]:
@@ -139,10 +121,12 @@ def run_real_scans(
             if len(found) < 2:
                 continue
             edges = [_mount(m, d) for m, d in found]
-            inserted = _insert(scan, edges, rng)
             local = Survey(
                 [Beacon(f"I{k + 1}", POSE.scanner_to_mine(e)) for k, e in enumerate(edges)]
             )
+            # The panels are measured by the same scanner: its own noise level, from the scan.
+            noise = segment_scan(scan).noise_m
+            inserted = cast_beacons(scan, POSE, local, rng, noise_m=noise).scan
             fix = locate(inserted, local, config=cfg)
             s.inserted += 1
             if fix.ok and fix.pose is not None and fix.adjustment is not None:
