@@ -318,6 +318,26 @@ def _partition_impl(
     return merged
 
 
+def _refine(
+    points: NDArray[np.float64], pieces: list[tuple[int, int]], var: float, min_points: int
+) -> list[tuple[int, int]]:
+    """Partition every piece of a run again, its break paid for by its own length.
+
+    The penalty grows with ln n because a break is chosen among n places;
+    across a whole run of hundreds of returns that buries the bend between
+    two short panels far away (a few returns each) under a break the long
+    run's walls cannot afford. Within one piece the choice is among its own
+    returns, so a piece is split when the split pays the penalty of its length.
+    """
+    out: list[tuple[int, int]] = []
+    for i, j in pieces:
+        if j - i >= 2 * min_points and j - i < points.shape[0]:
+            out.extend((i + a, i + b) for a, b in _partition(points[i:j], var))
+        else:
+            out.append((i, j))
+    return out
+
+
 def _make_segment(
     index: int, run: int, beams: NDArray[np.intp], pts: NDArray[np.float64], noise: float
 ) -> Segment:
@@ -392,7 +412,7 @@ def segment_scan(scan: Scan, config: SegmentationConfig = SegmentationConfig()) 
         if sel.size < config.min_points:
             continue
         p = pts[sel]
-        pieces = _partition(p, noise**2)
+        pieces = _refine(p, _partition(p, noise**2), noise**2, config.min_points)
         prev: Segment | None = None
         for i, j in pieces:
             if j - i < config.min_points:

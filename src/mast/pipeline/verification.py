@@ -89,8 +89,9 @@ class VerificationConfig:
         Probability of a return beyond a surveyed panel at the true pose
         (edges, mixed pixels): what each through-beam costs in the likelihood.
     straight_alpha : float
-        Significance at which the returns on a beacon must reject one straight
-        line through them, for the beacon to support without an identified node.
+        Significance at which the returns on a beacon must prefer its surveyed
+        shape to one straight line through them (a likelihood-ratio test), for
+        the beacon to support without an identified node.
     corner_reach_m : float
         A corner of the scan this close to a beacon's node edge, but not on
         it, keeps the beacon from supporting the pose without an identified node.
@@ -237,12 +238,13 @@ def _overrun(
     sigma_m: float,
     cfg: VerificationConfig,
 ) -> dict[int, int]:
-    """Returns continuing each panel's line past its surveyed ends, on no other panel of the beacon.
+    """Returns continuing each panel's line past its nodes, on no other panel of the beacon.
 
-    A beacon's panels end at its edges: past a free end lies the rock, past a
-    node the next panel turns away. Returns that run on along a panel's line
-    belong to a longer surface — a wall, a shelf, a door frame — that merely
-    resembles the beacon where it is. A surface that only crosses the band
+    Past a node the next panel turns away: returns that run on along a
+    panel's line there belong to a longer surface — a wall, a shelf, a door
+    frame — that merely resembles the beacon where it is. The free ends (e1
+    and the last edge) are not looked past: there the beacon meets its wall,
+    which may well run on in the outer panel's line. A surface that only crosses the band
     about the line (the wall a panel meets at a shallow angle) is not a
     continuation: the returns past each end count only when the line through
     them keeps the panel's direction (their lateral drift along the reach is
@@ -257,13 +259,17 @@ def _overrun(
     margin = 2.0 * gate_m + cfg.edge_margin_m
     band = (np.abs(s) <= gate_m) & ~near_any[:, None]
     out: dict[int, int] = {}
+    numbers = panels.panel[beacon_panels]
+    first, last = int(numbers.min()), int(numbers.max())
     for col, k in enumerate(beacon_panels.tolist()):
         count = 0
         tk, sk, lk = t[:, col], s[:, col], float(length[0, col])
-        for beyond in (
-            (tk > lk) & (tk < lk + cfg.overrun_reach_m),
-            (tk < 0) & (tk > -cfg.overrun_reach_m),
-        ):
+        ends_checked = []
+        if int(panels.panel[k]) != last:
+            ends_checked.append((tk > lk) & (tk < lk + cfg.overrun_reach_m))
+        if int(panels.panel[k]) != first:
+            ends_checked.append((tk < 0) & (tk > -cfg.overrun_reach_m))
+        for beyond in ends_checked:
             ends = band[:, col] & beyond
             past = ends & ((tk > lk + margin) | (tk < -margin))
             n = int(past.sum())
@@ -298,19 +304,44 @@ def _seen_from_front(edges: NDArray[np.float64], position: NDArray[np.float64]) 
     return bool(out * side > 0)
 
 
-def _shows_a_bend(points: NDArray[np.float64], sigma_m: float, alpha: float) -> bool:
-    """Whether returns said to lie on a beacon's panels are not one straight line.
+def _shows_a_bend(
+    points: NDArray[np.float64],
+    to_panels_m: NDArray[np.float64],
+    origin: NDArray[np.float64],
+    noise: NoiseModel,
+    alpha: float,
+) -> bool:
+    """Whether a beacon's shape explains its returns better than one straight line.
 
     A flat wall crossing the place where a beacon should be puts returns near
-    its panels too; only a bend that one line cannot explain (the line's
-    chi-square rejected at ``alpha``) is the beacon's shape.
+    its panels too. The two explanations are compared by their chi-square
+    (a likelihood ratio): the returns' offsets from the best straight line
+    through them against their offsets ``to_panels_m`` from the surveyed
+    panels at the pose. Each offset is weighed by the noise a return really
+    has across the line: the range noise projected on the line's normal
+    (``sigma_r * |n . u|`` for a beam along ``u`` from ``origin``) and the
+    angle noise on its tangent (``rho * sigma_phi * |n x u|``), so an oblique
+    panel's returns are judged as tightly as they lie. The beacon wins when
+    the line's excess passes the chi-square(2) quantile at ``alpha`` (the line
+    has two free parameters; the panels none). Roughness and extra noise
+    inflate both sums alike, so rough rock does not pass for a bend.
     """
     n = points.shape[0]
     if n < 4:
         return False
-    q = points - points.mean(axis=0)
-    smallest = float(np.linalg.eigvalsh(q.T @ q)[0])
-    return bool(stats.chi2.sf(smallest / sigma_m**2, n - 2) < alpha)
+    centre = points.mean(axis=0)
+    q = points - centre
+    _, vecs = np.linalg.eigh(q.T @ q)
+    normal = vecs[:, 0]
+    ray = points - origin
+    rho = np.hypot(ray[:, 0], ray[:, 1])
+    u = ray / np.where(rho > 0, rho, 1.0)[:, None]
+    cos_n = u @ normal
+    var = (noise.range_sigma_m * cos_n) ** 2 + (rho * noise.angle_sigma_rad) ** 2 * (1 - cos_n**2)
+    var = np.maximum(var, (0.1 * noise.range_sigma_m) ** 2)
+    chi_line = float(np.sum((q @ normal) ** 2 / var))
+    chi_beacon = float(np.sum(to_panels_m**2 / (var + noise.survey_sigma_m**2)))
+    return chi_line - chi_beacon > float(stats.chi2.isf(alpha, 2))
 
 
 def _support(
@@ -388,8 +419,10 @@ def _support(
         if np.any(~on_edge & np.any(d[:, 1:3] < cfg.corner_reach_m, axis=1)):
             continue
         mine = np.flatnonzero(panels.beacon == beacon_no[b])
-        on_beacon = points_mine[np.isin(icp.panel, mine)]
-        if not _shows_a_bend(on_beacon, noise.gate_sigma_m, cfg.straight_alpha):
+        on = np.isin(icp.panel, mine)
+        if not _shows_a_bend(
+            points_mine[on], icp.residual_m[on], icp.pose.position, noise, cfg.straight_alpha
+        ):
             continue
         over = _overrun(points_mine, panels, mine, gate, noise.gate_sigma_m, cfg)
         clean = all(
