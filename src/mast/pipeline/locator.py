@@ -103,6 +103,10 @@ class LocatorConfig:
         Where the scanner is believed to be. Hypotheses outside its window are
         not considered; a narrow one (see :class:`TrackingConfig`) is searched
         directly, without identification.
+    prior_margin_m, prior_margin_rad : float
+        How far outside the prior's window a pose may be estimated and still
+        count as inside: a true pose on the rim is estimated a few millimetres
+        either side of it.
     """
 
     range_sigma_m: float = 0.01
@@ -111,9 +115,11 @@ class LocatorConfig:
     min_beacons: int = 2
     min_cornered: int = 1
     ambiguity_log_ratio: float = math.log(1e4)
-    likelihood_tempering: float = 10.0
+    likelihood_tempering: float = 5.0
     reject_alpha: float = 1e-3
     prior: Prior | None = None
+    prior_margin_m: float = 0.05
+    prior_margin_rad: float = math.radians(0.5)
     segmentation: SegmentationConfig = field(default_factory=SegmentationConfig)
     identification: IdentificationConfig = field(default_factory=IdentificationConfig)
     hypotheses: HypothesisConfig = field(default_factory=HypothesisConfig)
@@ -267,6 +273,7 @@ def locate(scan: Scan, survey: Survey, *, config: LocatorConfig | None = None) -
         return Fix(**fields)  # type: ignore[arg-type]
 
     # Stages 1-3: segments, identified panels, pose hypotheses.
+    margin = (cfg.prior_margin_m, cfg.prior_margin_rad)
     seg = segment_scan(scan, cfg.segmentation)
     found["segmentation"] = seg
     ident = PanelIdentification((), ())
@@ -289,7 +296,7 @@ def locate(scan: Scan, survey: Survey, *, config: LocatorConfig | None = None) -
             ident, seg, index, cfg.hypotheses, survey_sigma_m=noise.survey_sigma_m
         )
         if cfg.prior is not None:
-            hyps = [h for h in hyps if cfg.prior.admits(h.similarity.pose())]
+            hyps = [h for h in hyps if cfg.prior.admits(h.similarity.pose(), *margin)]
         if not hyps:
             where = "" if cfg.prior is None else f" within the prior {cfg.prior.pose}"
             return finish(
@@ -300,7 +307,7 @@ def locate(scan: Scan, survey: Survey, *, config: LocatorConfig | None = None) -
     # Stage 4: ICP and every beam's verdict; the best pose by likelihood, unless ambiguous.
     verified = verify(hyps, scan, panels, index, ident, seg, noise, cfg.verification)
     if cfg.prior is not None:
-        verified = [v for v in verified if cfg.prior.admits(v.pose)]
+        verified = [v for v in verified if cfg.prior.admits(v.pose, *margin)]
     found["verified"] = tuple(verified)
     if not verified:
         return finish(reason="inconsistent", detail="no pose hypothesis is confirmed by the beams")

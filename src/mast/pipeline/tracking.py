@@ -47,15 +47,19 @@ class Prior:
     radius_m: float
     azimuth_tolerance_rad: float | None = None
 
-    def admits(self, pose: Pose2D) -> bool:
-        """Whether ``pose`` lies inside the prior's window."""
+    def admits(self, pose: Pose2D, margin_m: float = 0.0, margin_rad: float = 0.0) -> bool:
+        """Whether ``pose`` lies inside the prior's window, widened by the margins.
+
+        The margins are the estimate's own uncertainty: a true pose on the
+        window's rim is estimated a few millimetres either side of it.
+        """
         d = math.hypot(pose.easting - self.pose.easting, pose.northing - self.pose.northing)
-        if d > self.radius_m:
+        if d > self.radius_m + margin_m:
             return False
         if self.azimuth_tolerance_rad is None:
             return True
         da = abs(math.remainder(pose.azimuth - self.pose.azimuth, 2 * math.pi))
-        return da <= self.azimuth_tolerance_rad
+        return da <= self.azimuth_tolerance_rad + margin_rad
 
 
 @dataclass(frozen=True, slots=True)
