@@ -211,13 +211,19 @@ def _choose(verified: list[Verified], cfg: LocatorConfig) -> tuple[Verified | No
     best = full[0]
     # Any other pose the beams confirm competes, cornered or not, within the margin.
     # A pose one beacon short of a fix competes too when it explains the scan
-    # better than the best confirmed one: then the beacon that made the fix is
-    # the doubtful one (a look-alike read into returns a better pose explains).
+    # better than the best confirmed one and its beacon is identified by a
+    # corner: then the beacon that made the fix is the doubtful one (a
+    # look-alike read into returns a better pose explains).
     margin = cfg.ambiguity_log_ratio * cfg.likelihood_tempering
     for other in verified:
         if other is best or other.same_pose(best.pose, cfg.verification):
             continue
-        slack = margin if len(other.supported) >= cfg.min_beacons else 0.0
+        if len(other.supported) >= cfg.min_beacons:
+            slack = margin
+        elif other.cornered:
+            slack = 0.0
+        else:
+            continue  # one beacon, not even identified by a corner: a wall's bend can do that
         if other.log_likelihood >= best.log_likelihood - slack:
             return (
                 None,

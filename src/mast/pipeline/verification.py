@@ -359,25 +359,23 @@ def _support(
     """Beacons that confirm a pose, the returns on each panel, and the cornered beacons.
 
     A beacon confirms the pose when, at that pose, (1) two of its panels
-    carry at least ``min_panel_points`` returns, (2) at least ``min_coverage``
-    of the unoccluded beams that should hit it do, and (3) its returns are
-    the beacon's and not clutter's: a corner of the scan identified as one of
-    its edges lands on that edge, or no panel's returns run on past its ends
-    and they show a bend one straight line cannot explain. When ``tracked``
-    (a prior already says which beacon is where) (1) is two panels with
-    returns, ``2 * min_panel_points`` in all, and (3) is not asked: panels
-    too short for the noise to show their shape still confirm.
+    have returns, ``2 * min_panel_points`` in all, (2) at least
+    ``min_coverage`` of the unoccluded beams that should hit it do, and (3)
+    its returns are the beacon's and not clutter's: a corner of the scan
+    identified as one of its edges lands on that edge, or two panels carry
+    ``min_panel_points`` returns each, no panel's returns run on past its
+    nodes, and they show a bend one straight line cannot explain. When
+    ``tracked`` (a prior already says which beacon is where) (3) is not
+    asked: panels too short for the noise to show their shape still confirm.
     """
     counts: dict[tuple[str, int], int] = {}
     idx, n = np.unique(icp.panel[icp.panel >= 0], return_counts=True)
     for k, c in zip(idx, n, strict=True):
         counts[(panels.ids[panels.beacon[k]], int(panels.panel[k]))] = int(c)
-    # Tracked, two panels with returns and as many in all as two panels need suffice.
-    per_panel = 1 if tracked else cfg.min_panel_points
+    # Loosely: two panels with returns and as many in all as two panels need.
     per_beacon: dict[str, list[int]] = {}
     for (b, _panel), c in counts.items():
-        if c >= per_panel:
-            per_beacon.setdefault(b, []).append(c)
+        per_beacon.setdefault(b, []).append(c)
     candidates = {
         b
         for b, cs in per_beacon.items()
@@ -402,6 +400,10 @@ def _support(
             ):
                 node_ok.add(b)
     supported = set(node_ok)
+    # Without a node of its own, each of two panels must show its returns.
+    candidates = {
+        b for b in candidates if sum(c >= cfg.min_panel_points for c in per_beacon[b]) >= 2
+    }
     beacon_no = {bid: k for k, bid in enumerate(panels.ids)}
     corners = (
         icp.pose.scanner_to_mine(np.array([c.node for c in seg.corners]))
