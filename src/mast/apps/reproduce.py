@@ -445,8 +445,9 @@ def _report(rows: list[ShotResult], draws: int) -> str:
         "- **Beacon size is not a major factor: true without noise, not with it.** Noise-free every "
         f"size fixes exactly. With {1000 * NOISE_M:g} mm noise, size decides whether the beacons can be "
         f"identified at all: {size_text}. The 0.499 m beacon's panels (0.08–0.25 m, a few returns "
-        "each at 9 m) bend by less than the noise can show, so no corner is identified and the "
-        "locator (rightly) gives no fix; the paper, noise-free, could not see this.",
+        "each at 9 m) bend by hardly more than the noise can show: where no corner is identified "
+        "or the beams cannot tell its shape from a straight wall, the locator (rightly) gives no "
+        "fix; the paper, noise-free, could not see this.",
         "- **Point density is not a major factor: agree.** Near one beacon (P1, P5–P7) the scan "
         f"holds about {_f(dense_pts, 0)} returns on the beacons, midway (P2–P4) about {_f(sparse_pts, 0)}; "
         f"RMS position error {_f(dense_pos, 1)} mm against {_f(sparse_pos, 1)} mm, RMS azimuth error "

@@ -127,6 +127,23 @@ class PanelSet:
         d = np.hypot(mid[:, 0] - position[0], mid[:, 1] - position[1])
         return np.flatnonzero(d <= radius_m + 0.5 * self.length)
 
+    def within(
+        self,
+        points_mine: NDArray[np.float64],
+        reach_m: float,
+        *,
+        subset: NDArray[np.intp] | None = None,
+    ) -> NDArray[np.bool_]:
+        """Points within ``reach_m`` (Euclidean) of any panel segment."""
+        panels = np.arange(len(self)) if subset is None else subset
+        if points_mine.shape[0] == 0 or panels.size == 0:
+            return np.zeros(points_mine.shape[0], dtype=bool)
+        rel = points_mine[:, None, :] - self.a[None, panels, :]
+        t = np.einsum("nkj,kj->nk", rel, self.direction[panels])
+        s = np.einsum("nkj,kj->nk", rel, self.normal[panels])
+        over = np.maximum(np.maximum(-t, t - self.length[panels][None, :]), 0.0)
+        return np.asarray(np.any(over**2 + s**2 <= reach_m**2, axis=1))
+
     def associate(
         self,
         points_mine: NDArray[np.float64],
