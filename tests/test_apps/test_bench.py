@@ -153,3 +153,14 @@ def test_minewide_copies_do_not_crowd_out_the_true_single_hypothesis() -> None:
 def test_minewide_run_does_not_depend_on_survey_order() -> None:
     s = run_minewide(poses=3, copies=40, copies_first=True, echo=lambda _: None)
     assert [x.local_status for x in s.scans] == [x.minewide_status for x in s.scans]
+
+
+def test_tracking_bench_good_prior_fixes_wrong_prior_refuses() -> None:
+    from mast.apps.bench.tracking import run_tracking
+
+    lines: list[str] = []
+    (s,) = run_tracking(configs=(MODEL,), poses=4, draws=1, echo=lines.append)
+    assert s.scans == s.wrong_prior_scans == 4
+    assert s.fixed == 4 and s.wrong == 0
+    assert s.wrong_prior_fixes == 0
+    assert "good prior: fixed 4/4" in lines[0]

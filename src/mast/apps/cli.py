@@ -329,6 +329,21 @@ def bench_minewide(
     run_minewide(poses=poses, copies=copies, seed=seed, echo=typer.echo)
 
 
+@bench_app.command("tracking")
+def bench_tracking(
+    poses: Annotated[
+        int, typer.Option("--poses", min=1, help="Owed poses per configuration.")
+    ] = 40,
+    draws: Annotated[int, typer.Option("--draws", min=1, help="Noise draws per pose.")] = 3,
+    seed: Annotated[int, typer.Option("--seed", help="First scene seed.")] = 0,
+) -> None:
+    """Tracking: the accuracy benchmark's owed scans with a prior within 0.5 m and 5 degrees
+    (a fix owed on every one), and with a prior 1.5 m off (no fix owed)."""
+    from mast.apps.bench.tracking import run_tracking
+
+    run_tracking(poses=poses, draws=draws, seed=seed, echo=typer.echo)
+
+
 @bench_app.command("clutter")
 def bench_clutter(
     data: Annotated[

@@ -1,0 +1,121 @@
+"""Tracking benchmark: a fix from a prior pose, and no fix from a wrong one.
+
+The accuracy benchmark's owed poses and noise draws (its first ``draws``
+draws of each pose), located with a prior as a vehicle's previous fix or a
+surveyor's ``--near`` gives one:
+
+- **good prior**: centred within ``radius_m`` and ``tolerance_deg`` of the
+  true pose (drawn uniformly over the disc and the angle window), with that
+  radius and tolerance. Every such scan is owed a fix.
+- **wrong prior**: centred ``wrong_offset_m`` from the true pose (in a random
+  direction), azimuth within the tolerance, same radius: the true pose lies
+  outside the window, so the only right answer is ``no_fix``. A fix here
+  followed the prior.
+
+A good-prior fix is wrong when it is more than 5 cm or 0.25° off and outside
+five of its own standard deviations (as in the robustness benchmark).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections import Counter
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from mast.apps.bench.accuracy import ACCURACY_CONFIGS, owed_poses
+from mast.apps.bench.robustness import is_wrong
+from mast.core.pose import Pose2D
+from mast.pipeline.locator import LocatorConfig, locate
+from mast.pipeline.tracking import Prior
+from mast.sim import ScannerModel, simulate_scan
+
+__all__ = ["TrackingSummary", "run_tracking"]
+
+
+@dataclass(slots=True)
+class TrackingSummary:
+    config: str
+    scans: int = 0
+    fixed: int = 0
+    wrong: int = 0
+    wrong_prior_scans: int = 0
+    wrong_prior_fixes: int = 0
+    misses: Counter[str] = field(default_factory=Counter)
+    seconds: float = 0.0
+
+    @property
+    def fix_rate(self) -> float:
+        return self.fixed / self.scans if self.scans else math.nan
+
+    def line(self) -> str:
+        why = ", ".join(f"{k} {v}" for k, v in self.misses.most_common()) or "-"
+        return (
+            f"{self.config:22s} good prior: fixed {self.fixed}/{self.scans} "
+            f"({100 * self.fix_rate:5.1f} %) WRONG {self.wrong}  misses: {why};  "
+            f"wrong prior: fixes {self.wrong_prior_fixes}/{self.wrong_prior_scans}  "
+            f"({self.seconds:.0f} s)"
+        )
+
+
+def _offset(pose: Pose2D, distance_m: float, bearing: float, turn: float) -> Pose2D:
+    return Pose2D(
+        pose.easting + distance_m * math.cos(bearing),
+        pose.northing + distance_m * math.sin(bearing),
+        (pose.azimuth + turn) % (2 * math.pi),
+    )
+
+
+def run_tracking(
+    *,
+    configs: Sequence[ScannerModel] = ACCURACY_CONFIGS,
+    poses: int = 40,
+    draws: int = 3,
+    radius_m: float = 0.5,
+    tolerance_deg: float = 5.0,
+    wrong_offset_m: float = 1.5,
+    seed: int = 0,
+    echo: Callable[[str], object] = print,
+) -> list[TrackingSummary]:
+    """Locate the accuracy benchmark's owed draws with good and with wrong priors."""
+    out: list[TrackingSummary] = []
+    tol = math.radians(tolerance_deg)
+    for model in configs:
+        t0 = time.perf_counter()
+        s = TrackingSummary(model.name)
+        cfg = LocatorConfig(
+            range_sigma_m=model.range_sigma_m,
+            angle_sigma_rad=model.angle_sigma_rad,
+            survey_sigma_m=0.0,
+        )
+        prng = np.random.default_rng([seed, 5])
+        for p_idx, (scene, shot) in enumerate(owed_poses(model, poses, seed)):
+            rng = np.random.default_rng([seed, p_idx, 7])  # the accuracy benchmark's draws
+            truth = shot.pose
+            for _ in range(draws):
+                sim = simulate_scan(scene.world, truth, model, rng=rng)
+                r = radius_m * math.sqrt(prng.uniform())
+                guess = _offset(truth, r, prng.uniform(0, 2 * math.pi), prng.uniform(-tol, tol))
+                fix = locate(
+                    sim.scan, scene.survey, config=replace(cfg, prior=Prior(guess, radius_m, tol))
+                )
+                s.scans += 1
+                s.fixed += fix.ok
+                s.wrong += is_wrong(fix, truth)
+                if not fix.ok:
+                    s.misses[fix.reason] += 1
+                away = _offset(
+                    truth, wrong_offset_m, prng.uniform(0, 2 * math.pi), prng.uniform(-tol, tol)
+                )
+                bad = locate(
+                    sim.scan, scene.survey, config=replace(cfg, prior=Prior(away, radius_m, tol))
+                )
+                s.wrong_prior_scans += 1
+                s.wrong_prior_fixes += bad.ok
+        s.seconds = time.perf_counter() - t0
+        echo(s.line())
+        out.append(s)
+    return out
