@@ -161,6 +161,7 @@ def test_tracking_bench_good_prior_fixes_wrong_prior_refuses() -> None:
     lines: list[str] = []
     (s,) = run_tracking(configs=(MODEL,), poses=4, draws=1, echo=lines.append)
     assert s.scans == s.wrong_prior_scans == 4
-    assert s.fixed == 4 and s.wrong == 0
+    assert s.fixed == 4
+    assert s.wrong == 0
     assert s.wrong_prior_fixes == 0
     assert "good prior: fixed 4/4" in lines[0]

@@ -365,8 +365,12 @@ def _support(
     identified as one of its edges lands on that edge, or two panels carry
     ``min_panel_points`` returns each, no panel's returns run on past its
     nodes, and they show a bend one straight line cannot explain. When
-    ``tracked`` (a prior already says which beacon is where) (3) is not
-    asked: panels too short for the noise to show their shape still confirm.
+    ``tracked`` (a prior already says which beacon is where) no node is
+    identified and two panels with returns suffice, but the returns must
+    still bend as the beacon does and not run on past its nodes (a wrong
+    prior must not let clutter, or a few returns of the right beacons,
+    confirm a pose the beams do not prove); a stray corner beside an edge is
+    not held against them (the prior, not a corner, names the beacon).
     """
     counts: dict[tuple[str, int], int] = {}
     idx, n = np.unique(icp.panel[icp.panel >= 0], return_counts=True)
@@ -384,8 +388,6 @@ def _support(
         and checks.get(b, BeamCheck()).coverage >= cfg.min_coverage
         and _seen_from_front(index.survey[b].edges, icp.pose.position)
     }
-    if tracked:
-        return counts, tuple(sorted(candidates)), ()
     gate = cfg.gate_sigmas * noise.gate_sigma_m
     gate_node = cfg.gate_sigmas * math.hypot(seg.noise_m * 3.0, noise.gate_sigma_m)
     node_ok: set[str] = set()
@@ -400,10 +402,12 @@ def _support(
             ):
                 node_ok.add(b)
     supported = set(node_ok)
-    # Without a node of its own, each of two panels must show its returns.
-    candidates = {
-        b for b in candidates if sum(c >= cfg.min_panel_points for c in per_beacon[b]) >= 2
-    }
+    # Without a node of its own, each of two panels must show its returns
+    # (unless a prior already says which beacon is where).
+    if not tracked:
+        candidates = {
+            b for b in candidates if sum(c >= cfg.min_panel_points for c in per_beacon[b]) >= 2
+        }
     beacon_no = {bid: k for k, bid in enumerate(panels.ids)}
     corners = (
         icp.pose.scanner_to_mine(np.array([c.node for c in seg.corners]))
@@ -418,7 +422,7 @@ def _support(
         edges = index.survey[b].edges
         d = np.hypot(*(corners[:, None, :] - edges[None, :, :]).transpose(2, 0, 1))
         on_edge = np.any(d <= gate_node, axis=1)
-        if np.any(~on_edge & np.any(d[:, 1:3] < cfg.corner_reach_m, axis=1)):
+        if not tracked and np.any(~on_edge & np.any(d[:, 1:3] < cfg.corner_reach_m, axis=1)):
             continue
         mine = np.flatnonzero(panels.beacon == beacon_no[b])
         on = np.isin(icp.panel, mine)

@@ -106,7 +106,7 @@ def run_tracking(
                 s.fixed += fix.ok
                 s.wrong += is_wrong(fix, truth)
                 if not fix.ok:
-                    s.misses[fix.reason] += 1
+                    s.misses[fix.reason or "no_fix"] += 1
                 away = _offset(
                     truth, wrong_offset_m, prng.uniform(0, 2 * math.pi), prng.uniform(-tol, tol)
                 )
