@@ -127,6 +127,19 @@ class PanelSet:
         d = np.hypot(mid[:, 0] - position[0], mid[:, 1] - position[1])
         return np.flatnonzero(d <= radius_m + 0.5 * self.length)
 
+    def project(
+        self, points_mine: NDArray[np.float64], panels: NDArray[np.intp]
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Each point in each panel's frame: distance along it from ``a`` and across it.
+
+        Returns ``(t, s)``, both of shape ``(points, panels)``; ``s`` is signed
+        along the panel's normal.
+        """
+        rel = points_mine[:, None, :] - self.a[None, panels, :]
+        t = np.einsum("nkj,kj->nk", rel, self.direction[panels])
+        s = np.einsum("nkj,kj->nk", rel, self.normal[panels])
+        return t, s
+
     def within(
         self,
         points_mine: NDArray[np.float64],
@@ -138,9 +151,7 @@ class PanelSet:
         panels = np.arange(len(self)) if subset is None else subset
         if points_mine.shape[0] == 0 or panels.size == 0:
             return np.zeros(points_mine.shape[0], dtype=bool)
-        rel = points_mine[:, None, :] - self.a[None, panels, :]
-        t = np.einsum("nkj,kj->nk", rel, self.direction[panels])
-        s = np.einsum("nkj,kj->nk", rel, self.normal[panels])
+        t, s = self.project(points_mine, panels)
         over = np.maximum(np.maximum(-t, t - self.length[panels][None, :]), 0.0)
         return np.asarray(np.any(over**2 + s**2 <= reach_m**2, axis=1))
 
@@ -162,9 +173,7 @@ class PanelSet:
         panels = np.arange(len(self)) if subset is None else subset
         if n == 0 or panels.size == 0:
             return idx, dist
-        rel = points_mine[:, None, :] - self.a[None, panels, :]
-        t = np.einsum("nkj,kj->nk", rel, self.direction[panels])
-        s = np.einsum("nkj,kj->nk", rel, self.normal[panels])
+        t, s = self.project(points_mine, panels)
         g = np.broadcast_to(
             np.asarray(gate, dtype=float).reshape(-1, 1) if np.ndim(gate) else gate, s.shape
         )

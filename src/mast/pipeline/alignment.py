@@ -152,13 +152,14 @@ def icp_point_to_line(
     p = pose
     total = 0
     converged = False
-    all_points = points_scanner
     # Only returns that could come within a gate of a panel take part in the
     # iterations: twice the widest gate from one at the start (the pose moves
     # by less than a gate), so a few dozen returns, not the whole scan.
-    near = panels.within(pose.scanner_to_mine(all_points), 2.0 * max(gates_m) + 0.05, subset=subset)
-    points_scanner = all_points[near]
-    panel = np.full(points_scanner.shape[0], -1, dtype=np.intp)
+    near = panels.within(
+        pose.scanner_to_mine(points_scanner), 2.0 * max(gates_m) + 0.05, subset=subset
+    )
+    pts = points_scanner[near]
+    panel = np.full(pts.shape[0], -1, dtype=np.intp)
     for stage, gate in enumerate(gates_m):
         converged = False
         final = stage == len(gates_m) - 1
@@ -166,7 +167,7 @@ def icp_point_to_line(
         seen: set[bytes] = set()
         for _ in range(max_iterations):
             total += 1
-            m = p.scanner_to_mine(points_scanner)
+            m = p.scanner_to_mine(pts)
             panel, dist = panels.associate(m, gate, subset=subset)
             # A coarse stage only has to bring the returns to their panels: once the
             # matches stop changing, the next (narrower) stage takes over.
@@ -202,7 +203,7 @@ def icp_point_to_line(
             if math.hypot(x[0], x[1]) < tol_m and abs(x[2]) < max(tolerance_rad, tol_m / 100.0):
                 converged = True
                 break
-    m = p.scanner_to_mine(all_points)
+    m = p.scanner_to_mine(points_scanner)
     panel, dist = panels.associate(m, gates_m[-1], subset=subset)
     resid = np.where(panel >= 0, dist, np.nan)
     return IcpResult(p, total, converged, panel, resid)

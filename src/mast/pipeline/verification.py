@@ -244,18 +244,17 @@ def _overrun(
     panel's line there belong to a longer surface — a wall, a shelf, a door
     frame — that merely resembles the beacon where it is. The free ends (e1
     and the last edge) are not looked past: there the beacon meets its wall,
-    which may well run on in the outer panel's line. A surface that only crosses the band
-    about the line (the wall a panel meets at a shallow angle) is not a
-    continuation: the returns past each end count only when the line through
-    them keeps the panel's direction (their lateral drift along the reach is
-    within ``overrun_slope_sigmas`` standard deviations of none).
+    which may well run on in the outer panel's line. A surface that only
+    crosses the band about the line (the wall a panel meets at a shallow
+    angle) is not a continuation: the returns past each end count only when
+    the line through them keeps the panel's direction (their lateral drift
+    along the reach is within ``overrun_slope_sigmas`` standard deviations of
+    none).
     """
-    rel_all = points_mine[:, None, :] - panels.a[None, beacon_panels, :]
-    t = np.einsum("nkj,kj->nk", rel_all, panels.direction[beacon_panels])
-    s = np.einsum("nkj,kj->nk", rel_all, panels.normal[beacon_panels])
+    t, s = panels.project(points_mine, beacon_panels)
     length = panels.length[beacon_panels][None, :]
     on_panel = (np.abs(s) <= gate_m) & (t >= -gate_m) & (t <= length + gate_m)
-    near_any = on_panel.any(axis=1)
+    near_any = np.asarray(on_panel.any(axis=1), dtype=bool)
     margin = 2.0 * gate_m + cfg.edge_margin_m
     band = (np.abs(s) <= gate_m) & ~near_any[:, None]
     out: dict[int, int] = {}
