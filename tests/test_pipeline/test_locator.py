@@ -1,6 +1,7 @@
 """The locator end to end, on the simulator: exact when noise-free, never a wrong fix."""
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -238,3 +239,28 @@ def test_survey_sigma_is_in_every_record() -> None:
     assert rec["survey_sigma_m"] == 0.0
     assert rec["range_sigma_m"] == 0.01
     assert rec["angle_sigma_rad"] == 0.0
+
+
+def test_a_prior_confirms_a_second_beacon_whose_bend_is_inside_the_noise() -> None:
+    # The accuracy benchmark's 22nd owed pose at 270/0.25 deg, 12 mm: one beacon
+    # shows 45 returns on one panel and 3 on the next, a bend no likelihood-ratio
+    # test can see. From scratch that is one beacon; with a prior the first
+    # beacon fixes the pose and the second lies where it puts it.
+    from mast.apps.bench.accuracy import ACCURACY_CONFIGS, owed_poses
+    from mast.pipeline.tracking import Prior
+
+    model = ACCURACY_CONFIGS[1]
+    scene, shot = owed_poses(model, 22, 0)[21]
+    truth = shot.pose
+    sim = simulate_scan(scene.world, truth, model, rng=np.random.default_rng([0, 21, 7]))
+    cfg = LocatorConfig(range_sigma_m=model.range_sigma_m, survey_sigma_m=0.0)
+    alone = locate(sim.scan, scene.survey, config=cfg)
+    assert not alone.ok
+    assert alone.reason == "one_beacon"
+    start = Pose2D(truth.easting + 0.2, truth.northing - 0.25, truth.azimuth + math.radians(3))
+    fix = locate(sim.scan, scene.survey, config=replace(cfg, prior=Prior(start, 0.5, 0.1)))
+    assert fix.ok, fix.detail
+    assert fix.chosen is not None
+    assert len(fix.chosen.shaped) == 1
+    d, _ = _errors(fix, truth)
+    assert d < 0.02

@@ -351,14 +351,22 @@ def bench_clutter(
     ] = Path("../shared/data"),
     beacons: Annotated[int, typer.Option("--beacons", min=2, help="Beacons mounted per log.")] = 29,
     seed: Annotated[int, typer.Option("--seed", help="Seed of the designs and the noise.")] = 0,
+    priors: Annotated[
+        bool,
+        typer.Option(
+            "--priors/--no-priors",
+            help="Also locate every scan with a good prior (0.5 m, 5 deg) and a wrong one.",
+        ),
+    ] = True,
 ) -> None:
     """Real clutter: beacons mounted on the real walls of CARMEN logs with corrected
-    poses, ray-cast into every scan; fixes where owed and wrong fixes per log."""
+    poses, ray-cast into every scan; fixes where owed and wrong fixes per log, also
+    when tracking from a good or a wrong prior."""
     from mast.apps.bench.clutter import run_real_clutter
 
     if not data.is_dir():
         raise InputError("folder of real scans not found", path=data)
-    run_real_clutter(data, beacons=beacons, seed=seed, echo=typer.echo)
+    run_real_clutter(data, beacons=beacons, seed=seed, priors=priors, echo=typer.echo)
 
 
 @bench_app.command("real")

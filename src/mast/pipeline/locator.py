@@ -201,7 +201,9 @@ def _choose(verified: list[Verified], cfg: LocatorConfig) -> tuple[Verified | No
     # A tracked prior already says which beacon is which.
     confirmed = [v for v in verified if len(v.supported) >= cfg.min_beacons]
     full = [
-        v for v in confirmed if v.hypothesis.kind == "prior" or len(v.cornered) >= cfg.min_cornered
+        v
+        for v in confirmed
+        if len(v.shaped if v.hypothesis.kind == "prior" else v.cornered) >= cfg.min_cornered
     ]
     if not full:
         best = verified[0] if verified else None
@@ -209,18 +211,19 @@ def _choose(verified: list[Verified], cfg: LocatorConfig) -> tuple[Verified | No
         return None, "one_beacon", f"only beacon {names} confirmed by the beams"
     full.sort(key=lambda v: v.log_likelihood, reverse=True)
     best = full[0]
-    # Any other pose the beams confirm competes, cornered or not, within the margin.
-    # A pose one beacon short of a fix competes too when it explains the scan
-    # better than the best confirmed one and its beacon is identified by a
-    # corner: then the beacon that made the fix is the doubtful one (a
-    # look-alike read into returns a better pose explains).
+    # Any other pose whose beacons prove their shape competes, cornered or not,
+    # within the margin. A pose one shaped beacon short of a fix competes too
+    # when it explains the scan better than the best confirmed one and its
+    # beacon is identified by a corner (then the beacon that made the fix is
+    # the doubtful one: a look-alike read into returns a better pose explains)
+    # or a tracked pose's second beacon merely lies where that pose puts it.
     margin = cfg.ambiguity_log_ratio * cfg.likelihood_tempering
     for other in verified:
         if other is best or other.same_pose(best.pose, cfg.verification):
             continue
-        if len(other.supported) >= cfg.min_beacons:
+        if len(other.shaped) >= cfg.min_beacons:
             slack = margin
-        elif other.cornered:
+        elif other.cornered or len(other.supported) >= cfg.min_beacons:
             slack = 0.0
         else:
             continue  # one beacon, not even identified by a corner: a wall's bend can do that

@@ -82,6 +82,10 @@ class TrackingConfig:
         Returns used in the search at most (evenly thinned beyond).
     candidates : int
         Distinct best poses handed on as hypotheses.
+    distinct_m : float
+        Two grid poses are distinct hypotheses when one moves the returns by
+        at least this much from the other (translation, or rotation times the
+        returns' median range): closer ones fall in the same ICP basin.
     """
 
     max_radius_m: float = 2.0
@@ -89,7 +93,8 @@ class TrackingConfig:
     step_m: float = 0.04
     field_resolution_m: float = 0.02
     max_points: int = 600
-    candidates: int = 3
+    candidates: int = 6
+    distinct_m: float = 0.1
 
 
 def _likelihood_field(
@@ -182,14 +187,16 @@ def prior_hypotheses(
         ok = (gi >= 0) & (gi < shape[0]) & (gj >= 0) & (gj < shape[1])
         score = np.where(ok, field[np.clip(gi, 0, shape[0] - 1), np.clip(gj, 0, shape[1] - 1)], 0.0)
         total = score.sum(axis=1)
-        for t in np.argsort(total)[-config.candidates :]:
+        for t in np.argsort(total)[-4 * config.candidates :]:
             best.append((float(total[t]), rot, float(tx[t]), float(ty[t])))
     best.sort(reverse=True)
     out: list[Hypothesis] = []
     chosen: list[tuple[float, float, float]] = []
+    reach = float(np.median(r))
     for total_score, rot, x, y in best:
         if any(
-            math.hypot(x - cx, y - cy) < 4 * step and abs(rot - cr) < 4 * d_rot
+            math.hypot(x - cx, y - cy) < config.distinct_m
+            and abs(rot - cr) * reach < config.distinct_m
             for cr, cx, cy in chosen
         ):
             continue

@@ -208,6 +208,8 @@ class Verified:
     checks: dict[str, BeamCheck]
     cornered: tuple[str, ...] = ()
     """Supporting beacons on whose surveyed edge an identified corner of the scan lands."""
+    shaped: tuple[str, ...] = ()
+    """Supporting beacons whose returns prove their shape: cornered, or bent as no line is."""
 
     @property
     def pose(self) -> Pose2D:
@@ -303,31 +305,21 @@ def _seen_from_front(edges: NDArray[np.float64], position: NDArray[np.float64]) 
     return bool(out * side > 0)
 
 
-def _shows_a_bend(
+def _straight_and_fitted(
     points: NDArray[np.float64],
     to_panels_m: NDArray[np.float64],
     origin: NDArray[np.float64],
     noise: NoiseModel,
-    alpha: float,
-) -> bool:
-    """Whether a beacon's shape explains its returns better than one straight line.
+) -> tuple[float, float]:
+    """Chi-squares of a beacon's returns about one straight line and about its panels.
 
-    A flat wall crossing the place where a beacon should be puts returns near
-    its panels too. The two explanations are compared by their chi-square
-    (a likelihood ratio): the returns' offsets from the best straight line
-    through them against their offsets ``to_panels_m`` from the surveyed
-    panels at the pose. Each offset is weighed by the noise a return really
-    has across the line: the range noise projected on the line's normal
-    (``sigma_r * |n . u|`` for a beam along ``u`` from ``origin``) and the
-    angle noise on its tangent (``rho * sigma_phi * |n x u|``), so an oblique
-    panel's returns are judged as tightly as they lie. The beacon wins when
-    the line's excess passes the chi-square(2) quantile at ``alpha`` (the line
-    has two free parameters; the panels none). Roughness and extra noise
-    inflate both sums alike, so rough rock does not pass for a bend.
+    Each offset is weighed by the noise a return really has across the line:
+    the range noise projected on the line's normal (``sigma_r * |n . u|`` for
+    a beam along ``u`` from ``origin``) and the angle noise on its tangent
+    (``rho * sigma_phi * |n x u|``), so an oblique panel's returns are judged
+    as tightly as they lie. The panels' offsets also carry the survey's
+    variance.
     """
-    n = points.shape[0]
-    if n < 4:
-        return False
     centre = points.mean(axis=0)
     q = points - centre
     _, vecs = np.linalg.eigh(q.T @ q)
@@ -340,7 +332,25 @@ def _shows_a_bend(
     var = np.maximum(var, (0.1 * noise.range_sigma_m) ** 2)
     chi_line = float(np.sum((q @ normal) ** 2 / var))
     chi_beacon = float(np.sum(to_panels_m**2 / (var + noise.survey_sigma_m**2)))
+    return chi_line, chi_beacon
+
+
+def _shows_a_bend(chi_line: float, chi_beacon: float, alpha: float) -> bool:
+    """Whether a beacon's shape explains its returns better than one straight line.
+
+    A flat wall crossing the place where a beacon should be puts returns near
+    its panels too. The two explanations are compared by their chi-square
+    (a likelihood ratio, see :func:`_straight_and_fitted`). The beacon wins
+    when the line's excess passes the chi-square(2) quantile at ``alpha``
+    (the line has two free parameters; the panels none). Roughness and extra
+    noise inflate both sums alike, so rough rock does not pass for a bend.
+    """
     return chi_line - chi_beacon > float(stats.chi2.isf(alpha, 2))
+
+
+def _fits_in_place(chi_beacon: float, n: int, alpha: float) -> bool:
+    """Whether a beacon's returns lie on its surveyed panels at the pose, within their noise."""
+    return n > 0 and float(stats.chi2.sf(chi_beacon, n)) > alpha
 
 
 def _support(
@@ -354,8 +364,8 @@ def _support(
     noise: NoiseModel,
     cfg: VerificationConfig,
     tracked: bool = False,
-) -> tuple[dict[tuple[str, int], int], tuple[str, ...], tuple[str, ...]]:
-    """Beacons that confirm a pose, the returns on each panel, and the cornered beacons.
+) -> tuple[dict[tuple[str, int], int], tuple[str, ...], tuple[str, ...], tuple[str, ...]]:
+    """Beacons that confirm a pose, the returns on each panel, the cornered and the shaped beacons.
 
     A beacon confirms the pose when, at that pose, (1) two of its panels
     have returns, ``2 * min_panel_points`` in all, (2) at least
@@ -401,6 +411,7 @@ def _support(
             ):
                 node_ok.add(b)
     supported = set(node_ok)
+    shaped = set(node_ok)
     # Without a node of its own, each of two panels must show its returns
     # (unless a prior already says which beacon is where).
     if not tracked:
@@ -425,9 +436,14 @@ def _support(
             continue
         mine = np.flatnonzero(panels.beacon == beacon_no[b])
         on = np.isin(icp.panel, mine)
-        if not _shows_a_bend(
-            points_mine[on], icp.residual_m[on], icp.pose.position, noise, cfg.straight_alpha
-        ):
+        n_on = int(on.sum())
+        if n_on < 4:
+            continue
+        chi_line, chi_beacon = _straight_and_fitted(
+            points_mine[on], icp.residual_m[on], icp.pose.position, noise
+        )
+        bent = _shows_a_bend(chi_line, chi_beacon, cfg.straight_alpha)
+        if not (bent or (tracked and _fits_in_place(chi_beacon, n_on, cfg.straight_alpha))):
             continue
         over = _overrun(points_mine, panels, mine, gate, noise.gate_sigma_m, cfg)
         clean = all(
@@ -440,7 +456,9 @@ def _support(
         )
         if clean:
             supported.add(b)
-    return counts, tuple(sorted(supported)), tuple(sorted(node_ok))
+            if bent:
+                shaped.add(b)
+    return counts, tuple(sorted(supported)), tuple(sorted(node_ok)), tuple(sorted(shaped))
 
 
 def verify(
@@ -484,7 +502,7 @@ def verify(
             if any(v.same_pose(icp.pose, cfg) for v in out):
                 continue  # converged onto a pose already confirmed
             checks = check_beams(scan, icp.pose, panels, noise, cfg, subset=near)
-            counts, supported, cornered = _support(
+            counts, supported, cornered, shaped = _support(
                 icp,
                 icp.pose.scanner_to_mine(pts),
                 panels,
@@ -496,7 +514,7 @@ def verify(
                 cfg,
                 tracked=h.kind == "prior",
             )
-            v = Verified(h, icp, counts, supported, checks, cornered)
+            v = Verified(h, icp, counts, supported, checks, cornered, shaped)
             done.append(v)
         supported, checks = v.supported, v.checks
         if not set(h.beacons) <= set(supported):

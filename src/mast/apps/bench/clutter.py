@@ -41,13 +41,14 @@ import math
 import time
 from collections import Counter
 from collections.abc import Callable, Iterable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
 
 from mast.apps.bench.robustness import is_wrong
+from mast.apps.bench.tracking import prior_pair
 from mast.core.beacon import Beacon, Survey
 from mast.core.geometry import first_hits
 from mast.core.pose import Pose2D
@@ -186,6 +187,11 @@ class ClutterSummary:
     noise_mm: float = math.nan
     seconds: float = 0.0
     outcomes: list[ScanOutcome] = field(default_factory=list)
+    tracked: bool = False
+    prior_owed_fixed: int = 0
+    prior_fixes: int = 0
+    prior_wrong: int = 0
+    wrong_prior_fixes: int = 0
 
     @property
     def fix_rate_owed(self) -> float:
@@ -203,6 +209,13 @@ class ClutterSummary:
             f"(not owed {self.fixes_not_owed})  WRONG {self.wrong}  "
             f"error median {med:.1f} mm max {top:.1f} mm  no-fix: {reasons}  "
             f"(scan noise {self.noise_mm:.0f} mm, {self.seconds:.0f} s)"
+            + (
+                f"\n{'':<12} with a good prior: fixed where owed {self.prior_owed_fixed:4d}  "
+                f"fixes {self.prior_fixes:4d}  WRONG {self.prior_wrong};  "
+                f"with a wrong prior: fixes {self.wrong_prior_fixes}"
+                if self.tracked
+                else ""
+            )
         )
 
 
@@ -488,6 +501,7 @@ def run_clutter_log(
     panel_noise_m: float | None = PANEL_NOISE_M,
     every: int = 1,
     config: LocatorConfig | None = None,
+    priors: bool = False,
     echo: Callable[[str], object] = print,
 ) -> tuple[ClutterSummary, Survey, list[WallSite]]:
     """Mount beacons on one log's walls, cast them into every scan and locate each scan.
@@ -510,6 +524,11 @@ def run_clutter_log(
         locator takes 0.1-1 s a scan on these logs.
     config : LocatorConfig, optional
         Defaults to ``LocatorConfig(range_sigma_m=0.01)``.
+    priors : bool
+        Also locate every scan with a good prior (within 0.5 m and 5 degrees
+        of its true pose) and with a wrong one (1.5 m off), as
+        :func:`mast.apps.bench.tracking.prior_pair` draws them: tracking in
+        real clutter must fix as often and never follow a wrong prior.
     echo : callable
         Receives every wrong fix and the summary line.
     """
@@ -535,7 +554,10 @@ def run_clutter_log(
         Beacon(f"B{k + 1:02d}", d.mounted(s.point, s.direction, tunnel_side=s.tunnel_side))
         for k, (s, d) in enumerate(zip(sites, designs, strict=True))
     )
-    summary = ClutterSummary(name, beacons=len(survey), designs=len({id(d) for d in designs}))
+    summary = ClutterSummary(
+        name, beacons=len(survey), designs=len({id(d) for d in designs}), tracked=priors
+    )
+    prior_rng = np.random.default_rng([seed, 5])
     summary.noise_mm = 1e3 * float(np.median([g.noise_m for g in segs]))
     model = _scanner_model(scans[0], name)
     for i, (scan, pose) in enumerate(data):
@@ -573,6 +595,17 @@ def run_clutter_log(
         summary.outcomes.append(
             ScanOutcome(i, owed, fix.status, fix.reason, wrong, fix.beacons, hit, error)
         )
+        if priors:
+            good, bad = prior_pair(pose, prior_rng)
+            tracked = locate(sim.scan, survey, config=replace(cfg, prior=good))
+            summary.prior_owed_fixed += owed and tracked.ok
+            summary.prior_fixes += tracked.ok
+            summary.prior_wrong += is_wrong(tracked, pose)
+            followed = locate(sim.scan, survey, config=replace(cfg, prior=bad))
+            summary.wrong_prior_fixes += followed.ok
+            for what, f in (("good", tracked), ("wrong", followed)):
+                if f.ok and (what == "wrong" or is_wrong(f, pose)):
+                    echo(f"  WRONG FIX ({what} prior) {name} scan {i}: {f.pose} (true {pose})")
     summary.seconds = time.perf_counter() - t0
     echo(summary.line())
     return summary, survey, sites
@@ -586,6 +619,7 @@ def run_real_clutter(
     panel_noise_m: float | None = PANEL_NOISE_M,
     every: int = 1,
     logs: Iterable[str] = tuple(CARMEN_LOGS),
+    priors: bool = False,
     echo: Callable[[str], object] = print,
 ) -> list[ClutterSummary]:
     """Run :func:`run_clutter_log` on each CARMEN log present under ``data_dir``.
@@ -605,6 +639,7 @@ def run_real_clutter(
             seed=seed + list(CARMEN_LOGS).index(name),
             panel_noise_m=panel_noise_m,
             every=every,
+            priors=priors,
             echo=echo,
         )
         out.append(summary)

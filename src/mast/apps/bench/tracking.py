@@ -33,7 +33,7 @@ from mast.pipeline.locator import LocatorConfig, locate
 from mast.pipeline.tracking import Prior
 from mast.sim import ScannerModel, simulate_scan
 
-__all__ = ["TrackingSummary", "run_tracking"]
+__all__ = ["TrackingSummary", "prior_pair", "run_tracking"]
 
 
 @dataclass(slots=True)
@@ -69,6 +69,27 @@ def _offset(pose: Pose2D, distance_m: float, bearing: float, turn: float) -> Pos
     )
 
 
+def prior_pair(
+    truth: Pose2D,
+    rng: np.random.Generator,
+    *,
+    radius_m: float = 0.5,
+    tolerance_deg: float = 5.0,
+    wrong_offset_m: float = 1.5,
+) -> tuple[Prior, Prior]:
+    """A good prior about ``truth`` and a wrong one, both ``radius_m`` and ``tolerance_deg`` wide.
+
+    The good one is centred uniformly over the disc and the angle window about
+    the truth; the wrong one ``wrong_offset_m`` away in a random direction
+    (the truth outside its window), azimuth within the tolerance.
+    """
+    tol = math.radians(tolerance_deg)
+    r = radius_m * math.sqrt(rng.uniform())
+    guess = _offset(truth, r, rng.uniform(0, 2 * math.pi), rng.uniform(-tol, tol))
+    away = _offset(truth, wrong_offset_m, rng.uniform(0, 2 * math.pi), rng.uniform(-tol, tol))
+    return Prior(guess, radius_m, tol), Prior(away, radius_m, tol)
+
+
 def run_tracking(
     *,
     configs: Sequence[ScannerModel] = ACCURACY_CONFIGS,
@@ -82,7 +103,6 @@ def run_tracking(
 ) -> list[TrackingSummary]:
     """Locate the accuracy benchmark's owed draws with good and with wrong priors."""
     out: list[TrackingSummary] = []
-    tol = math.radians(tolerance_deg)
     for model in configs:
         t0 = time.perf_counter()
         s = TrackingSummary(model.name)
@@ -97,22 +117,20 @@ def run_tracking(
             truth = shot.pose
             for _ in range(draws):
                 sim = simulate_scan(scene.world, truth, model, rng=rng)
-                r = radius_m * math.sqrt(prng.uniform())
-                guess = _offset(truth, r, prng.uniform(0, 2 * math.pi), prng.uniform(-tol, tol))
-                fix = locate(
-                    sim.scan, scene.survey, config=replace(cfg, prior=Prior(guess, radius_m, tol))
+                good, wrong = prior_pair(
+                    truth,
+                    prng,
+                    radius_m=radius_m,
+                    tolerance_deg=tolerance_deg,
+                    wrong_offset_m=wrong_offset_m,
                 )
+                fix = locate(sim.scan, scene.survey, config=replace(cfg, prior=good))
                 s.scans += 1
                 s.fixed += fix.ok
                 s.wrong += is_wrong(fix, truth)
                 if not fix.ok:
                     s.misses[fix.reason or "no_fix"] += 1
-                away = _offset(
-                    truth, wrong_offset_m, prng.uniform(0, 2 * math.pi), prng.uniform(-tol, tol)
-                )
-                bad = locate(
-                    sim.scan, scene.survey, config=replace(cfg, prior=Prior(away, radius_m, tol))
-                )
+                bad = locate(sim.scan, scene.survey, config=replace(cfg, prior=wrong))
                 s.wrong_prior_scans += 1
                 s.wrong_prior_fixes += bad.ok
         s.seconds = time.perf_counter() - t0
