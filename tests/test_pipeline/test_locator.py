@@ -264,3 +264,27 @@ def test_a_prior_confirms_a_second_beacon_whose_bend_is_inside_the_noise() -> No
     assert len(fix.chosen.shaped) == 1
     d, _ = _errors(fix, truth)
     assert d < 0.02
+
+
+def test_a_misplaced_segmentation_corner_does_not_veto_a_beacon_that_fits_in_place() -> None:
+    # The accuracy benchmark's first owed pose at 270/0.5 deg, 12 mm, first draw:
+    # the second beacon shows 4, 9 and 4 returns; the segmentation bends a
+    # short panel's line and puts a corner 0.25 m beside its edge. The returns
+    # lie on the surveyed panels within their noise, so the beacon confirms.
+    from mast.apps.bench.accuracy import ACCURACY_CONFIGS, owed_poses
+    from mast.pipeline.verification import VerificationConfig
+
+    model = ACCURACY_CONFIGS[0]
+    scene, shot = owed_poses(model, 1, 0)[0]
+    sim = simulate_scan(scene.world, shot.pose, model, rng=np.random.default_rng([0, 0, 7]))
+    cfg = LocatorConfig(range_sigma_m=model.range_sigma_m, survey_sigma_m=0.0)
+    fix = locate(sim.scan, scene.survey, config=cfg)
+    assert fix.ok, fix.detail
+    assert fix.chosen is not None
+    assert fix.chosen.supported == ("B1", "B2")
+    assert fix.chosen.cornered == ("B2",)
+    d, _ = _errors(fix, shot.pose)
+    assert d < 0.02
+    # Demanding a fit no return can meet restores the veto: the corner alone refuses B1.
+    strict = replace(cfg, verification=VerificationConfig(straight_alpha=1.0 - 1e-12))
+    assert not locate(sim.scan, scene.survey, config=strict).ok

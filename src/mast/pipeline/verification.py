@@ -94,7 +94,9 @@ class VerificationConfig:
         the beacon to support without an identified node.
     corner_reach_m : float
         A corner of the scan this close to a beacon's node edge, but not on
-        it, keeps the beacon from supporting the pose without an identified node.
+        it, keeps the beacon from supporting the pose without an identified
+        node, unless the beacon's returns fit its panels at the pose (their
+        chi-square passes at ``straight_alpha``).
     duplicate_m, duplicate_rad : float
         A hypothesis starting this close to an already verified pose is not
         verified again.
@@ -373,7 +375,9 @@ def _support(
     its returns are the beacon's and not clutter's: a corner of the scan
     identified as one of its edges lands on that edge, or two panels carry
     ``min_panel_points`` returns each, no panel's returns run on past its
-    nodes, and they show a bend one straight line cannot explain. When
+    nodes, and they show a bend one straight line cannot explain (a corner
+    of the scan beside one of its node edges vetoes it, unless its returns
+    lie on its panels within their noise). When
     ``tracked`` (a prior already says which beacon is where) no node is
     identified and two panels with returns suffice, but the returns must
     still bend as the beacon does and not run on past its nodes (a wrong
@@ -426,14 +430,11 @@ def _support(
     )
     for b in candidates - node_ok:
         # Corners of the scan near this beacon's edges must be its edges: one that
-        # lands beside an edge says the shape there is another (or the beacon moved).
-        # (A corner on any surveyed edge, the free ends where the beacon meets the
-        # wall included, is the beacon's own.)
-        edges = index.survey[b].edges
-        d = np.hypot(*(corners[:, None, :] - edges[None, :, :]).transpose(2, 0, 1))
-        on_edge = np.any(d <= gate_node, axis=1)
-        if not tracked and np.any(~on_edge & np.any(d[:, 1:3] < cfg.corner_reach_m, axis=1)):
-            continue
+        # lands beside an edge says the shape there is another (or the beacon moved),
+        # unless the returns themselves lie on the surveyed panels within their
+        # noise (then the corner is the segmentation's: a breakpoint misplaced on a
+        # panel of a few returns bends its line). A corner on any surveyed edge,
+        # the free ends where the beacon meets the wall included, is the beacon's own.
         mine = np.flatnonzero(panels.beacon == beacon_no[b])
         on = np.isin(icp.panel, mine)
         n_on = int(on.sum())
@@ -443,6 +444,13 @@ def _support(
             points_mine[on], icp.residual_m[on], icp.pose.position, noise
         )
         bent = _shows_a_bend(chi_line, chi_beacon, cfg.straight_alpha)
+        fits = _fits_in_place(chi_beacon, n_on, cfg.straight_alpha)
+        edges = index.survey[b].edges
+        d = np.hypot(*(corners[:, None, :] - edges[None, :, :]).transpose(2, 0, 1))
+        on_edge = np.any(d <= gate_node, axis=1)
+        stray = np.any(~on_edge & np.any(d[:, 1:3] < cfg.corner_reach_m, axis=1))
+        if stray and not (tracked or fits):
+            continue
         if not (bent or (tracked and _fits_in_place(chi_beacon, n_on, cfg.straight_alpha))):
             continue
         over = _overrun(points_mine, panels, mine, gate, noise.gate_sigma_m, cfg)
