@@ -288,3 +288,35 @@ def test_a_misplaced_segmentation_corner_does_not_veto_a_beacon_that_fits_in_pla
     # Demanding a fit no return can meet restores the veto: the corner alone refuses B1.
     strict = replace(cfg, verification=VerificationConfig(straight_alpha=1.0 - 1e-12))
     assert not locate(sim.scan, scene.survey, config=strict).ok
+
+
+def test_one_corner_read_another_way_does_not_undo_a_fix_on_two_identified_corners() -> None:
+    # The accuracy benchmark's 19th owed pose at 190/0.167 deg, 8 mm, 9th draw:
+    # the true pose rests on two beacons, each identified by its own corner on
+    # its own edge. One of those corners, read backwards, puts a single beacon
+    # 3 m away where a wall's returns run along its panels (a higher beam
+    # likelihood, with 11 beams through another beacon). That one-beacon pose
+    # does not make the scan ambiguous; against a fix on one corner it would.
+    from mast.apps.bench.accuracy import ACCURACY_CONFIGS, owed_poses
+    from mast.pipeline.locator import _choose
+
+    model = ACCURACY_CONFIGS[2]
+    scene, shot = owed_poses(model, 19, 0)[18]
+    rng = np.random.default_rng([0, 18, 7])
+    for _ in range(9):
+        sim = simulate_scan(scene.world, shot.pose, model, rng=rng)
+    cfg = LocatorConfig(range_sigma_m=model.range_sigma_m, survey_sigma_m=0.0)
+    fix = locate(sim.scan, scene.survey, config=cfg)
+    assert fix.ok, fix.detail
+    assert fix.chosen is not None
+    assert fix.chosen.cornered == ("B2", "B3")
+    d, _ = _errors(fix, shot.pose)
+    assert d < 0.02
+    rival = [v for v in fix.verified if len(v.supported) == 1]
+    assert rival
+    assert rival[0].log_likelihood > fix.chosen.log_likelihood
+    # Were the fix's second beacon confirmed by its returns alone, the rival would win the doubt.
+    weaker = replace(fix.chosen, cornered=("B2",))
+    best, reason, _ = _choose([weaker, *rival], cfg)
+    assert best is None
+    assert reason == "ambiguous"

@@ -213,17 +213,21 @@ def _choose(verified: list[Verified], cfg: LocatorConfig) -> tuple[Verified | No
     best = full[0]
     # Any other pose whose beacons prove their shape competes, cornered or not,
     # within the margin. A pose one shaped beacon short of a fix competes too
-    # when it explains the scan better than the best confirmed one and its
-    # beacon is identified by a corner (then the beacon that made the fix is
-    # the doubtful one: a look-alike read into returns a better pose explains)
-    # or a tracked pose's second beacon merely lies where that pose puts it.
+    # when it explains the scan better than the best confirmed one and either
+    # its beacon is identified by a corner while the best one rests on a
+    # single identified corner (then the beacon confirmed by its returns alone
+    # is the doubtful one: a look-alike read into returns a better pose
+    # explains), or it is a tracked pose whose second beacon merely lies where
+    # the pose puts it. A fix on two identified corners, each on its own
+    # surveyed edge, is not undone by one corner read another way.
     margin = cfg.ambiguity_log_ratio * cfg.likelihood_tempering
+    doubtful = len(best.cornered) < cfg.min_beacons
     for other in verified:
         if other is best or other.same_pose(best.pose, cfg.verification):
             continue
         if len(other.shaped) >= cfg.min_beacons:
             slack = margin
-        elif other.cornered or len(other.supported) >= cfg.min_beacons:
+        elif (other.cornered and doubtful) or len(other.supported) >= cfg.min_beacons:
             slack = 0.0
         else:
             continue  # one beacon, not even identified by a corner: a wall's bend can do that
