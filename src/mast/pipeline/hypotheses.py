@@ -32,6 +32,7 @@ from mast.pipeline.segmentation import Segment, Segmentation
 __all__ = [
     "Hypothesis",
     "HypothesisConfig",
+    "corner_covariance",
     "node_covariance",
     "node_sigma",
     "pose_hypotheses",
@@ -113,27 +114,29 @@ def _line_variances(seg: Segment, noise: float, node: NDArray[np.float64]) -> fl
     return noise**2 / max(len(seg), 1) + (t * seg.sigma_direction) ** 2
 
 
-def node_covariance(node: NodeMatch, segmentation: Segmentation) -> NDArray[np.float64]:
-    """2x2 covariance of an identified node, scanner frame.
+def corner_covariance(
+    first: Segment, second: Segment, at: NDArray[np.float64], noise_m: float
+) -> NDArray[np.float64]:
+    """2x2 covariance, scanner frame, of where two fitted lines meet (near ``at``).
 
-    The node solves ``n_k . x = o_k`` for the two lines ``k``; a perturbation
-    ``d o_k`` of each line's offset at the node moves it by ``N^-1 d o``
-    (``N`` the rows ``n_k``), so ``C = N^-1 diag(var_k) N^-T``.
+    The intersection solves ``n_k . x = o_k`` for the two lines ``k``; a
+    perturbation ``d o_k`` of each line's offset there moves it by
+    ``N^-1 d o`` (``N`` the rows ``n_k``), so ``C = N^-1 diag(var_k) N^-T``.
+    Shallow corners are poorly placed along their lines, as they should be.
     """
-    a, b = (segmentation.segments[i] for i in node.segments)
-    noise = segmentation.noise_m
-    nmat = np.array([a.normal, b.normal])
+    nmat = np.array([first.normal, second.normal])
     det = float(np.linalg.det(nmat))
     if abs(det) < 1e-3:
         nmat = nmat + np.array([[0.0, 0.0], [1e-3, 0.0]])
     inv = np.linalg.inv(nmat)
-    var = np.diag(
-        [
-            _line_variances(a, noise, node.node_scanner),
-            _line_variances(b, noise, node.node_scanner),
-        ]
-    )
+    var = np.diag([_line_variances(first, noise_m, at), _line_variances(second, noise_m, at)])
     return np.asarray(inv @ var @ inv.T)
+
+
+def node_covariance(node: NodeMatch, segmentation: Segmentation) -> NDArray[np.float64]:
+    """2x2 covariance of an identified node, scanner frame (:func:`corner_covariance`)."""
+    a, b = (segmentation.segments[i] for i in node.segments)
+    return corner_covariance(a, b, node.node_scanner, segmentation.noise_m)
 
 
 def node_sigma(node: NodeMatch, segmentation: Segmentation) -> float:

@@ -211,8 +211,11 @@ def _choose(verified: list[Verified], cfg: LocatorConfig) -> tuple[Verified | No
         return None, "one_beacon", f"only beacon {names} confirmed by the beams"
     full.sort(key=lambda v: v.log_likelihood, reverse=True)
     best = full[0]
-    # Any other pose whose beacons prove their shape competes, cornered or not,
-    # within the margin. A pose one shaped beacon short of a fix competes too
+    # Any other pose whose beacons prove their shape competes within the margin,
+    # unless it has fewer beacons identified by their own corners than the best
+    # (up to two): then an identified corner that lands on its surveyed edge at
+    # the best pose lands nowhere at the other, and the other must explain the
+    # scan better to compete. A pose one shaped beacon short of a fix competes too
     # when it explains the scan better than the best confirmed one and either
     # its beacon is identified by a corner while the best one rests on a
     # single identified corner (then the beacon confirmed by its returns alone
@@ -222,10 +225,11 @@ def _choose(verified: list[Verified], cfg: LocatorConfig) -> tuple[Verified | No
     # surveyed edge, is not undone by one corner read another way.
     margin = cfg.ambiguity_log_ratio * cfg.likelihood_tempering
     doubtful = len(best.cornered) < cfg.min_beacons
+    proven = min(len(best.cornered), cfg.min_beacons)
     for other in verified:
         if other is best or other.same_pose(best.pose, cfg.verification):
             continue
-        if len(other.shaped) >= cfg.min_beacons:
+        if len(other.shaped) >= cfg.min_beacons and len(other.cornered) >= proven:
             slack = margin
         elif (other.cornered and doubtful) or len(other.supported) >= cfg.min_beacons:
             slack = 0.0

@@ -37,7 +37,7 @@ from mast.core.noise import NoiseModel
 from mast.core.pose import Pose2D
 from mast.core.scan import Scan
 from mast.pipeline.alignment import IcpResult, icp_point_to_line
-from mast.pipeline.hypotheses import Hypothesis, node_sigma
+from mast.pipeline.hypotheses import Hypothesis, corner_covariance, node_sigma
 from mast.pipeline.identification import PanelIdentification
 from mast.pipeline.segmentation import Segmentation
 
@@ -94,9 +94,8 @@ class VerificationConfig:
         the beacon to support without an identified node.
     corner_reach_m : float
         A corner of the scan this close to a beacon's node edge, but not on
-        it, keeps the beacon from supporting the pose without an identified
-        node, unless the beacon's returns fit its panels at the pose (their
-        chi-square passes at ``straight_alpha``).
+        it (farther than ``gate_sigmas`` of the corner's own uncertainty),
+        keeps the beacon from supporting the pose without an identified node.
     duplicate_m, duplicate_rad : float
         A hypothesis starting this close to an already verified pose is not
         verified again.
@@ -355,6 +354,43 @@ def _fits_in_place(chi_beacon: float, n: int, alpha: float) -> bool:
     return n > 0 and float(stats.chi2.sf(chi_beacon, n)) > alpha
 
 
+def _stray_corner(
+    edges: NDArray[np.float64],
+    pose: Pose2D,
+    seg: Segmentation,
+    corners_mine: NDArray[np.float64],
+    gate_m: float,
+    noise: NoiseModel,
+    cfg: VerificationConfig,
+) -> bool:
+    """Whether a corner of the scan lands beside one of a beacon's node edges, not on an edge.
+
+    Corners of the scan near a beacon's edges must be its edges: one that
+    lands beside an edge says the shape there is another (or the beacon
+    moved). A corner is on an edge when within ``gate_m`` of it, or within
+    ``gate_sigmas`` of its own uncertainty (:func:`corner_covariance`, with
+    the range and survey variances): two short or nearly collinear lines
+    meet far from where their surfaces do. A corner on any surveyed edge,
+    the free ends where the beacon meets the wall included, is the
+    beacon's own.
+    """
+    if corners_mine.shape[0] == 0:
+        return False
+    d = np.hypot(*(corners_mine[:, None, :] - edges[None, :, :]).transpose(2, 0, 1))
+    near_node = np.any(d[:, 1:3] < cfg.corner_reach_m, axis=1) & ~np.any(d <= gate_m, axis=1)
+    extra = noise.gate_sigma_m**2 + noise.survey_sigma_m**2
+    edges_scanner = pose.mine_to_scanner(edges)
+    for k in np.flatnonzero(near_node):
+        c = seg.corners[k]
+        cov = corner_covariance(seg.segments[c.first], seg.segments[c.second], c.node, seg.noise_m)
+        inv = np.linalg.inv(cov + extra * np.eye(2))
+        off = edges_scanner - c.node
+        maha = np.einsum("ij,jk,ik->i", off, inv, off)
+        if np.all(maha > cfg.gate_sigmas**2):
+            return True
+    return False
+
+
 def _support(
     icp: IcpResult,
     points_mine: NDArray[np.float64],
@@ -375,9 +411,8 @@ def _support(
     its returns are the beacon's and not clutter's: a corner of the scan
     identified as one of its edges lands on that edge, or two panels carry
     ``min_panel_points`` returns each, no panel's returns run on past its
-    nodes, and they show a bend one straight line cannot explain (a corner
-    of the scan beside one of its node edges vetoes it, unless its returns
-    lie on its panels within their noise). When
+    nodes, they show a bend one straight line cannot explain, and no corner
+    of the scan lands beside one of its node edges (:func:`_stray_corner`). When
     ``tracked`` (a prior already says which beacon is where) no node is
     identified and two panels with returns suffice, but the returns must
     still bend as the beacon does and not run on past its nodes (a wrong
@@ -429,12 +464,6 @@ def _support(
         else np.zeros((0, 2))
     )
     for b in candidates - node_ok:
-        # Corners of the scan near this beacon's edges must be its edges: one that
-        # lands beside an edge says the shape there is another (or the beacon moved),
-        # unless the returns themselves lie on the surveyed panels within their
-        # noise (then the corner is the segmentation's: a breakpoint misplaced on a
-        # panel of a few returns bends its line). A corner on any surveyed edge,
-        # the free ends where the beacon meets the wall included, is the beacon's own.
         mine = np.flatnonzero(panels.beacon == beacon_no[b])
         on = np.isin(icp.panel, mine)
         n_on = int(on.sum())
@@ -444,12 +473,9 @@ def _support(
             points_mine[on], icp.residual_m[on], icp.pose.position, noise
         )
         bent = _shows_a_bend(chi_line, chi_beacon, cfg.straight_alpha)
-        fits = _fits_in_place(chi_beacon, n_on, cfg.straight_alpha)
-        edges = index.survey[b].edges
-        d = np.hypot(*(corners[:, None, :] - edges[None, :, :]).transpose(2, 0, 1))
-        on_edge = np.any(d <= gate_node, axis=1)
-        stray = np.any(~on_edge & np.any(d[:, 1:3] < cfg.corner_reach_m, axis=1))
-        if stray and not (tracked or fits):
+        if not tracked and _stray_corner(
+            index.survey[b].edges, icp.pose, seg, corners, gate_node, noise, cfg
+        ):
             continue
         if not (bent or (tracked and _fits_in_place(chi_beacon, n_on, cfg.straight_alpha))):
             continue
