@@ -146,14 +146,19 @@ class PanelSet:
         reach_m: float,
         *,
         subset: NDArray[np.intp] | None = None,
-    ) -> NDArray[np.bool_]:
-        """Points within ``reach_m`` (Euclidean) of any panel segment."""
+    ) -> tuple[NDArray[np.bool_], NDArray[np.intp]]:
+        """Points within ``reach_m`` (Euclidean) of any panel segment, and those panels.
+
+        Returns a mask over the points and the indices of the panels (of
+        ``subset``) that have any point within ``reach_m``.
+        """
         panels = np.arange(len(self)) if subset is None else subset
         if points_mine.shape[0] == 0 or panels.size == 0:
-            return np.zeros(points_mine.shape[0], dtype=bool)
+            return np.zeros(points_mine.shape[0], dtype=bool), np.zeros(0, dtype=np.intp)
         t, s = self.project(points_mine, panels)
         over = np.maximum(np.maximum(-t, t - self.length[panels][None, :]), 0.0)
-        return np.asarray(np.any(over**2 + s**2 <= reach_m**2, axis=1))
+        close = over**2 + s**2 <= reach_m**2
+        return np.asarray(np.any(close, axis=1)), panels[np.any(close, axis=0)]
 
     def associate(
         self,

@@ -153,9 +153,10 @@ def icp_point_to_line(
     total = 0
     converged = False
     # Only returns that could come within a gate of a panel take part in the
-    # iterations: twice the widest gate from one at the start (the pose moves
-    # by less than a gate), so a few dozen returns, not the whole scan.
-    near = panels.within(
+    # iterations, and only the panels they could reach: twice the widest gate
+    # at the start (the pose moves by less than a gate), so a few dozen
+    # returns and panels, not the whole scan and every panel in range.
+    near, reached = panels.within(
         pose.scanner_to_mine(points_scanner), 2.0 * max(gates_m) + 0.05, subset=subset
     )
     pts = points_scanner[near]
@@ -168,7 +169,7 @@ def icp_point_to_line(
         for _ in range(max_iterations):
             total += 1
             m = p.scanner_to_mine(pts)
-            panel, dist = panels.associate(m, gate, subset=subset)
+            panel, dist = panels.associate(m, gate, subset=reached)
             # A coarse stage only has to bring the returns to their panels: once the
             # matches stop changing, the next (narrower) stage takes over.
             if not final and np.array_equal(panel, previous):
