@@ -241,20 +241,28 @@ def test_survey_sigma_is_in_every_record() -> None:
     assert rec["angle_sigma_rad"] == 0.0
 
 
+def _accuracy_draw(config: int, pose: int, draw: int = 0):  # type: ignore[no-untyped-def]
+    """The accuracy benchmark's scene, shot, noisy scan and located fix for one draw."""
+    from mast.apps.bench.accuracy import ACCURACY_CONFIGS, owed_poses
+
+    model = ACCURACY_CONFIGS[config]
+    scene, shot = owed_poses(model, pose + 1, 0)[pose]
+    rng = np.random.default_rng([0, pose, 7])
+    for _ in range(draw + 1):
+        sim = simulate_scan(scene.world, shot.pose, model, rng=rng)
+    cfg = LocatorConfig(range_sigma_m=model.range_sigma_m, survey_sigma_m=0.0)
+    return scene, shot, sim, cfg, locate(sim.scan, scene.survey, config=cfg)
+
+
 def test_a_prior_confirms_a_second_beacon_whose_bend_is_inside_the_noise() -> None:
     # The accuracy benchmark's 22nd owed pose at 270/0.25 deg, 12 mm: one beacon
     # shows 45 returns on one panel and 3 on the next, a bend no likelihood-ratio
     # test can see. From scratch that is one beacon; with a prior the first
     # beacon fixes the pose and the second lies where it puts it.
-    from mast.apps.bench.accuracy import ACCURACY_CONFIGS, owed_poses
     from mast.pipeline.tracking import Prior
 
-    model = ACCURACY_CONFIGS[1]
-    scene, shot = owed_poses(model, 22, 0)[21]
+    scene, shot, sim, cfg, alone = _accuracy_draw(1, 21)
     truth = shot.pose
-    sim = simulate_scan(scene.world, truth, model, rng=np.random.default_rng([0, 21, 7]))
-    cfg = LocatorConfig(range_sigma_m=model.range_sigma_m, survey_sigma_m=0.0)
-    alone = locate(sim.scan, scene.survey, config=cfg)
     assert not alone.ok
     assert alone.reason == "one_beacon"
     start = Pose2D(truth.easting + 0.2, truth.northing - 0.25, truth.azimuth + math.radians(3))
@@ -271,13 +279,7 @@ def test_a_corner_beside_an_edge_is_judged_by_its_own_uncertainty() -> None:
     # the second beacon shows 4, 9 and 4 returns, and its shallow corners with
     # the wall (7-9 degrees, lines of 4-10 returns) land 0.19-0.26 m beside its
     # edges: within their own uncertainty, so they do not veto the beacon.
-    from mast.apps.bench.accuracy import ACCURACY_CONFIGS, owed_poses
-
-    model = ACCURACY_CONFIGS[0]
-    scene, shot = owed_poses(model, 1, 0)[0]
-    sim = simulate_scan(scene.world, shot.pose, model, rng=np.random.default_rng([0, 0, 7]))
-    cfg = LocatorConfig(range_sigma_m=model.range_sigma_m, survey_sigma_m=0.0)
-    fix = locate(sim.scan, scene.survey, config=cfg)
+    _, shot, _, _, fix = _accuracy_draw(0, 0)
     assert fix.ok, fix.detail
     assert fix.chosen is not None
     assert fix.chosen.supported == ("B1", "B2")
@@ -312,16 +314,9 @@ def test_one_corner_read_another_way_does_not_undo_a_fix_on_two_identified_corne
     # 3 m away where a wall's returns run along its panels (a higher beam
     # likelihood, with 11 beams through another beacon). That one-beacon pose
     # does not make the scan ambiguous; against a fix on one corner it would.
-    from mast.apps.bench.accuracy import ACCURACY_CONFIGS, owed_poses
     from mast.pipeline.locator import _choose
 
-    model = ACCURACY_CONFIGS[2]
-    scene, shot = owed_poses(model, 19, 0)[18]
-    rng = np.random.default_rng([0, 18, 7])
-    for _ in range(9):
-        sim = simulate_scan(scene.world, shot.pose, model, rng=rng)
-    cfg = LocatorConfig(range_sigma_m=model.range_sigma_m, survey_sigma_m=0.0)
-    fix = locate(sim.scan, scene.survey, config=cfg)
+    _, shot, _, cfg, fix = _accuracy_draw(2, 18, draw=8)
     assert fix.ok, fix.detail
     assert fix.chosen is not None
     assert fix.chosen.cornered == ("B2", "B3")
@@ -342,13 +337,7 @@ def test_a_mirror_pose_with_fewer_identified_corners_must_explain_the_scan_bette
     # turned 180 degrees and 1.4 m away is confirmed by both beacons too, within
     # the ambiguity margin, but only one identified corner lands on an edge
     # there against two at the true pose: it no longer makes the scan ambiguous.
-    from mast.apps.bench.accuracy import ACCURACY_CONFIGS, owed_poses
-
-    model = ACCURACY_CONFIGS[0]
-    scene, shot = owed_poses(model, 12, 0)[11]
-    sim = simulate_scan(scene.world, shot.pose, model, rng=np.random.default_rng([0, 11, 7]))
-    cfg = LocatorConfig(range_sigma_m=model.range_sigma_m, survey_sigma_m=0.0)
-    fix = locate(sim.scan, scene.survey, config=cfg)
+    _, shot, _, cfg, fix = _accuracy_draw(0, 11)
     assert fix.ok, fix.detail
     assert fix.chosen is not None
     assert len(fix.chosen.cornered) == 2
