@@ -2,6 +2,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 from typer.testing import CliRunner
 
@@ -254,3 +255,65 @@ def test_locate_near_option_errors(paper_files: Path) -> None:
     assert "--near '11;7': expected E,N or E,N,AZ" in r.stderr
     r = _mast(*args, "--near", "500,500")
     assert r.returncode == 3
+
+
+def _rewritten_scan(paper_files: Path, tmp_path: Path, angle: float, rng: float) -> Path:
+    """The paper's first scan with its angles and ranges multiplied (a unit mistake)."""
+    from mast.io import read_scan_csv
+
+    scan = read_scan_csv(paper_files / "paper-parallel" / "scan_001.csv")
+    out = tmp_path / "scan.csv"
+    lines = ["angle_rad,range_m"]
+    lines += [
+        f"{float(a * angle)!r},{float(r * rng)!r}" if np.isfinite(r) else f"{float(a * angle)!r},"
+        for a, r in zip(scan.angles_rad, scan.ranges_m, strict=True)
+    ]
+    out.write_text("\n".join(lines) + "\n")
+    return out
+
+
+@pytest.mark.parametrize(
+    ("angle", "rng", "hint"),
+    [
+        (180 / np.pi, 1.0, "more than a full turn: they look like degrees"),
+        (1.0, 1000.0, "the ranges look like millimetres"),
+    ],
+)
+def test_unit_mistakes_in_a_scan_are_bad_input_with_a_hint(
+    paper_files: Path, tmp_path: Path, angle: float, rng: float, hint: str
+) -> None:
+    scan = _rewritten_scan(paper_files, tmp_path, angle, rng)
+    beacons = paper_files / "paper-parallel" / "beacons.csv"
+    r = _mast("locate", str(scan), "--beacons", str(beacons))
+    assert r.returncode == 2
+    assert "Traceback" not in r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1
+    assert str(scan) in r.stderr
+    assert hint in r.stderr
+
+
+@pytest.mark.parametrize(
+    ("option", "value", "unit"),
+    [
+        ("--range-sigma", "10", "it is in metres (10 mm is 0.01)"),
+        ("--survey-sigma", "3", "it is in metres (3 mm is 0.003)"),
+        ("--angle-sigma", "0.5", "it is in radians"),
+    ],
+)
+def test_a_sigma_no_scanner_has_warns_with_its_unit(
+    paper_files: Path, option: str, value: str, unit: str
+) -> None:
+    folder = paper_files / "paper-parallel"
+    r = _mast(
+        "locate",
+        str(folder / "scan_001.csv"),
+        "--beacons",
+        str(folder / "beacons.csv"),
+        option,
+        value,
+    )
+    assert "Traceback" not in r.stderr
+    warning = [line for line in r.stderr.splitlines() if "warning" in line]
+    assert len(warning) == 1
+    assert option in warning[0]
+    assert unit in warning[0]

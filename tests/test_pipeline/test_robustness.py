@@ -11,6 +11,7 @@ from hypothesis import strategies as st
 from mast import Beacon, Scan, Survey
 from mast.apps.bench.realscans import run_real_scans
 from mast.apps.bench.robustness import is_wrong
+from mast.errors import InputError
 from mast.pipeline.locator import NO_FIX_REASONS, LocatorConfig, locate
 from mast.sim import drift_scene, hard_scene, paper_scene, random_scene
 from tests._paths import SHARED_DATA
@@ -89,6 +90,14 @@ ranges = st.one_of(
 def test_garbage_scans_never_raise(values: list[float], step: float, start: float) -> None:
     survey = paper_scene("parallel").survey
     r = np.array(values, dtype=float)
+    finite = r[np.isfinite(r) & (r > 0)]
+    if step * max(r.size - 1, 0) > 2 * math.pi + 1e-6 or (
+        finite.size and np.median(finite) > 1000.0
+    ):
+        # Beyond a full turn or at kilometre ranges, the scan is refused with a unit hint.
+        with pytest.raises(InputError, match="look like"):
+            Scan.from_laserscan(angle_min=start, angle_increment=step, ranges=r)
+        return
     scan = Scan.from_laserscan(angle_min=start, angle_increment=step, ranges=r)
     fix = locate(scan, survey)
     assert fix.status in ("fix", "no_fix")

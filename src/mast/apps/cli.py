@@ -26,6 +26,10 @@ EXIT_OK = 0
 EXIT_BAD_INPUT = 2
 EXIT_NO_FIX = 3
 
+#: Sigmas above these get a warning naming the unit (millimetres or degrees typed).
+MAX_PLAUSIBLE_SIGMA_M = 0.5
+MAX_PLAUSIBLE_ANGLE_SIGMA_RAD = 0.05
+
 app = typer.Typer(
     name="mast",
     help=(
@@ -239,6 +243,17 @@ def locate(
     for name, value in checks:
         if value is not None and not (math.isfinite(value) and value >= 0):
             raise InputError(f"{name} must be a non-negative number, got {value}")
+    for name, value, limit, unit, example in (
+        ("--range-sigma", range_sigma, MAX_PLAUSIBLE_SIGMA_M, "metres", "10 mm is 0.01"),
+        ("--survey-sigma", survey_sigma, MAX_PLAUSIBLE_SIGMA_M, "metres", "3 mm is 0.003"),
+        ("--angle-sigma", angle_sigma, MAX_PLAUSIBLE_ANGLE_SIGMA_RAD, "radians", "0.1° is 0.0017"),
+    ):
+        if value is not None and value > limit:
+            typer.echo(
+                f"mast: warning: {name} {value:g} {unit} is more than any laser scanner or "
+                f"survey has; it is in {unit} ({example})",
+                err=True,
+            )
     if range_sigma is not None:
         if range_sigma <= 0:
             raise InputError("--range-sigma must be positive")

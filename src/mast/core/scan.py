@@ -19,6 +19,10 @@ def _frozen(a: ArrayLike) -> NDArray[np.float64]:
     return arr
 
 
+#: A median range beyond this is not a scan in metres (millimetres, most likely).
+MAX_PLAUSIBLE_RANGE_M = 1000.0
+
+
 @dataclass(frozen=True, eq=False)
 class Scan:
     """A single scan in the scanner frame (REP 103: x forward, y left).
@@ -67,6 +71,13 @@ class Scan:
             object.__setattr__(self, "intensities", inten)
         if not np.all(np.isfinite(angles)):
             raise InputError("scan has a beam angle that is not a finite number")
+        span = float(angles[-1] - angles[0]) if angles.size > 1 else 0.0
+        if span > 2 * math.pi + 1e-6:
+            raise InputError(
+                f"scan angles span {span:.6g} rad ({span / (2 * math.pi):.1f} turns), more "
+                "than a full turn: they look like degrees; angles must be in radians "
+                "(degrees x pi/180)"
+            )
         if angles.size > 1 and not np.all(np.diff(angles) > 0):
             i = int(np.argmin(np.diff(angles) > 0))
             raise InputError(
@@ -79,7 +90,14 @@ class Scan:
         object.__setattr__(self, "range_min_m", rmin)
         object.__setattr__(self, "range_max_m", rmax)
         with np.errstate(invalid="ignore"):
+            returned = ranges[np.isfinite(ranges) & (ranges > 0)]
             valid = np.isfinite(ranges) & (ranges > 0) & (ranges >= rmin) & (ranges <= rmax)
+        if returned.size and float(np.median(returned)) > MAX_PLAUSIBLE_RANGE_M:
+            raise InputError(
+                f"scan's median range is {float(np.median(returned)):.6g} m, beyond any laser "
+                f"scanner underground (> {MAX_PLAUSIBLE_RANGE_M:g} m): the ranges look like "
+                "millimetres; ranges must be in metres (millimetres / 1000)"
+            )
         valid.setflags(write=False)
         object.__setattr__(self, "_valid", valid)
 
