@@ -90,11 +90,12 @@ class Scan:
         object.__setattr__(self, "range_min_m", rmin)
         object.__setattr__(self, "range_max_m", rmax)
         with np.errstate(invalid="ignore"):
-            returned = ranges[np.isfinite(ranges) & (ranges > 0)]
-            valid = np.isfinite(ranges) & (ranges > 0) & (ranges >= rmin) & (ranges <= rmax)
-        if returned.size and float(np.median(returned)) > MAX_PLAUSIBLE_RANGE_M:
+            returned = np.isfinite(ranges) & (ranges > 0)
+            valid = returned & (ranges >= rmin) & (ranges <= rmax)
+        median = float(np.median(ranges[returned])) if returned.any() else 0.0
+        if median > MAX_PLAUSIBLE_RANGE_M:
             raise InputError(
-                f"scan's median range is {float(np.median(returned)):.6g} m, beyond any laser "
+                f"scan's median range is {median:.6g} m, beyond any laser "
                 f"scanner underground (> {MAX_PLAUSIBLE_RANGE_M:g} m): the ranges look like "
                 "millimetres; ranges must be in metres (millimetres / 1000)"
             )

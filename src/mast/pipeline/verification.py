@@ -355,10 +355,8 @@ def _fits_in_place(chi_beacon: float, n: int, alpha: float) -> bool:
 
 
 def _stray_corner(
-    edges: NDArray[np.float64],
-    pose: Pose2D,
+    edges_scanner: NDArray[np.float64],
     seg: Segmentation,
-    corners_mine: NDArray[np.float64],
     gate_m: float,
     noise: NoiseModel,
     cfg: VerificationConfig,
@@ -372,14 +370,16 @@ def _stray_corner(
     the range and survey variances): two short or nearly collinear lines
     meet far from where their surfaces do. A corner on any surveyed edge,
     the free ends where the beacon meets the wall included, is the
-    beacon's own.
+    beacon's own. Everything is compared in the scanner frame, where the
+    corners and their covariances are (``edges_scanner``: the beacon's
+    surveyed edges mapped there by the pose).
     """
-    if corners_mine.shape[0] == 0:
+    if not seg.corners:
         return False
-    d = np.hypot(*(corners_mine[:, None, :] - edges[None, :, :]).transpose(2, 0, 1))
+    nodes = np.array([c.node for c in seg.corners])
+    d = np.hypot(*(nodes[:, None, :] - edges_scanner[None, :, :]).transpose(2, 0, 1))
     near_node = np.any(d[:, 1:3] < cfg.corner_reach_m, axis=1) & ~np.any(d <= gate_m, axis=1)
     extra = noise.gate_sigma_m**2 + noise.survey_sigma_m**2
-    edges_scanner = pose.mine_to_scanner(edges)
     for k in np.flatnonzero(near_node):
         c = seg.corners[k]
         cov = corner_covariance(seg.segments[c.first], seg.segments[c.second], c.node, seg.noise_m)
@@ -458,25 +458,19 @@ def _support(
             b for b in candidates if sum(c >= cfg.min_panel_points for c in per_beacon[b]) >= 2
         }
     beacon_no = {bid: k for k, bid in enumerate(panels.ids)}
-    corners = (
-        icp.pose.scanner_to_mine(np.array([c.node for c in seg.corners]))
-        if seg.corners
-        else np.zeros((0, 2))
-    )
     for b in candidates - node_ok:
         mine = np.flatnonzero(panels.beacon == beacon_no[b])
         on = np.isin(icp.panel, mine)
         n_on = int(on.sum())
         if n_on < 4:
             continue
+        edges_scanner = icp.pose.mine_to_scanner(index.survey[b].edges)
+        if not tracked and _stray_corner(edges_scanner, seg, gate_node, noise, cfg):
+            continue
         chi_line, chi_beacon = _straight_and_fitted(
             points_mine[on], icp.residual_m[on], icp.pose.position, noise
         )
         bent = _shows_a_bend(chi_line, chi_beacon, cfg.straight_alpha)
-        if not tracked and _stray_corner(
-            index.survey[b].edges, icp.pose, seg, corners, gate_node, noise, cfg
-        ):
-            continue
         if not (bent or (tracked and _fits_in_place(chi_beacon, n_on, cfg.straight_alpha))):
             continue
         over = _overrun(points_mine, panels, mine, gate, noise.gate_sigma_m, cfg)
