@@ -7,7 +7,18 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-__all__ = ["NoiseModel"]
+__all__ = [
+    "DEFAULT_ANGLE_SIGMA_RAD",
+    "DEFAULT_RANGE_SIGMA_M",
+    "DEFAULT_SURVEY_SIGMA_M",
+    "NoiseModel",
+]
+
+#: A typical 2D scanner's range precision (metres) and beam-angle precision (radians).
+DEFAULT_RANGE_SIGMA_M = 0.01
+DEFAULT_ANGLE_SIGMA_RAD = 0.0
+#: A surveyed edge coordinate's precision (metres): a total station at a few tens of metres.
+DEFAULT_SURVEY_SIGMA_M = 0.003
 
 
 @dataclass(frozen=True, slots=True)
@@ -25,9 +36,9 @@ class NoiseModel:
         exact, simulated survey).
     """
 
-    range_sigma_m: float = 0.01
-    angle_sigma_rad: float = 0.0
-    survey_sigma_m: float = 0.003
+    range_sigma_m: float = DEFAULT_RANGE_SIGMA_M
+    angle_sigma_rad: float = DEFAULT_ANGLE_SIGMA_RAD
+    survey_sigma_m: float = DEFAULT_SURVEY_SIGMA_M
 
     def variance(self, d_range_d_angle: ArrayLike) -> NDArray[np.float64]:
         """Variance of a range observation: ``sigma_r^2 + (d rho / d phi * sigma_phi)^2``.

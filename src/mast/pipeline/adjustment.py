@@ -130,6 +130,15 @@ class Adjustment:
         return self.chi2_lower <= self.reference_variance <= self.chi2_upper
 
     @property
+    def test_code(self) -> str:
+        """The global test as a code: ``pass``, ``too_small`` or ``too_large``."""
+        if self.reference_variance < self.chi2_lower:
+            return "too_small"
+        if self.reference_variance > self.chi2_upper:
+            return "too_large"
+        return "pass"
+
+    @property
     def test_verdict(self) -> str:
         if self.reference_variance < self.chi2_lower:
             return "too small (a-priori precisions pessimistic)"

@@ -26,12 +26,38 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import NDArray
 from scipy import stats
 
 from mast.core.noise import NoiseModel
 from mast.pipeline.adjustment import Adjustment, Observations
 
-__all__ = ["BeaconTest", "Observations", "beacon_tests", "exclude_inconsistent", "snoop"]
+__all__ = [
+    "BeaconTest",
+    "GroupResiduals",
+    "Observations",
+    "Residuals",
+    "beacon_tests",
+    "exclude_inconsistent",
+    "residual_summary",
+    "snoop",
+    "standardised_residuals",
+]
+
+#: Significance of the w-test (shared over all returns, Bonferroni) and of the beacon test.
+W_TEST_ALPHA = 0.001
+
+
+def standardised_residuals(adj: Adjustment) -> NDArray[np.float64]:
+    """Baarda's ``w_i = v_i / sigma_vi`` with ``sigma_vi^2 = sigma_i^2 - g_i Q g_i^T``."""
+    g = adj.jacobian
+    qvv = adj.sigmas_m**2 - np.einsum("ij,jk,ik->i", g, adj.cofactor, g)
+    return np.asarray(adj.residuals_m / np.sqrt(np.maximum(qvv, 1e-30)), dtype=float)
+
+
+def w_critical(n: int, alpha: float = W_TEST_ALPHA) -> float:
+    """Critical |w| for the largest of ``n`` standardised residuals (two-sided, Bonferroni)."""
+    return float(stats.norm.ppf(1 - alpha / 2 / max(n, 1)))
 
 
 def snoop(
@@ -39,18 +65,15 @@ def snoop(
     adj: Adjustment,
     *,
     noise: NoiseModel,
-    alpha: float = 0.001,
+    alpha: float = W_TEST_ALPHA,
     max_removed: int = 50,
 ) -> tuple[Observations, Adjustment, int]:
     """Remove, one at a time, returns whose w-test fails; returns what is left."""
     removed = 0
     while removed < max_removed and len(obs) > 4:
-        g = adj.jacobian
-        qvv = adj.sigmas_m**2 - np.einsum("ij,jk,ik->i", g, adj.cofactor, g)
-        w = adj.residuals_m / np.sqrt(np.maximum(qvv, 1e-30))
-        crit = float(stats.norm.ppf(1 - alpha / 2 / len(obs)))
+        w = standardised_residuals(adj)
         i = int(np.argmax(np.abs(w)))
-        if abs(w[i]) <= crit:
+        if abs(w[i]) <= w_critical(len(obs), alpha):
             break
         keep = np.ones(len(obs), dtype=bool)
         keep[i] = False
@@ -83,7 +106,7 @@ def beacon_tests(
     adj: Adjustment,
     *,
     noise: NoiseModel,
-    alpha: float = 0.001,
+    alpha: float = W_TEST_ALPHA,
 ) -> list[BeaconTest]:
     """Leave-one-beacon-out tests for every beacon with returns (needs two or more)."""
     ids = np.unique(obs.beacon)
@@ -171,3 +194,78 @@ def exclude_inconsistent(
         adj = obs.adjust(adj.pose, noise)
         obs, adj, more = snoop(obs, adj, noise=noise)
         outliers += more
+
+
+@dataclass(frozen=True, slots=True)
+class GroupResiduals:
+    """Residuals of one group of returns (a beacon, a panel)."""
+
+    returns: int
+    rms_m: float
+    max_abs_w: float
+
+
+@dataclass(frozen=True, slots=True)
+class Residuals:
+    """What a survey adjustment report lists about the residuals of a fix.
+
+    Attributes
+    ----------
+    rms_m : float
+        RMS of the range residuals ``v`` (metres).
+    max_abs_w : float
+        Largest standardised residual |w| (Baarda's w-test statistic).
+    w_critical : float
+        The w-test's critical value at 0.1 %, shared over all returns.
+    per_beacon : dict
+        Beacon id -> its returns' :class:`GroupResiduals`.
+    per_panel : dict
+        (beacon id, panel 1..3) -> its returns' :class:`GroupResiduals`.
+    beacon_tests : dict
+        Beacon id -> its left-out :class:`BeaconTest` (two or more beacons).
+    """
+
+    rms_m: float
+    max_abs_w: float
+    w_critical: float
+    per_beacon: dict[str, GroupResiduals]
+    per_panel: dict[tuple[str, int], GroupResiduals]
+    beacon_tests: dict[str, BeaconTest]
+
+
+def _group(v: NDArray[np.float64], w: NDArray[np.float64]) -> GroupResiduals:
+    return GroupResiduals(int(v.size), float(np.sqrt(np.mean(v**2))), float(np.max(np.abs(w))))
+
+
+def residual_summary(
+    obs: Observations,
+    adj: Adjustment,
+    *,
+    ids: tuple[str, ...],
+    panel_numbers: NDArray[np.intp],
+    noise: NoiseModel,
+) -> Residuals:
+    """Residuals of an adjustment, overall, per beacon and per panel, with the beacon tests.
+
+    ``ids`` names the beacon indices of ``obs.beacon``; ``panel_numbers`` gives
+    the panel number (1..3) of each panel index in ``obs.panel``.
+    """
+    v, w = adj.residuals_m, standardised_residuals(adj)
+    per_beacon = {
+        ids[b]: _group(v[obs.beacon == b], w[obs.beacon == b]) for b in np.unique(obs.beacon)
+    }
+    per_panel = {
+        (ids[int(obs.beacon[obs.panel == k][0])], int(panel_numbers[k])): _group(
+            v[obs.panel == k], w[obs.panel == k]
+        )
+        for k in np.unique(obs.panel)
+    }
+    tests = {ids[t.beacon]: t for t in beacon_tests(obs, adj, noise=noise)}
+    return Residuals(
+        rms_m=float(np.sqrt(np.mean(v**2))),
+        max_abs_w=float(np.max(np.abs(w))),
+        w_critical=w_critical(len(obs)),
+        per_beacon=per_beacon,
+        per_panel=per_panel,
+        beacon_tests=tests,
+    )

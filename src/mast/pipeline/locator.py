@@ -25,10 +25,20 @@ from scipy import stats
 from mast.core.beacon import Survey
 from mast.core.geometry import PanelSet
 from mast.core.index import SurveyIndex
-from mast.core.noise import NoiseModel
+from mast.core.noise import (
+    DEFAULT_ANGLE_SIGMA_RAD,
+    DEFAULT_RANGE_SIGMA_M,
+    DEFAULT_SURVEY_SIGMA_M,
+    NoiseModel,
+)
 from mast.core.pose import Pose2D
 from mast.core.scan import Scan
-from mast.pipeline.adjustment import Adjustment, adjust_on_panels, survey_covariance
+from mast.pipeline.adjustment import (
+    Adjustment,
+    Observations,
+    adjust_on_panels,
+    survey_covariance,
+)
 from mast.pipeline.alignment import Similarity
 from mast.pipeline.bounds import cramer_rao_bound
 from mast.pipeline.hypotheses import Hypothesis, HypothesisConfig, pose_hypotheses
@@ -37,7 +47,7 @@ from mast.pipeline.identification import (
     PanelIdentification,
     identify_panels,
 )
-from mast.pipeline.integrity import exclude_inconsistent, snoop
+from mast.pipeline.integrity import Residuals, exclude_inconsistent, residual_summary, snoop
 from mast.pipeline.segmentation import Segmentation, SegmentationConfig, segment_scan
 from mast.pipeline.tracking import Prior, TrackingConfig, prior_hypotheses
 from mast.pipeline.verification import VerificationConfig, Verified, verify
@@ -109,9 +119,9 @@ class LocatorConfig:
         either side of it.
     """
 
-    range_sigma_m: float = 0.01
-    angle_sigma_rad: float = 0.0
-    survey_sigma_m: float = 0.003
+    range_sigma_m: float = DEFAULT_RANGE_SIGMA_M
+    angle_sigma_rad: float = DEFAULT_ANGLE_SIGMA_RAD
+    survey_sigma_m: float = DEFAULT_SURVEY_SIGMA_M
     min_beacons: int = 2
     min_cornered: int = 1
     ambiguity_log_ratio: float = math.log(1e4)
@@ -166,6 +176,9 @@ class Fix:
     (moved or mis-surveyed)."""
     outliers_removed: int = 0
     """Returns removed by data snooping."""
+    residuals: Residuals | None = None
+    """Residuals of the adjustment (overall, per beacon and panel, beacon tests): of the
+    fix, or of the adjustment a fix was refused on (``inconsistent``, ``rejected``)."""
 
     @property
     def ok(self) -> bool:
@@ -346,13 +359,26 @@ def locate(scan: Scan, survey: Survey, *, config: LocatorConfig | None = None) -
         return finish(reason="degenerate_geometry", detail=adjusted)
     obs, adj = adjusted
     obs, adj, outliers = snoop(obs, adj, noise=noise)
+
+    def summary(obs: Observations, adj: Adjustment) -> Residuals:
+        return residual_summary(obs, adj, ids=panels.ids, panel_numbers=panels.panel, noise=noise)
+
     cleaned = exclude_inconsistent(obs, adj, noise=noise, min_beacons=cfg.min_beacons)
     if isinstance(cleaned, list):
+        res = summary(obs, adj)
         names = sorted(panels.ids[b] for b in cleaned)
+        worst = max(res.beacon_tests.values(), key=lambda t: t.ratio, default=None)
+        most = (
+            ""
+            if worst is None
+            else f"; {panels.ids[worst.beacon]} disagrees most (test {worst.statistic:.1f} "
+            f"on {worst.dof} returns, {worst.ratio:.1f} times its 0.1 % critical value)"
+        )
         return finish(
             reason="inconsistent",
             detail=f"the beacons seen disagree with each other; {' or '.join(names)} "
-            "may have been moved or mis-surveyed",
+            f"may have been moved or mis-surveyed{most}",
+            residuals=res,
         )
     obs, adj, excluded, more = cleaned
     if adj.dof > 0 and stats.chi2.sf(adj.reference_variance * adj.dof, adj.dof) < cfg.reject_alpha:
@@ -360,6 +386,7 @@ def locate(scan: Scan, survey: Survey, *, config: LocatorConfig | None = None) -
             reason="rejected",
             detail=f"reference variance {adj.reference_variance:.2f} on {adj.dof} degrees "
             "of freedom: the returns do not fit the surveyed beacons",
+            residuals=summary(obs, adj),
         )
     if noise.survey_sigma_m > 0:
         adj = replace(
@@ -380,6 +407,7 @@ def locate(scan: Scan, survey: Survey, *, config: LocatorConfig | None = None) -
         crb=cramer_rao_bound(adj.pose, obs.angles_rad, obs.normals, obs.offsets, noise=noise),
         excluded_beacons=tuple(panels.ids[b] for b in excluded),
         outliers_removed=outliers + more,
+        residuals=summary(obs, adj),
     )
 
 
