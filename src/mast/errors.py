@@ -1,14 +1,15 @@
 """The package's exceptions: one root, a few meaningful kinds.
 
 Library code raises these; only the command line turns them into a one-line
-message and an exit status (2 for bad input, 3 for no fix).
+message and an exit status (2 for bad input, 3 for no fix, 4 when an output
+cannot be written).
 """
 
 from __future__ import annotations
 
 from pathlib import Path
 
-__all__ = ["BeaconError", "InputError", "MastError", "NoFixError"]
+__all__ = ["BeaconError", "InputError", "MastError", "NoFixError", "OutputError"]
 
 
 class MastError(Exception):
@@ -30,6 +31,15 @@ class InputError(MastError):
             where = self.path if line is None else f"{self.path}, line {line}"
             where += ": "
         super().__init__(where + problem)
+
+
+class OutputError(MastError):
+    """An output (a file, a folder, standard output) cannot be written; names it."""
+
+    def __init__(self, problem: str, *, path: str | Path | None = None):
+        self.problem = problem
+        self.path = None if path is None else str(path)
+        super().__init__(problem if self.path is None else f"{self.path}: {problem}")
 
 
 class BeaconError(InputError):

@@ -8,6 +8,7 @@ on stderr and an exit status: 2 bad input, 3 no fix.
 from __future__ import annotations
 
 import math
+import os
 import sys
 import tempfile
 from dataclasses import replace
@@ -18,25 +19,36 @@ from typing import Annotated
 import typer
 
 from mast import __version__
+from mast.apps.outputs import check_output_file, check_output_folder
+from mast.apps.plot import PLOT_SUFFIXES
+from mast.core.noise import DEFAULT_ANGLE_SIGMA_RAD, DEFAULT_RANGE_SIGMA_M, DEFAULT_SURVEY_SIGMA_M
 from mast.core.scan import Scan
-from mast.errors import InputError, MastError, NoFixError
+from mast.errors import InputError, MastError, NoFixError, OutputError
 from mast.pipeline.tracking import Prior
 
 EXIT_OK = 0
 EXIT_BAD_INPUT = 2
 EXIT_NO_FIX = 3
+EXIT_CANNOT_WRITE = 4
+#: A bug in MAST itself (BSD sysexits EX_SOFTWARE): one line, never a traceback.
+EXIT_INTERNAL = 70
 
 #: Sigmas above these get a warning naming the unit (millimetres or degrees typed).
 MAX_PLAUSIBLE_SIGMA_M = 0.5
 MAX_PLAUSIBLE_ANGLE_SIGMA_RAD = 0.05
+
+#: -h as well as --help, on every command.
+CONTEXT = {"help_option_names": ["-h", "--help"]}
 
 app = typer.Typer(
     name="mast",
     help=(
         "MAST: Mobile Automated Scanner Triangulateration. Fix a 2D laser scanner's "
         "position and azimuth in the mine grid from surveyed wall beacons.\n\n"
-        "Exit status: 0 success (a fix), 2 bad input, 3 no fix."
+        "Exit status: 0 success (a fix), 2 bad input, 3 no fix, 4 an output cannot be "
+        "written, 70 an internal error (please report it)."
     ),
+    context_settings=CONTEXT,
     no_args_is_help=True,
     add_completion=False,
     pretty_exceptions_enable=False,
@@ -93,6 +105,7 @@ def simulate(
     """Simulate a scenario: per scene, beacons.csv, the scans and truth.csv."""
     from mast.sim import build_scenario, write_scenario
 
+    check_output_folder(out)
     scenes = build_scenario(scenario, seed, noise=noise)
     written = write_scenario(scenes, out, fmt=fmt.value, scenario=scenario, seed=seed)
     for w in written:
@@ -112,6 +125,10 @@ def _load_scans(
     from mast.io import read_laserscans, read_scan_csv
     from mast.io.bags import bag_kind
 
+    if path == Path("-"):
+        return [_read_stdin_scan(range_min, range_max)], False
+    if not path.exists():
+        raise InputError("scan file not found", path=path)
     if path.is_file() and path.suffix.lower() in {".csv", ".txt"}:
         scan = read_scan_csv(path, range_min_m=range_min or 0.0, range_max_m=range_max or math.inf)
         return [scan], False
@@ -133,6 +150,24 @@ def _load_scans(
     if not scans:
         raise InputError("bag holds no LaserScan message on that topic", path=path)
     return scans, True
+
+
+def _read_stdin_scan(range_min: float | None, range_max: float | None) -> Scan:
+    """A scan CSV from standard input, spooled to a temporary file and named ``<stdin>``."""
+    import shutil
+
+    from mast.io import read_scan_csv
+
+    with tempfile.TemporaryDirectory(prefix="mast-stdin-") as tmp:
+        spool = Path(tmp) / "stdin.csv"
+        with spool.open("wb") as fh:
+            shutil.copyfileobj(sys.stdin.buffer, fh, 1 << 20)
+        try:
+            return read_scan_csv(
+                spool, range_min_m=range_min or 0.0, range_max_m=range_max or math.inf
+            )
+        except InputError as err:
+            raise InputError(err.problem, path="<stdin>", line=err.line) from None
 
 
 def _parse_near(text: str, radius: float, az_tol_deg: float) -> Prior:
@@ -160,17 +195,36 @@ def _parse_near(text: str, radius: float, az_tol_deg: float) -> Prior:
     )
 
 
+def _default(value: float) -> str:
+    return f"{value:g}"
+
+
 @app.command()
 def locate(
-    scan_path: Annotated[
-        Path, typer.Argument(metavar="SCAN", help="A scan CSV, a ROS 1 bag or a ROS 2 bag folder.")
+    scan_paths: Annotated[
+        list[Path],
+        typer.Argument(
+            metavar="SCAN...",
+            help="Scan CSVs, ROS 1 bags or ROS 2 bag folders; '-' reads a scan CSV from "
+            "standard input.",
+        ),
     ],
     beacons: Annotated[Path, typer.Option("--beacons", "-b", help="Beacon survey CSV.")],
     range_sigma: Annotated[
-        float | None, typer.Option("--range-sigma", help="Range standard deviation, metres.")
+        float | None,
+        typer.Option(
+            "--range-sigma",
+            help="Range standard deviation, metres "
+            f"[default: {_default(DEFAULT_RANGE_SIGMA_M)}, or the --scanner's].",
+        ),
     ] = None,
     angle_sigma: Annotated[
-        float | None, typer.Option("--angle-sigma", help="Beam angle standard deviation, radians.")
+        float | None,
+        typer.Option(
+            "--angle-sigma",
+            help="Beam angle standard deviation, radians "
+            f"[default: {_default(DEFAULT_ANGLE_SIGMA_RAD)}, or the --scanner's].",
+        ),
     ] = None,
     scanner: Annotated[
         str | None,
@@ -179,21 +233,29 @@ def locate(
         ),
     ] = None,
     fmt: Annotated[
-        OutputFormat, typer.Option("--format", help="text report or JSON (JSON Lines for a bag).")
+        OutputFormat,
+        typer.Option("--format", help="text report, or JSON Lines (one record per scan)."),
     ] = OutputFormat.text,
     plot: Annotated[
         Path | None,
         typer.Option(
             "--plot",
-            help="Write the paper's Figure 3 for the scan (PNG); numbered per scan for a bag.",
+            help="Write the paper's Figure 3 for the scan (.png, .pdf, .svg ...); numbered "
+            "per scan when there are several. A missing folder is created.",
         ),
     ] = None,
     topic: Annotated[str | None, typer.Option("--topic", help="LaserScan topic in a bag.")] = None,
     range_min: Annotated[
-        float | None, typer.Option("--range-min", help="Shortest valid range, metres.")
+        float | None,
+        typer.Option(
+            "--range-min", help="Shortest valid range, metres [default: the bag's, or 0]."
+        ),
     ] = None,
     range_max: Annotated[
-        float | None, typer.Option("--range-max", help="Longest valid range, metres.")
+        float | None,
+        typer.Option(
+            "--range-max", help="Longest valid range, metres [default: the bag's, or none]."
+        ),
     ] = None,
     near: Annotated[
         str | None,
@@ -213,28 +275,31 @@ def locate(
         float | None,
         typer.Option(
             "--survey-sigma",
-            help="Standard deviation of a surveyed edge coordinate, metres (default 0.003).",
+            help="Standard deviation of a surveyed edge coordinate, metres "
+            f"[default: {_default(DEFAULT_SURVEY_SIGMA_M)}].",
         ),
     ] = None,
 ) -> None:
-    """Fix position and azimuth from one scan (or every scan of a bag).
+    """Fix position and azimuth from one scan, several, or every scan of a bag.
 
-    Exit status 0 when a scan is fixed (for a bag: at least one), 3 when none
-    is, 2 for bad input.
+    Exit status 0 when a scan is fixed (with several scans or a bag: at least
+    one), 3 when none is, 2 for bad input, 4 when an output cannot be written.
     """
     import json
 
-    from mast.apps.report import fix_record, fix_text
+    from mast.apps.report import ReportInputs, fix_record, fix_text
     from mast.io import read_survey
     from mast.pipeline.locator import LocatorConfig, locate_sequence
     from mast.sim import scanner_model
 
     cfg = LocatorConfig()
+    defaults = {"range_sigma_m", "angle_sigma_rad", "survey_sigma_m"}
     if scanner is not None:
         model = scanner_model(scanner)
         cfg = replace(
             cfg, range_sigma_m=max(model.range_sigma_m, 1e-4), angle_sigma_rad=model.angle_sigma_rad
         )
+        defaults -= {"range_sigma_m", "angle_sigma_rad"}
     checks = (
         ("--range-sigma", range_sigma),
         ("--angle-sigma", angle_sigma),
@@ -258,39 +323,67 @@ def locate(
         if range_sigma <= 0:
             raise InputError("--range-sigma must be positive")
         cfg = replace(cfg, range_sigma_m=range_sigma)
+        defaults.discard("range_sigma_m")
     if angle_sigma is not None:
         cfg = replace(cfg, angle_sigma_rad=angle_sigma)
+        defaults.discard("angle_sigma_rad")
     if survey_sigma is not None:
         cfg = replace(cfg, survey_sigma_m=survey_sigma)
+        defaults.discard("survey_sigma_m")
     if near is not None:
         cfg = replace(cfg, prior=_parse_near(near, radius, azimuth_tolerance))
+    if scan_paths.count(Path("-")) > 1:
+        raise InputError("standard input ('-') can be read only once")
+    if plot is not None:
+        check_output_file(plot, suffixes=PLOT_SUFFIXES, inputs=[*scan_paths, beacons])
     survey = read_survey(beacons)
-    scans, many = _load_scans(scan_path, topic=topic, range_min=range_min, range_max=range_max)
-    fixed = 0
-    for i, (scan, fix) in enumerate(
-        zip(scans, locate_sequence(scans, survey, config=cfg), strict=True)
-    ):
-        fixed += fix.ok
-        label = f"{scan_path}#{i}" if many else str(scan_path)
-        if fmt is OutputFormat.json:
-            typer.echo(
-                json.dumps(fix_record(fix, source=str(scan_path), index=i if many else None))
-            )
-        else:
-            if i:
-                typer.echo("")
-            typer.echo(fix_text(fix, source=label))
-        if plot is not None:
-            from mast.apps.plot import plot_fix
+    numbered = len(scan_paths) > 1
+    fixed = located = 0
+    for scan_path in scan_paths:
+        scans, many = _load_scans(scan_path, topic=topic, range_min=range_min, range_max=range_max)
+        numbered = numbered or many
+        inputs = ReportInputs(
+            scan_file="<stdin>" if scan_path == Path("-") else str(scan_path),
+            survey_file=str(beacons),
+            scanner=scanner,
+            topic=_bag_topic(scan_path, topic) if many else None,
+            defaults=frozenset(defaults),
+        )
+        source = inputs.scan_file or str(scan_path)
+        for i, (scan, fix) in enumerate(
+            zip(scans, locate_sequence(scans, survey, config=cfg), strict=True)
+        ):
+            fixed += fix.ok
+            label = f"{source}#{i}" if many else source
+            if fmt is OutputFormat.json:
+                record = fix_record(
+                    fix, source=source, index=i if many else None, scan=scan, inputs=inputs
+                )
+                typer.echo(json.dumps(record))
+            else:
+                if located:
+                    typer.echo("")
+                typer.echo(fix_text(fix, source=label, scan=scan, inputs=inputs))
+            if plot is not None:
+                from mast.apps.plot import plot_fix
 
-            target = plot if not many else plot.with_name(f"{plot.stem}_{i:04d}{plot.suffix}")
-            plot_fix(scan, survey, fix, target, title=label)
+                target = plot.with_name(f"{plot.stem}_{located:04d}{plot.suffix}")
+                plot_fix(scan, survey, fix, target if numbered else plot, title=label)
+            located += 1
     if fixed == 0:
         raise typer.Exit(EXIT_NO_FIX)
 
 
+def _bag_topic(path: Path, topic: str | None) -> str | None:
+    from mast.io.bags import laserscan_topic
+
+    return laserscan_topic(path, topic)
+
+
 bench_app = typer.Typer(
-    help="Benchmarks that print figures (not timed tests).", no_args_is_help=True
+    help="Benchmarks that print figures (not timed tests).",
+    no_args_is_help=True,
+    context_settings=CONTEXT,
 )
 app.add_typer(bench_app, name="bench")
 
@@ -308,6 +401,8 @@ def bench_accuracy(
     for the four scanner configurations (270° at 0.5° and 0.25°, 190° at 1/6°, 360° at 0.2°)."""
     from mast.apps.bench import run_accuracy
 
+    if out is not None:
+        check_output_folder(out)
     run_accuracy(poses=poses, draws=draws, seed=seed, out_dir=out, echo=typer.echo)
 
 
@@ -326,6 +421,8 @@ def bench_robustness(
     reasons, over hostile scenes and a many-beacon drift."""
     from mast.apps.bench.robustness import run_robustness
 
+    if out is not None:
+        check_output_folder(out)
     run_robustness(hard_scenes=hard, drift_scenes=drift, seed=seed, out_dir=out, echo=typer.echo)
 
 
@@ -401,7 +498,9 @@ def bench_real(
     run_real_scans(data, every=every, echo=typer.echo)
 
 
-reproduce_app = typer.Typer(help="Re-run published experiments.", no_args_is_help=True)
+reproduce_app = typer.Typer(
+    help="Re-run published experiments.", no_args_is_help=True, context_settings=CONTEXT
+)
 app.add_typer(reproduce_app, name="reproduce")
 
 
@@ -417,6 +516,7 @@ def reproduce_paper_cmd(
     and with 12 mm range noise, reported beside the paper's published values."""
     from mast.apps.reproduce import reproduce_paper
 
+    check_output_folder(out)
     reproduce_paper(out, draws=draws, seed=seed, echo=typer.echo)
 
 
@@ -442,23 +542,56 @@ def demo(
     """Simulate the paper's layout, locate every scan, and compare with the truth (Table 2)."""
     from mast.apps.demo import run_demo
 
+    if out is not None:
+        check_output_folder(out)
     with tempfile.TemporaryDirectory(prefix="mast-demo-") as tmp:
         run_demo(out if out is not None else Path(tmp), echo=typer.echo, keep=out is not None)
 
 
 def main() -> None:
-    """Entry point: run the app, turning MAST's own errors into one line and an exit status."""
+    """Entry point: every way the command can end is one line and a documented exit status."""
     try:
-        app(standalone_mode=True)
+        try:
+            app(standalone_mode=True)
+        finally:
+            sys.stdout.flush()
     except NoFixError as err:
         print(f"mast: {err}", file=sys.stderr)
         sys.exit(EXIT_NO_FIX)
-    except InputError as err:
+    except OutputError as err:
         print(f"mast: error: {err}", file=sys.stderr)
-        sys.exit(EXIT_BAD_INPUT)
-    except MastError as err:
+        sys.exit(EXIT_CANNOT_WRITE)
+    except MastError as err:  # InputError and the rest: what was given is wrong
         print(f"mast: error: {err}", file=sys.stderr)
         sys.exit(EXIT_BAD_INPUT)
     except KeyboardInterrupt:
         print("mast: interrupted", file=sys.stderr)
         sys.exit(130)
+    except BrokenPipeError:
+        # The reader of standard output went away (``mast locate ... | head``).
+        _silence_stdout()
+        sys.exit(EXIT_CANNOT_WRITE)
+    except OSError as err:
+        _silence_stdout()
+        where = f"{err.filename}: " if err.filename else "standard output: "
+        print(f"mast: error: cannot write {where}{err.strerror or err}", file=sys.stderr)
+        sys.exit(EXIT_CANNOT_WRITE)
+    except Exception as err:
+        if os.environ.get("MAST_DEBUG"):
+            raise
+        text = str(err).splitlines()[0][:200] if str(err) else ""
+        print(
+            f"mast: internal error: {type(err).__name__}: {text} (a bug in MAST: please "
+            "report it with the command; MAST_DEBUG=1 shows the traceback)",
+            file=sys.stderr,
+        )
+        sys.exit(EXIT_INTERNAL)
+
+
+def _silence_stdout() -> None:
+    """Point standard output at /dev/null so that the interpreter's final flush is quiet."""
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+    except (OSError, ValueError):
+        pass

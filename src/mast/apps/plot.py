@@ -12,7 +12,12 @@ from mast.core.beacon import Survey
 from mast.core.scan import Scan
 from mast.pipeline.locator import Fix
 
-__all__ = ["plot_fix"]
+__all__ = ["PLOT_SUFFIXES", "plot_fix"]
+
+#: File suffixes a plot can be written as (matplotlib's Agg and vector back-ends).
+PLOT_SUFFIXES = frozenset(
+    {".png", ".pdf", ".svg", ".svgz", ".jpg", ".jpeg", ".tif", ".tiff", ".webp", ".eps", ".ps"}
+)
 
 
 def plot_fix(scan: Scan, survey: Survey, fix: Fix, path: str | Path, *, title: str = "") -> None:

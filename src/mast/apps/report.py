@@ -1,35 +1,171 @@
-"""What a fix looks like to people and to other programs: JSON records and survey-style text."""
+"""What a fix looks like to people and to other programs: JSON records and a survey report.
+
+The JSON record is published as ``docs/fix.schema.json``; the text report is
+laid out like the least-squares adjustment reports surveyors sign (inputs,
+result, statistics, residuals, how the solution was found).
+"""
 
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass, field
+from datetime import UTC, datetime
 from typing import Any
 
 import numpy as np
 
+from mast import __version__
 from mast.core.pose import format_dms
+from mast.core.scan import Scan
+from mast.pipeline.integrity import Residuals
 from mast.pipeline.locator import NO_FIX_REASONS, Fix
 
-__all__ = ["fix_record", "fix_text"]
+__all__ = ["COVARIANCE_ORDER", "OPTION_WORDS", "ReportInputs", "fix_record", "fix_text"]
+
+#: Row and column order of ``covariance`` in a record, with units.
+COVARIANCE_ORDER = ("easting_m", "northing_m", "azimuth_rad")
+
+#: The MAST paper's Table 1 options in words: which tests a pair of segments passed.
+OPTION_WORDS: dict[int, str] = {
+    1: "both panel lengths, the angle between them and their spacing",
+    2: "both panel lengths and the angle between them",
+    3: "the second panel's length, the angle and the spacing",
+    4: "the first panel's length, the angle and the spacing",
+    5: "the first panel's length and the angle",
+    6: "the second panel's length and the angle",
+}
+
+_TEST_WORDS = {
+    "pass": "PASS",
+    "too_small": "FAIL (too small: the returns fit better than the precisions say)",
+    "too_large": "FAIL (too large: the returns fit worse than the precisions say; "
+    "standard deviations scaled by it)",
+}
+
+
+@dataclass(frozen=True, slots=True)
+class ReportInputs:
+    """What a fix was computed from, for the record (the report a surveyor signs).
+
+    Attributes
+    ----------
+    scan_file, survey_file : str, optional
+        The files as given on the command line.
+    scanner : str, optional
+        The named scanner model the precisions came from.
+    topic : str, optional
+        The bag topic the scan was read from.
+    defaults : frozenset of str
+        Which of ``range_sigma_m``, ``angle_sigma_rad``, ``survey_sigma_m``
+        were left at their defaults (neither given nor from ``scanner``).
+    computed_utc : datetime
+        When the report was made.
+    """
+
+    scan_file: str | None = None
+    survey_file: str | None = None
+    scanner: str | None = None
+    topic: str | None = None
+    defaults: frozenset[str] = frozenset()
+    computed_utc: datetime = field(default_factory=lambda: datetime.now(UTC))
 
 
 def _r(x: float, nd: int = 6) -> float | None:
     return None if not math.isfinite(x) else round(float(x), nd)
 
 
-def fix_record(fix: Fix, *, source: str | None = None, index: int | None = None) -> dict[str, Any]:
-    """The "A fix" JSON object of DESIGN.md (plus diagnostics), JSON-serialisable.
+def _residuals_record(res: Residuals) -> dict[str, Any]:
+    per_beacon: dict[str, Any] = {}
+    for b, g in res.per_beacon.items():
+        entry: dict[str, Any] = {
+            "returns": g.returns,
+            "rms_m": _r(g.rms_m, 7),
+            "max_abs_w": _r(g.max_abs_w, 3),
+        }
+        t = res.beacon_tests.get(b)
+        if t is not None:
+            entry["test"] = {
+                "statistic": _r(t.statistic, 3),
+                "dof": t.dof,
+                "critical": _r(t.critical, 3),
+                "passed": not t.failed,
+            }
+        per_beacon[b] = entry
+    return {
+        "rms_m": _r(res.rms_m, 7),
+        "max_abs_w": _r(res.max_abs_w, 3),
+        "w_critical": _r(res.w_critical, 3),
+        "per_beacon": per_beacon,
+        "per_panel": [
+            {
+                "beacon": b,
+                "panel": p,
+                "returns": g.returns,
+                "rms_m": _r(g.rms_m, 7),
+                "max_abs_w": _r(g.max_abs_w, 3),
+            }
+            for (b, p), g in sorted(res.per_panel.items())
+        ],
+    }
+
+
+def _inputs_record(fix: Fix, scan: Scan | None, inputs: ReportInputs) -> dict[str, Any]:
+    rec: dict[str, Any] = {
+        "scan_file": inputs.scan_file,
+        "survey_file": inputs.survey_file,
+        "scanner": inputs.scanner,
+        "defaults": sorted(inputs.defaults),
+    }
+    if inputs.topic is not None:
+        rec["topic"] = inputs.topic
+    if scan is not None:
+        rec.update(
+            beams=len(scan),
+            valid_beams=int(np.count_nonzero(scan.valid)),
+            range_min_m=_r(scan.range_min_m),
+            range_max_m=_r(scan.range_max_m),
+        )
+    return rec
+
+
+def _corners(fix: Fix) -> list[tuple[str, int, int]]:
+    """(beacon, edge, best option) of each identified corner of the beacons used, once each."""
+    best: dict[tuple[str, int], int] = {}
+    for n in fix.identification.nodes:
+        if n.beacon in fix.beacons:
+            key = (n.beacon, n.edge)
+            best[key] = min(best.get(key, n.option), n.option)
+    return [(b, e, o) for (b, e), o in sorted(best.items())]
+
+
+def fix_record(
+    fix: Fix,
+    *,
+    source: str | None = None,
+    index: int | None = None,
+    scan: Scan | None = None,
+    inputs: ReportInputs | None = None,
+) -> dict[str, Any]:
+    """The "A fix" JSON object of DESIGN.md, described by ``docs/fix.schema.json``.
 
     Keys always present: ``status``, ``easting``, ``northing``, ``azimuth_deg``,
     ``sigma_easting_m``, ``sigma_northing_m``, ``sigma_azimuth_deg``,
-    ``reference_variance``, ``beacons``, ``points_used``; ``reason`` and
-    ``detail`` when there is no fix (values then ``null``).
+    ``reference_variance``, ``beacons``, ``points_used``, the precisions used
+    and ``software``; ``reason`` and ``detail`` when there is no fix (values
+    then ``null``). In a sequence (``index`` given) the scan's ``stamp_ns`` and
+    ``frame_id`` are added when ``scan`` is.
     """
+    inputs = inputs or ReportInputs()
     rec: dict[str, Any] = {}
     if source is not None:
         rec["source"] = source
     if index is not None:
         rec["scan"] = index
+        if scan is not None:
+            rec["stamp_ns"] = scan.stamp_ns
+            rec["frame_id"] = scan.frame_id
+        if inputs.topic is not None:
+            rec["topic"] = inputs.topic
     rec["status"] = fix.status
     adj = fix.adjustment
     if fix.ok and adj is not None and fix.pose is not None:
@@ -51,9 +187,10 @@ def fix_record(fix: Fix, *, source: str | None = None, index: int | None = None)
             ellipse95_semi_minor_m=_r(ell.semi_minor_m, 7),
             ellipse95_azimuth_deg=_r(math.degrees(ell.azimuth_rad), 4),
             covariance=[[float(v) for v in row] for row in adj.covariance],
+            covariance_order=list(COVARIANCE_ORDER),
             reference_variance=_r(adj.reference_variance, 6),
             degrees_of_freedom=adj.dof,
-            chi2_test=adj.test_verdict,
+            chi2_test=adj.test_code,
             chi2_bounds=[_r(adj.chi2_lower, 6), _r(adj.chi2_upper, 6)],
             covariance_scaled=adj.scaled,
         )
@@ -74,8 +211,11 @@ def fix_record(fix: Fix, *, source: str | None = None, index: int | None = None)
             sigma_azimuth_deg=None,
             reference_variance=None,
             reason=fix.reason,
+            reason_text=NO_FIX_REASONS.get(fix.reason or "", ""),
             detail=fix.detail,
         )
+    if fix.residuals is not None:
+        rec["residuals"] = _residuals_record(fix.residuals)
     rec["beacons"] = list(fix.beacons)
     rec["excluded_beacons"] = list(fix.excluded_beacons)
     rec["outliers_removed"] = fix.outliers_removed
@@ -101,18 +241,108 @@ def fix_record(fix: Fix, *, source: str | None = None, index: int | None = None)
             "azimuth_deg": fix.config.prior.pose.azimuth_deg,
             "radius_m": fix.config.prior.radius_m,
         }
+    rec["inputs"] = _inputs_record(fix, scan, inputs)
+    rec["software"] = f"mast {__version__}"
+    rec["computed_utc"] = inputs.computed_utc.isoformat(timespec="seconds").replace("+00:00", "Z")
     rec["elapsed_ms"] = round(fix.elapsed_s * 1e3, 3)
     return rec
 
 
-def fix_text(fix: Fix, *, source: str | None = None) -> str:
-    """A short survey-style report of one fix."""
-    lines: list[str] = []
-    if source:
-        lines.append(f"Scan      {source}")
+def _mm(x: float) -> str:
+    return f"{1e3 * x:.1f}"
+
+
+def _mm2(x: float) -> str:
+    return f"{1e3 * x:7.2f}"
+
+
+def _residual_lines(res: Residuals) -> list[str]:
+    lines = [
+        "Residuals (measured minus computed range; w: standardised residual, Baarda's w-test)",
+        f"  {'beacon':<10} {'panel':>5} {'returns':>7} {'RMS mm':>8} {'max |w|':>8}",
+    ]
+    for b, g in sorted(res.per_beacon.items()):
+        for (pb, p), pg in sorted(res.per_panel.items()):
+            if pb == b:
+                lines.append(
+                    f"  {b:<10} {p:>5} {pg.returns:>7} {_mm(pg.rms_m):>8} {pg.max_abs_w:>8.2f}"
+                )
+        lines.append(f"  {b:<10} {'all':>5} {g.returns:>7} {_mm(g.rms_m):>8} {g.max_abs_w:>8.2f}")
+    n = sum(g.returns for g in res.per_beacon.values())
+    lines.append(f"  {'all':<10} {'':>5} {n:>7} {_mm(res.rms_m):>8} {res.max_abs_w:>8.2f}")
+    verdict = "no outlier" if res.max_abs_w <= res.w_critical else "an outlier remains"
+    lines.append(
+        f"  largest |w| {res.max_abs_w:.2f} against the critical {res.w_critical:.2f} "
+        f"(0.1 % over all returns): {verdict}"
+    )
+    if res.beacon_tests:
+        lines.append(
+            "Beacon tests (each beacon's ranges against the pose the others give; chi-square, "
+            "0.1 %)"
+        )
+        for b, t in sorted(res.beacon_tests.items()):
+            verdict = "FAIL: moved or mis-surveyed?" if t.failed else "pass"
+            lines.append(
+                f"  {b:<10} statistic {t.statistic:9.1f} on {t.dof:>4} returns, "
+                f"critical {t.critical:7.1f}: {verdict}"
+            )
+    return lines
+
+
+def _input_lines(fix: Fix, scan: Scan | None, inputs: ReportInputs) -> list[str]:
+    noise = fix.config.noise
+    when = inputs.computed_utc.strftime("%Y-%m-%d %H:%M:%S UTC")
+    lines = [f"MAST fix report                          mast {__version__}, {when}", "Inputs"]
+    if inputs.scan_file is not None:
+        lines.append(f"  Scan file     {inputs.scan_file}")
+    if scan is not None:
+        valid = int(np.count_nonzero(scan.valid))
+        upper = f"{scan.range_max_m:g} m" if math.isfinite(scan.range_max_m) else "no limit"
+        lines.append(
+            f"  Beams         {len(scan)} read, {valid} with a valid return "
+            f"(valid ranges {scan.range_min_m:g} m to {upper})"
+        )
+    if inputs.survey_file is not None:
+        lines.append(f"  Survey file   {inputs.survey_file}")
+    if inputs.scanner is not None:
+        lines.append(f"  Scanner       {inputs.scanner}")
+
+    def tag(key: str) -> str:
+        if key in inputs.defaults:
+            return " (default)"
+        return f" (from {inputs.scanner})" if inputs.scanner and key != "survey_sigma_m" else ""
+
+    lines += [
+        f"  Range σ       {_mm(noise.range_sigma_m)} mm{tag('range_sigma_m')}",
+        f"  Angle σ       {noise.angle_sigma_rad:g} rad{tag('angle_sigma_rad')}",
+        f"  Survey σ      {_mm(noise.survey_sigma_m)} mm per edge coordinate"
+        f"{tag('survey_sigma_m')}",
+    ]
+    prior = fix.config.prior
+    if prior is not None:
+        lines.append(f"  Prior         {prior.pose}, radius {prior.radius_m:g} m")
+    return lines
+
+
+def fix_text(
+    fix: Fix,
+    *,
+    source: str | None = None,
+    scan: Scan | None = None,
+    inputs: ReportInputs | None = None,
+) -> str:
+    """A survey-style report of one fix (or of why there is none)."""
+    inputs = inputs or ReportInputs(scan_file=source)
+    lines = _input_lines(fix, scan, inputs)
+    if source is not None and source != inputs.scan_file:
+        lines.append(f"  Scan          {source}")
     if not fix.ok or fix.pose is None or fix.adjustment is None:
-        lines.append(f"NO FIX    {fix.reason}: {fix.detail}")
-        lines.append(f"          ({NO_FIX_REASONS.get(fix.reason or '', '')})")
+        lines += [
+            f"Result        NO FIX ({fix.reason}): {NO_FIX_REASONS.get(fix.reason or '', '')}",
+            f"  {fix.detail}",
+        ]
+        if fix.residuals is not None:
+            lines += _residual_lines(fix.residuals)
         return "\n".join(lines)
     adj = fix.adjustment
     sig = adj.sigma
@@ -122,15 +352,18 @@ def fix_text(fix: Fix, *, source: str | None = None) -> str:
     sig_az = format_dms(math.degrees(sig[2]), signed=True)
     ci_az = format_dms(math.degrees(ci[2]), signed=True)
     lines += [
-        f"Easting   {p.easting:15.4f} m   σ {1e3 * sig[0]:7.2f} mm   95% ± {1e3 * ci[0]:7.2f} mm",
-        f"Northing  {p.northing:15.4f} m   σ {1e3 * sig[1]:7.2f} mm   95% ± {1e3 * ci[1]:7.2f} mm",
-        f"Azimuth   {format_dms(p.azimuth_deg):>15}     σ {sig_az:>10}   95% ± {ci_az}",
-        f"Ellipse   95%: {1e3 * ell.semi_major_m:.2f} × {1e3 * ell.semi_minor_m:.2f} mm, "
-        f"major axis at {math.degrees(ell.azimuth_rad):.1f}°",
-        f"Ref. var. {adj.reference_variance:.3f} ({adj.dof} dof; 95% bounds "
-        f"{adj.chi2_lower:.3f}–{adj.chi2_upper:.3f}): {adj.test_verdict}"
-        + ("; covariance scaled by it" if adj.scaled else ""),
-        "Beacons   "
+        "Result        FIX",
+        f"  Easting   {p.easting:15.4f} m   σ {_mm2(sig[0])} mm   95% ± {_mm2(ci[0])} mm",
+        f"  Northing  {p.northing:15.4f} m   σ {_mm2(sig[1])} mm   95% ± {_mm2(ci[1])} mm",
+        f"  Azimuth   {format_dms(p.azimuth_deg):>15}     σ {sig_az:>10}   95% ± {ci_az}",
+        f"  Error ellipse (95 %): semi-major {1e3 * ell.semi_major_m:.2f} mm, semi-minor "
+        f"{1e3 * ell.semi_minor_m:.2f} mm, major axis at azimuth "
+        f"{math.degrees(ell.azimuth_rad):.1f}° (clockwise from grid north)",
+        "Statistics",
+        f"  Reference variance {adj.reference_variance:.3f} on {adj.dof} degrees of freedom; "
+        f"chi-square test at 5 % (accept {adj.chi2_lower:.3f} to {adj.chi2_upper:.3f}): "
+        f"{_TEST_WORDS[adj.test_code]}",
+        "  Beacons used  "
         + ", ".join(
             f"{b} (panels {','.join(map(str, sorted(ps)))})" for b, ps in sorted(fix.panels.items())
         )
@@ -138,19 +371,24 @@ def fix_text(fix: Fix, *, source: str | None = None) -> str:
     ]
     if fix.excluded_beacons:
         lines.append(
-            f"WARNING   beacon(s) {', '.join(fix.excluded_beacons)} left out: their ranges "
+            f"  WARNING: beacon(s) {', '.join(fix.excluded_beacons)} left out: their ranges "
             "disagree with the others (moved or mis-surveyed?)"
         )
     if fix.outliers_removed:
-        lines.append(f"Outliers  {fix.outliers_removed} return(s) removed by data snooping")
-    opts = sorted(
-        {(n.beacon, n.edge, n.option) for n in fix.identification.nodes if n.beacon in fix.beacons}
-    )
-    if opts:
-        lines.append("Corners   " + ", ".join(f"{b} e{e} (Table 1 option {o})" for b, e, o in opts))
+        lines.append(f"  {fix.outliers_removed} return(s) removed as outliers (w-test)")
+    if fix.residuals is not None:
+        lines += _residual_lines(fix.residuals)
+    lines.append("How it was found")
+    for b, e, o in _corners(fix):
+        lines.append(
+            f"  {b} edge {e}: corner identified by {OPTION_WORDS.get(o, '?')} "
+            f"(MAST paper, Table 1 option {o})"
+        )
     if fix.similarity is not None:
         lines.append(
-            f"Alignment similarity scale {fix.similarity.scale:.6f}, "
-            f"ICP {fix.icp_iterations} iterations, {1e3 * fix.elapsed_s:.1f} ms"
+            f"  First pose from the matched corners (scan-to-survey scale "
+            f"{fix.similarity.scale:.6f}; 1 when they agree in size), refined by fitting the "
+            f"returns to the surveyed panels ({fix.icp_iterations} iterations), "
+            f"{1e3 * fix.elapsed_s:.1f} ms in all"
         )
     return "\n".join(lines)

@@ -19,7 +19,14 @@ import numpy as np
 from mast.core.scan import Scan
 from mast.errors import InputError
 
-__all__ = ["BagKind", "bag_kind", "list_topics", "read_laserscans", "write_laserscans"]
+__all__ = [
+    "BagKind",
+    "bag_kind",
+    "laserscan_topic",
+    "list_topics",
+    "read_laserscans",
+    "write_laserscans",
+]
 
 LASERSCAN = "sensor_msgs/msg/LaserScan"
 BagKind = Literal["rosbag1", "sqlite3", "mcap"]
@@ -143,6 +150,16 @@ def read_laserscans(path: str | Path, *, topic: str | None = None) -> Iterator[S
             ) from None
     finally:
         reader.close()
+
+
+def laserscan_topic(path: str | Path, topic: str | None = None) -> str | None:
+    """The LaserScan topic :func:`read_laserscans` reads, or None when the bag's index
+    is too damaged to list its topics (the tolerant reader may still read it)."""
+    try:
+        topics = list_topics(path)
+    except InputError:
+        return topic
+    return _choose_topic([(t.topic, t.msgtype) for t in topics], topic, Path(path))
 
 
 def _choose_topic(topics: list[tuple[str, str]], topic: str | None, path: Path) -> str:

@@ -1,0 +1,75 @@
+"""Output paths checked before any work starts, so that a long run never ends in a
+traceback over where to write: a missing folder is created, a wrong kind of
+path is bad input (exit 2), a place that cannot be written is an
+:class:`~mast.errors.OutputError` (exit 4)."""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Iterable
+from pathlib import Path
+
+from mast.errors import InputError, OutputError
+
+__all__ = ["check_output_file", "check_output_folder", "write_bytes"]
+
+
+def _same_file(a: Path, b: Path) -> bool:
+    try:
+        return a.exists() and b.exists() and a.samefile(b)
+    except OSError:
+        return False
+
+
+def check_output_folder(path: Path, *, option: str = "--out") -> Path:
+    """Make sure ``path`` is a folder that can be written into, creating it if missing."""
+    if path.exists() and not path.is_dir():
+        raise InputError(f"{option} must be a folder, and this is a file", path=path)
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except OSError as err:
+        raise OutputError(f"cannot create the folder: {err.strerror}", path=path) from None
+    if not os.access(path, os.W_OK | os.X_OK):
+        raise OutputError("cannot write into the folder: permission denied", path=path)
+    return path
+
+
+def check_output_file(
+    path: Path,
+    *,
+    suffixes: Iterable[str],
+    inputs: Iterable[Path] = (),
+    option: str = "--plot",
+) -> Path:
+    """Make sure ``path`` names a file of a known kind that can be written.
+
+    Its folder is created if missing. A folder, an unknown suffix or one of
+    the ``inputs`` is bad input; a place that cannot be written is an
+    :class:`OutputError`.
+    """
+    known = sorted(suffixes)
+    if path.is_dir():
+        raise InputError(
+            f"{option} must name a file (such as fix{known[0]}), not a folder", path=path
+        )
+    if path.suffix.lower() not in known:
+        raise InputError(
+            f"{option}: unknown file type {path.suffix or '(no suffix)'!r}; "
+            f"use one of {', '.join(known)}",
+            path=path,
+        )
+    for given in inputs:
+        if _same_file(path, given):
+            raise InputError(f"{option} would overwrite an input file", path=path)
+    check_output_folder(path.parent if str(path.parent) else Path("."), option=option)
+    if path.exists() and not os.access(path, os.W_OK):
+        raise OutputError("cannot overwrite the file: permission denied", path=path)
+    return path
+
+
+def write_bytes(path: Path, data: bytes) -> None:
+    """Write a whole file, turning a failure (full disk, permissions) into an OutputError."""
+    try:
+        path.write_bytes(data)
+    except OSError as err:
+        raise OutputError(f"cannot write: {err.strerror or err}", path=path) from None
