@@ -186,7 +186,7 @@ def fix_record(
             ellipse95_semi_major_m=_r(ell.semi_major_m, 7),
             ellipse95_semi_minor_m=_r(ell.semi_minor_m, 7),
             ellipse95_azimuth_deg=_r(math.degrees(ell.azimuth_rad), 4),
-            covariance=[[float(v) for v in row] for row in adj.covariance],
+            covariance=[[float(v) for v in row] for row in (adj.covariance + adj.covariance.T) / 2],
             covariance_order=list(COVARIANCE_ORDER),
             reference_variance=_r(adj.reference_variance, 6),
             degrees_of_freedom=adj.dof,

@@ -367,12 +367,12 @@ def locate(scan: Scan, survey: Survey, *, config: LocatorConfig | None = None) -
     if isinstance(cleaned, list):
         res = summary(obs, adj)
         names = sorted(panels.ids[b] for b in cleaned)
-        worst = max(res.beacon_tests.values(), key=lambda t: t.ratio, default=None)
+        ratios = sorted(res.beacon_tests.items(), key=lambda kv: -kv[1].ratio)
         most = (
-            ""
-            if worst is None
-            else f"; {panels.ids[worst.beacon]} disagrees most (test {worst.statistic:.1f} "
-            f"on {worst.dof} returns, {worst.ratio:.1f} times its 0.1 % critical value)"
+            "; each beacon's test against the pose the others give, in multiples of its "
+            "0.1 % critical value: " + ", ".join(f"{b} {t.ratio:.2f}" for b, t in ratios)
+            if ratios
+            else ""
         )
         return finish(
             reason="inconsistent",
