@@ -54,9 +54,38 @@ def test_scan_rejects_inconsistent_input(kwargs: dict[str, object], message: str
         Scan(**kwargs)  # type: ignore[arg-type]
 
 
-def test_laserscan_needs_positive_increment() -> None:
-    with pytest.raises(InputError, match="must be positive"):
-        Scan.from_laserscan(angle_min=0.0, angle_increment=-0.01, ranges=[1.0, 2.0])
+def test_laserscan_refuses_a_zero_increment() -> None:
+    with pytest.raises(InputError, match="angle_increment is 0"):
+        Scan.from_laserscan(angle_min=0.0, angle_increment=0.0, ranges=[1.0, 2.0])
+
+
+def test_a_negative_increment_is_the_same_beams_in_reverse() -> None:
+    # ROS allows angle_min > angle_max with a negative increment (a scanner mounted
+    # upside down sweeps clockwise): each range keeps its own angle.
+    from mast.pipeline import LocatorConfig, locate
+    from mast.sim import paper_scene
+
+    scene = paper_scene("parallel")
+    up = scene.simulate_all()[2].scan
+    n = len(up)
+    down = Scan.from_laserscan(
+        angle_min=float(up.angles_rad[-1]),
+        angle_increment=-up.angle_increment,
+        ranges=up.ranges_m[::-1],
+        intensities=np.arange(n, dtype=float)[::-1],
+    )
+    np.testing.assert_allclose(down.angles_rad, up.angles_rad, atol=1e-12)
+    np.testing.assert_array_equal(down.ranges_m, up.ranges_m)
+    assert down.intensities is not None
+    np.testing.assert_array_equal(down.intensities, np.arange(n))
+    cfg = LocatorConfig(range_sigma_m=0.005)
+    a, b = locate(up, scene.survey, config=cfg), locate(down, scene.survey, config=cfg)
+    assert a.ok
+    assert b.ok
+    assert a.pose is not None
+    assert b.pose is not None
+    assert abs(a.pose.easting - b.pose.easting) < 1e-9
+    assert abs(a.pose.azimuth_deg - b.pose.azimuth_deg) < 1e-7
 
 
 def test_uniformity() -> None:

@@ -119,13 +119,15 @@ class Scan:
         r: NDArray[np.float64] = np.asarray(ranges, dtype=np.float64).reshape(-1)
         if not (math.isfinite(angle_min) and math.isfinite(angle_increment)):
             raise InputError("LaserScan angle_min and angle_increment must be finite")
-        if angle_increment <= 0 and r.size > 1:
-            raise InputError(
-                f"LaserScan angle_increment {angle_increment!r} must be positive "
-                "(beams in increasing angle order)"
-            )
+        if angle_increment == 0 and r.size > 1:
+            raise InputError("LaserScan angle_increment is 0: every beam at the same angle")
         angles = np.asarray(angle_min + angle_increment * np.arange(r.size), dtype=np.float64)
         inten = None if intensities is None else np.asarray(intensities, dtype=np.float64)
+        if angle_increment < 0:
+            # Legal in ROS (a scanner mounted upside down sweeps clockwise): the same
+            # beams, listed in increasing angle order.
+            angles, r = angles[::-1], r[::-1]
+            inten = None if inten is None else inten[::-1]
         return cls(angles, r, inten, range_min, range_max, stamp_ns, frame_id)
 
     def __len__(self) -> int:
