@@ -91,3 +91,21 @@ def test_a_negative_increment_is_the_same_beams_in_reverse() -> None:
 def test_uniformity() -> None:
     assert Scan.from_laserscan(angle_min=-1.0, angle_increment=0.01, ranges=np.ones(100)).is_uniform
     assert not Scan([0.0, 0.1, 0.3], [1.0, 1.0, 1.0]).is_uniform
+
+
+def test_ranges_beyond_the_limits_in_another_unit_get_a_hint() -> None:
+    # A narrow drift scanned by a 5.6 m scanner, ranges written in millimetres:
+    # the median (about 600) is no proof by itself, but no beam is within the limits.
+    ranges = np.linspace(300.0, 900.0, 200)
+    with pytest.raises(InputError, match="no range lies within .* look like millimetres"):
+        Scan.from_laserscan(
+            angle_min=-2.0, angle_increment=0.02, ranges=ranges, range_min=0.02, range_max=5.6
+        )
+
+
+def test_a_scan_without_any_echo_is_not_a_unit_mistake() -> None:
+    # Drivers report "no echo" just beyond the longest range: a scan, with no valid return.
+    scan = Scan.from_laserscan(
+        angle_min=-2.0, angle_increment=0.02, ranges=np.full(200, 65.533), range_max=30.0
+    )
+    assert not scan.valid.any()

@@ -21,6 +21,10 @@ def _frozen(a: ArrayLike) -> NDArray[np.float64]:
 
 #: A median range beyond this is not a scan in metres (millimetres, most likely).
 MAX_PLAUSIBLE_RANGE_M = 1000.0
+#: When no return lies within the scanner's limits and their median is this many times
+#: the longest valid range, the ranges are in another unit (millimetres), not "no echo"
+#: (which drivers report just beyond the limit).
+UNIT_MISTAKE_RATIO = 20.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -98,6 +102,12 @@ class Scan:
                 f"scan's median range is {median:.6g} m, beyond any laser "
                 f"scanner underground (> {MAX_PLAUSIBLE_RANGE_M:g} m): the ranges look like "
                 "millimetres; ranges must be in metres (millimetres / 1000)"
+            )
+        if returned.any() and not valid.any() and median > UNIT_MISTAKE_RATIO * rmax:
+            raise InputError(
+                f"no range lies within the scanner's limits {rmin:g} to {rmax:g} m and their "
+                f"median is {median:.6g}: the ranges look like millimetres; ranges must be "
+                "in metres (millimetres / 1000)"
             )
         valid.setflags(write=False)
         object.__setattr__(self, "_valid", valid)
