@@ -1,5 +1,3 @@
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -8,18 +6,12 @@ from typer.testing import CliRunner
 
 from mast import __version__
 from mast.apps.cli import app
+from tests._cli import run_mast_text
 
 runner = CliRunner()
 
 
-def _mast(*args: str) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(
-        [sys.executable, "-m", "mast", *args],
-        capture_output=True,
-        text=True,
-        timeout=120,
-        check=False,
-    )
+_mast = run_mast_text
 
 
 def test_version_and_help() -> None:

@@ -20,6 +20,7 @@ from mast.apps.report import fix_record, fix_text
 from mast.core.beacon import Beacon, Survey
 from mast.pipeline import LocatorConfig, locate
 from mast.sim import paper_scene, random_scene, write_scenario
+from tests._cli import run_mast
 
 SCHEMA_PATH = Path(__file__).resolve().parents[2] / "docs" / "fix.schema.json"
 runner = CliRunner()
@@ -42,13 +43,14 @@ def files(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return out
 
 
-def _mast(*args: str, stdin: bytes | None = None) -> subprocess.CompletedProcess[bytes]:
-    return subprocess.run(
-        [sys.executable, "-m", "mast", *args],
-        capture_output=True,
-        input=stdin,
-        timeout=120,
-        check=False,
+_mast = run_mast
+
+
+def _locate_paper(files: Path, scan: str, *options: str) -> Any:
+    """``mast locate`` in-process on a scan of the noisy parallel-wall scene."""
+    folder = files / "paper-parallel"
+    return runner.invoke(
+        app, ["locate", str(folder / scan), "-b", str(folder / "beacons.csv"), *options]
     )
 
 
@@ -133,20 +135,7 @@ def test_bag_records_follow_the_schema_with_stamp_topic_and_frame(
 
 
 def test_the_covariance_states_its_order_and_units(files: Path) -> None:
-    folder = files / "paper-parallel"
-    r = runner.invoke(
-        app,
-        [
-            "locate",
-            str(folder / "scan_004.csv"),
-            "-b",
-            str(folder / "beacons.csv"),
-            "--format",
-            "json",
-            "--range-sigma",
-            "0.012",
-        ],
-    )
+    r = _locate_paper(files, "scan_004.csv", "--format", "json", "--range-sigma", "0.012")
     rec = json.loads(r.output)
     assert rec["covariance_order"] == ["easting_m", "northing_m", "azimuth_rad"]
     cov = np.array(rec["covariance"])
@@ -195,11 +184,8 @@ def test_an_inconsistent_answer_gives_every_beacons_test(
 
 
 def test_the_text_report_lists_inputs_residuals_and_conventions(files: Path) -> None:
-    folder = files / "paper-parallel"
-    scan = str(folder / "scan_001.csv")
-    r = runner.invoke(
-        app, ["locate", scan, "-b", str(folder / "beacons.csv"), "--range-sigma", "0.012"]
-    )
+    scan = str(files / "paper-parallel" / "scan_001.csv")
+    r = _locate_paper(files, "scan_001.csv", "--range-sigma", "0.012")
     assert r.exit_code == 0, r.output
     out = r.output
     for expected in (
@@ -227,18 +213,7 @@ def test_the_text_report_lists_inputs_residuals_and_conventions(files: Path) -> 
 
 
 def test_a_scanner_model_is_named_as_the_source_of_the_precisions(files: Path) -> None:
-    folder = files / "paper-parallel"
-    r = runner.invoke(
-        app,
-        [
-            "locate",
-            str(folder / "scan_001.csv"),
-            "-b",
-            str(folder / "beacons.csv"),
-            "--scanner",
-            "lms1xx-0.25",
-        ],
-    )
+    r = _locate_paper(files, "scan_001.csv", "--scanner", "lms1xx-0.25")
     assert "Scanner       lms1xx-0.25" in r.output
     assert "(from lms1xx-0.25)" in r.output
 
@@ -299,21 +274,8 @@ def test_bad_output_paths_are_one_line_before_any_work(
 
 
 def test_a_plot_into_a_missing_folder_creates_it(tmp_path: Path, files: Path) -> None:
-    folder = files / "paper-parallel"
     target = tmp_path / "new" / "deeper" / "fix.png"
-    r = runner.invoke(
-        app,
-        [
-            "locate",
-            str(folder / "scan_001.csv"),
-            "-b",
-            str(folder / "beacons.csv"),
-            "--plot",
-            str(target),
-            "--range-sigma",
-            "0.012",
-        ],
-    )
+    r = _locate_paper(files, "scan_001.csv", "--plot", str(target), "--range-sigma", "0.012")
     assert r.exit_code == 0, r.output
     assert target.read_bytes().startswith(b"\x89PNG")
 

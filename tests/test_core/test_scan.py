@@ -97,7 +97,7 @@ def test_ranges_beyond_the_limits_in_another_unit_get_a_hint() -> None:
     # A narrow drift scanned by a 5.6 m scanner, ranges written in millimetres:
     # the median (about 600) is no proof by itself, but no beam is within the limits.
     ranges = np.linspace(300.0, 900.0, 200)
-    with pytest.raises(InputError, match="no range lies within .* look like millimetres"):
+    with pytest.raises(InputError, match=r"no range lies within .* look like millimetres"):
         Scan.from_laserscan(
             angle_min=-2.0, angle_increment=0.02, ranges=ranges, range_min=0.02, range_max=5.6
         )

@@ -86,6 +86,13 @@ def range_model(
     return rho, jac, -jac[:, 2]
 
 
+_VERDICTS = {
+    "pass": "passed",
+    "too_small": "too small (a-priori precisions pessimistic)",
+    "too_large": "too large (model or precisions do not fit)",
+}
+
+
 @dataclass(frozen=True, eq=False)
 class Adjustment:
     """The adjusted pose with its statistics.
@@ -140,11 +147,8 @@ class Adjustment:
 
     @property
     def test_verdict(self) -> str:
-        if self.reference_variance < self.chi2_lower:
-            return "too small (a-priori precisions pessimistic)"
-        if self.reference_variance > self.chi2_upper:
-            return "too large (model or precisions do not fit)"
-        return "passed"
+        """The global test in words."""
+        return _VERDICTS[self.test_code]
 
     @property
     def sigma(self) -> NDArray[np.float64]:

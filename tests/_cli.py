@@ -1,0 +1,25 @@
+"""Running the installed ``mast`` command as a user would: a separate process."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+
+def run_mast(*args: str, stdin: bytes | None = None) -> subprocess.CompletedProcess[bytes]:
+    """``python -m mast ARGS`` with its exit status, stdout and stderr (bytes)."""
+    return subprocess.run(
+        [sys.executable, "-m", "mast", *args],
+        capture_output=True,
+        input=stdin,
+        timeout=120,
+        check=False,
+    )
+
+
+def run_mast_text(*args: str) -> subprocess.CompletedProcess[str]:
+    """:func:`run_mast` with stdout and stderr decoded."""
+    done = run_mast(*args)
+    return subprocess.CompletedProcess(
+        done.args, done.returncode, done.stdout.decode(), done.stderr.decode()
+    )
