@@ -60,6 +60,7 @@ __all__ = [
     "SequenceConfig",
     "Verified",
     "locate",
+    "locate_near",
     "locate_sequence",
 ]
 
@@ -430,6 +431,23 @@ class SequenceConfig:
     azimuth_tolerance_rad: float = math.radians(5.0)
 
 
+def locate_near(
+    scan: Scan, survey: Survey, prior: Prior | None, *, config: LocatorConfig | None = None
+) -> Fix:
+    """Locate a scan near a predicted pose first, from scratch when that gives no fix.
+
+    The prior only narrows the search (no identification needed within it);
+    a scan it cannot fix is located as if there were none, so a prediction can
+    add fixes but never steer one. A prior in ``config`` takes precedence.
+    """
+    cfg = config or LocatorConfig()
+    if cfg.prior is None and prior is not None:
+        fix = locate(scan, survey, config=replace(cfg, prior=prior))
+        if fix.ok:
+            return fix
+    return locate(scan, survey, config=cfg)
+
+
 def locate_sequence(
     scans: Iterable[Scan],
     survey: Survey,
@@ -440,25 +458,16 @@ def locate_sequence(
     """Fix every scan of a sequence, each with the previous fix as its prior when close in time.
 
     A scan within ``max_gap_s`` of a fixed one is first searched near that fix
-    (no identification needed); when that gives no fix it is located from
-    scratch, so a prior can only add fixes, never steer one. A prior given in
-    ``config`` applies to every scan and is never replaced.
+    (:func:`locate_near`). A prior given in ``config`` applies to every scan
+    and is never replaced.
     """
     cfg = config or LocatorConfig()
     last: tuple[int, Pose2D] | None = None
     for scan in scans:
-        fix: Fix | None = None
-        if (
-            cfg.prior is None
-            and last is not None
-            and abs(scan.stamp_ns - last[0]) <= sequence.max_gap_s * 1e9
-        ):
+        prior = None
+        if last is not None and abs(scan.stamp_ns - last[0]) <= sequence.max_gap_s * 1e9:
             prior = Prior(last[1], sequence.radius_m, sequence.azimuth_tolerance_rad)
-            fix = locate(scan, survey, config=replace(cfg, prior=prior))
-            if not fix.ok:
-                fix = None
-        if fix is None:
-            fix = locate(scan, survey, config=cfg)
+        fix = locate_near(scan, survey, prior, config=cfg)
         if fix.ok and fix.pose is not None:
             last = (scan.stamp_ns, fix.pose)
         yield fix
