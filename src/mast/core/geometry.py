@@ -10,7 +10,12 @@ from numpy.typing import NDArray
 
 from mast.core.beacon import Survey
 
-__all__ = ["PanelSet", "first_hits"]
+__all__ = ["CHUNK_ELEMENTS", "PanelSet", "first_hits"]
+
+#: Rays x segments (or points x panels) that one step of the geometry tests holds at
+#: once: each of their temporaries stays at a couple of megabytes however many beams
+#: a scan has and however many panels a survey has (results do not depend on it).
+CHUNK_ELEMENTS = 1 << 18
 
 
 def first_hits(
@@ -19,7 +24,7 @@ def first_hits(
     seg_a: NDArray[np.float64],
     seg_b: NDArray[np.float64],
     *,
-    chunk_elements: int = 2_000_000,
+    chunk_elements: int = CHUNK_ELEMENTS,
 ) -> tuple[NDArray[np.float64], NDArray[np.intp]]:
     """Distance along each ray to the first segment it crosses.
 
@@ -153,12 +158,19 @@ class PanelSet:
         ``subset``) that have any point within ``reach_m``.
         """
         panels = np.arange(len(self)) if subset is None else subset
-        if points_mine.shape[0] == 0 or panels.size == 0:
-            return np.zeros(points_mine.shape[0], dtype=bool), np.zeros(0, dtype=np.intp)
-        t, s = self.project(points_mine, panels)
-        over = np.maximum(np.maximum(-t, t - self.length[panels][None, :]), 0.0)
-        close = over**2 + s**2 <= reach_m**2
-        return np.asarray(np.any(close, axis=1)), panels[np.any(close, axis=0)]
+        n = points_mine.shape[0]
+        if n == 0 or panels.size == 0:
+            return np.zeros(n, dtype=bool), np.zeros(0, dtype=np.intp)
+        near = np.zeros(n, dtype=bool)
+        reached = np.zeros(panels.size, dtype=bool)
+        step = max(1, CHUNK_ELEMENTS // panels.size)
+        for lo in range(0, n, step):
+            t, s = self.project(points_mine[lo : lo + step], panels)
+            over = np.maximum(np.maximum(-t, t - self.length[panels][None, :]), 0.0)
+            close = over**2 + s**2 <= reach_m**2
+            near[lo : lo + step] = np.any(close, axis=1)
+            reached |= np.any(close, axis=0)
+        return near, panels[reached]
 
     def associate(
         self,
@@ -178,14 +190,21 @@ class PanelSet:
         panels = np.arange(len(self)) if subset is None else subset
         if n == 0 or panels.size == 0:
             return idx, dist
-        t, s = self.project(points_mine, panels)
-        g = np.broadcast_to(
-            np.asarray(gate, dtype=float).reshape(-1, 1) if np.ndim(gate) else gate, s.shape
-        )
-        ok = (t >= 0) & (t <= self.length[panels][None, :]) & (np.abs(s) <= g)
-        score = np.where(ok, np.abs(s), np.inf)
-        j = np.argmin(score, axis=1)
-        found = np.isfinite(score[np.arange(n), j])
-        idx[found] = panels[j[found]]
-        dist[found] = s[np.arange(n), j][found]
+        # A gate per point (or one for all), as a column that broadcasts over the panels.
+        gates = np.asarray(gate, dtype=float).reshape(-1, 1) if np.ndim(gate) else None
+        per_point = gates is not None and gates.shape[0] == n
+        step = max(1, CHUNK_ELEMENTS // panels.size)
+        for lo in range(0, n, step):
+            hi = min(lo + step, n)
+            t, s = self.project(points_mine[lo:hi], panels)
+            g = np.broadcast_to(
+                gate if gates is None else gates[lo:hi] if per_point else gates, s.shape
+            )
+            ok = (t >= 0) & (t <= self.length[panels][None, :]) & (np.abs(s) <= g)
+            score = np.where(ok, np.abs(s), np.inf)
+            j = np.argmin(score, axis=1)
+            rows = np.arange(hi - lo)
+            found = np.isfinite(score[rows, j])
+            idx[lo:hi][found] = panels[j[found]]
+            dist[lo:hi][found] = s[rows, j][found]
         return idx, dist

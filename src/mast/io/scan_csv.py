@@ -4,13 +4,15 @@ from __future__ import annotations
 
 import csv
 import math
+from array import array
 from pathlib import Path
 
 import numpy as np
+from numpy.typing import NDArray
 
 from mast.core.scan import Scan
 from mast.errors import InputError
-from mast.io._csv import CsvRows, parse_number
+from mast.io._csv import CsvRows, CsvStream, IrregularError, parse_number
 
 __all__ = ["read_scan_csv", "write_scan_csv"]
 
@@ -30,11 +32,100 @@ def read_scan_csv(
     ``[range_min_m, range_max_m]``; a negative range is treated as no return,
     as some drivers write ``-1`` for one.
 
+    The file is streamed into arrays (memory a few tens of bytes per beam, any
+    size of file); anything irregular is read again as a whole, which names
+    the problem.
+
     Raises
     ------
     InputError
         Naming the file, the line and the problem.
     """
+    try:
+        p, angles, ranges, inten = _stream(path)
+    except (IrregularError, InputError, OSError, UnicodeDecodeError, csv.Error):
+        p, angles, ranges, inten = _read_whole(path)
+    try:
+        return Scan(angles, ranges, inten, range_min_m, range_max_m)
+    except InputError as err:
+        raise InputError(err.problem, path=p) from None
+
+
+_Columns = tuple[Path, NDArray[np.float64], NDArray[np.float64], NDArray[np.float64] | None]
+
+
+def _range_value(text: str, path: Path, line: int) -> float:
+    """One ``range_m`` field: the no-return spellings, else a number (``inf`` allowed)."""
+    r_text = text.strip()
+    if r_text.lower() in _NO_RETURN:
+        return math.nan if r_text.lower() in {"", "nan", "-nan", "none", "null"} else math.inf
+    return parse_number(r_text, column="range_m", path=path, line=line, finite=False)
+
+
+def _intensity_value(text: str, path: Path, line: int) -> float:
+    """One ``intensity`` field: nan for the no-return spellings, else a number."""
+    t = text.strip()
+    if t.lower() in _NO_RETURN:
+        return math.nan
+    return parse_number(t, column="intensity", path=path, line=line, finite=False)
+
+
+def _stream(path: str | Path) -> _Columns:
+    """Plain, valid files row by row into arrays; :class:`IrregularError` for anything else.
+
+    Reads every value as :func:`_read_whole` does (the fast ``float`` of a
+    field is taken only where it equals what the whole-file reader makes of
+    it); an error of any kind is left to :func:`_read_whole` to name.
+    """
+    fl = float
+    angles, ranges, inten = array("d"), array("d"), array("d")
+    with CsvStream(path, required=("angle_rad", "range_m"), optional=("intensity",)) as rows:
+        p = rows.path
+        ia, ir = rows.columns["angle_rad"], rows.columns["range_m"]
+        ii = rows.columns.get("intensity")
+        prev = -math.inf
+        for row in rows.reader:
+            try:
+                a = fl(row[ia])
+                r_text = row[ir]
+            except (ValueError, IndexError):
+                if any(cell.strip() for cell in row):
+                    raise IrregularError("row") from None
+                continue  # a blank line
+            if not (a > prev and a - a == 0.0):  # not increasing, or not finite
+                raise IrregularError("angle")
+            prev = a
+            try:
+                r = fl(r_text)
+            except ValueError:
+                r = _range_value(r_text, p, 0)
+            else:
+                if r - r != 0.0:  # nan or infinite: as the no-return spellings read
+                    r = _range_value(r_text, p, 0)
+            angles.append(a)
+            ranges.append(r)
+            if ii is not None:
+                t = row[ii] if ii < len(row) else ""
+                try:
+                    v = fl(t)
+                except ValueError:
+                    v = _intensity_value(t, p, 0)
+                else:
+                    if v - v != 0.0:
+                        v = _intensity_value(t, p, 0)
+                inten.append(v)
+    if not angles:
+        raise IrregularError("no beams")
+    return (
+        p,
+        np.frombuffer(angles, dtype=np.float64),
+        np.frombuffer(ranges, dtype=np.float64),
+        np.frombuffer(inten, dtype=np.float64) if ii is not None else None,
+    )
+
+
+def _read_whole(path: str | Path) -> _Columns:
+    """The whole file at once, row by row: every error named with its file and line."""
     rows = CsvRows(path, required=("angle_rad", "range_m"), optional=("intensity",))
     p = rows.path
     angles: list[float] = []
@@ -50,33 +141,14 @@ def read_scan_csv(
                 path=p,
                 line=line,
             )
-        r_text = f["range_m"].strip()
-        if r_text.lower() in _NO_RETURN:
-            r = math.nan if r_text.lower() in {"", "nan", "-nan", "none", "null"} else math.inf
-        else:
-            r = parse_number(r_text, column="range_m", path=p, line=line, finite=False)
         angles.append(a)
-        ranges.append(r)
+        ranges.append(_range_value(f["range_m"], p, line))
         if rows.has("intensity"):
-            t = f["intensity"].strip()
-            inten.append(
-                math.nan
-                if t.lower() in _NO_RETURN
-                else parse_number(t, column="intensity", path=p, line=line, finite=False)
-            )
+            inten.append(_intensity_value(f["intensity"], p, line))
         prev_line = line
     if not angles:
         raise InputError("no beams after the header", path=p, line=rows.header_line)
-    try:
-        return Scan(
-            np.array(angles),
-            np.array(ranges),
-            np.array(inten) if inten else None,
-            range_min_m,
-            range_max_m,
-        )
-    except InputError as err:
-        raise InputError(err.problem, path=p) from None
+    return p, np.array(angles), np.array(ranges), np.array(inten) if inten else None
 
 
 def write_scan_csv(path: str | Path, scan: Scan) -> None:

@@ -314,18 +314,20 @@ def _ray_association(
     beams = np.flatnonzero(scan.valid)
     dirs = pose.beam_directions(scan.angles_rad[beams])
     t, j = first_hits(pose.position, dirs, panels.a[keep], panels.b[keep])
-    hit = j >= 0
-    pk = keep[np.maximum(j, 0)]
+    # Only the beams that meet a kept panel go on (memory follows them, not the scan).
+    hit = np.flatnonzero(j >= 0)
+    beams, dirs, t = beams[hit], dirs[hit], t[hit]
+    pk = keep[j[hit]]
     nrm = panels.normal[pk]
     nu = np.abs(np.einsum("ij,ij->i", nrm, dirs))
     gate = np.full(beams.size, gate_sigmas * noise.gate_sigma_m)
-    if pose_cofactor is not None and np.any(hit):
+    if pose_cofactor is not None and beams.size:
         offsets = np.einsum("ij,ij->i", nrm, panels.a[pk])
         _rho, jac, d_phi = range_model(pose, scan.angles_rad[beams], nrm, offsets)
         pred = np.einsum("ij,jk,ik->i", jac, pose_cofactor, jac)
         var = noise.gate_variance(d_phi) + np.where(np.isfinite(pred), pred, 0.0)
         gate = gate_sigmas * np.sqrt(var)
-    ok = hit & (np.abs(scan.ranges_m[beams] - t) <= gate) & (nu > MIN_INCIDENCE_COS)
+    ok = (np.abs(scan.ranges_m[beams] - t) <= gate) & (nu > MIN_INCIDENCE_COS)
     return beams[ok], pk[ok]
 
 

@@ -204,14 +204,6 @@ def estimate_noise(points: NDArray[np.float64], run_ids: NDArray[np.intp]) -> fl
     return float(np.quantile(dist / nu[ok], NOISE_QUANTILE) / _HALF_NORMAL_Q / math.sqrt(1.5))
 
 
-def _sse(points: NDArray[np.float64]) -> float:
-    """Total-least-squares residual sum of squares (smallest singular value squared)."""
-    if points.shape[0] < 3:
-        return 0.0
-    q = points - points.mean(axis=0)
-    return float(np.linalg.svd(q, compute_uv=False)[-1] ** 2)
-
-
 def _penalty(n: int) -> float:
     """SSE, in noise variances, that one more line must buy (BIC-like, grows as ln n).
 
@@ -221,8 +213,18 @@ def _penalty(n: int) -> float:
     return 4.0 * math.log(max(n, 2)) + 12.0
 
 
+#: Longest piece the optimal partition considers at once (returns): bounds its work
+#: to ``n * MAX_PIECE`` for a run of ``n``; longer straight pieces are put back
+#: together from these afterwards (only where the cap alone made the cut).
+MAX_PIECE = 128
+
+#: Piece ends whose candidate costs (``COST_BLOCK x MAX_PIECE``) the partition holds
+#: at once: its memory stays a few megabytes however long the run.
+COST_BLOCK = 512
+
+
 def _partition(
-    points: NDArray[np.float64], var: float, max_piece: int = 128
+    points: NDArray[np.float64], var: float, max_piece: int = MAX_PIECE
 ) -> list[tuple[int, int]]:
     """Optimal partition of one run into straight pieces (dynamic programming).
 
@@ -239,7 +241,8 @@ def _partition(
     lines. Pieces hold at most ``max_piece`` returns, which bounds the work
     to ``n * max_piece``; cuts that only the cap made are undone after.
     Every candidate piece's SSE and normal come at once from cumulative
-    moments.
+    moments, :data:`COST_BLOCK` piece ends at a time, so memory is linear in
+    the run's returns.
 
     References
     ----------
@@ -250,10 +253,11 @@ def _partition(
         return _partition_impl(points, var, max_piece)
 
 
-def _partition_impl(
-    points: NDArray[np.float64], var: float, max_piece: int
-) -> list[tuple[int, int]]:
-    n = points.shape[0]
+def _cumulative_moments(
+    points: NDArray[np.float64],
+) -> tuple[NDArray[np.float64], tuple[NDArray[np.float64], ...]]:
+    """Unit beam vectors, and cumulative sums (from 0) of the centred points' first and
+    second moments and of the beam vectors' second moments."""
     c = points - points.mean(axis=0)
     r = np.hypot(points[:, 0], points[:, 1])
     u = points / np.where(r > 0, r, 1.0)[:, None]
@@ -262,41 +266,64 @@ def _partition_impl(
     def cum(v: NDArray[np.float64]) -> NDArray[np.float64]:
         return np.concatenate([z, np.cumsum(v)])
 
-    sx, sy = cum(c[:, 0]), cum(c[:, 1])
-    sxx, syy, sxy = cum(c[:, 0] ** 2), cum(c[:, 1] ** 2), cum(c[:, 0] * c[:, 1])
-    uxx, uyy, uxy = cum(u[:, 0] ** 2), cum(u[:, 1] ** 2), cum(u[:, 0] * u[:, 1])
+    return u, (
+        cum(c[:, 0]),
+        cum(c[:, 1]),
+        cum(c[:, 0] ** 2),
+        cum(c[:, 1] ** 2),
+        cum(c[:, 0] * c[:, 1]),
+        cum(u[:, 0] ** 2),
+        cum(u[:, 1] ** 2),
+        cum(u[:, 0] * u[:, 1]),
+    )
+
+
+def _partition_impl(
+    points: NDArray[np.float64], var: float, max_piece: int
+) -> list[tuple[int, int]]:
+    n = points.shape[0]
+    u, (sx, sy, sxx, syy, sxy, uxx, uyy, uxy) = _cumulative_moments(points)
     w = min(n, max_piece)
     d = np.arange(1, w + 1)  # piece lengths
-    j = np.arange(1, n + 1)[:, None]  # piece ends (exclusive)
-    i = j - d[None, :]  # piece starts
-    ok = i >= 0
-    ii = np.where(ok, i, 0)
     m = d[None, :].astype(float)
-    ax, ay = sx[j] - sx[ii], sy[j] - sy[ii]
-    vxx = sxx[j] - sxx[ii] - ax * ax / m
-    vyy = syy[j] - syy[ii] - ay * ay / m
-    vxy = sxy[j] - sxy[ii] - ax * ay / m
-    half = 0.5 * (vxx + vyy)
-    sse = np.maximum(half - np.sqrt(np.maximum(0.25 * (vxx - vyy) ** 2 + vxy**2, 0.0)), 0.0)
-    theta = 0.5 * np.arctan2(2.0 * vxy, vxx - vyy)  # direction of the piece's line
-    nx, ny = -np.sin(theta), np.cos(theta)
-    nu2 = (
-        nx * nx * (uxx[j] - uxx[ii])
-        + 2 * nx * ny * (uxy[j] - uxy[ii])
-        + ny * ny * (uyy[j] - uyy[ii])
-    ) / m
-    scale = var * np.maximum(nu2, 0.05)
     pen = _penalty(n)
-    cost = np.where(ok, sse / scale + pen + 4.0 * np.where(m < 3, m, 0.0), np.inf)
+    small = 4.0 * np.where(m < 3, m, 0.0)
+
+    def costs(j0: int, j1: int) -> NDArray[np.float64]:
+        """Cost of every piece ending at ``j0 .. j1 - 1`` (exclusive ends), by length."""
+        j = np.arange(j0, j1)[:, None]  # piece ends (exclusive)
+        i = j - d[None, :]  # piece starts
+        ok = i >= 0
+        ii = np.where(ok, i, 0)
+        ax, ay = sx[j] - sx[ii], sy[j] - sy[ii]
+        vxx = sxx[j] - sxx[ii] - ax * ax / m
+        vyy = syy[j] - syy[ii] - ay * ay / m
+        vxy = sxy[j] - sxy[ii] - ax * ay / m
+        half = 0.5 * (vxx + vyy)
+        sse = np.maximum(half - np.sqrt(np.maximum(0.25 * (vxx - vyy) ** 2 + vxy**2, 0.0)), 0.0)
+        theta = 0.5 * np.arctan2(2.0 * vxy, vxx - vyy)  # direction of the piece's line
+        nx, ny = -np.sin(theta), np.cos(theta)
+        nu2 = (
+            nx * nx * (uxx[j] - uxx[ii])
+            + 2 * nx * ny * (uxy[j] - uxy[ii])
+            + ny * ny * (uyy[j] - uyy[ii])
+        ) / m
+        scale = var * np.maximum(nu2, 0.05)
+        out: NDArray[np.float64] = np.where(ok, sse / scale + pen + small, np.inf)
+        return out
+
     best = np.empty(n + 1)
     best[0] = -pen
     last = np.zeros(n + 1, dtype=np.intp)
-    for jj in range(1, n + 1):
-        k = min(jj, w)
-        total = best[jj - 1 :: -1][:k] + cost[jj - 1, :k]
-        arg = int(np.argmin(total))
-        best[jj] = total[arg]
-        last[jj] = jj - 1 - arg
+    for j0 in range(1, n + 1, COST_BLOCK):
+        j1 = min(j0 + COST_BLOCK, n + 1)
+        cost = costs(j0, j1)
+        for jj in range(j0, j1):
+            k = min(jj, w)
+            total = best[jj - 1 :: -1][:k] + cost[jj - j0, :k]
+            arg = int(np.argmin(total))
+            best[jj] = total[arg]
+            last[jj] = jj - 1 - arg
     pieces: list[tuple[int, int]] = []
     e = n
     while e > 0:
@@ -305,17 +332,66 @@ def _partition_impl(
     pieces.reverse()
     # Undo the cuts that only the cap on piece length made.
     merged: list[tuple[int, int]] = []
+    joined: _Moments | None = None  # moments of merged[-1]
     for a0, b0 in pieces:
         if merged and b0 - merged[-1][0] > w:
             s0 = merged[-1][0]
-            fit = fit_line(points[s0:b0])
-            nu = u[s0:b0] @ fit.normal
-            gain = _sse(points[s0:b0]) - _sse(points[s0:a0]) - _sse(points[a0:b0])
-            if gain / (var * max(float(np.mean(nu**2)), 0.05)) <= pen:
+            if joined is None:
+                joined = _Moments.of(points[s0:a0], u[s0:a0])
+            piece = _Moments.of(points[a0:b0], u[a0:b0])
+            both = joined.union(piece)
+            gain = both.sse() - joined.sse() - piece.sse()
+            if gain / (var * max(both.mean_nu2(), 0.05)) <= pen:
                 merged[-1] = (s0, b0)
+                joined = both
                 continue
         merged.append((a0, b0))
+        joined = None
     return merged
+
+
+@dataclass(frozen=True, slots=True)
+class _Moments:
+    """What a piece's total-least-squares fit needs, kept small and exact.
+
+    ``r`` is the triangular factor of the piece's centred points (their
+    scatter is ``r.T @ r``): the SSE is the smallest singular value of ``r``
+    squared and the line's normal its right singular vector, to the accuracy
+    of a singular value decomposition of the points themselves. Two pieces'
+    factors, centroids and counts give their union's (Chan, Golub and LeVeque
+    1979), so a piece grown one piece at a time costs no pass over its points.
+    """
+
+    count: int
+    mean: NDArray[np.float64]
+    r: NDArray[np.float64]
+    uu: NDArray[np.float64]  # sum of u u^T over the beams (unit vectors)
+
+    @classmethod
+    def of(cls, points: NDArray[np.float64], u: NDArray[np.float64]) -> _Moments:
+        mean = points.mean(axis=0)
+        r = np.linalg.qr(points - mean, mode="r") if points.shape[0] > 1 else np.zeros((1, 2))
+        return cls(int(points.shape[0]), mean, np.asarray(r), u.T @ u)
+
+    def union(self, other: _Moments) -> _Moments:
+        n = self.count + other.count
+        dm = other.mean - self.mean
+        shift = math.sqrt(self.count * other.count / n) * dm
+        r = np.linalg.qr(np.vstack([self.r, other.r, shift[None, :]]), mode="r")
+        return _Moments(n, self.mean + dm * (other.count / n), np.asarray(r), self.uu + other.uu)
+
+    def _svd(self) -> tuple[float, NDArray[np.float64]]:
+        _, s, vt = np.linalg.svd(self.r)
+        return (float(s[-1]) if s.size > 1 else 0.0), vt[-1]
+
+    def sse(self) -> float:
+        """Total-least-squares residual sum of squares (0 for fewer than three points)."""
+        return self._svd()[0] ** 2 if self.count >= 3 else 0.0
+
+    def mean_nu2(self) -> float:
+        """Mean of (normal . u)^2 over the beams, for the fitted line's normal."""
+        nrm = self._svd()[1]
+        return float(nrm @ self.uu @ nrm) / self.count
 
 
 def _refine(
@@ -367,23 +443,10 @@ def _make_segment(
     )
 
 
-def segment_scan(scan: Scan, config: SegmentationConfig = SegmentationConfig()) -> Segmentation:
-    """Split a scan into straight segments and the corners between them.
-
-    Parameters
-    ----------
-    scan : Scan
-    config : SegmentationConfig
-
-    Returns
-    -------
-    Segmentation
-        Segments in increasing beam order, the corners between consecutive
-        segments of a run, and the noise level the thresholds used.
-    """
-    beams, pts = scan.points()
-    if beams.size == 0:
-        return Segmentation((), (), config.noise_floor_m)
+def _runs(
+    scan: Scan, beams: NDArray[np.intp], pts: NDArray[np.float64], config: SegmentationConfig
+) -> tuple[NDArray[np.intp], float]:
+    """Run (stretch without a breakpoint) of every return, and the noise for the thresholds."""
     r = scan.ranges_m[beams]
     ang = scan.angles_rad[beams]
     # Breakpoints: a jump larger than a surface at the limiting incidence explains.
@@ -405,19 +468,42 @@ def segment_scan(scan: Scan, config: SegmentationConfig = SegmentationConfig()) 
         # Second pass with the estimated noise, so noisy returns do not cut runs.
         brk = (gap_beams > config.max_gap_beams + 1) | (step > dmax + 3.0 * noise) | (dphi >= lam)
         run_ids[1:] = np.cumsum(brk)
+    return run_ids, noise
+
+
+def segment_scan(scan: Scan, config: SegmentationConfig = SegmentationConfig()) -> Segmentation:
+    """Split a scan into straight segments and the corners between them.
+
+    Parameters
+    ----------
+    scan : Scan
+    config : SegmentationConfig
+
+    Returns
+    -------
+    Segmentation
+        Segments in increasing beam order, the corners between consecutive
+        segments of a run, and the noise level the thresholds used.
+    """
+    beams, pts = scan.points()
+    if beams.size == 0:
+        return Segmentation((), (), config.noise_floor_m)
+    run_ids, noise = _runs(scan, beams, pts, config)
     segments: list[Segment] = []
     corners: list[Corner] = []
-    for run in np.unique(run_ids):
-        sel = np.flatnonzero(run_ids == run)
-        if sel.size < config.min_points:
+    # run_ids never decrease: each run is one slice of the returns
+    bounds = np.flatnonzero(np.diff(run_ids)) + 1
+    for lo, hi in zip([0, *bounds.tolist()], [*bounds.tolist(), beams.size], strict=True):
+        if hi - lo < config.min_points:
             continue
-        p = pts[sel]
+        run = int(run_ids[lo])
+        p = pts[lo:hi]
         pieces = _refine(p, _partition(p, noise**2), noise**2, config.min_points)
         prev: Segment | None = None
         for i, j in pieces:
             if j - i < config.min_points:
                 continue
-            seg = _make_segment(len(segments), int(run), beams[sel[i:j]], p[i:j], noise)
+            seg = _make_segment(len(segments), run, beams[lo + i : lo + j].copy(), p[i:j], noise)
             if prev is not None and prev.last_beam + 1 + config.max_gap_beams >= seg.first_beam:
                 corner = _corner(prev, seg)
                 if corner is not None:

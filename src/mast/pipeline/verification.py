@@ -166,16 +166,17 @@ def check_beams(
     a = panels.a[sel] + cfg.edge_margin_m * panels.direction[sel]
     b = panels.b[sel] - cfg.edge_margin_m * panels.direction[sel]
     t, jj = first_hits(pose.position, dirs, a, b)
-    j = np.where(jj >= 0, sel[np.maximum(jj, 0)], -1)
-    hit = (j >= 0) & (t <= scan.range_max_m) & (t >= scan.range_min_m)
-    nu = np.abs(np.einsum("ij,ij->i", panels.normal[np.maximum(j, 0)], dirs))
-    hit &= nu > math.sin(math.radians(cfg.min_check_incidence_deg))
-    idx = np.flatnonzero(hit)
+    # Only the beams that meet a panel within the scanner's range go on.
+    idx = np.flatnonzero((jj >= 0) & (t <= scan.range_max_m) & (t >= scan.range_min_m))
+    j = sel[jj[idx]]
+    nu = np.abs(np.einsum("ij,ij->i", panels.normal[j], dirs[idx]))
+    steep = nu > math.sin(math.radians(cfg.min_check_incidence_deg))
+    idx, j, t = idx[steep], j[steep], t[idx[steep]]
     r = scan.ranges_m[idx]
     valid = scan.valid[idx]
     sigma = noise.gate_sigma_m
     gate = cfg.gate_sigmas * sigma
-    res = np.where(valid, r - t[idx], np.nan)
+    res = np.where(valid, r - t, np.nan)
     kind = np.full(idx.size, 3)  # missing
     kind[valid & (res < -gate)] = 1
     kind[valid & (res > gate)] = 2
@@ -187,7 +188,7 @@ def check_beams(
         reach = float(np.max(scan.ranges_m[scan.valid], initial=1.0))
     span = max(reach, 1.0)
     hit_ll = math.log(span / (sigma * math.sqrt(2 * math.pi))) - 0.5 * (res / sigma) ** 2
-    beacon = panels.beacon[j[idx]]
+    beacon = panels.beacon[j]
     out: dict[str, BeamCheck] = {}
     for k in np.unique(beacon):
         m = beacon == k
@@ -254,7 +255,11 @@ def _overrun(
     along the reach is within ``overrun_slope_sigmas`` standard deviations of
     none).
     """
-    t, s = panels.project(points_mine, beacon_panels)
+    # Only returns within a gate of a panel's line, and at most the reach past its
+    # ends, can count: the others are left out before any (returns x panels) array.
+    reach = math.hypot(gate_m, max(gate_m, cfg.overrun_reach_m)) + gate_m
+    near, _ = panels.within(points_mine, reach, subset=beacon_panels)
+    t, s = panels.project(points_mine[near], beacon_panels)
     length = panels.length[beacon_panels][None, :]
     on_panel = (np.abs(s) <= gate_m) & (t >= -gate_m) & (t <= length + gate_m)
     near_any = np.asarray(on_panel.any(axis=1), dtype=bool)
