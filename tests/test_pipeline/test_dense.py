@@ -65,11 +65,6 @@ def test_segmenting_a_dense_scan_is_linear_in_memory(scans: dict[int, tuple[Path
     assert len(seg.segments) == len(normal.segments)
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="integrity.beacon_tests forms an n_b x n_b covariance (4000 returns on a beacon: "
-    "~450 MB); mast.core.linalg.grouped_quadratic_form replaces it, to be wired in there",
-)
 def test_a_dense_scan_locates_within_twice_a_normal_scans_memory(
     scans: dict[int, tuple[Path, Path]],
 ) -> None:

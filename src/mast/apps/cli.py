@@ -456,6 +456,23 @@ def bench_tracking(
     run_tracking(poses=poses, draws=draws, seed=seed, echo=typer.echo)
 
 
+@bench_app.command("dense")
+def bench_dense(
+    beams: Annotated[
+        list[int] | None,
+        typer.Argument(help="Beam counts to measure [default: 1081 10000 100000 1000000]."),
+    ] = None,
+    range_sigma: Annotated[
+        float, typer.Option("--range-sigma", help="Range noise of the scans, metres.")
+    ] = 0.0,
+) -> None:
+    """Dense scans: read and locate time and peak memory (each in a fresh process)
+    against the beams of a scan, from a normal scan to a million beams."""
+    from mast.apps.bench.dense import DEFAULT_BEAMS, run_dense
+
+    run_dense(tuple(beams) if beams else DEFAULT_BEAMS, range_sigma_m=range_sigma, echo=typer.echo)
+
+
 @bench_app.command("clutter")
 def bench_clutter(
     data: Annotated[

@@ -29,6 +29,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import stats
 
+from mast.core.linalg import grouped_quadratic_form
 from mast.core.noise import NoiseModel
 from mast.pipeline.adjustment import Adjustment, Observations
 
@@ -128,13 +129,19 @@ def beacon_tests(
         q_rest = np.linalg.inv(n_rest)
         delta = q_rest @ (g[rest].T @ (w[rest] * v[rest]))
         d = v[mine] - g[mine] @ delta
-        c = np.diag(sig[mine] ** 2) + g[mine] @ q_rest @ g[mine].T
-        # A panel's surveyed position errs once for all its returns: sigma_s / |n . u| each.
-        lever = lever_all[mine]
-        same = obs.panel[mine][:, None] == obs.panel[mine][None, :]
-        c += noise.survey_sigma_m**2 * np.outer(lever, lever) * same
+        # C = diag(sigma^2) + G_b Q_(-b) G_b^T + the survey's share: a panel's surveyed
+        # position errs once for all its returns (sigma_s / |n . u| each); C is never
+        # formed (n_b x n_b), its quadratic form comes from its low-rank parts.
         try:
-            t = float(d @ np.linalg.solve(c, d))
+            t = grouped_quadratic_form(
+                d,
+                sig[mine] ** 2,
+                g[mine],
+                q_rest,
+                lever_all[mine],
+                obs.panel[mine],
+                noise.survey_sigma_m**2,
+            )
         except np.linalg.LinAlgError:
             continue
         # The others' own misfit, when larger than the a-priori precisions allow for
