@@ -8,10 +8,9 @@ and sqlite3 (``.db3``) or MCAP storage. No ROS installation is needed.
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from struct import error as struct_error
 from typing import Any, Literal
 
 import numpy as np
@@ -112,12 +111,23 @@ def list_topics(path: str | Path) -> list[TopicInfo]:
         reader.close()
 
 
-def read_laserscans(path: str | Path, *, topic: str | None = None) -> Iterator[Scan]:
-    """Yield the ``LaserScan`` messages of ``topic`` in time order.
+def read_laserscans(
+    path: str | Path,
+    *,
+    topic: str | None = None,
+    on_skip: Callable[[str], None] | None = None,
+) -> Iterator[Scan]:
+    """Yield the ``LaserScan`` messages of ``topic`` in time order, one at a time.
 
     With ``topic=None`` the bag must hold exactly one LaserScan topic. A topic
     that is missing, or not LaserScan, is an :class:`InputError` listing the
     bag's topics.
+
+    Without ``on_skip`` any damage is an :class:`InputError`. With it, bags
+    are read as they come from the field: a message that cannot be decoded is
+    skipped and ``on_skip`` told which one and why; a bag cut short (or whose
+    storage fails part-way) gives every scan before the damage, and
+    ``on_skip`` is told where the reading stopped.
     """
     p = Path(path)
     try:
@@ -125,31 +135,57 @@ def read_laserscans(path: str | Path, *, topic: str | None = None) -> Iterator[S
     except InputError as err:
         if bag_kind(p) != "rosbag1":
             raise
-        # A damaged index (strict readers refuse it) need not mean damaged messages.
-        yield from _read_tolerant(p, topic, err)
+        # A damaged or missing index (strict readers refuse it) need not mean lost messages.
+        yield from _read_tolerant(p, topic, err, on_skip)
         return
     try:
         conns = list(reader.connections)
         name = _choose_topic([(c.topic, c.msgtype) for c in conns], topic, p)
         chosen = [c for c in conns if c.topic == name]
         index = 0
-        try:
-            for conn, _t, raw in reader.messages(connections=chosen):
-                if ros1:
-                    msg = store.deserialize_ros1(raw, conn.msgtype)
-                else:
-                    msg = store.deserialize_cdr(raw, conn.msgtype)
-                index += 1
-                yield _to_scan(msg, p, index)
-        except InputError:
-            raise
-        except Exception as err:
-            raise InputError(
-                f"unreadable bag at message {index + 1} of {chosen[0].topic}: {_describe(err)}",
-                path=p,
-            ) from None
+        messages = reader.messages(connections=chosen)
+        while True:
+            try:
+                conn, _t, raw = next(messages)
+            except StopIteration:
+                break
+            except Exception as err:
+                problem = f"unreadable bag after message {index} of {name}: {_describe(err)}"
+                if on_skip is None:
+                    raise InputError(problem, path=p) from None
+                on_skip(f"{p}: {problem}; the scans before it are kept")
+                break
+            index += 1
+            scan = _decode(store, ros1, conn.msgtype, raw, p, name, index, on_skip)
+            if scan is not None:
+                yield scan
     finally:
         reader.close()
+
+
+def _decode(
+    store: Any,
+    ros1: bool,
+    msgtype: str,
+    raw: bytes,
+    path: Path,
+    topic: str,
+    index: int,
+    on_skip: Callable[[str], None] | None,
+) -> Scan | None:
+    """One message as a Scan; None (after telling ``on_skip``) when it cannot be decoded."""
+    try:
+        msg = store.deserialize_ros1(raw, msgtype) if ros1 else store.deserialize_cdr(raw, msgtype)
+        return _to_scan(msg, path, index)
+    except Exception as err:
+        problem = err.problem if isinstance(err, InputError) else _describe(err)
+        if isinstance(err, InputError) and problem.startswith(f"message {index}: "):
+            problem = problem[len(f"message {index}: ") :]
+        text = f"message {index} of {topic} cannot be decoded: {problem}"
+        if on_skip is None:
+            raise InputError(text, path=path) from None
+        on_skip(f"{path}: {text}; skipped")
+        return None
 
 
 def laserscan_topic(path: str | Path, topic: str | None = None) -> str | None:
@@ -185,34 +221,49 @@ def _choose_topic(topics: list[tuple[str, str]], topic: str | None, path: Path) 
     return topic
 
 
-def _read_tolerant(path: Path, topic: str | None, strict_error: InputError) -> Iterator[Scan]:
-    """ROS 1 messages by walking the records (see :mod:`mast.io.ros1_tolerant`)."""
+def _read_tolerant(
+    path: Path,
+    topic: str | None,
+    strict_error: InputError,
+    on_skip: Callable[[str], None] | None,
+) -> Iterator[Scan]:
+    """ROS 1 messages by walking the records (see :mod:`mast.io.ros1_tolerant`): a first
+    walk finds the topics, a second yields the chosen one's scans, one chunk at a time."""
     from rosbags.typesys import Stores, get_typestore
 
-    from mast.io.ros1_tolerant import BagFormatError, walk_ros1_bag
+    from mast.io.ros1_tolerant import BagFormatError, iter_ros1_bag
 
-    try:
-        raw = walk_ros1_bag(path)
-    except (BagFormatError, struct_error, KeyError, IndexError) as err:
-        raise InputError(
-            f"{strict_error.problem}; the records cannot be walked either ({err})", path=path
-        ) from None
-    # ROS 1 names types "pkg/Type"; rosbags and this module say "pkg/msg/Type".
-    topics = [
-        (m.topic, m.msgtype if "/msg/" in m.msgtype else m.msgtype.replace("/", "/msg/", 1))
-        for m in raw
-    ]
-    topic = _choose_topic(topics, topic, path)
-    store = get_typestore(Stores.ROS1_NOETIC)
-    chosen = sorted((m for m in raw if m.topic == topic), key=lambda m: m.time_ns)
-    for index, m in enumerate(chosen, 1):
+    damage: list[str] = []
+
+    def walk() -> Iterator[Any]:
         try:
-            msg = store.deserialize_ros1(m.data, LASERSCAN)
-        except Exception as err:
+            yield from iter_ros1_bag(path, on_damage=damage.append if on_skip else None)
+        except BagFormatError as err:
             raise InputError(
-                f"unreadable message {index} of {topic}: {_describe(err)}", path=path
+                f"{strict_error.problem}; the records cannot be walked either ({err})", path=path
             ) from None
-        yield _to_scan(msg, path, index)
+
+    # ROS 1 names types "pkg/Type"; rosbags and this module say "pkg/msg/Type".
+    def msgtype(m: Any) -> str:
+        t = str(m.msgtype)
+        return t if "/msg/" in t else t.replace("/", "/msg/", 1)
+
+    topics = sorted({(m.topic, msgtype(m)) for m in walk()})
+    if not topics and damage:
+        raise InputError(f"no intact message before the damage: {damage[0]}", path=path)
+    topic = _choose_topic(topics, topic, path)
+    damage.clear()
+    store = get_typestore(Stores.ROS1_NOETIC)
+    index = 0
+    for m in walk():
+        if m.topic != topic:
+            continue
+        index += 1
+        scan = _decode(store, True, LASERSCAN, m.data, path, topic, index, on_skip)
+        if scan is not None:
+            yield scan
+    if damage and on_skip is not None:
+        on_skip(f"{path}: {damage[0]}; the {index} message(s) of {topic} before it are kept")
 
 
 def _to_scan(msg: Any, path: Path, index: int) -> Scan:

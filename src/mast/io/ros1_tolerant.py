@@ -1,23 +1,30 @@
-"""A tolerant walk over a ROS 1 bag's records, for bags whose index is damaged.
+"""A tolerant walk over a ROS 1 bag's records, for bags whose index is damaged or missing.
 
 Strict readers (rosbags among them) refuse a bag whose index records are
-inconsistent even when every message is intact; ``../shared/data``'s real bag
-is one (its IndexData records declare a data length that disagrees with their
-count). This walks the records in file order — bag header, uncompressed
-chunks with their connection and message records, index records skipped by
-their *count* — and returns the raw messages; rosbags still decodes them.
-Format: http://wiki.ros.org/Bags/Format/2.0.
+inconsistent even when every message is intact (``../shared/data``'s real bag
+is one: its IndexData records declare a data length that disagrees with their
+count), and a bag cut short, which has no index at all. This walks the
+records in file order — bag header, chunks (uncompressed, bz2 or lz4) with
+their connection and message records, index records skipped by their
+*count* — one chunk in memory at a time, and yields the raw messages;
+rosbags still decodes them. A record cut short ends the walk after every
+message before it, and says so. Format: http://wiki.ros.org/Bags/Format/2.0.
 """
 
 from __future__ import annotations
 
+import bz2
 import struct
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
+from typing import BinaryIO
 
-__all__ = ["RawMessage", "walk_ros1_bag"]
+__all__ = ["MAX_CHUNK_BYTES", "BagFormatError", "RawMessage", "iter_ros1_bag", "walk_ros1_bag"]
 
 _MAGIC = b"#ROSBAG V2.0\n"
+#: Largest chunk (compressed or as declared decompressed) the walk will hold in memory.
+MAX_CHUNK_BYTES = 512 * 1024 * 1024
 
 
 @dataclass(frozen=True, slots=True)
@@ -32,26 +39,33 @@ class BagFormatError(Exception):
     """The bag's records cannot be walked."""
 
 
-def _record(buf: bytes, pos: int) -> tuple[dict[str, bytes], int, int, int]:
-    """Header fields, data start, data length and the header length of the record at pos."""
-    if pos + 4 > len(buf):
-        raise BagFormatError(f"truncated record header at byte {pos}")
-    (hlen,) = struct.unpack_from("<I", buf, pos)
-    hstart, hend = pos + 4, pos + 4 + hlen
-    if hend + 4 > len(buf):
-        raise BagFormatError(f"truncated record at byte {pos}")
+def _fields(header: bytes, pos: int) -> dict[str, bytes]:
     fields: dict[str, bytes] = {}
-    p = hstart
-    while p < hend:
-        (flen,) = struct.unpack_from("<I", buf, p)
-        field = buf[p + 4 : p + 4 + flen]
-        if b"=" not in field or p + 4 + flen > hend:
-            raise BagFormatError(f"malformed header field at byte {p}")
+    p = 0
+    while p < len(header):
+        if p + 4 > len(header):
+            raise BagFormatError(f"malformed header field at byte {pos + p}")
+        (flen,) = struct.unpack_from("<I", header, p)
+        field = header[p + 4 : p + 4 + flen]
+        if b"=" not in field or p + 4 + flen > len(header):
+            raise BagFormatError(f"malformed header field at byte {pos + p}")
         name, value = field.split(b"=", 1)
         fields[name.decode("ascii", "replace")] = value
         p += 4 + flen
+    return fields
+
+
+def _record(buf: bytes, pos: int) -> tuple[dict[str, bytes], int, int]:
+    """Header fields, data start and data length of the record at ``pos`` of a buffer."""
+    if pos + 4 > len(buf):
+        raise BagFormatError(f"truncated record header at byte {pos}")
+    (hlen,) = struct.unpack_from("<I", buf, pos)
+    hend = pos + 4 + hlen
+    if hend + 4 > len(buf):
+        raise BagFormatError(f"truncated record at byte {pos}")
+    fields = _fields(buf[pos + 4 : hend], pos + 4)
     (dlen,) = struct.unpack_from("<I", buf, hend)
-    return fields, hend + 4, dlen, hlen
+    return fields, hend + 4, dlen
 
 
 def _conn_header(data: bytes) -> dict[str, str]:
@@ -71,49 +85,117 @@ def _time_ns(value: bytes) -> int:
     return int(sec) * 1_000_000_000 + int(nsec)
 
 
-def walk_ros1_bag(path: str | Path) -> list[RawMessage]:
-    """Every message of an uncompressed ROS 1 bag, in file order."""
-    buf = Path(path).read_bytes()
-    if not buf.startswith(_MAGIC):
-        raise BagFormatError("not a ROS 1 bag (no '#ROSBAG V2.0' header)")
-    conns: dict[int, tuple[str, str]] = {}
-    pending: list[tuple[int, int, bytes]] = []
-    pos = len(_MAGIC)
+def _read(fh: BinaryIO, n: int, pos: int, what: str) -> bytes:
+    data = fh.read(n)
+    if len(data) != n:
+        raise BagFormatError(f"{what} at byte {pos} is cut short (the file ends)")
+    return data
 
-    def handle(fields: dict[str, bytes], data: bytes) -> None:
-        op = fields.get("op", b"\x00")[0]
-        if op == 0x07:
-            (cid,) = struct.unpack("<I", fields["conn"][:4])
-            hdr = _conn_header(data)
-            topic = fields.get("topic", hdr.get("topic", "").encode()).decode("utf-8", "replace")
-            conns[cid] = (topic, hdr.get("type", "?"))
-        elif op == 0x02:
-            (cid,) = struct.unpack("<I", fields["conn"][:4])
-            pending.append((cid, _time_ns(fields["time"]), data))
 
-    while pos < len(buf):
-        fields, dstart, dlen, _ = _record(buf, pos)
-        op = fields.get("op", b"\x00")[0]
-        if op == 0x04:
-            (count,) = struct.unpack("<I", fields["count"][:4])
-            pos = dstart + 12 * count  # the count, not the (damaged) data length
-            continue
-        if dstart + dlen > len(buf):
-            raise BagFormatError(f"record at byte {pos} runs past the end of the file")
-        data = buf[dstart : dstart + dlen]
-        if op == 0x05:
-            if fields.get("compression", b"none") != b"none":
-                raise BagFormatError("compressed chunks are not supported by the tolerant reader")
-            p = 0
-            while p < len(data):
-                f2, d2, l2, _ = _record(data, p)
-                handle(f2, data[d2 : d2 + l2])
-                p = d2 + l2
+def _decompress(fields: dict[str, bytes], data: bytes, pos: int) -> bytes:
+    kind = fields.get("compression", b"none")
+    size = struct.unpack("<I", fields["size"][:4])[0] if "size" in fields else None
+    if size is not None and size > MAX_CHUNK_BYTES:
+        raise BagFormatError(f"chunk at byte {pos} declares {size} bytes, beyond the limit")
+    limit = MAX_CHUNK_BYTES if size is None else size
+    try:
+        if kind == b"none":
+            return data
+        if kind == b"bz2":
+            dec = bz2.BZ2Decompressor()
+            out = dec.decompress(data, max_length=limit + 1)
+        elif kind == b"lz4":
+            import lz4.frame  # type: ignore[import-untyped]
+
+            ctx = lz4.frame.LZ4FrameDecompressor()
+            out = ctx.decompress(data, max_length=limit + 1)
         else:
-            handle(fields, data)
-        pos = dstart + dlen
-    out = []
-    for cid, t, data in pending:
+            raise BagFormatError(f"chunk at byte {pos}: unknown compression {kind!r}")
+    except (OSError, ValueError, RuntimeError, EOFError) as err:
+        raise BagFormatError(f"chunk at byte {pos} cannot be decompressed ({err})") from None
+    if len(out) > limit:
+        raise BagFormatError(f"chunk at byte {pos} decompresses beyond its declared size")
+    return bytes(out)
+
+
+def iter_ros1_bag(
+    path: str | Path, *, on_damage: Callable[[str], None] | None = None
+) -> Iterator[RawMessage]:
+    """Every message of a ROS 1 bag in file order, one chunk in memory at a time.
+
+    A record that is cut short or cannot be read ends the walk: every message
+    before it has been yielded; ``on_damage`` is told why (without it, the
+    walk raises :class:`BagFormatError`).
+    """
+    conns: dict[int, tuple[str, str]] = {}
+    p = Path(path)
+    with p.open("rb") as fh:
+        if fh.read(len(_MAGIC)) != _MAGIC:
+            raise BagFormatError("not a ROS 1 bag (no '#ROSBAG V2.0' header)")
+        pos = len(_MAGIC)
+        try:
+            while True:
+                head = fh.read(4)
+                if not head:
+                    return
+                if len(head) < 4:
+                    raise BagFormatError(f"record at byte {pos} is cut short (the file ends)")
+                (hlen,) = struct.unpack("<I", head)
+                if hlen > MAX_CHUNK_BYTES:
+                    raise BagFormatError(f"record header at byte {pos} is implausibly long")
+                fields = _fields(_read(fh, hlen, pos, "record header"), pos + 4)
+                (dlen,) = struct.unpack("<I", _read(fh, 4, pos, "record"))
+                op = fields.get("op", b"\x00")[0]
+                if op == 0x04:  # index data: skip by its count, not its (damaged) length
+                    (count,) = struct.unpack("<I", fields["count"][:4])
+                    fh.seek(12 * count, 1)
+                    pos = fh.tell()
+                    continue
+                if dlen > MAX_CHUNK_BYTES:
+                    raise BagFormatError(f"record at byte {pos} declares {dlen} bytes")
+                if op in (0x05, 0x07, 0x02):
+                    data = _read(fh, dlen, pos, "record")
+                else:
+                    fh.seek(dlen, 1)
+                    data = b""
+                if op == 0x05:
+                    chunk = _decompress(fields, data, pos)
+                    q = 0
+                    while q < len(chunk):
+                        f2, d2, l2 = _record(chunk, q)
+                        if d2 + l2 > len(chunk):
+                            raise BagFormatError(f"chunk at byte {pos} holds a record cut short")
+                        msg = _handle(conns, f2, chunk[d2 : d2 + l2])
+                        if msg is not None:
+                            yield msg
+                        q = d2 + l2
+                else:
+                    msg = _handle(conns, fields, data)
+                    if msg is not None:
+                        yield msg
+                pos = fh.tell()
+        except (BagFormatError, struct.error, KeyError, IndexError) as err:
+            if on_damage is None:
+                raise BagFormatError(str(err)) from None
+            on_damage(str(err))
+
+
+def _handle(
+    conns: dict[int, tuple[str, str]], fields: dict[str, bytes], data: bytes
+) -> RawMessage | None:
+    op = fields.get("op", b"\x00")[0]
+    if op == 0x07:
+        (cid,) = struct.unpack("<I", fields["conn"][:4])
+        hdr = _conn_header(data)
+        topic = fields.get("topic", hdr.get("topic", "").encode()).decode("utf-8", "replace")
+        conns[cid] = (topic, hdr.get("type", "?"))
+    elif op == 0x02:
+        (cid,) = struct.unpack("<I", fields["conn"][:4])
         topic, msgtype = conns.get(cid, ("?", "?"))
-        out.append(RawMessage(topic, msgtype, t, data))
-    return out
+        return RawMessage(topic, msgtype, _time_ns(fields["time"]), data)
+    return None
+
+
+def walk_ros1_bag(path: str | Path) -> list[RawMessage]:
+    """Every message of a ROS 1 bag, in file order (raises if any record is damaged)."""
+    return list(iter_ros1_bag(path))
