@@ -5,7 +5,7 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 DEVSTAMP := $(VENV)/.installed-dev
 
-.PHONY: demo test lint typecheck pytest clean
+.PHONY: demo test lint typecheck pytest browser clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -29,7 +29,19 @@ lint: $(DEVSTAMP)
 typecheck: $(DEVSTAMP)
 	$(BIN)/mypy --strict src/mast
 
-pytest: $(DEVSTAMP)
+# The run report's render test opens report.html in headless Chromium: installed here
+# (Debian's chromium) when missing and we are root; otherwise a note, and that test skips.
+browser:
+	@command -v chromium >/dev/null 2>&1 || command -v chromium-browser >/dev/null 2>&1 || \
+	if [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then \
+		echo "installing chromium (apt-get) for the HTML report render test"; \
+		{ apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium >/dev/null; } || \
+		echo "note: chromium could not be installed; the HTML report render test will skip"; \
+	else \
+		echo "note: no chromium and not root (or no apt-get): install chromium to run the HTML report render test"; \
+	fi
+
+pytest: $(DEVSTAMP) browser
 	$(BIN)/python -m pytest
 
 test: lint typecheck pytest

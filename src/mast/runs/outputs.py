@@ -1,0 +1,1128 @@
+"""The files a survey run leaves behind: trajectory, point map, plan and report.
+
+``mast track RUN --beacons B --out DIR`` writes (docs/design.md, "A run"):
+
+* ``trajectory.csv`` (:func:`write_trajectory_csv`): one row per placed scan,
+  full precision, the file contract
+  ``stamp_ns,easting,northing,azimuth_deg,sigma_easting_m,sigma_northing_m,
+  sigma_azimuth_deg,source``;
+* ``trajectory.tum`` (:func:`write_trajectory_tum`): the same poses as TUM
+  ``t x y z qx qy qz qw`` for trajectory tools such as evo;
+* ``map.las`` (:class:`LasMapWriter`): every return of every placed scan in
+  the mine grid, streamed scan by scan;
+* ``map.dxf`` (:func:`write_map_dxf`): a plan for CAD: walls, surveyed
+  beacons, trajectory and fixes on named layers, in metres;
+* ``report.html`` (:func:`write_report_html`): one self-contained page
+  (figures inline as SVG, no network) with the run's counts, figures of the
+  trajectory, its precision and the fixes' global tests, and a table of fixes.
+
+Frames (docs/design.md, "Frames and units"): mine frame E = x, N = y in
+metres; azimuth clockwise from grid north. A TUM or GTSAM heading (yaw) is
+counter-clockwise from +E, so ``yaw = 90° − azimuth``.
+
+Every writer raises :class:`~mast.errors.OutputError` naming the file when it
+cannot be written.
+"""
+
+from __future__ import annotations
+
+import calendar
+import html
+import io
+import math
+import re
+from collections.abc import Iterable, Iterator, Mapping, Sequence
+from datetime import UTC, datetime
+from pathlib import Path
+from types import TracebackType
+from typing import Any, Final
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from mast.core.beacon import Survey
+from mast.core.pose import format_dms
+from mast.errors import InputError, OutputError
+from mast.runs.model import PlacedScan, RunSummary
+
+__all__ = [
+    "DXF_LAYERS",
+    "LAS_SCALE_M",
+    "MAX_TABLE_ROWS",
+    "TRAJECTORY_HEADER",
+    "LasMapWriter",
+    "gps_adjusted_time",
+    "tum_quaternion",
+    "write_map_dxf",
+    "write_report_html",
+    "write_trajectory_csv",
+    "write_trajectory_tum",
+]
+
+#: Header of ``trajectory.csv`` (a file contract: docs/design.md, "A run").
+TRAJECTORY_HEADER: Final = (
+    "stamp_ns,easting,northing,azimuth_deg,"
+    "sigma_easting_m,sigma_northing_m,sigma_azimuth_deg,source"
+)
+
+#: Header comment of ``trajectory.tum``; TUM readers (evo) skip lines starting with '#'.
+TUM_HEADER: Final = (
+    "# timestamp_s x_easting_m y_northing_m z_m qx qy qz qw (yaw = 90 deg - azimuth)"
+)
+
+#: LAS coordinate quantum, metres: 0.1 mm, kept at UTM-sized coordinates because the
+#: header offset sits near the survey (LAS stores int32 multiples of it from the offset).
+LAS_SCALE_M: Final = 1e-4
+
+#: The LAS offset is rounded to a multiple of this (metres): a round number a reader
+#: recognises, still well inside the int32 reach of ±214 km at 0.1 mm.
+LAS_OFFSET_STEP_M: Final = 1.0
+
+_INT32_MAX: Final = 2**31 - 1
+
+#: The layers of ``map.dxf`` and their AutoCAD colour index.
+DXF_LAYERS: Final[Mapping[str, int]] = {
+    "MAST_WALLS": 8,  # grey
+    "MAST_BEACONS": 1,  # red
+    "MAST_TRAJECTORY": 5,  # blue
+    "MAST_FIXES": 3,  # green
+}
+
+#: Height of a beacon's id in the DXF, metres.
+DXF_TEXT_HEIGHT_M: Final = 0.25
+#: Radius of the circle marking a fix in the DXF, metres.
+DXF_FIX_RADIUS_M: Final = 0.05
+#: Length of a fix's azimuth tick in the DXF (from the fix along the scanner's +x), metres.
+DXF_FIX_TICK_M: Final = 0.5
+#: $INSUNITS code for metres.
+_DXF_METRES: Final = 6
+
+#: The report's table of fixes stops after this many rows (a note says so).
+MAX_TABLE_ROWS: Final = 2000
+#: At most this many wall points are drawn in the report's map (evenly thinned).
+MAX_FIGURE_POINTS: Final = 50_000
+#: Markers beyond this many in one series are drawn as an image inside the SVG:
+#: as vector marks they would make the page megabytes long.
+MAX_VECTOR_MARKERS: Final = 5000
+
+_ARCSEC_PER_RAD: Final = 180.0 / math.pi * 3600.0
+
+# --------------------------------------------------------------------------- time
+
+#: Unix time (s) at the GPS epoch, 1980-01-06T00:00:00 UTC.
+_GPS_EPOCH_UNIX: Final = 315_964_800
+#: Adjusted Standard GPS Time is GPS time minus 10^9 s (LAS 1.4, global encoding bit 0).
+_GPS_ADJUST_S: Final = 1_000_000_000
+#: GPS − UTC in seconds, from each leap second on (IERS Bulletin C). No leap second has
+#: been inserted since 2017-01-01; a new one would be added here.
+_LEAP_SECONDS: Final = tuple(
+    (calendar.timegm((y, m, 1, 0, 0, 0)), k)
+    for k, (y, m) in enumerate(
+        [
+            (1981, 7),
+            (1982, 7),
+            (1983, 7),
+            (1985, 7),
+            (1988, 1),
+            (1990, 1),
+            (1991, 1),
+            (1992, 7),
+            (1993, 7),
+            (1994, 7),
+            (1996, 1),
+            (1997, 7),
+            (1999, 1),
+            (2006, 1),
+            (2009, 1),
+            (2012, 7),
+            (2015, 7),
+            (2017, 1),
+        ],
+        start=1,
+    )
+)
+
+
+def gps_adjusted_time(stamp_ns: ArrayLike) -> NDArray[np.float64]:
+    """Adjusted Standard GPS Time (LAS ``gps_time``) of Unix time stamps.
+
+    Parameters
+    ----------
+    stamp_ns : array_like of int
+        Nanoseconds since the Unix epoch (UTC, as ROS message stamps are).
+
+    Returns
+    -------
+    ndarray of float
+        GPS seconds since 1980-01-06 minus 10^9 s: Unix seconds, plus the
+        leap seconds GPS has gained on UTC by then (18 since 2017), minus
+        315 964 800 s and 10^9 s. Computed in integer nanoseconds, so the only
+        rounding is the final one to a double (0.1 µs near the present).
+    """
+    ns = np.asarray(stamp_ns, dtype=np.int64)
+    bounds = np.array([t for t, _ in _LEAP_SECONDS], dtype=np.int64) * 1_000_000_000
+    leap = np.searchsorted(bounds, ns, side="right").astype(np.int64)
+    shift_ns = (leap - _GPS_EPOCH_UNIX - _GPS_ADJUST_S) * 1_000_000_000
+    whole, frac = np.divmod(ns + shift_ns, 1_000_000_000)
+    return np.asarray(whole.astype(np.float64) + frac.astype(np.float64) / 1e9)
+
+
+def _seconds(stamp_ns: int) -> str:
+    """``stamp_ns`` as decimal seconds with all nine digits, without going through a float."""
+    sign = "-" if stamp_ns < 0 else ""
+    s, ns = divmod(abs(int(stamp_ns)), 1_000_000_000)
+    return f"{sign}{s}.{ns:09d}"
+
+
+# --------------------------------------------------------------------------- helpers
+
+
+def _num(value: float) -> str:
+    """Shortest text that reads back as the same double (a Python float's repr)."""
+    return repr(float(value))
+
+
+def _open_text(path: str | Path) -> io.TextIOWrapper:
+    try:
+        return open(path, "w", encoding="utf-8", newline="\n")
+    except OSError as exc:
+        raise OutputError(f"cannot write: {exc.strerror or exc}", path=path) from None
+
+
+def _write_lines(path: str | Path, lines: Iterable[str]) -> int:
+    """Write ``lines`` (each without its newline); the number of lines after the first."""
+    rows = -1
+    f = _open_text(path)
+    try:
+        with f:
+            for line in lines:
+                f.write(line)
+                f.write("\n")
+                rows += 1
+    except OSError as exc:
+        raise OutputError(f"cannot write: {exc.strerror or exc}", path=path) from None
+    return max(rows, 0)
+
+
+def _stretches(placed: Sequence[PlacedScan]) -> list[list[PlacedScan]]:
+    """Placed scans split where the run was not placed: a scan index skipped.
+
+    Between two stretches the scanner's path is unknown (the scans there were
+    neither fixed nor chained to a fix), so the trajectory is not drawn across.
+    """
+    out: list[list[PlacedScan]] = []
+    for p in placed:
+        if out and p.scan == out[-1][-1].scan + 1:
+            out[-1].append(p)
+        else:
+            out.append([p])
+    return out
+
+
+# --------------------------------------------------------------------------- trajectory
+
+
+def write_trajectory_csv(path: str | Path, placed: Iterable[PlacedScan]) -> int:
+    """Write ``trajectory.csv``: one row per placed scan, in the given order.
+
+    Parameters
+    ----------
+    path : str or Path
+        The file to write (replaced if it exists).
+    placed : iterable of PlacedScan
+        The placed scans, in time order.
+
+    Returns
+    -------
+    int
+        Rows written (without the header).
+
+    Notes
+    -----
+    The header is :data:`TRAJECTORY_HEADER` (a file contract). Floats are
+    written as their shortest exact representation (Python's ``repr``), so a
+    UTM coordinate such as 512334.1234 reads back as the same double;
+    ``azimuth_deg`` is in [0, 360), ``sigma_azimuth_deg`` in degrees, and
+    ``source`` is ``fix`` or ``odometry``.
+
+    Raises
+    ------
+    OutputError
+        The file cannot be written.
+    """
+
+    def rows() -> Iterator[str]:
+        yield TRAJECTORY_HEADER
+        for p in placed:
+            s = p.sigma
+            yield ",".join(
+                (
+                    str(int(p.stamp_ns)),
+                    _num(p.pose.easting),
+                    _num(p.pose.northing),
+                    _num(p.pose.azimuth_deg),
+                    _num(s[0]),
+                    _num(s[1]),
+                    _num(math.degrees(s[2])),
+                    p.source,
+                )
+            )
+
+    return _write_lines(path, rows())
+
+
+def tum_quaternion(azimuth_rad: float) -> tuple[float, float, float, float]:
+    """``(qx, qy, qz, qw)`` of a rotation about z by ``yaw = 90° − azimuth``.
+
+    The yaw is wrapped to (−180°, 180°] first, so that ``qw >= 0``.
+    """
+    yaw = math.pi / 2 - azimuth_rad
+    yaw = -((math.pi - yaw) % math.tau - math.pi)  # to (-pi, pi]
+    return 0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2)
+
+
+def write_trajectory_tum(path: str | Path, placed: Iterable[PlacedScan]) -> int:
+    """Write ``trajectory.tum``: the placed poses in the TUM RGB-D trajectory format.
+
+    Parameters
+    ----------
+    path : str or Path
+        The file to write (replaced if it exists).
+    placed : iterable of PlacedScan
+        The placed scans, in time order.
+
+    Returns
+    -------
+    int
+        Poses written.
+
+    Notes
+    -----
+    One line per pose, ``t x y z qx qy qz qw`` separated by single spaces
+    (no trailing space: evo refuses one), after one comment line starting
+    with ``#`` (:data:`TUM_HEADER`), which TUM readers skip. ``t`` is the
+    stamp in seconds with all nine decimals, formatted from the integer
+    nanoseconds; ``x`` = easting, ``y`` = northing, ``z`` = 0 (metres); the
+    orientation is the rotation about z by ``yaw = 90° − azimuth`` (the
+    scanner's +x counter-clockwise from +E), a unit quaternion with
+    ``qw >= 0``.
+
+    References
+    ----------
+    TUM RGB-D benchmark, file formats:
+    https://cvg.cit.tum.de/data/datasets/rgbd-dataset/file_formats
+
+    Raises
+    ------
+    OutputError
+        The file cannot be written.
+    """
+
+    def rows() -> Iterator[str]:
+        yield TUM_HEADER
+        for p in placed:
+            qx, qy, qz, qw = tum_quaternion(p.pose.azimuth)
+            yield " ".join(
+                (
+                    _seconds(p.stamp_ns),
+                    _num(p.pose.easting),
+                    _num(p.pose.northing),
+                    "0.0",
+                    _num(qx),
+                    _num(qy),
+                    _num(qz),
+                    _num(qw),
+                )
+            )
+
+    return _write_lines(path, rows())
+
+
+# --------------------------------------------------------------------------- LAS
+
+
+class LasMapWriter:
+    """Stream the returns of a run's placed scans into a LAS 1.4 point cloud.
+
+    Points are written scan by scan as they are added (nothing accumulates:
+    memory does not grow with the run); the header's counts and bounds are
+    finalised by :meth:`close`. A ``.laz`` path is compressed (lazrs).
+
+    Parameters
+    ----------
+    path : str or Path
+        ``map.las`` (replaced if it exists).
+    origin_e, origin_n : float
+        A point near the survey, metres. The header offsets are these rounded
+        to :data:`LAS_OFFSET_STEP_M`, and the scales :data:`LAS_SCALE_M`
+        (0.1 mm), so UTM-sized coordinates keep 0.1 mm: LAS stores each
+        coordinate as an int32 multiple of the scale from the offset, which
+        reaches ±214 km around the origin.
+
+    Notes
+    -----
+    Point data record format 6 (LAS 1.4): x = easting, y = northing, z = 0,
+    ``intensity`` (uint16), ``return_number`` = ``number_of_returns`` = 1,
+    ``gps_time`` and the extra dimension ``scan_index`` (uint32, the
+    LaserScan message index of the point's scan).
+
+    ``gps_time`` is **Adjusted Standard GPS Time** (GPS seconds since
+    1980-01-06 minus 10^9, :func:`gps_adjusted_time`), converted from the
+    scans' Unix (UTC) stamps with the leap seconds; the header's global
+    encoding says so (bit 0, GPS time type, set), as it also sets the WKT bit
+    that LAS 1.4 requires with format 6. No coordinate reference system is
+    recorded: the mine grid is the survey's.
+
+    Examples
+    --------
+    How ``mast track`` would use it (``scans[i]`` the Scan of message i)::
+
+        with LasMapWriter(out / "map.las", origin_e=e0, origin_n=n0) as las:
+            for p in placed:
+                _, pts = scans[p.scan].points()
+                las.add(p.scan, p.stamp_ns, p.pose.scanner_to_mine(pts))
+    """
+
+    def __init__(self, path: str | Path, *, origin_e: float, origin_n: float) -> None:
+        import laspy
+
+        if not (math.isfinite(origin_e) and math.isfinite(origin_n)):
+            raise InputError(f"map origin ({origin_e}, {origin_n}) is not finite")
+        self.path = Path(path)
+        header = laspy.LasHeader(point_format=6, version="1.4")
+        header.add_extra_dim(
+            laspy.ExtraBytesParams(
+                name="scan_index",
+                type=np.uint32,
+                description="LaserScan message index",
+            )
+        )
+        step = LAS_OFFSET_STEP_M
+        self._offset = np.array([round(origin_e / step) * step, round(origin_n / step) * step, 0.0])
+        header.offsets = self._offset
+        header.scales = np.array([LAS_SCALE_M] * 3)
+        header.global_encoding.gps_time_type = laspy.header.GpsTimeType.STANDARD
+        header.global_encoding.wkt = True
+        header.generating_software = "mast"
+        header.system_identifier = "MAST survey run"
+        self._header = header
+        self.count = 0
+        self._closed = False
+        try:
+            self._writer = laspy.open(self.path, mode="w", header=header)
+        except OSError as exc:
+            raise OutputError(f"cannot write: {exc.strerror or exc}", path=self.path) from None
+
+    def __enter__(self) -> LasMapWriter:
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.close()
+
+    def add(
+        self,
+        scan_index: int,
+        stamp_ns: int,
+        points_mine: ArrayLike,
+        intensity: ArrayLike | None = None,
+    ) -> int:
+        """Append the returns of one scan.
+
+        Parameters
+        ----------
+        scan_index : int
+            The scan's LaserScan message index (from 0).
+        stamp_ns : int
+            Its stamp, nanoseconds since the Unix epoch.
+        points_mine : array_like, shape (n, 2)
+            Its returns in the mine frame (E, N), metres. Rows with a
+            coordinate that is not finite (beams without a return) are left out.
+        intensity : array_like, shape (n,), optional
+            The returns' intensities, rounded and clipped to LAS's uint16
+            (0..65535); not finite gives 0. Without it, 0.
+
+        Returns
+        -------
+        int
+            Points written for this scan.
+
+        Raises
+        ------
+        InputError
+            Shapes do not match, or a point lies beyond the ±214 km that LAS
+            can store at 0.1 mm around the origin.
+        OutputError
+            The writer is closed, or the file cannot be written.
+        """
+        import laspy
+
+        if self._closed:
+            raise OutputError("map already closed", path=self.path)
+        pts = np.asarray(points_mine, dtype=float)
+        if pts.ndim != 2 or pts.shape[1] != 2:
+            raise InputError(f"points_mine must have shape (n, 2), got {pts.shape}")
+        keep = np.all(np.isfinite(pts), axis=1)
+        inten = np.zeros(len(pts))
+        if intensity is not None:
+            inten = np.asarray(intensity, dtype=float).reshape(-1)
+            if inten.shape != (len(pts),):
+                raise InputError(
+                    f"intensity must have shape ({len(pts)},) like the points, got {inten.shape}"
+                )
+        pts, inten = pts[keep], inten[keep]
+        n = len(pts)
+        if n == 0:
+            return 0
+        counts = np.round((pts - self._offset[:2]) / LAS_SCALE_M)
+        if np.any(np.abs(counts) > _INT32_MAX):
+            far = pts[np.argmax(np.max(np.abs(counts), axis=1))]
+            raise InputError(
+                f"scan {scan_index}: point ({far[0]:.3f}, {far[1]:.3f}) is more than "
+                f"{_INT32_MAX * LAS_SCALE_M / 1000:.0f} km from the map origin "
+                f"({self._offset[0]:.0f}, {self._offset[1]:.0f}); LAS cannot store it at "
+                f"{LAS_SCALE_M * 1000:g} mm"
+            )
+        record = laspy.ScaleAwarePointRecord.zeros(n, header=self._header)
+        record.X = counts[:, 0].astype(np.int32)
+        record.Y = counts[:, 1].astype(np.int32)
+        record.Z = np.zeros(n, dtype=np.int32)
+        record.intensity = np.clip(np.round(np.nan_to_num(inten, nan=0.0)), 0, 65535).astype(
+            np.uint16
+        )
+        record.return_number = np.ones(n, dtype=np.uint8)
+        record.number_of_returns = np.ones(n, dtype=np.uint8)
+        record.gps_time = np.full(n, gps_adjusted_time(np.int64(stamp_ns)))
+        record.scan_index = np.full(n, scan_index, dtype=np.uint32)
+        try:
+            self._writer.write_points(record)
+        except OSError as exc:
+            raise OutputError(f"cannot write: {exc.strerror or exc}", path=self.path) from None
+        self.count += n
+        return n
+
+    def close(self) -> int:
+        """Finalise the header (counts, bounds) and close the file; the points written."""
+        if not self._closed:
+            self._closed = True
+            try:
+                self._writer.close()
+            except OSError as exc:
+                raise OutputError(f"cannot write: {exc.strerror or exc}", path=self.path) from None
+        return self.count
+
+
+# --------------------------------------------------------------------------- DXF
+
+
+def _finite_rows(points: ArrayLike) -> NDArray[np.float64]:
+    p = np.asarray(points, dtype=float).reshape(-1, 2)
+    return p[np.all(np.isfinite(p), axis=1)]
+
+
+def write_map_dxf(
+    path: str | Path,
+    survey: Survey,
+    placed: Iterable[PlacedScan],
+    walls: Iterable[ArrayLike],
+    fixes: Iterable[PlacedScan],
+) -> None:
+    """Write ``map.dxf``: the run's plan in the mine grid, for CAD.
+
+    Parameters
+    ----------
+    path : str or Path
+        The file to write (replaced if it exists).
+    survey : Survey
+        The surveyed beacons.
+    placed : iterable of PlacedScan
+        Every placed scan, in time order.
+    walls : iterable of array_like, shape (n, 2)
+        Wall pieces in the mine frame (E, N), metres, e.g. the scans' straight
+        segments mapped to the mine frame; each becomes one polyline. Rows
+        that are not finite are dropped; a piece with fewer than two points
+        left is skipped.
+    fixes : iterable of PlacedScan
+        The placed scans that were fixed from beacons.
+
+    Notes
+    -----
+    DXF R2010, units metres (``$INSUNITS`` = 6, ``$MEASUREMENT`` = 1 metric);
+    coordinates are written as full doubles, so UTM-sized ones are kept
+    exactly. Layers (:data:`DXF_LAYERS`):
+
+    ``MAST_WALLS``
+        one LWPOLYLINE per wall piece;
+    ``MAST_BEACONS``
+        per beacon, an LWPOLYLINE through its four surveyed edges and a TEXT
+        with its id at its centre (:data:`DXF_TEXT_HEIGHT_M` high);
+    ``MAST_TRAJECTORY``
+        one LWPOLYLINE per unbroken stretch of placed scans (consecutive scan
+        indices), a POINT for a stretch of one scan: the path is not drawn
+        where the run was not placed;
+    ``MAST_FIXES``
+        per fix, a CIRCLE (:data:`DXF_FIX_RADIUS_M`) and a LINE of
+        :data:`DXF_FIX_TICK_M` from it along its azimuth.
+
+    Raises
+    ------
+    OutputError
+        The file cannot be written.
+    """
+    from ezdxf import units
+    from ezdxf.enums import TextEntityAlignment
+    from ezdxf.filemanagement import new
+
+    doc = new("R2010", units=units.M)
+    doc.header["$INSUNITS"] = _DXF_METRES
+    doc.header["$MEASUREMENT"] = 1
+    for name, colour in DXF_LAYERS.items():
+        doc.layers.add(name, color=colour)
+    msp = doc.modelspace()
+
+    for piece in walls:
+        p = _finite_rows(piece)
+        if len(p) >= 2:
+            msp.add_lwpolyline(p.tolist(), dxfattribs={"layer": "MAST_WALLS"})
+
+    for b in survey:
+        msp.add_lwpolyline(np.asarray(b.edges).tolist(), dxfattribs={"layer": "MAST_BEACONS"})
+        c = b.centroid
+        msp.add_text(
+            b.id, height=DXF_TEXT_HEIGHT_M, dxfattribs={"layer": "MAST_BEACONS"}
+        ).set_placement((float(c[0]), float(c[1])), align=TextEntityAlignment.BOTTOM_CENTER)
+
+    for stretch in _stretches(list(placed)):
+        xy = [(s.pose.easting, s.pose.northing) for s in stretch]
+        if len(xy) == 1:
+            msp.add_point(xy[0], dxfattribs={"layer": "MAST_TRAJECTORY"})
+        else:
+            msp.add_lwpolyline(xy, dxfattribs={"layer": "MAST_TRAJECTORY"})
+
+    for f in fixes:
+        e, n, a = f.pose.easting, f.pose.northing, f.pose.azimuth
+        msp.add_circle((e, n), DXF_FIX_RADIUS_M, dxfattribs={"layer": "MAST_FIXES"})
+        tip = (e + DXF_FIX_TICK_M * math.sin(a), n + DXF_FIX_TICK_M * math.cos(a))
+        msp.add_line((e, n), tip, dxfattribs={"layer": "MAST_FIXES"})
+
+    try:
+        doc.saveas(path)
+    except OSError as exc:
+        raise OutputError(f"cannot write: {exc.strerror or exc}", path=path) from None
+
+
+# --------------------------------------------------------------------------- report
+
+_CSS: Final = """
+body { font-family: system-ui, -apple-system, "Segoe UI", Roboto, sans-serif; color: #222;
+       max-width: 1100px; margin: 1.5em auto; padding: 0 1em; line-height: 1.4; }
+h1 { font-size: 1.6em; margin-bottom: 0.1em; }
+h2 { font-size: 1.2em; margin-top: 1.8em; border-bottom: 1px solid #ccc; }
+.sub { color: #555; margin-top: 0; }
+table { border-collapse: collapse; font-size: 0.9em; }
+th, td { padding: 0.2em 0.6em; border-bottom: 1px solid #e4e4e4; text-align: left; }
+td.n, th.n { text-align: right; font-variant-numeric: tabular-nums; white-space: nowrap; }
+table.summary th { font-weight: normal; color: #555; }
+figure { margin: 1em 0; }
+figure svg { max-width: 100%; height: auto; }
+figcaption { font-size: 0.9em; color: #444; }
+.note { color: #8a5a00; }
+.test-pass { color: #1b6e20; } .test-too_small, .test-too_large { color: #a33; }
+footer { margin-top: 2em; font-size: 0.8em; color: #777; }
+"""
+
+_FIX_COLOUR: Final = "tab:red"
+_ODO_COLOUR: Final = "tab:blue"
+_WALL_COLOUR: Final = "0.6"
+_BEACON_COLOUR: Final = "tab:green"
+_NICE: Final = (1.0, 2.0, 5.0)
+
+
+def _e(value: object) -> str:
+    return html.escape(str(value), quote=True)
+
+
+def _group(value: float, decimals: int = 0) -> str:
+    """A number with its thousands grouped by thin spaces, as survey sheets print them."""
+    return f"{value:,.{decimals}f}".replace(",", "\u2009")
+
+
+def _origin(points: NDArray[np.float64]) -> tuple[float, float]:
+    """Round point the report's map axes count from: zero for coordinates under 10 km,
+    else a multiple of 100 m (or a larger power of ten for a wide view) just below them."""
+    if len(points) == 0 or float(np.max(np.abs(points))) < 10_000.0:
+        return 0.0, 0.0
+    lo, hi = points.min(axis=0), points.max(axis=0)
+    span = float(np.max(hi - lo))
+    step = 10.0 ** max(2, math.ceil(math.log10(max(span, 1.0))))
+    return (math.floor(float(lo[0]) / step) * step, math.floor(float(lo[1]) / step) * step)
+
+
+def _axis_label(name: str, value: float) -> str:
+    return f"{name} (m)" if value == 0.0 else f"{name} − {_group(value)} (m)"
+
+
+def _svg(fig: Any, name: str) -> str:
+    """A matplotlib figure as inline ``<svg>`` (no XML prolog, DOCTYPE or metadata).
+
+    Each figure gets its own hash salt: the ids of its clip paths and markers
+    are then unique in the page (several SVGs share one id space) and the
+    same from run to run.
+    """
+    import matplotlib as mpl
+
+    buf = io.StringIO()
+    with mpl.rc_context({"svg.hashsalt": f"mast-{name}", "svg.fonttype": "none"}):
+        fig.savefig(buf, format="svg", metadata={"Date": None})
+    text = buf.getvalue()
+    start = text.find("<svg")
+    text = text[start:]
+    text = re.sub(r"<metadata>.*?</metadata>\s*", "", text, count=1, flags=re.DOTALL)
+    return text.replace("<svg ", f'<svg role="img" aria-label="{_e(name)}" ', 1)
+
+
+def _new_figure(width_in: float, height_in: float, rows: int = 1) -> tuple[Any, Any]:
+    # Figure objects, not pyplot: nothing is registered with a GUI back-end or kept
+    # alive by pyplot's figure manager, so there is nothing to close and no state leaks.
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(width_in, height_in), layout="constrained")
+    axes = fig.subplots(rows, 1, sharex=True, squeeze=False)[:, 0]
+    return fig, axes
+
+
+def _broken(
+    t: NDArray[np.float64], y: NDArray[np.float64], scans: NDArray[np.int64]
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """``t, y`` with a NaN inserted where scan indices skip: lines break at gaps."""
+    if len(t) < 2:
+        return t, y
+    gaps = np.nonzero(np.diff(scans) != 1)[0] + 1
+    return np.insert(t, gaps, np.nan), np.insert(y, gaps, np.nan)
+
+
+def _map_figure(
+    survey: Survey,
+    placed: Sequence[PlacedScan],
+    wall_points: NDArray[np.float64],
+) -> tuple[str, str]:
+    """The trajectory over the beacons and the wall points; SVG and caption."""
+    pose_xy = np.array([[p.pose.easting, p.pose.northing] for p in placed]).reshape(-1, 2)
+    edges = np.vstack([b.edges for b in survey]) if len(survey) else np.zeros((0, 2))
+    walls = _finite_rows(wall_points)
+    if len(walls) > MAX_FIGURE_POINTS:
+        walls = walls[:: math.ceil(len(walls) / MAX_FIGURE_POINTS)]
+    extent = np.vstack([pose_xy, edges, walls])
+    oe, on = _origin(extent)
+    o = np.array([oe, on])
+    fig, (ax,) = _new_figure(10.0, 7.0)
+    if len(walls):
+        # Rasterised: tens of thousands of dots as vector marks would bloat the page.
+        ax.scatter(
+            *(walls - o).T,
+            s=0.4,
+            c=_WALL_COLOUR,
+            linewidths=0,
+            rasterized=True,
+            label=f"wall returns ({len(walls)} drawn)",
+            zorder=1,
+        )
+    for k, b in enumerate(survey):
+        e = np.asarray(b.edges) - o
+        ax.plot(*e.T, "-", color=_BEACON_COLOUR, lw=2.0, zorder=3, label="beacon" if k == 0 else "")
+        c = b.centroid - o
+        ax.annotate(
+            b.id,
+            (float(c[0]), float(c[1])),
+            xytext=(0, 6),
+            textcoords="offset points",
+            ha="center",
+            fontsize=8,
+            color="darkgreen",
+            zorder=5,
+        )
+    if len(placed):
+        scans = np.array([p.scan for p in placed], dtype=np.int64)
+        xy = pose_xy - o
+        te, tn = _broken(xy[:, 0], xy[:, 1], scans)
+        ax.plot(te, tn, "-", color=_ODO_COLOUR, lw=1.0, zorder=4, label="trajectory")
+        fix = np.array([p.source == "fix" for p in placed])
+        if np.any(~fix):
+            ax.plot(
+                *xy[~fix].T,
+                ".",
+                ms=2.5,
+                color=_ODO_COLOUR,
+                zorder=4,
+                label="placed by odometry",
+                rasterized=bool(np.count_nonzero(~fix) > MAX_VECTOR_MARKERS),
+            )
+        if np.any(fix):
+            ax.plot(
+                *xy[fix].T,
+                "o",
+                ms=4,
+                mfc="none",
+                mec=_FIX_COLOUR,
+                zorder=6,
+                label="fixed from beacons",
+                rasterized=bool(np.count_nonzero(fix) > MAX_VECTOR_MARKERS),
+            )
+        ax.plot(*xy[0], ">", ms=8, color="k", zorder=7, label="start")
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.set_xlabel(_axis_label("E", oe))
+    ax.set_ylabel(_axis_label("N", on))
+    for axis in (ax.xaxis, ax.yaxis):
+        axis.get_major_formatter().set_useOffset(False)
+        axis.get_major_formatter().set_scientific(False)
+    ax.grid(True, color="0.92", lw=0.6, zorder=0)
+    if ax.get_legend_handles_labels()[0]:
+        ax.legend(fontsize=8, loc="best", framealpha=0.85)
+    svg = _svg(fig, "trajectory-map")
+    where = (
+        "Axes in metres of the mine grid."
+        if oe == 0.0 and on == 0.0
+        else f"Axes in metres from E {_group(oe)}, N {_group(on)} (the origin of the axes)."
+    )
+    caption = (
+        "Trajectory of the scanner over the surveyed beacons (green, with their ids) and "
+        "the wall returns (grey). Circles: scans fixed from beacons; dots: scans placed by "
+        "odometry between fixes; the line breaks where scans could not be placed. "
+        f"{where} Equal scales in E and N."
+    )
+    return svg, caption
+
+
+def _precision_figure(placed: Sequence[PlacedScan], t0_ns: int) -> tuple[str, str]:
+    """σE, σN (mm) and σA (arc-seconds) against time since the first scan."""
+    t = np.array([(p.stamp_ns - t0_ns) / 1e9 for p in placed])
+    sig = np.array([p.sigma for p in placed]).reshape(-1, 3)
+    scans = np.array([p.scan for p in placed], dtype=np.int64)
+    fix = np.array([p.source == "fix" for p in placed], dtype=bool)
+    fig, (ax_pos, ax_az) = _new_figure(10.0, 5.5, rows=2)
+    series = (
+        (ax_pos, sig[:, 0] * 1000.0, "σE", "tab:blue"),
+        (ax_pos, sig[:, 1] * 1000.0, "σN", "tab:orange"),
+        (ax_az, sig[:, 2] * _ARCSEC_PER_RAD, "σA", "tab:purple"),
+    )
+    for ax, y, name, colour in series:
+        ax.plot(*_broken(t, y, scans), "-", lw=1.0, color=colour, label=name)
+        if np.any(fix):
+            ax.plot(
+                t[fix],
+                y[fix],
+                "o",
+                ms=3.5,
+                mfc="none",
+                mec=colour,
+                label=f"{name} at fixes",
+                rasterized=bool(np.count_nonzero(fix) > MAX_VECTOR_MARKERS),
+            )
+    for ax, unit in ((ax_pos, "σ (mm)"), (ax_az, "σA (″)")):
+        y = np.concatenate([line.get_ydata() for line in ax.get_lines()]).astype(float)
+        y = y[np.isfinite(y) & (y > 0)]
+        # A log axis when odometry's growth between fixes dwarfs the fixes' own sigma.
+        if len(y) and y.max() / y.min() > 50.0:
+            ax.set_yscale("log")
+        ax.set_ylabel(unit)
+        ax.grid(True, color="0.92", lw=0.6)
+        ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.0, 1.0), framealpha=0.85)
+    ax_az.set_xlabel("time since the first scan (s)")
+    svg = _svg(fig, "precision")
+    caption = (
+        "Standard deviations of the smoothed poses along the run: easting and northing in "
+        "millimetres (top), azimuth in arc-seconds (bottom), against the time since the "
+        "first scan; circles mark the scans fixed from beacons, lines break where scans "
+        "were not placed."
+    )
+    return svg, caption
+
+
+def _reference_variance_figure(values: Sequence[tuple[float, int]]) -> tuple[str, str] | None:
+    """Histogram of the fixes' reference variances with the density they should follow."""
+    from scipy import stats
+
+    v = np.array([x for x, d in values if d > 0 and math.isfinite(x)], dtype=float)
+    dof = np.array([d for x, d in values if d > 0 and math.isfinite(x)], dtype=float)
+    if len(v) == 0:
+        return None
+    lo_q = float(min(stats.chi2.ppf(0.0005, d) / d for d in np.unique(dof)))
+    hi_q = float(max(stats.chi2.ppf(0.9995, d) / d for d in np.unique(dof)))
+    lo = min(lo_q, float(v.min()))
+    hi = max(hi_q, float(v.max()))
+    pad = 0.05 * (hi - lo)
+    lo, hi = max(lo - pad, 0.0), hi + pad
+    x = np.linspace(lo, hi, 400)
+    # Under the model each fix's reference variance is chi-square(dof)/dof; the pooled
+    # sample follows the mixture of those densities, weighted by how many fixes have each.
+    ds, counts = np.unique(dof, return_counts=True)
+    dens = sum(c * d * stats.chi2.pdf(d * x, d) for d, c in zip(ds, counts, strict=True))
+    dens = np.asarray(dens, dtype=float) / len(v)
+    fig, (ax,) = _new_figure(8.0, 4.0)
+    bins = int(min(60, max(10, math.ceil(2 * len(v) ** (1 / 3)) * 2)))
+    ax.hist(
+        v,
+        bins=bins,
+        range=(lo, hi),
+        density=True,
+        color="0.75",
+        edgecolor="white",
+        label=f"{len(v)} fixes",
+    )
+    ax.plot(x, dens, "-", color="tab:red", lw=1.5, label="χ²(ν)/ν, mixture over the fixes' ν")
+    ax.axvline(1.0, color="k", lw=0.8, ls=":")
+    ax.set_xlabel("reference variance (a-posteriori / a-priori)")
+    ax.set_ylabel("density")
+    ax.grid(True, color="0.92", lw=0.6)
+    ax.legend(fontsize=8, framealpha=0.85)
+    svg = _svg(fig, "reference-variance")
+    med = float(np.median(dof))
+    caption = (
+        f"Histogram (as a density) of the reference variances of the {len(v)} fixes. "
+        "The red curve is the density they follow when the precisions used are right: "
+        "each fix's reference variance is then χ²(ν)/ν with ν its degrees of freedom, and "
+        "the curve is the mixture of those densities over all fixes (ν from "
+        f"{_group(ds.min())} to {_group(ds.max())}, median {_group(med)}). Bars to the "
+        "right of the curve: returns scatter more than the range precision says; to the "
+        "left: less."
+    )
+    return svg, caption
+
+
+def _record_time(rec: Mapping[str, Any], t0_ns: int | None) -> str:
+    stamp = rec.get("stamp_ns")
+    if stamp is None or t0_ns is None:
+        return ""
+    return f"{(int(stamp) - t0_ns) / 1e9:.3f}"
+
+
+def _fmt(value: Any, spec: str, scale: float = 1.0) -> str:
+    if value is None:
+        return ""
+    try:
+        return format(float(value) * scale, spec)
+    except (TypeError, ValueError):
+        return _e(value)
+
+
+def _fix_table(
+    records: Sequence[Mapping[str, Any]], t0_ns: int | None, max_rows: int
+) -> tuple[str, int]:
+    """The table of fixes (at most ``max_rows``) and how many fixes there are."""
+    fixes = [r for r in records if r.get("status") == "fix"]
+    head = (
+        "<tr><th class='n'>scan</th><th class='n'>t (s)</th><th class='n'>E (m)</th>"
+        "<th class='n'>N (m)</th><th class='n'>azimuth</th><th class='n'>σE (mm)</th>"
+        "<th class='n'>σN (mm)</th><th class='n'>σA (″)</th>"
+        "<th class='n'>ref. variance</th><th class='n'>ν</th><th>χ² test</th>"
+        "<th>beacons</th></tr>"
+    )
+    rows = []
+    for r in fixes[:max_rows]:
+        az = r.get("azimuth_dms")
+        if az is None and r.get("azimuth_deg") is not None:
+            az = format_dms(float(r["azimuth_deg"]))
+        test = str(r.get("chi2_test") or "")
+        beacons = r.get("beacons") or []
+        rows.append(
+            "<tr>"
+            f"<td class='n'>{_e(r.get('scan', ''))}</td>"
+            f"<td class='n'>{_record_time(r, t0_ns)}</td>"
+            f"<td class='n'>{_fmt(r.get('easting'), '.4f')}</td>"
+            f"<td class='n'>{_fmt(r.get('northing'), '.4f')}</td>"
+            f"<td class='n'>{_e(az or '')}</td>"
+            f"<td class='n'>{_fmt(r.get('sigma_easting_m'), '.2f', 1000.0)}</td>"
+            f"<td class='n'>{_fmt(r.get('sigma_northing_m'), '.2f', 1000.0)}</td>"
+            f"<td class='n'>{_fmt(r.get('sigma_azimuth_deg'), '.1f', 3600.0)}</td>"
+            f"<td class='n'>{_fmt(r.get('reference_variance'), '.3f')}</td>"
+            f"<td class='n'>{_e(r.get('degrees_of_freedom', ''))}</td>"
+            f"<td class='test-{_e(test)}'>{_e(test)}</td>"
+            f"<td>{_e(', '.join(str(b) for b in beacons))}</td>"
+            "</tr>"
+        )
+    return f"<table class='fixes'>{head}{''.join(rows)}</table>", len(fixes)
+
+
+def _utc(stamp_ns: int) -> str:
+    return datetime.fromtimestamp(stamp_ns // 1_000_000_000, tz=UTC).strftime(
+        "%Y-%m-%d %H:%M:%S UTC"
+    )
+
+
+def _summary_rows(
+    summary: RunSummary,
+    placed: Sequence[PlacedScan],
+    t0_ns: int | None,
+    t1_ns: int | None,
+) -> list[tuple[str, str]]:
+    n_odo = sum(p.source == "odometry" for p in placed)
+
+    def share(k: int) -> str:
+        return f"{k}" if summary.scans <= 0 else f"{k} ({100.0 * k / summary.scans:.1f} %)"
+
+    rows = [
+        ("Run", summary.run),
+        ("Topic", summary.topic or "(not named)"),
+        ("Scans read", f"{summary.scans}"),
+        ("Fixed from beacons", share(summary.fixes)),
+        ("Placed in the mine grid", share(summary.placed)),
+        ("of which by odometry", f"{n_odo}"),
+        ("Not placed", f"{max(summary.scans - summary.placed, 0)}"),
+        ("Messages skipped (not decodable)", f"{summary.skipped}"),
+    ]
+    if t0_ns is not None and t1_ns is not None:
+        rows.append(
+            ("Recorded", f"{_utc(t0_ns)}, {(t1_ns - t0_ns) / 1e9:.1f} s from first to last scan")
+        )
+    if placed:
+        length = 0.0
+        for stretch in _stretches(placed):
+            xy = np.array([[p.pose.easting, p.pose.northing] for p in stretch])
+            length += float(np.sum(np.hypot(*np.diff(xy, axis=0).T))) if len(xy) > 1 else 0.0
+        rows.append(("Distance along the placed trajectory", f"{length:.1f} m"))
+    rate = f", {summary.scans / summary.elapsed_s:.1f} scans/s" if summary.elapsed_s > 0 else ""
+    rows.append(("Processing time", f"{summary.elapsed_s:.1f} s{rate}"))
+    return rows
+
+
+def write_report_html(
+    path: str | Path,
+    summary: RunSummary,
+    placed: Sequence[PlacedScan],
+    records: Sequence[Mapping[str, Any]],
+    survey: Survey,
+    wall_points: ArrayLike,
+    *,
+    max_table_rows: int = MAX_TABLE_ROWS,
+) -> None:
+    """Write ``report.html``: one self-contained page about a run.
+
+    Parameters
+    ----------
+    path : str or Path
+        The file to write (replaced if it exists).
+    summary : RunSummary
+        The run's counts, no-fix reasons, reference variances and time.
+    placed : sequence of PlacedScan
+        Every placed scan, in time order.
+    records : sequence of dict
+        The run's fix records (``fixes.jsonl``, docs/fix.schema.json); those
+        with ``status`` ``fix`` make the table.
+    survey : Survey
+        The surveyed beacons.
+    wall_points : array_like, shape (n, 2)
+        A sample of wall returns in the mine frame (E, N), metres; at most
+        :data:`MAX_FIGURE_POINTS` are drawn (evenly thinned).
+    max_table_rows : int
+        The table of fixes stops after this many rows, with a note.
+
+    Notes
+    -----
+    The page holds, in order: a summary (run, topic, scans, fixes, placed,
+    skipped messages, recording time, distance, processing time and scans
+    per second); the no-fix reasons with their counts and meanings; a map of
+    the trajectory (fixes and odometry-placed scans distinguished) over the
+    beacons with their ids and the wall returns, equal scales, axes in metres
+    from a stated round origin at UTM-sized coordinates; the precision along
+    the run (σE, σN in mm, σA in arc-seconds against time since the first
+    scan, fixes marked); a histogram of the fixes' reference variances against
+    the mixture of the χ²(ν)/ν densities of their degrees of freedom ν; and a
+    table of the fixes (scan, time, E, N, azimuth D°MM'SS.S", σ's in mm and
+    arc-seconds, reference variance, ν, χ² test, beacons).
+
+    Figures are matplotlib SVG inlined in the page, the style sheet is
+    inline, there are no scripts and nothing is fetched: the file can be
+    mailed or opened offline. All text taken from inputs is HTML-escaped.
+
+    Raises
+    ------
+    OutputError
+        The file cannot be written.
+    """
+    from mast import __version__
+    from mast.pipeline.locator import NO_FIX_REASONS
+
+    walls = np.asarray(wall_points, dtype=float).reshape(-1, 2)
+    stamps = [p.stamp_ns for p in placed] + [
+        int(r["stamp_ns"]) for r in records if r.get("stamp_ns") is not None
+    ]
+    t0 = min(stamps) if stamps else None
+    t1 = max(stamps) if stamps else None
+
+    parts: list[str] = [
+        "<!DOCTYPE html>",
+        "<html lang='en'><head><meta charset='utf-8'>",
+        "<meta name='viewport' content='width=device-width, initial-scale=1'>",
+        f"<title>MAST run report: {_e(summary.run)}</title>",
+        f"<style>{_CSS}</style></head><body>",
+        "<h1>MAST survey run</h1>",
+        f"<p class='sub'>{_e(summary.run)}</p>",
+        "<h2>Summary</h2><table class='summary'>",
+    ]
+    for key, value in _summary_rows(summary, placed, t0, t1):
+        parts.append(f"<tr><th>{_e(key)}</th><td>{_e(value)}</td></tr>")
+    parts.append("</table>")
+
+    parts.append("<h2>Scans without a fix</h2>")
+    reasons = {k: v for k, v in summary.reasons.items() if v}
+    if reasons:
+        parts.append("<table><tr><th>reason</th><th class='n'>scans</th><th>meaning</th></tr>")
+        for reason, count in sorted(reasons.items(), key=lambda kv: (-kv[1], kv[0])):
+            parts.append(
+                f"<tr><td>{_e(reason)}</td><td class='n'>{count}</td>"
+                f"<td>{_e(NO_FIX_REASONS.get(reason, ''))}</td></tr>"
+            )
+        parts.append("</table>")
+    else:
+        parts.append("<p>Every scan read was fixed.</p>" if summary.scans else "<p>No scan.</p>")
+
+    figures: list[tuple[str, str, str]] = []
+    if placed or len(survey) or len(walls):
+        svg, cap = _map_figure(survey, placed, walls)
+        figures.append(("Trajectory", svg, cap))
+    if placed and t0 is not None:
+        svg, cap = _precision_figure(placed, t0)
+        figures.append(("Precision along the run", svg, cap))
+    rv = _reference_variance_figure(summary.reference_variances)
+    for k, (title, svg, cap) in enumerate(figures, start=1):
+        parts.append(f"<h2>{_e(title)}</h2><figure>{svg}")
+        parts.append(f"<figcaption>Figure {k}. {_e(cap)}</figcaption></figure>")
+    parts.append("<h2>Global test of the fixes</h2>")
+    if rv is None:
+        parts.append("<p>No fix: no reference variance to show.</p>")
+    else:
+        svg, cap = rv
+        parts.append(
+            f"<figure>{svg}<figcaption>Figure {len(figures) + 1}. {_e(cap)}</figcaption></figure>"
+        )
+        tests: dict[str, int] = {}
+        for r in records:
+            if r.get("status") == "fix" and r.get("chi2_test"):
+                tests[str(r["chi2_test"])] = tests.get(str(r["chi2_test"]), 0) + 1
+        if tests:
+            words = ", ".join(f"{_e(k)} {v}" for k, v in sorted(tests.items()))
+            parts.append(f"<p>χ² test of the reference variance at 5 %: {words}.</p>")
+
+    parts.append("<h2>Fixes</h2>")
+    table, n_fix = _fix_table(records, t0, max_table_rows)
+    if n_fix == 0:
+        parts.append("<p>No fix.</p>")
+    else:
+        if n_fix > max_table_rows:
+            parts.append(
+                f"<p class='note'>The first {max_table_rows} of {n_fix} fixes are listed; "
+                "every fix is in fixes.jsonl.</p>"
+            )
+        parts.append(
+            "<p>t: seconds since the first scan; E, N: metres; azimuth clockwise from grid "
+            "north; ν: degrees of freedom.</p>"
+        )
+        parts.append(table)
+    now = datetime.now(tz=UTC).strftime("%Y-%m-%d %H:%M:%S UTC")
+    parts.append(f"<footer>mast {_e(__version__)}, {_e(now)}</footer></body></html>")
+
+    _write_lines(path, parts)
