@@ -11,10 +11,13 @@ import math
 import os
 import sys
 import tempfile
+import time
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from dataclasses import replace
 from enum import StrEnum
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 
@@ -25,6 +28,9 @@ from mast.core.noise import DEFAULT_ANGLE_SIGMA_RAD, DEFAULT_RANGE_SIGMA_M, DEFA
 from mast.core.scan import Scan
 from mast.errors import InputError, MastError, NoFixError, OutputError
 from mast.pipeline.tracking import Prior
+
+if TYPE_CHECKING:
+    from mast.pipeline.locator import LocatorConfig
 
 EXIT_OK = 0
 EXIT_BAD_INPUT = 2
@@ -85,7 +91,14 @@ class ScanFormat(StrEnum):
 def simulate(
     out: Annotated[Path, typer.Option("--out", help="Folder to write into (created if missing).")],
     scenario: Annotated[
-        str, typer.Option("--scenario", help="Scenario name: paper or random.")
+        str,
+        typer.Option(
+            "--scenario",
+            help=(
+                "Scenario name: paper, random, or drive (a vehicle driving a drift at the "
+                "scanner's rate, beacons in stretches with 30-60 m gaps between; streamed)."
+            ),
+        ),
     ] = "paper",
     seed: Annotated[int, typer.Option("--seed", help="Random seed (noise, random scenes).")] = 0,
     fmt: Annotated[
@@ -99,14 +112,34 @@ def simulate(
         ),
     ] = ScanFormat.csv,
     noise: Annotated[
-        bool, typer.Option("--noise/--no-noise", help="Add realistic range noise.")
-    ] = False,
+        bool | None,
+        typer.Option(
+            "--noise/--no-noise",
+            help="Add realistic range noise (default: none for paper and random, 12 mm for drive).",
+            show_default=False,
+        ),
+    ] = None,
+    scans: Annotated[
+        int | None,
+        typer.Option(
+            "--scans", min=1, help="drive: number of scans (default 500; 10000 is ~800 m)."
+        ),
+    ] = None,
+    rate: Annotated[
+        float | None,
+        typer.Option(
+            "--rate", help="drive: scans per second, Hz (default 25 at 0.25°; 50 gives 0.5°)."
+        ),
+    ] = None,
 ) -> None:
     """Simulate a scenario: per scene, beacons.csv, the scans and truth.csv."""
     from mast.sim import build_scenario, write_scenario
 
+    options = {k: v for k, v in (("scans", scans), ("rate_hz", rate)) if v is not None}
+    if options and scenario != "drive":
+        raise InputError("--scans and --rate apply to --scenario drive only")
     check_output_folder(out)
-    scenes = build_scenario(scenario, seed, noise=noise)
+    scenes = build_scenario(scenario, seed, noise=noise, **options)
     written = write_scenario(scenes, out, fmt=fmt.value, scenario=scenario, seed=seed)
     for w in written:
         typer.echo(f"{w.folder}: {w.count} scan(s), survey {w.survey.name}, truth {w.truth.name}")
@@ -199,6 +232,48 @@ def _default(value: float) -> str:
     return f"{value:g}"
 
 
+BeaconsOption = Annotated[Path, typer.Option("--beacons", "-b", help="Beacon survey CSV.")]
+TopicOption = Annotated[str | None, typer.Option("--topic", help="LaserScan topic in a bag.")]
+RangeSigmaOption = Annotated[
+    float | None,
+    typer.Option(
+        "--range-sigma",
+        help="Range standard deviation, metres "
+        f"[default: {_default(DEFAULT_RANGE_SIGMA_M)}, or the --scanner's].",
+    ),
+]
+AngleSigmaOption = Annotated[
+    float | None,
+    typer.Option(
+        "--angle-sigma",
+        help="Beam angle standard deviation, radians "
+        f"[default: {_default(DEFAULT_ANGLE_SIGMA_RAD)}, or the --scanner's].",
+    ),
+]
+ScannerOption = Annotated[
+    str | None,
+    typer.Option(
+        "--scanner", help="Named scanner model giving the default sigmas (see mast scanners)."
+    ),
+]
+RangeMinOption = Annotated[
+    float | None,
+    typer.Option("--range-min", help="Shortest valid range, metres [default: the bag's, or 0]."),
+]
+RangeMaxOption = Annotated[
+    float | None,
+    typer.Option("--range-max", help="Longest valid range, metres [default: the bag's, or none]."),
+]
+SurveySigmaOption = Annotated[
+    float | None,
+    typer.Option(
+        "--survey-sigma",
+        help="Standard deviation of a surveyed edge coordinate, metres "
+        f"[default: {_default(DEFAULT_SURVEY_SIGMA_M)}].",
+    ),
+]
+
+
 @app.command()
 def locate(
     scan_paths: Annotated[
@@ -209,29 +284,10 @@ def locate(
             "standard input.",
         ),
     ],
-    beacons: Annotated[Path, typer.Option("--beacons", "-b", help="Beacon survey CSV.")],
-    range_sigma: Annotated[
-        float | None,
-        typer.Option(
-            "--range-sigma",
-            help="Range standard deviation, metres "
-            f"[default: {_default(DEFAULT_RANGE_SIGMA_M)}, or the --scanner's].",
-        ),
-    ] = None,
-    angle_sigma: Annotated[
-        float | None,
-        typer.Option(
-            "--angle-sigma",
-            help="Beam angle standard deviation, radians "
-            f"[default: {_default(DEFAULT_ANGLE_SIGMA_RAD)}, or the --scanner's].",
-        ),
-    ] = None,
-    scanner: Annotated[
-        str | None,
-        typer.Option(
-            "--scanner", help="Named scanner model giving the default sigmas (see mast scanners)."
-        ),
-    ] = None,
+    beacons: BeaconsOption,
+    range_sigma: RangeSigmaOption = None,
+    angle_sigma: AngleSigmaOption = None,
+    scanner: ScannerOption = None,
     fmt: Annotated[
         OutputFormat,
         typer.Option("--format", help="text report, or JSON Lines (one record per scan)."),
@@ -244,19 +300,9 @@ def locate(
             "per scan when there are several. A missing folder is created.",
         ),
     ] = None,
-    topic: Annotated[str | None, typer.Option("--topic", help="LaserScan topic in a bag.")] = None,
-    range_min: Annotated[
-        float | None,
-        typer.Option(
-            "--range-min", help="Shortest valid range, metres [default: the bag's, or 0]."
-        ),
-    ] = None,
-    range_max: Annotated[
-        float | None,
-        typer.Option(
-            "--range-max", help="Longest valid range, metres [default: the bag's, or none]."
-        ),
-    ] = None,
+    topic: TopicOption = None,
+    range_min: RangeMinOption = None,
+    range_max: RangeMaxOption = None,
     near: Annotated[
         str | None,
         typer.Option(
@@ -271,14 +317,7 @@ def locate(
         float,
         typer.Option("--azimuth-tolerance", help="With an azimuth in --near: degrees allowed."),
     ] = 30.0,
-    survey_sigma: Annotated[
-        float | None,
-        typer.Option(
-            "--survey-sigma",
-            help="Standard deviation of a surveyed edge coordinate, metres "
-            f"[default: {_default(DEFAULT_SURVEY_SIGMA_M)}].",
-        ),
-    ] = None,
+    survey_sigma: SurveySigmaOption = None,
 ) -> None:
     """Fix position and azimuth from one scan, several, or every scan of a bag.
 
@@ -289,47 +328,9 @@ def locate(
 
     from mast.apps.report import ReportInputs, fix_record, fix_text
     from mast.io import read_survey
-    from mast.pipeline.locator import LocatorConfig, locate_sequence
-    from mast.sim import scanner_model
+    from mast.pipeline.locator import locate_sequence
 
-    cfg = LocatorConfig()
-    defaults = {"range_sigma_m", "angle_sigma_rad", "survey_sigma_m"}
-    if scanner is not None:
-        model = scanner_model(scanner)
-        cfg = replace(
-            cfg, range_sigma_m=max(model.range_sigma_m, 1e-4), angle_sigma_rad=model.angle_sigma_rad
-        )
-        defaults -= {"range_sigma_m", "angle_sigma_rad"}
-    checks = (
-        ("--range-sigma", range_sigma),
-        ("--angle-sigma", angle_sigma),
-        ("--survey-sigma", survey_sigma),
-    )
-    for name, value in checks:
-        if value is not None and not (math.isfinite(value) and value >= 0):
-            raise InputError(f"{name} must be a non-negative number, got {value}")
-    for name, value, limit, unit, example in (
-        ("--range-sigma", range_sigma, MAX_PLAUSIBLE_SIGMA_M, "metres", "10 mm is 0.01"),
-        ("--survey-sigma", survey_sigma, MAX_PLAUSIBLE_SIGMA_M, "metres", "3 mm is 0.003"),
-        ("--angle-sigma", angle_sigma, MAX_PLAUSIBLE_ANGLE_SIGMA_RAD, "radians", "0.1° is 0.0017"),
-    ):
-        if value is not None and value > limit:
-            typer.echo(
-                f"mast: warning: {name} {value:g} {unit} is more than any laser scanner or "
-                f"survey has; it is in {unit} ({example})",
-                err=True,
-            )
-    if range_sigma is not None:
-        if range_sigma <= 0:
-            raise InputError("--range-sigma must be positive")
-        cfg = replace(cfg, range_sigma_m=range_sigma)
-        defaults.discard("range_sigma_m")
-    if angle_sigma is not None:
-        cfg = replace(cfg, angle_sigma_rad=angle_sigma)
-        defaults.discard("angle_sigma_rad")
-    if survey_sigma is not None:
-        cfg = replace(cfg, survey_sigma_m=survey_sigma)
-        defaults.discard("survey_sigma_m")
+    cfg, defaults = _precisions(range_sigma, angle_sigma, scanner, survey_sigma)
     if near is not None:
         cfg = replace(cfg, prior=_parse_near(near, radius, azimuth_tolerance))
     if scan_paths.count(Path("-")) > 1:
@@ -372,6 +373,208 @@ def locate(
             located += 1
     if fixed == 0:
         raise typer.Exit(EXIT_NO_FIX)
+
+
+@app.command()
+def track(
+    runs: Annotated[
+        list[Path],
+        typer.Argument(
+            metavar="RUN...",
+            help="ROS 1 bags, ROS 2 bag folders (sqlite3, MCAP), or folders holding them.",
+        ),
+    ],
+    beacons: BeaconsOption,
+    out: Annotated[
+        Path, typer.Option("--out", help="Folder for the run's files (created if missing).")
+    ],
+    topic: TopicOption = None,
+    range_sigma: RangeSigmaOption = None,
+    angle_sigma: AngleSigmaOption = None,
+    scanner: ScannerOption = None,
+    survey_sigma: SurveySigmaOption = None,
+    range_min: RangeMinOption = None,
+    range_max: RangeMaxOption = None,
+    scheduler: Annotated[
+        str | None,
+        typer.Option(
+            "--scheduler",
+            help="With several runs: address of a Dask scheduler to run them on "
+            "[default: a local cluster].",
+        ),
+    ] = None,
+    workers: Annotated[
+        int | None,
+        typer.Option("--workers", min=1, help="Processes of the local cluster [default: cores]."),
+    ] = None,
+) -> None:
+    """Place every scan of a run in the mine grid: fixes from beacons, odometry between
+    them, smoothed in a pose graph; writes fixes.jsonl, trajectory.csv and .tum, map.las,
+    map.dxf and report.html into --out.
+
+    Several runs (or a folder of them) are tracked in parallel on Dask, one run per
+    task, each into --out/<run name>/, with --out/index.csv listing them.
+
+    Exit status 0 when scans were placed (in every run), 3 when none could be, 2 for bad
+    input, 4 when an output cannot be written, 130 when interrupted (the files then hold
+    the scans read until then).
+    """
+    from mast.apps.report import ReportInputs
+    from mast.io import read_survey
+    from mast.io.bags import bag_kind, laserscan_topic
+    from mast.runs.batch import expand_runs, track_runs
+    from mast.runs.run import track_run
+    from mast.runs.track import TrackConfig
+
+    cfg, defaults = _precisions(range_sigma, angle_sigma, scanner, survey_sigma)
+    for name, value in (("--range-min", range_min), ("--range-max", range_max)):
+        if value is not None and not (math.isfinite(value) and value >= 0):
+            raise InputError(f"{name} must be a non-negative number, got {value}")
+    for given in runs:
+        if not given.exists():
+            raise InputError("run not found", path=given)
+    found = expand_runs(runs)
+    for r in found:
+        bag_kind(r)
+    check_output_folder(out)
+    survey = read_survey(beacons)
+    if len(found) > 1 or scheduler is not None:
+        outcomes = track_runs(
+            found,
+            beacons,
+            out,
+            options={
+                "config": TrackConfig(locator=cfg),
+                "topic": topic,
+                "inputs": ReportInputs(
+                    survey_file=str(beacons), scanner=scanner, defaults=frozenset(defaults)
+                ),
+            },
+            scheduler=scheduler,
+            workers=workers,
+            echo=typer.echo,
+        )
+        typer.echo(f"{len(outcomes)} runs; index in {out / 'index.csv'}")
+        if any(o.status == "error" for o in outcomes):
+            raise typer.Exit(EXIT_BAD_INPUT)
+        if not all(o.placed for o in outcomes):
+            raise typer.Exit(EXIT_NO_FIX)
+        return
+    (run,) = found
+    inputs = ReportInputs(
+        scan_file=str(run),
+        survey_file=str(beacons),
+        scanner=scanner,
+        topic=laserscan_topic(run, topic),
+        defaults=frozenset(defaults),
+    )
+
+    def warn(text: str) -> None:
+        typer.echo(f"mast: warning: {text}", err=True)
+
+    with _progress(f"tracking {run.name}") as progress:
+        result = track_run(
+            run,
+            survey,
+            out,
+            config=TrackConfig(locator=cfg),
+            topic=topic,
+            inputs=inputs,
+            range_limits=(range_min, range_max),
+            warn=warn,
+            progress=progress,
+        )
+    s = result.summary
+    typer.echo(
+        f"{run}: {s.scans} scans, {s.fixes} fixed, {s.placed} placed"
+        + (f", {s.skipped} messages skipped" if s.skipped else "")
+        + f" in {s.elapsed_s:.1f} s ({s.scans / max(s.elapsed_s, 1e-9):.0f} scans/s); "
+        f"files in {out}"
+    )
+    if result.interrupted:
+        typer.echo("mast: interrupted; the files hold the scans read until then", err=True)
+        raise typer.Exit(130)
+    if s.placed == 0:
+        raise typer.Exit(EXIT_NO_FIX)
+
+
+@contextmanager
+def _progress(label: str) -> Iterator[Callable[[int, int], None] | None]:
+    """A progress line on a terminal (scans, fixes, scans per second); nothing otherwise."""
+    if not sys.stderr.isatty():
+        yield None
+        return
+    from rich.progress import Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
+
+    with Progress(
+        SpinnerColumn(),
+        TextColumn("{task.description}"),
+        TextColumn("{task.completed} scans, {task.fields[fixes]} fixed, {task.fields[rate]}"),
+        TimeElapsedColumn(),
+        transient=True,
+    ) as bar:
+        task = bar.add_task(label, total=None, fixes=0, rate="")
+        start = time.perf_counter()
+
+        def update(scans: int, fixes: int) -> None:
+            rate = scans / max(time.perf_counter() - start, 1e-9)
+            bar.update(task, completed=scans, fixes=fixes, rate=f"{rate:.0f} scans/s")
+
+        yield update
+
+
+def _precisions(
+    range_sigma: float | None,
+    angle_sigma: float | None,
+    scanner: str | None,
+    survey_sigma: float | None,
+) -> tuple[LocatorConfig, set[str]]:
+    """The locator's precisions from the options, and which were left at their defaults.
+
+    A sigma no scanner or survey has gets a warning naming its unit.
+    """
+    from mast.pipeline.locator import LocatorConfig
+    from mast.sim import scanner_model
+
+    cfg = LocatorConfig()
+    defaults = {"range_sigma_m", "angle_sigma_rad", "survey_sigma_m"}
+    if scanner is not None:
+        model = scanner_model(scanner)
+        cfg = replace(
+            cfg, range_sigma_m=max(model.range_sigma_m, 1e-4), angle_sigma_rad=model.angle_sigma_rad
+        )
+        defaults -= {"range_sigma_m", "angle_sigma_rad"}
+    checks = (
+        ("--range-sigma", range_sigma),
+        ("--angle-sigma", angle_sigma),
+        ("--survey-sigma", survey_sigma),
+    )
+    for name, value in checks:
+        if value is not None and not (math.isfinite(value) and value >= 0):
+            raise InputError(f"{name} must be a non-negative number, got {value}")
+    for name, value, limit, unit, example in (
+        ("--range-sigma", range_sigma, MAX_PLAUSIBLE_SIGMA_M, "metres", "10 mm is 0.01"),
+        ("--survey-sigma", survey_sigma, MAX_PLAUSIBLE_SIGMA_M, "metres", "3 mm is 0.003"),
+        ("--angle-sigma", angle_sigma, MAX_PLAUSIBLE_ANGLE_SIGMA_RAD, "radians", "0.1° is 0.0017"),
+    ):
+        if value is not None and value > limit:
+            typer.echo(
+                f"mast: warning: {name} {value:g} {unit} is more than any laser scanner or "
+                f"survey has; it is in {unit} ({example})",
+                err=True,
+            )
+    if range_sigma is not None:
+        if range_sigma <= 0:
+            raise InputError("--range-sigma must be positive")
+        cfg = replace(cfg, range_sigma_m=range_sigma)
+        defaults.discard("range_sigma_m")
+    if angle_sigma is not None:
+        cfg = replace(cfg, angle_sigma_rad=angle_sigma)
+        defaults.discard("angle_sigma_rad")
+    if survey_sigma is not None:
+        cfg = replace(cfg, survey_sigma_m=survey_sigma)
+        defaults.discard("survey_sigma_m")
+    return cfg, defaults
 
 
 def _bag_topic(path: Path, topic: str | None) -> str | None:

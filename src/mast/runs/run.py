@@ -1,0 +1,242 @@
+"""``mast track``: a bag in; every scan located, placed, mapped and reported.
+
+One pass streams the bag through :class:`~mast.runs.track.RunTracker` (the one
+locator, tracked from the previous pose, plus odometry), writing each scan's
+record to ``fixes.jsonl`` as it goes; the pose graph is then smoothed, and a
+second pass over the bag puts every placed scan's returns into the map.
+Memory holds a few numbers per scan, never the scans.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from mast.apps.report import ReportInputs, fix_record
+from mast.core.beacon import Survey
+from mast.core.scan import Scan
+from mast.errors import OutputError
+from mast.runs.model import PlacedScan, RunSummary
+from mast.runs.track import Node, RunTracker, TrackConfig, smooth
+
+__all__ = ["RUN_FILES", "RunResult", "track_run"]
+
+#: What a run writes into its folder.
+RUN_FILES = (
+    "fixes.jsonl",
+    "trajectory.csv",
+    "trajectory.tum",
+    "map.las",
+    "map.dxf",
+    "report.html",
+)
+
+#: Keys of a fix record kept for the report's table (the whole record is in fixes.jsonl).
+_TABLE_KEYS = (
+    "scan",
+    "stamp_ns",
+    "status",
+    "easting",
+    "northing",
+    "azimuth_deg",
+    "azimuth_dms",
+    "sigma_easting_m",
+    "sigma_northing_m",
+    "sigma_azimuth_deg",
+    "reference_variance",
+    "degrees_of_freedom",
+    "chi2_test",
+    "beacons",
+)
+#: Wall pieces for the DXF are taken from scans at least this far apart.
+WALL_SPACING_M = 2.0
+#: Map points kept for the report's figure.
+REPORT_POINTS = 20_000
+
+
+@dataclass(slots=True)
+class RunResult:
+    """What a run produced."""
+
+    summary: RunSummary
+    placed: list[PlacedScan]
+    out: Path
+    interrupted: bool = False
+    warnings: list[str] = field(default_factory=list)
+
+
+def _walls(scan: Scan, fix_segments: Any) -> NDArray[np.float64]:
+    """The scan's straight pieces (scanner frame) as an (n, 2, 2) array of end points."""
+    segs = [s for s in fix_segments if s.length >= 0.5]
+    if not segs:
+        return np.zeros((0, 2, 2))
+    return np.array([[s.start, s.end] for s in segs], dtype=float)
+
+
+def track_run(
+    bag: Path,
+    survey: Survey,
+    out: Path,
+    *,
+    config: TrackConfig | None = None,
+    topic: str | None = None,
+    inputs: ReportInputs | None = None,
+    range_limits: tuple[float | None, float | None] = (None, None),
+    warn: Callable[[str], object] = print,
+    progress: Callable[[int, int], object] | None = None,
+) -> RunResult:
+    """Track every LaserScan of ``bag`` and write the run's files into ``out``.
+
+    Parameters
+    ----------
+    bag : Path
+        A ROS 1 bag or a ROS 2 bag folder.
+    survey : Survey
+    out : Path
+        An existing, writable folder.
+    config : TrackConfig, optional
+    topic : str, optional
+        The LaserScan topic (needed when the bag has several).
+    inputs : ReportInputs, optional
+        What to state in each record about the inputs.
+    range_limits : (min, max)
+        Override the bag's range limits, metres.
+    warn : callable
+        Told about every message skipped and where a damaged bag stopped.
+    progress : callable, optional
+        Called with (scans so far, fixes so far) after each scan.
+
+    Returns
+    -------
+    RunResult
+        ``interrupted`` when Ctrl-C stopped the reading: the files then hold the
+        scans read until then, and are complete and valid.
+    """
+    from mast.io.bags import laserscan_topic, read_laserscans
+    from mast.runs import outputs
+
+    cfg = config or TrackConfig()
+    t0 = time.perf_counter()
+    name = laserscan_topic(bag, topic)
+    inputs = inputs or ReportInputs(scan_file=str(bag), topic=name)
+    summary = RunSummary(run=str(bag), topic=name)
+    result = RunResult(summary, [], out)
+
+    def skipped(text: str) -> None:
+        if "skipped" in text:
+            summary.skipped += 1
+        result.warnings.append(text)
+        warn(text)
+
+    def scans(on_skip: Callable[[str], None]) -> Any:
+        for s in read_laserscans(bag, topic=topic, on_skip=on_skip):
+            lo, hi = range_limits
+            if lo is not None or hi is not None:
+                s = Scan(
+                    s.angles_rad,
+                    s.ranges_m,
+                    s.intensities,
+                    lo if lo is not None else s.range_min_m,
+                    hi if hi is not None else s.range_max_m,
+                    s.stamp_ns,
+                    s.frame_id,
+                )
+            yield s
+
+    tracker = RunTracker(survey, cfg)
+    nodes: list[Node] = []
+    table: list[dict[str, Any]] = []
+    walls: dict[int, NDArray[np.float64]] = {}
+    last_wall: NDArray[np.float64] | None = None
+    try:
+        with (out / "fixes.jsonl").open("w", encoding="utf-8") as fh:
+            try:
+                for i, scan in enumerate(scans(skipped)):
+                    step = tracker.step(i, scan)
+                    rec = fix_record(step.fix, source=str(bag), index=i, scan=scan, inputs=inputs)
+                    fh.write(json.dumps(rec) + "\n")
+                    nodes.append(Node.of(step))
+                    summary.scans += 1
+                    if step.fix.ok:
+                        summary.fixes += 1
+                        adj = step.fix.adjustment
+                        if adj is not None:
+                            summary.reference_variances.append((adj.reference_variance, adj.dof))
+                        table.append({k: rec.get(k) for k in _TABLE_KEYS})
+                    else:
+                        reason = step.fix.reason or "unknown"
+                        summary.reasons[reason] = summary.reasons.get(reason, 0) + 1
+                    pose = step.fix.pose if step.fix.ok else step.predicted
+                    if pose is not None and (
+                        last_wall is None or math.dist(pose.position, last_wall) >= WALL_SPACING_M
+                    ):
+                        walls[i] = _walls(scan, step.fix.segmentation.segments)
+                        last_wall = pose.position
+                    if progress is not None:
+                        progress(summary.scans, summary.fixes)
+            except KeyboardInterrupt:
+                result.interrupted = True
+    except OSError as err:
+        raise OutputError(
+            f"cannot write: {err.strerror or err}", path=out / "fixes.jsonl"
+        ) from None
+    placed = smooth(nodes, cfg)
+    summary.placed = len(placed)
+    result.placed = placed
+    by_scan = {p.scan: p for p in placed}
+    try:
+        outputs.write_trajectory_csv(out / "trajectory.csv", placed)
+        outputs.write_trajectory_tum(out / "trajectory.tum", placed)
+        origin = _origin(survey, placed)
+        sample: list[NDArray[np.float64]] = []
+        points = 0
+        with outputs.LasMapWriter(out / "map.las", origin_e=origin[0], origin_n=origin[1]) as las:
+            for i, scan in enumerate(scans(lambda _: None)):
+                if i >= summary.scans:
+                    break  # an interrupted run maps what it read
+                p = by_scan.get(i)
+                if p is None:
+                    continue
+                beams, pts = scan.points()
+                mine = p.pose.scanner_to_mine(pts)
+                inten = None if scan.intensities is None else scan.intensities[beams]
+                las.add(i, scan.stamp_ns, mine, inten)
+                points += len(mine)
+                sample.append(mine[:: max(1, len(placed) * len(mine) // REPORT_POINTS + 1)])
+        wall_lines = [
+            by_scan[i].pose.scanner_to_mine(seg.reshape(-1, 2)).reshape(-1, 2, 2)
+            for i, seg in walls.items()
+            if i in by_scan and len(seg)
+        ]
+        outputs.write_map_dxf(
+            out / "map.dxf",
+            survey,
+            placed,
+            [w for lines in wall_lines for w in lines],
+            [p for p in placed if p.source == "fix"],
+        )
+        summary.elapsed_s = time.perf_counter() - t0
+        wall_points = np.vstack(sample) if sample else np.zeros((0, 2))
+        outputs.write_report_html(out / "report.html", summary, placed, table, survey, wall_points)
+    except OSError as err:
+        raise OutputError(
+            f"cannot write the run's files: {err.strerror or err}", path=out
+        ) from None
+    return result
+
+
+def _origin(survey: Survey, placed: list[PlacedScan]) -> tuple[float, float]:
+    """A round point near the run, for the map's coordinate offsets."""
+    pts = [b.edges.mean(axis=0) for b in survey]
+    if placed:
+        pts.append(placed[0].pose.position)
+    c = np.mean(pts, axis=0) if pts else np.zeros(2)
+    return float(np.floor(c[0] / 1000) * 1000), float(np.floor(c[1] / 1000) * 1000)

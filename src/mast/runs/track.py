@@ -1,0 +1,302 @@
+"""A run, scan by scan: each located near where odometry says the scanner is, the
+motion between scans measured, then fixes and motions smoothed in a pose graph.
+
+:class:`RunTracker` is the streaming half (one scan in, one :class:`Step` out,
+memory independent of the run's length); :func:`smooth` places every scan
+chained by odometry to at least one fix, with GTSAM (Dellaert and Kaess,
+*Factor Graphs for Robot Perception*, 2017): a fix is a prior factor with its
+own covariance, a motion a between factor with its own, both behind a Huber
+kernel so that one bad factor cannot drag the run; each placed scan gets its
+marginal covariance.
+
+Frames: GTSAM's ``Pose2(x, y, theta)`` is (easting, northing, 90° − azimuth);
+its covariances live in the pose's own (body) frame, and are turned to and
+from (easting, northing, azimuth) covariances by ``J = diag(R(theta), -1)``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from mast.core.beacon import Survey
+from mast.core.geometry import PanelSet
+from mast.core.pose import Pose2D
+from mast.core.scan import Scan
+from mast.pipeline.locator import Fix, LocatorConfig, locate_near
+from mast.pipeline.tracking import Prior
+from mast.runs.model import PlacedScan
+from mast.runs.odometry import Motion, OdometryConfig, lines_of, scan_to_scan
+
+__all__ = ["RunTracker", "Step", "TrackConfig", "smooth"]
+
+
+@dataclass(frozen=True, slots=True)
+class TrackConfig:
+    """How a run is tracked and smoothed.
+
+    Attributes
+    ----------
+    locator : LocatorConfig
+        The one locator's settings (precisions, tests).
+    odometry : OdometryConfig
+    max_gap_s : float
+        Scans further apart in time are not chained by odometry.
+    prior_radius_m, max_prior_radius_m : float
+        The search window around the predicted pose: three of its standard
+        deviations, within these bounds.
+    prior_azimuth_rad, max_prior_azimuth_rad : float
+        The same for the azimuth.
+    huber_k : float
+        Huber kernel threshold, in standard deviations, of every factor.
+    keyframe_m, keyframe_rad : float
+        Scans are matched to a keyframe, not to the scan before them: odometry
+        errors then add up once per keyframe (every half metre), not once per
+        scan (every few centimetres at 25 Hz). A scan this far from its
+        keyframe becomes the next one.
+    """
+
+    locator: LocatorConfig = field(default_factory=LocatorConfig)
+    odometry: OdometryConfig = field(default_factory=OdometryConfig)
+    max_gap_s: float = 0.5
+    prior_radius_m: float = 0.5
+    max_prior_radius_m: float = 1.0
+    prior_azimuth_rad: float = math.radians(5.0)
+    max_prior_azimuth_rad: float = math.radians(10.0)
+    huber_k: float = 1.345
+    keyframe_m: float = 0.5
+    keyframe_rad: float = math.radians(5.0)
+
+
+@dataclass(frozen=True, slots=True)
+class Step:
+    """What one scan of a run gave: its fix (or no-fix) and its motion since the last scan.
+
+    ``motion`` is the scan's pose in the frame of its keyframe ``ref`` (an
+    earlier scan of the run); None when the scan is not chained to the run
+    before it (a time gap, or its returns did not find the keyframe's walls).
+    """
+
+    scan: int
+    stamp_ns: int
+    fix: Fix
+    motion: Motion | None
+    ref: int | None
+    predicted: Pose2D | None
+
+
+def _theta(azimuth_rad: float) -> float:
+    return math.pi / 2 - azimuth_rad
+
+
+def _jacobian(theta: float) -> NDArray[np.float64]:
+    """d(E, N, A) / d(body x, body y, theta) at a pose with heading ``theta``."""
+    c, s = math.cos(theta), math.sin(theta)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, -1.0]])
+
+
+def compose(
+    pose: Pose2D, cov: NDArray[np.float64], motion: Motion
+) -> tuple[Pose2D, NDArray[np.float64]]:
+    """The pose after ``motion`` and its covariance (E, N, A), first-order propagation."""
+    th = _theta(pose.azimuth)
+    c, s = math.cos(th), math.sin(th)
+    de = c * motion.dx - s * motion.dy
+    dn = s * motion.dx + c * motion.dy
+    new = Pose2D(pose.easting + de, pose.northing + dn, (pose.azimuth - motion.dtheta) % math.tau)
+    # d new / d old (E, N, A): the rotation of the step with the azimuth.
+    jp = np.array([[1.0, 0.0, dn], [0.0, 1.0, -de], [0.0, 0.0, 1.0]])
+    jm = _jacobian(th)
+    return new, jp @ cov @ jp.T + jm @ motion.covariance @ jm.T
+
+
+class RunTracker:
+    """Locate the scans of a run one at a time, each near its dead-reckoned pose.
+
+    The pose is carried from the last fix by the motions between scans; the
+    next scan is searched within a window of about three of its standard
+    deviations (:func:`~mast.pipeline.locator.locate_near`), and from scratch
+    when that gives no fix. Memory does not grow with the run.
+    """
+
+    def __init__(self, survey: Survey, config: TrackConfig | None = None) -> None:
+        self.survey = survey
+        self.config = config or TrackConfig()
+        self._stamp: int | None = None
+        # The keyframe: its scan index, lines, and pose with covariance (if placed).
+        self._key: tuple[int, PanelSet] | None = None
+        self._key_pose: Pose2D | None = None
+        self._key_cov = np.zeros((3, 3))
+        self._last: Motion | None = None
+
+    def _prior(self, pose: Pose2D, cov: NDArray[np.float64]) -> Prior:
+        cfg = self.config
+        pos = float(np.sqrt(max(np.linalg.eigvalsh(cov[:2, :2])[-1], 0.0)))
+        radius = min(max(3.0 * pos, cfg.prior_radius_m), cfg.max_prior_radius_m)
+        az = math.sqrt(max(cov[2, 2], 0.0))
+        tol = min(max(3.0 * az, cfg.prior_azimuth_rad), cfg.max_prior_azimuth_rad)
+        return Prior(pose, radius, tol)
+
+    def step(self, index: int, scan: Scan) -> Step:
+        """Locate one scan (the next of the run) and measure its motion."""
+        cfg = self.config
+        motion = None
+        ref = None
+        if (
+            self._key is not None
+            and self._stamp is not None
+            and 0 <= scan.stamp_ns - self._stamp <= cfg.max_gap_s * 1e9
+        ):
+            ref, lines = self._key
+            last = self._last
+            guess = (0.0, 0.0, 0.0) if last is None else (last.dx, last.dy, last.dtheta)
+            motion = scan_to_scan(
+                lines,
+                scan,
+                guess=guess,
+                range_sigma_m=cfg.locator.range_sigma_m,
+                config=cfg.odometry,
+            )
+        predicted, cov = None, np.zeros((3, 3))
+        if motion is not None and self._key_pose is not None:
+            predicted, cov = compose(self._key_pose, self._key_cov, motion)
+        prior = None if predicted is None else self._prior(predicted, cov)
+        fix = locate_near(scan, self.survey, prior, config=cfg.locator)
+        pose: Pose2D | None = predicted
+        if fix.ok and fix.pose is not None and fix.adjustment is not None:
+            pose, cov = fix.pose, fix.adjustment.covariance.copy()
+        self._stamp = scan.stamp_ns
+        # A new keyframe when the chain broke, the scanner moved far enough from the
+        # last one, or this scan is fixed (the best-known pose to carry on from).
+        if (
+            motion is None
+            or fix.ok
+            or math.hypot(motion.dx, motion.dy) > cfg.keyframe_m
+            or abs(motion.dtheta) > cfg.keyframe_rad
+        ):
+            self._key = (index, lines_of(fix.segmentation, cfg.odometry.min_line_m))
+            self._key_pose, self._key_cov = pose, cov
+            self._last = None
+        else:
+            self._last = motion
+        return Step(
+            index, scan.stamp_ns, fix, motion, ref if motion is not None else None, predicted
+        )
+
+
+@dataclass(frozen=True, slots=True)
+class Node:
+    """What smoothing needs of one scan (a few numbers: a run of any length fits)."""
+
+    scan: int
+    stamp_ns: int
+    fix: tuple[Pose2D, NDArray[np.float64]] | None
+    motion: Motion | None
+    ref: int | None
+
+    @classmethod
+    def of(cls, step: Step) -> Node:
+        fix = None
+        if step.fix.ok and step.fix.pose is not None and step.fix.adjustment is not None:
+            fix = (step.fix.pose, step.fix.adjustment.covariance.copy())
+        return cls(step.scan, step.stamp_ns, fix, step.motion, step.ref)
+
+
+def _chains(nodes: Sequence[Node]) -> list[list[Node]]:
+    """Runs of scans each chained by a motion to a keyframe earlier in the same run."""
+    out: list[list[Node]] = []
+    members: set[int] = set()
+    for n in nodes:
+        if out and n.motion is not None and n.ref in members:
+            out[-1].append(n)
+        else:
+            out.append([n])
+            members = set()
+        members.add(n.scan)
+    return out
+
+
+def smooth(nodes: Iterable[Node], config: TrackConfig | None = None) -> list[PlacedScan]:
+    """Every scan chained by odometry to a fix, placed by a smoothed pose graph.
+
+    Scans of a chain without any fix cannot be placed in the mine grid and
+    are left out.
+    """
+    import gtsam
+
+    cfg = config or TrackConfig()
+    huber = gtsam.noiseModel.mEstimator.Huber.Create(cfg.huber_k)
+
+    def robust(cov: NDArray[np.float64]) -> gtsam.noiseModel.Robust:
+        sym = (cov + cov.T) / 2
+        return gtsam.noiseModel.Robust.Create(huber, gtsam.noiseModel.Gaussian.Covariance(sym))
+
+    placed: list[PlacedScan] = []
+    for chain in _chains(list(nodes)):
+        fixed = [i for i, n in enumerate(chain) if n.fix is not None]
+        if not fixed:
+            continue
+        graph = gtsam.NonlinearFactorGraph()
+        values = gtsam.Values()
+        # Dead reckoning in the chain's own frame (its first scan at the origin) ...
+        local: dict[int, gtsam.Pose2] = {}
+        for n in chain:
+            if n.motion is None or n.ref is None:
+                local[n.scan] = gtsam.Pose2()
+                continue
+            m = n.motion
+            local[n.scan] = local[n.ref].compose(gtsam.Pose2(m.dx, m.dy, m.dtheta))
+            # The motion's covariance is in the keyframe's frame; GTSAM's error of a
+            # between factor lives in the frame of the relative pose itself.
+            jm = np.eye(3)
+            jm[:2, :2] = _jacobian(m.dtheta)[:2, :2].T
+            graph.add(
+                gtsam.BetweenFactorPose2(
+                    n.ref,
+                    n.scan,
+                    gtsam.Pose2(m.dx, m.dy, m.dtheta),
+                    robust(jm @ m.covariance @ jm.T),
+                )
+            )
+        for n in chain:
+            if n.fix is not None:
+                pose, cov = n.fix
+                th = _theta(pose.azimuth)
+                jinv = np.linalg.inv(_jacobian(th))
+                graph.add(
+                    gtsam.PriorFactorPose2(
+                        n.scan,
+                        gtsam.Pose2(pose.easting, pose.northing, th),
+                        robust(jinv @ cov @ jinv.T),
+                    )
+                )
+        # ... moved onto the first fix: the optimiser's starting point.
+        anchor = chain[fixed[0]]
+        assert anchor.fix is not None
+        p0 = anchor.fix[0]
+        to_mine = gtsam.Pose2(p0.easting, p0.northing, _theta(p0.azimuth)).compose(
+            local[anchor.scan].inverse()
+        )
+        for n in chain:
+            values.insert(n.scan, to_mine.compose(local[n.scan]))
+        params = gtsam.LevenbergMarquardtParams()
+        result = gtsam.LevenbergMarquardtOptimizer(graph, values, params).optimize()
+        marginals = gtsam.Marginals(graph, result)
+        for n in chain:
+            p = result.atPose2(n.scan)
+            j = _jacobian(p.theta())
+            cov = j @ marginals.marginalCovariance(n.scan) @ j.T
+            placed.append(
+                PlacedScan(
+                    n.scan,
+                    n.stamp_ns,
+                    Pose2D(p.x(), p.y(), (math.pi / 2 - p.theta()) % math.tau),
+                    (cov + cov.T) / 2,
+                    "fix" if n.fix is not None else "odometry",
+                )
+            )
+    return placed
