@@ -30,6 +30,8 @@ __all__ = [
 LASERSCAN = "sensor_msgs/msg/LaserScan"
 BagKind = Literal["rosbag1", "sqlite3", "mcap"]
 _ROS1_MAGIC = b"#ROSBAG V2.0"
+#: Chunk size of the ROS 1 bags MAST writes (rosbag record's default, 768 KiB).
+ROS1_CHUNK_BYTES = 768 * 1024
 
 
 def bag_kind(path: str | Path) -> Literal["rosbag1", "rosbag2"]:
@@ -310,6 +312,8 @@ def write_laserscans(
         from rosbags.rosbag1 import Writer as Writer1
 
         writer: Any = Writer1(p)
+        # rosbag record's chunk size: a bag cut short loses at most one chunk of scans.
+        writer.chunk_threshold = ROS1_CHUNK_BYTES
     else:
         from rosbags.rosbag2 import StoragePlugin
         from rosbags.rosbag2 import Writer as Writer2

@@ -56,7 +56,7 @@ class OdometryConfig:
     min_line_m: float = 0.3
     min_matches: int = 40
     max_rms_m: float = 0.05
-    tempering: float = 5.0
+    tempering: float = 2.0
     min_sigma_m: float = 0.002
     min_sigma_rad: float = math.radians(0.02)
 
