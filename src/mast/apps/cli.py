@@ -676,6 +676,21 @@ def bench_dense(
     run_dense(tuple(beams) if beams else DEFAULT_BEAMS, range_sigma_m=range_sigma, echo=typer.echo)
 
 
+@bench_app.command("run")
+def bench_run(
+    scans: Annotated[
+        list[int] | None,
+        typer.Argument(help="Drive lengths in scans [default: 1000 10000]."),
+    ] = None,
+    seed: Annotated[int, typer.Option("--seed", help="Seed of the drive.")] = 0,
+) -> None:
+    """Survey runs: simulated drives read and tracked (throughput, peak memory), the placed
+    scans against the truth (fixed and carried by odometry) and their 95 % coverage."""
+    from mast.apps.bench.runs import DEFAULT_SCANS, run_runs
+
+    run_runs(tuple(scans) if scans else DEFAULT_SCANS, seed=seed, echo=typer.echo)
+
+
 @bench_app.command("clutter")
 def bench_clutter(
     data: Annotated[
