@@ -5,11 +5,13 @@ so tests and benchmarks know which panels a scan saw.
 """
 
 from mast.sim.design import BeaconDesign, paper_design, polyline_design, random_design
+from mast.sim.drive import DriveScene, drive_scenario, drive_scene
 from mast.sim.hard import drift_scene, hard_scene
 from mast.sim.scanner import SCANNERS, ScannerModel, SimulatedScan, scanner_model, simulate_scan
 from mast.sim.scenarios import (
     PAPER_VARIANTS,
     SCENARIOS,
+    TRUTH_COLUMNS,
     Scene,
     Shot,
     build_scenario,
@@ -26,7 +28,9 @@ __all__ = [
     "PAPER_VARIANTS",
     "SCANNERS",
     "SCENARIOS",
+    "TRUTH_COLUMNS",
     "BeaconDesign",
+    "DriveScene",
     "Roughness",
     "ScannerModel",
     "Scene",
@@ -38,6 +42,8 @@ __all__ = [
     "WorldBuilder",
     "build_scenario",
     "drift_scene",
+    "drive_scenario",
+    "drive_scene",
     "hard_scene",
     "paper_design",
     "paper_scenario",

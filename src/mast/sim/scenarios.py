@@ -9,9 +9,10 @@ from __future__ import annotations
 import csv
 import json
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -20,6 +21,7 @@ from mast.core.beacon import Beacon, Survey
 from mast.core.pose import Pose2D
 from mast.errors import InputError
 from mast.io import write_laserscans, write_scan_csv, write_survey
+from mast.io.bags import BagKind
 from mast.sim.design import BeaconDesign, paper_design, random_design
 from mast.sim.scanner import SCANNERS, ScannerModel, SimulatedScan, simulate_scan
 from mast.sim.tunnel import Roughness, Tunnel, project_station, roughen
@@ -27,6 +29,7 @@ from mast.sim.world import Surface, World, WorldBuilder
 
 __all__ = [
     "SCENARIOS",
+    "TRUTH_COLUMNS",
     "Scene",
     "Shot",
     "build_scenario",
@@ -62,12 +65,16 @@ class Scene:
     ) -> SimulatedScan:
         return simulate_scan(self.world, shot.pose, shot.scanner, rng=rng, stamp_ns=stamp_ns)
 
-    def simulate_all(self) -> list[SimulatedScan]:
-        """Every shot, with noise drawn from a generator seeded by the scene's seed."""
+    def iter_simulated(self) -> Iterator[SimulatedScan]:
+        """Every shot in order, one at a time, with noise drawn from a generator seeded
+        by the scene's seed (stamps 0.1 s apart)."""
         rng = np.random.default_rng(self.seed)
-        return [
-            self.simulate(s, rng=rng, stamp_ns=i * 100_000_000) for i, s in enumerate(self.shots)
-        ]
+        for i, s in enumerate(self.shots):
+            yield self.simulate(s, rng=rng, stamp_ns=i * 100_000_000)
+
+    def simulate_all(self) -> list[SimulatedScan]:
+        """Every shot, as :meth:`iter_simulated` gives them."""
+        return list(self.iter_simulated())
 
 
 def _with_noise(model: ScannerModel, sigma_m: float) -> ScannerModel:
@@ -292,18 +299,82 @@ SCENARIOS: dict[str, Callable[..., list[Scene]]] = {
 }
 
 
-def build_scenario(name: str, seed: int = 0, *, noise: bool = False) -> list[Scene]:
-    """Build a named scenario; the error lists the known names."""
+def build_scenario(
+    name: str, seed: int = 0, *, noise: bool | None = None, **options: object
+) -> list[Scene]:
+    """Build a named scenario; the error lists the known names.
+
+    ``noise=None`` is each scenario's own default: none for ``paper`` and ``random``,
+    12 mm for ``drive``. ``options`` (``scans``, ``rate_hz``) are the drive's
+    (:func:`mast.sim.drive.drive_scenario`).
+    """
+    if name == "drive":  # scans streamed one at a time; see mast.sim.drive
+        from mast.sim.drive import drive_scenario
+
+        unknown = sorted(set(options) - {"scans", "rate_hz"})
+        if unknown:
+            raise InputError(f"scenario 'drive' has no option {unknown[0]!r}")
+        return drive_scenario(seed, noise=noise, **options)  # type: ignore[arg-type]
     try:
         builder = SCENARIOS[name]
     except KeyError:
         raise InputError(f"unknown scenario {name!r}; known: {', '.join(SCENARIOS)}") from None
-    return builder(seed, noise=noise)
+    if options:
+        raise InputError(
+            f"scenario {name!r} takes no {', '.join(sorted(options))}; only drive does"
+        )
+    return builder(seed, noise=bool(noise))
 
 
 # --------------------------------------------------------------------------- writing
 
 SCAN_FORMATS = ("csv", "bag", "ros2", "mcap")
+
+#: Columns of ``truth.csv``, one row per scan (a file contract: tools read them by name).
+TRUTH_COLUMNS = (
+    "shot",
+    "label",
+    "file",
+    "message",
+    "stamp_ns",
+    "easting",
+    "northing",
+    "azimuth_deg",
+    "scanner",
+    "fov_deg",
+    "resolution_deg",
+    "range_sigma_m",
+    "panels_seen",
+)
+
+
+def _with_truth(scene: Scene, files: Sequence[str], truth: Any) -> Iterator[SimulatedScan]:
+    """The scene's scans one at a time, each writing its row to the ``truth`` csv writer.
+
+    ``files`` names each scan's file, or holds one name (a bag) for all of them.
+    """
+    for i, (shot, sim) in enumerate(zip(scene.shots, scene.iter_simulated(), strict=True)):
+        truth.writerow(_truth_row(i, files[i] if len(files) > 1 else files[0], shot, sim))
+        yield sim
+
+
+def _truth_row(i: int, file: str, shot: Shot, sim: SimulatedScan) -> list[object]:
+    seen = ";".join(f"{b}:{''.join(map(str, ps))}" for b, ps in sim.panels_seen().items())
+    return [
+        i,
+        shot.label,
+        file,
+        i + 1,
+        sim.scan.stamp_ns,
+        repr(shot.pose.easting),
+        repr(shot.pose.northing),
+        repr(shot.pose.azimuth_deg),
+        shot.scanner.name,
+        shot.scanner.fov_deg,
+        shot.scanner.resolution_deg,
+        shot.scanner.range_sigma_m,
+        seen,
+    ]
 
 
 @dataclass(frozen=True, slots=True)
@@ -332,66 +403,31 @@ def write_scenario(
         folder.mkdir(exist_ok=True)
         survey_path = folder / "beacons.csv"
         write_survey(survey_path, scene.survey)
-        sims = scene.simulate_all()
-        scan_paths: list[Path] = []
-        files: list[str] = []
+        count = len(scene.shots)
+        digits = max(3, len(str(count - 1)))
         if fmt == "csv":
-            for i, sim in enumerate(sims):
-                p = folder / f"scan_{i:03d}.csv"
-                write_scan_csv(p, sim.scan)
-                scan_paths.append(p)
-                files.append(p.name)
+            files = [f"scan_{i:0{digits}d}.csv" for i in range(count)]
+            scan_paths = [folder / f for f in files]
         else:
             name = {"bag": "scans.bag", "ros2": "scans_ros2", "mcap": "scans_mcap"}[fmt]
-            kind = {"bag": "rosbag1", "ros2": "sqlite3", "mcap": "mcap"}[fmt]
             p = folder / name
             if p.exists():
                 raise InputError("exists already; choose an empty --out folder", path=p)
-            write_laserscans(p, [s.scan for s in sims], kind=kind)  # type: ignore[arg-type]
-            scan_paths.append(p)
-            files = [name] * len(sims)
+            files = [name]
+            scan_paths = [p]
         truth_path = folder / "truth.csv"
         with truth_path.open("w", newline="", encoding="utf-8") as fh:
-            w = csv.writer(fh)
-            w.writerow(
-                [
-                    "shot",
-                    "label",
-                    "file",
-                    "message",
-                    "stamp_ns",
-                    "easting",
-                    "northing",
-                    "azimuth_deg",
-                    "scanner",
-                    "fov_deg",
-                    "resolution_deg",
-                    "range_sigma_m",
-                    "panels_seen",
-                ]
-            )
-            for i, (shot, sim) in enumerate(zip(scene.shots, sims, strict=True)):
-                seen = ";".join(
-                    f"{b}:{''.join(map(str, ps))}" for b, ps in sim.panels_seen().items()
-                )
-                w.writerow(
-                    [
-                        i,
-                        shot.label,
-                        files[i],
-                        i + 1,
-                        sim.scan.stamp_ns,
-                        repr(shot.pose.easting),
-                        repr(shot.pose.northing),
-                        repr(shot.pose.azimuth_deg),
-                        shot.scanner.name,
-                        shot.scanner.fov_deg,
-                        shot.scanner.resolution_deg,
-                        shot.scanner.range_sigma_m,
-                        seen,
-                    ]
-                )
-        written.append(WrittenScene(folder, survey_path, scan_paths, truth_path, len(sims)))
+            truth = csv.writer(fh)
+            truth.writerow(TRUTH_COLUMNS)
+            sims = _with_truth(scene, files, truth)
+            if fmt == "csv":
+                for path, sim in zip(scan_paths, sims, strict=True):
+                    write_scan_csv(path, sim.scan)
+            else:
+                kinds: dict[str, BagKind] = {"bag": "rosbag1", "ros2": "sqlite3", "mcap": "mcap"}
+                # streamed: the writer takes one scan at a time, never all of them
+                write_laserscans(scan_paths[0], (s.scan for s in sims), kind=kinds[fmt])
+        written.append(WrittenScene(folder, survey_path, scan_paths, truth_path, count))
         meta.append(
             {
                 "name": scene.name,
