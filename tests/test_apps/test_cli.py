@@ -58,7 +58,7 @@ def test_demo_prints_the_table2_comparison() -> None:
     [
         (
             ["simulate", "--scenario", "mars", "--out", "{tmp}"],
-            "mast: error: unknown scenario 'mars'; known: paper, random",
+            "mast: error: unknown scenario 'mars'; known: paper, random, drive",
         ),
     ],
 )

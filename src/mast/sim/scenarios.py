@@ -318,7 +318,8 @@ def build_scenario(
     try:
         builder = SCENARIOS[name]
     except KeyError:
-        raise InputError(f"unknown scenario {name!r}; known: {', '.join(SCENARIOS)}") from None
+        known = ", ".join([*SCENARIOS, "drive"])
+        raise InputError(f"unknown scenario {name!r}; known: {known}") from None
     if options:
         raise InputError(
             f"scenario {name!r} takes no {', '.join(sorted(options))}; only drive does"

@@ -1,0 +1,243 @@
+"""Survey runs (issue 10): a simulated drive tracked from bag to every output, with the
+placed scans checked against the truth, a damaged bag, an interrupted run and Dask."""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+import ezdxf
+import jsonschema
+import laspy
+import numpy as np
+import pytest
+
+from mast.core.pose import Pose2D
+from mast.io import read_laserscans, read_survey
+from mast.pipeline import LocatorConfig
+from mast.runs.odometry import Motion, scan_lines, scan_to_scan
+from mast.runs.run import RUN_FILES, track_run
+from mast.runs.track import TrackConfig, compose
+from mast.sim import drive_scene, write_scenario
+from tests._cli import run_mast_text
+
+SCHEMA = Path(__file__).resolve().parents[2] / "docs" / "fix.schema.json"
+CONFIG = TrackConfig(locator=LocatorConfig(range_sigma_m=0.012))
+
+
+@pytest.fixture(scope="module")
+def drive(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A 250-scan drive (10 s at 25 Hz) past beacons and into a stretch without any."""
+    out = tmp_path_factory.mktemp("drive")
+    (w,) = write_scenario([drive_scene(0, scans=250)], out, fmt="bag", scenario="drive")
+    return w.folder
+
+
+@pytest.fixture(scope="module")
+def tracked(drive: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    out = tmp_path_factory.mktemp("run")
+    r = run_mast_text(
+        "track",
+        str(drive / "scans.bag"),
+        "-b",
+        str(drive / "beacons.csv"),
+        "--out",
+        str(out),
+        "--range-sigma",
+        "0.012",
+    )
+    assert r.returncode == 0, r.stderr
+    assert "250 scans" in r.stdout
+    return out
+
+
+def _rows(path: Path) -> list[dict[str, str]]:
+    with path.open(encoding="utf-8", newline="") as fh:
+        return list(csv.DictReader(fh))
+
+
+def test_a_run_writes_every_file_and_places_every_scan(tracked: Path, drive: Path) -> None:
+    for name in RUN_FILES:
+        assert (tracked / name).stat().st_size > 0, name
+    schema = json.loads(SCHEMA.read_text(encoding="utf-8"))
+    validator = jsonschema.Draft202012Validator(schema)
+    records = [json.loads(line) for line in (tracked / "fixes.jsonl").read_text().splitlines()]
+    assert [r["scan"] for r in records] == list(range(250))
+    truth = _rows(drive / "truth.csv")
+    assert [r["stamp_ns"] for r in records] == [int(t["stamp_ns"]) for t in truth]
+    for r in records:
+        assert not list(validator.iter_errors(r))
+        assert r["topic"] == "/scan"
+    fixed = sum(r["status"] == "fix" for r in records)
+    traj = _rows(tracked / "trajectory.csv")
+    assert len(traj) == 250
+    assert {r["source"] for r in traj} == {"fix", "odometry"}
+    assert sum(r["source"] == "fix" for r in traj) == fixed
+    assert 0 < fixed < 250  # the drive leaves the beacons behind: odometry carries the rest
+
+
+def test_placed_scans_are_within_5_cm_of_the_truth_with_honest_sigmas(
+    tracked: Path, drive: Path
+) -> None:
+    truth = {t["stamp_ns"]: t for t in _rows(drive / "truth.csv")}
+    z: list[float] = []
+    for r in _rows(tracked / "trajectory.csv"):
+        t = truth[r["stamp_ns"]]
+        de = float(r["easting"]) - float(t["easting"])
+        dn = float(r["northing"]) - float(t["northing"])
+        da = (float(r["azimuth_deg"]) - float(t["azimuth_deg"]) + 180) % 360 - 180
+        assert math.hypot(de, dn) < (0.01 if r["source"] == "fix" else 0.05)
+        assert abs(da) < 0.1
+        z += [de / float(r["sigma_easting_m"]), dn / float(r["sigma_northing_m"])]
+    # 95 % intervals hold the truth at least 95 % of the time (the scans are correlated
+    # along the run, so this is a sanity check; the benchmark measures coverage).
+    assert np.mean(np.abs(z) <= 1.96) >= 0.95
+
+
+def test_the_map_and_the_plan_reopen_in_their_own_libraries(tracked: Path) -> None:
+    las = laspy.read(tracked / "map.las")
+    assert len(las.points) > 100_000
+    assert set(np.unique(las.scan_index)) <= set(range(250))
+    traj = _rows(tracked / "trajectory.csv")
+    e = np.array([float(r["easting"]) for r in traj])
+    assert abs(float(np.median(las.x)) - float(np.median(e))) < 30.0  # walls around the path
+    doc = ezdxf.readfile(tracked / "map.dxf")
+    auditor = doc.audit()
+    assert not auditor.has_errors
+    layers = {layer.dxf.name for layer in doc.layers}
+    assert {"MAST_WALLS", "MAST_BEACONS", "MAST_TRAJECTORY", "MAST_FIXES"} <= layers
+    tum = (tracked / "trajectory.tum").read_text().splitlines()
+    rows = [line.split() for line in tum if not line.startswith("#")]
+    assert len(rows) == 250
+    assert all(len(row) == 8 for row in rows)
+
+
+def test_a_bag_cut_short_gives_the_scans_it_holds(tmp_path: Path, drive: Path) -> None:
+    data = (drive / "scans.bag").read_bytes()
+    cut = tmp_path / "cut.bag"
+    cut.write_bytes(data[: int(len(data) * 0.85)])
+    out = tmp_path / "run"
+    r = run_mast_text(
+        "track",
+        str(cut),
+        "-b",
+        str(drive / "beacons.csv"),
+        "--out",
+        str(out),
+        "--range-sigma",
+        "0.012",
+    )
+    assert r.returncode == 0, r.stderr
+    assert "cut short" in r.stderr
+    records = (out / "fixes.jsonl").read_text().splitlines()
+    assert 0 < len(records) < 250
+    assert len(_rows(out / "trajectory.csv")) == len(records)
+
+
+def test_an_interrupted_run_leaves_valid_files_for_the_scans_done(
+    tmp_path: Path, drive: Path
+) -> None:
+    def stop_after_40(scans: int, fixes: int) -> None:
+        if scans == 40:
+            raise KeyboardInterrupt
+
+    result = track_run(
+        drive / "scans.bag",
+        read_survey(drive / "beacons.csv"),
+        tmp_path,
+        config=CONFIG,
+        progress=stop_after_40,
+    )
+    assert result.interrupted
+    assert result.summary.scans == 40
+    lines = (tmp_path / "fixes.jsonl").read_text().splitlines()
+    assert len(lines) == 40
+    json.loads(lines[-1])
+    assert len(_rows(tmp_path / "trajectory.csv")) == result.summary.placed > 0
+    las = laspy.read(tmp_path / "map.las")
+    assert int(np.max(las.scan_index)) < 40
+    assert not ezdxf.readfile(tmp_path / "map.dxf").audit().has_errors
+    assert "</html>" in (tmp_path / "report.html").read_text()
+
+
+def test_several_runs_on_a_dask_local_cluster(tmp_path: Path) -> None:
+    from mast.runs.batch import track_runs
+
+    folder = tmp_path / "runs"
+    for seed in (1, 2):
+        write_scenario([drive_scene(seed, scans=40)], folder / f"s{seed}", fmt="bag")
+    bags = sorted(folder.glob("s*/*/scans.bag"))
+    survey = bags[0].parent / "beacons.csv"  # each run with its own survey: run 2 gets none fixed
+    out = tmp_path / "out"
+    out.mkdir()
+    outcomes = track_runs(
+        bags, survey, out, options={"config": CONFIG}, workers=2, echo=lambda _: None
+    )
+    assert [o.run for o in outcomes] == [str(b) for b in bags]
+    assert outcomes[0].status == "placed"
+    assert outcomes[0].placed == outcomes[0].scans == 40
+    assert outcomes[1].status in ("placed", "no_fix")
+    index = _rows(out / "index.csv")
+    assert [r["run"] for r in index] == [str(b) for b in bags]
+    assert (Path(index[0]["folder"]) / "report.html").is_file()
+
+
+# --- frames and odometry -------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("azimuth_deg", "dx", "dy", "dtheta_deg", "expected"),
+    [
+        (0.0, 1.0, 0.0, 0.0, (0.0, 1.0, 0.0)),  # facing grid north, one metre forward
+        (90.0, 1.0, 0.0, 0.0, (1.0, 0.0, 90.0)),  # facing east
+        (0.0, 0.0, 1.0, 0.0, (-1.0, 0.0, 0.0)),  # facing north, one metre to the left: west
+        (90.0, 0.0, 0.0, 10.0, (0.0, 0.0, 80.0)),  # a left turn lowers the azimuth
+    ],
+)
+def test_a_motion_in_the_scanner_frame_moves_the_pose_in_the_mine_frame(
+    azimuth_deg: float,
+    dx: float,
+    dy: float,
+    dtheta_deg: float,
+    expected: tuple[float, float, float],
+) -> None:
+    motion = Motion(dx, dy, math.radians(dtheta_deg), np.eye(3) * 1e-6, 100, 0.01)
+    pose, cov = compose(Pose2D.from_degrees(1000.0, 2000.0, azimuth_deg), np.zeros((3, 3)), motion)
+    assert pose.easting == pytest.approx(1000.0 + expected[0])
+    assert pose.northing == pytest.approx(2000.0 + expected[1])
+    assert pose.azimuth_deg == pytest.approx(expected[2])
+    assert np.allclose(cov, cov.T)
+    assert np.all(np.linalg.eigvalsh(cov) > 0)
+
+
+def test_scan_to_scan_odometry_recovers_the_drives_motion(drive: Path) -> None:
+    scans = list(read_laserscans(drive / "scans.bag"))
+    truth = _rows(drive / "truth.csv")
+
+    def pose(k: int) -> Pose2D:
+        t = truth[k]
+        return Pose2D.from_degrees(
+            float(t["easting"]), float(t["northing"]), float(t["azimuth_deg"])
+        )
+
+    z: list[Any] = []
+    for k in range(0, 200, 20):
+        a, b = pose(k), pose(k + 5)
+        m = scan_to_scan(scan_lines(scans[k]), scans[k + 5], range_sigma_m=0.012)
+        assert m is not None
+        th = math.pi / 2 - a.azimuth
+        de, dn = b.easting - a.easting, b.northing - a.northing
+        true = np.array(
+            [
+                math.cos(th) * de + math.sin(th) * dn,
+                -math.sin(th) * de + math.cos(th) * dn,
+                -(b.azimuth - a.azimuth),
+            ]
+        )
+        err = np.array([m.dx, m.dy, m.dtheta]) - true
+        assert math.hypot(err[0], err[1]) < 0.02
+        z.append(float(err @ np.linalg.solve(m.covariance, err)))
+    assert np.mean(z) < 3 * 3  # consistent with its covariance (3 dof), within a margin
