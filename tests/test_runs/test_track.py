@@ -18,7 +18,7 @@ import pytest
 from mast.core.pose import Pose2D
 from mast.io import read_laserscans, read_survey
 from mast.pipeline import LocatorConfig
-from mast.runs.odometry import Motion, scan_lines, scan_to_scan
+from mast.runs.odometry import Motion, keyframe, scan_to_scan
 from mast.runs.run import RUN_FILES, track_run
 from mast.runs.track import TrackConfig, compose
 from mast.sim import drive_scene, write_scenario
@@ -226,7 +226,7 @@ def test_scan_to_scan_odometry_recovers_the_drives_motion(drive: Path) -> None:
     z: list[Any] = []
     for k in range(0, 200, 20):
         a, b = pose(k), pose(k + 5)
-        m = scan_to_scan(scan_lines(scans[k]), scans[k + 5], range_sigma_m=0.012)
+        m = scan_to_scan(keyframe(scans[k]), scans[k + 5], range_sigma_m=0.012)
         assert m is not None
         th = math.pi / 2 - a.azimuth
         de, dn = b.easting - a.easting, b.northing - a.northing

@@ -488,6 +488,7 @@ def track(
     typer.echo(
         f"{run}: {s.scans} scans, {s.fixes} fixed, {s.placed} placed"
         + (f", {s.skipped} messages skipped" if s.skipped else "")
+        + (f", {s.coasted} carried at constant velocity" if s.coasted else "")
         + f" in {s.elapsed_s:.1f} s ({s.scans / max(s.elapsed_s, 1e-9):.0f} scans/s); "
         f"files in {out}"
     )

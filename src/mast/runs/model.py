@@ -68,6 +68,9 @@ class RunSummary:
         Reference variance and its degrees of freedom of every fix.
     elapsed_s : float
         Wall-clock time of the run.
+    coasted : int
+        Scans whose returns did not find their keyframe's walls (or moved in a way no
+        vehicle can) and were carried at constant velocity, with its uncertainty.
     """
 
     run: str
@@ -79,3 +82,4 @@ class RunSummary:
     reasons: dict[str, int] = field(default_factory=dict)
     reference_variances: list[tuple[float, int]] = field(default_factory=list)
     elapsed_s: float = 0.0
+    coasted: int = 0

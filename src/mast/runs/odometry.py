@@ -1,16 +1,21 @@
-"""Scan-to-scan odometry: how the scanner moved between two scans, with its covariance.
+"""Scan-to-keyframe odometry: how the scanner moved between two scans, with its covariance.
 
-The previous scan is cut into straight pieces by the locator's own PCA
-segmentation (stage 1), and the current scan's returns are fitted to those
-lines by the same point-to-line ICP that aligns a scan with the surveyed
-panels (stage 4, Low 2004): a drift's rock walls are the "panels". The
-covariance is that of the linearised fit, ``s^2 (J^T J)^-1``, with ``s^2``
-the residual variance (never below the range variance) and inflated by the
-number of beams per independent piece of evidence, as the locator tempers
-its beam likelihoods: returns of one wall share its roughness, so they are
-not independent. Along a smooth, straight drift the fit cannot see motion
-along the walls; the covariance then says so (its information along the
-drift is near zero) instead of inventing a step.
+The keyframe's returns, each with the normal of the wall around it (principal
+component analysis over a window of about 0.3 m of consecutive returns, as
+the locator's segmentation fits its lines), are the target; the current
+scan's returns are fitted to them by point-to-plane ICP (Low 2004, the
+linearisation the locator's alignment uses), associating each return with
+its nearest keyframe return (a k-d tree). Fitting to the returns, not to long
+straight segments, keeps the rock's roughness: that is what tells motion
+along a drift.
+
+The covariance is that of the linearised fit, ``s^2 (J^T J)^-1``, with
+``s^2`` the residual variance (never below twice the range variance: both
+scans are noisy) and inflated by the returns per independent piece of
+evidence, as the locator tempers its beam likelihoods. Along a smooth,
+straight drift the fit cannot see motion along the walls; the covariance
+then says so (almost no information along the drift) instead of inventing a
+step.
 """
 
 from __future__ import annotations
@@ -20,26 +25,26 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.spatial import cKDTree
 
-from mast.core.geometry import PanelSet
-from mast.core.pose import Pose2D
 from mast.core.scan import Scan
-from mast.pipeline.alignment import icp_point_to_line
-from mast.pipeline.segmentation import Segmentation, SegmentationConfig, segment_scan
 
-__all__ = ["Motion", "OdometryConfig", "lines_of", "scan_lines", "scan_to_scan"]
+__all__ = ["Keyframe", "Motion", "OdometryConfig", "keyframe", "scan_to_scan"]
 
 
 @dataclass(frozen=True, slots=True)
 class OdometryConfig:
-    """How scans are matched to each other.
+    """How scans are matched to a keyframe.
 
     Attributes
     ----------
     gates_m : tuple of float
         Association gates of the ICP stages, decreasing, metres.
-    min_line_m : float
-        Shortest straight piece of the previous scan used as a line.
+    normal_span_m : float
+        Length of wall over which a return's normal is fitted.
+    max_planarity : float
+        A return whose window is less straight than this (smallest over
+        largest principal variance) has no normal and is not a target.
     min_matches : int
         Returns that must be matched for a motion to count.
     max_rms_m : float
@@ -50,15 +55,75 @@ class OdometryConfig:
     min_sigma_m, min_sigma_rad : float
         Floors on the motion's standard deviations (time sync, vehicle
         vibration, the walls' unmodelled roughness).
+    max_iterations : int
+        Per gate.
     """
 
-    gates_m: tuple[float, ...] = (0.5, 0.15, 0.06)
-    min_line_m: float = 0.3
+    gates_m: tuple[float, ...] = (0.3, 0.12, 0.06)
+    normal_span_m: float = 0.3
+    max_planarity: float = 0.1
     min_matches: int = 40
     max_rms_m: float = 0.05
     tempering: float = 2.0
     min_sigma_m: float = 0.002
     min_sigma_rad: float = math.radians(0.02)
+    max_iterations: int = 30
+
+
+@dataclass(frozen=True, slots=True)
+class Keyframe:
+    """A scan as a target for the next scans: its returns with their wall normals."""
+
+    points: NDArray[np.float64]
+    normals: NDArray[np.float64]
+    tree: cKDTree
+
+    def __len__(self) -> int:
+        return int(self.points.shape[0])
+
+
+def keyframe(scan: Scan, config: OdometryConfig | None = None) -> Keyframe:
+    """The scan's returns that lie on a locally straight wall, with the wall's normal."""
+    cfg = config or OdometryConfig()
+    _, pts = scan.points()
+    n = pts.shape[0]
+    if n < 3:
+        return Keyframe(np.zeros((0, 2)), np.zeros((0, 2)), cKDTree(np.zeros((0, 2))))
+    # Runs of consecutive returns without a jump; a window never crosses one.
+    step = np.hypot(*np.diff(pts, axis=0).T)
+    r = np.hypot(pts[:, 0], pts[:, 1])
+    spacing = np.maximum(r[1:] * max(scan.angle_increment, 1e-4), 0.01)
+    cut = step > 5 * spacing + 0.05
+    run = np.concatenate([[0], np.cumsum(cut)])
+    first = np.searchsorted(run, run, side="left")
+    last = np.searchsorted(run, run, side="right") - 1
+    half = np.clip(
+        np.round(cfg.normal_span_m / 2 / (r * max(scan.angle_increment, 1e-4))), 2, 50
+    ).astype(np.intp)
+    idx = np.arange(n)
+    lo = np.maximum(idx - half, first)
+    hi = np.minimum(idx + half, last)
+    # Window moments by cumulative sums (centred on the scan's mean for precision).
+    c = pts - pts.mean(axis=0)
+    cols = np.column_stack(
+        [np.ones(n), c[:, 0], c[:, 1], c[:, 0] ** 2, c[:, 0] * c[:, 1], c[:, 1] ** 2]
+    )
+    cs = np.vstack([np.zeros(6), np.cumsum(cols, axis=0)])
+    m = cs[hi + 1] - cs[lo]
+    k = m[:, 0]
+    mx, my = m[:, 1] / k, m[:, 2] / k
+    sxx = m[:, 3] / k - mx**2
+    sxy = m[:, 4] / k - mx * my
+    syy = m[:, 5] / k - my**2
+    # Principal direction angle; the normal is perpendicular to it.
+    ang = 0.5 * np.arctan2(2 * sxy, sxx - syy)
+    tr = sxx + syy
+    det = np.sqrt(np.maximum((sxx - syy) ** 2 / 4 + sxy**2, 0.0))
+    lmax, lmin = tr / 2 + det, tr / 2 - det
+    good = (k >= 5) & (lmin <= cfg.max_planarity * np.maximum(lmax, 1e-12))
+    nrm = np.column_stack([-np.sin(ang), np.cos(ang)])
+    keep = pts[good]
+    return Keyframe(keep, nrm[good], cKDTree(keep))
 
 
 @dataclass(frozen=True, slots=True)
@@ -87,80 +152,68 @@ class Motion:
     rms_m: float
 
 
-def lines_of(seg: Segmentation, min_line_m: float = 0.3) -> PanelSet:
-    """The straight pieces of a segmented scan as lines to match the next scan to."""
-    keep = [s for s in seg.segments if s.length >= min_line_m]
-    if not keep:
-        empty = np.zeros((0, 2))
-        none = np.zeros(0, dtype=np.intp)
-        return PanelSet(empty, empty, empty, empty, np.zeros(0), none, none, ())
-    a = np.array([s.start for s in keep], dtype=float)
-    b = np.array([s.end for s in keep], dtype=float)
-    v = b - a
-    length = np.hypot(v[:, 0], v[:, 1])
-    d = v / length[:, None]
-    nrm = np.stack([-d[:, 1], d[:, 0]], axis=1)
-    idx = np.arange(len(keep), dtype=np.intp)
-    return PanelSet(a, b, d, nrm, length, idx, np.ones(len(keep), dtype=np.intp), ("scan",))
-
-
-def scan_lines(
-    scan: Scan, *, config: SegmentationConfig | None = None, min_line_m: float = 0.3
-) -> PanelSet:
-    """The straight pieces of a scan (the locator's segmentation) as lines, scanner frame."""
-    return lines_of(segment_scan(scan, config or SegmentationConfig()), min_line_m)
-
-
-def _as_pose(dx: float, dy: float, dtheta: float) -> Pose2D:
-    # The previous scanner frame plays the mine frame: x as "easting", y as "northing";
-    # a counter-clockwise rotation dtheta is the azimuth pi/2 - dtheta.
-    return Pose2D(dx, dy, (math.pi / 2 - dtheta) % (2 * math.pi))
-
-
 def scan_to_scan(
-    previous: PanelSet,
+    key: Keyframe,
     scan: Scan,
     *,
     guess: tuple[float, float, float] = (0.0, 0.0, 0.0),
     range_sigma_m: float,
     config: OdometryConfig | None = None,
 ) -> Motion | None:
-    """How the scanner moved from the scan whose lines are ``previous`` to ``scan``.
+    """How the scanner moved from the keyframe ``key`` to ``scan``.
 
     Parameters
     ----------
-    previous : PanelSet
-        The previous scan's lines (:func:`scan_lines`).
+    key : Keyframe
+        The keyframe's returns and normals (:func:`keyframe`).
     scan : Scan
     guess : (dx, dy, dtheta)
         Starting motion (a constant-velocity prediction).
     range_sigma_m : float
-        A-priori range precision: the floor of the residual variance.
+        A-priori range precision of either scan.
 
     Returns
     -------
-    Motion, or None when the returns do not find the previous scan's walls
-    (too few matches, or residuals too large).
+    Motion, or None when the returns do not find the keyframe's walls (too
+    few matches, or residuals too large).
     """
     cfg = config or OdometryConfig()
-    if len(previous) == 0:
-        return None
     _, pts = scan.points()
-    if pts.shape[0] < cfg.min_matches:
+    if len(key) < cfg.min_matches or pts.shape[0] < cfg.min_matches:
         return None
-    icp = icp_point_to_line(pts, _as_pose(*guess), previous, gates_m=cfg.gates_m)
-    ok = icp.panel >= 0
+    x = np.array(guess, dtype=float)
+    ok = np.zeros(0, dtype=bool)
+    for gate in cfg.gates_m:
+        for _ in range(cfg.max_iterations):
+            c, s_ = math.cos(x[2]), math.sin(x[2])
+            m = pts @ np.array([[c, s_], [-s_, c]]) + x[:2]
+            dist, j = key.tree.query(m, distance_upper_bound=gate)
+            ok = np.isfinite(dist)
+            if np.count_nonzero(ok) < cfg.min_matches:
+                return None
+            nrm = key.normals[j[ok]]
+            res = np.einsum("ij,ij->i", m[ok] - key.points[j[ok]], nrm)
+            rel = m[ok] - x[:2]
+            jac = np.column_stack([nrm, nrm[:, 1] * rel[:, 0] - nrm[:, 0] * rel[:, 1]])
+            step, *_ = np.linalg.lstsq(jac, -res, rcond=None)
+            x = x + step
+            if math.hypot(step[0], step[1]) < 1e-5 and abs(step[2]) < 1e-6:
+                break
+    c, s_ = math.cos(x[2]), math.sin(x[2])
+    m = pts @ np.array([[c, s_], [-s_, c]]) + x[:2]
+    dist, j = key.tree.query(m, distance_upper_bound=cfg.gates_m[-1])
+    ok = np.isfinite(dist)
     n = int(np.count_nonzero(ok))
-    if n < cfg.min_matches or icp.rms_m > cfg.max_rms_m:
+    if n < cfg.min_matches:
         return None
-    p = icp.pose
-    m = p.scanner_to_mine(pts[ok])
-    nrm = previous.normal[icp.panel[ok]]
-    rel = m - p.position
-    jw = nrm[:, 1] * rel[:, 0] - nrm[:, 0] * rel[:, 1]
-    jac = np.column_stack([nrm, jw])
-    resid = icp.residual_m[ok]
-    s2 = max(float(resid @ resid) / max(n - 3, 1), range_sigma_m**2)
+    nrm = key.normals[j[ok]]
+    res = np.einsum("ij,ij->i", m[ok] - key.points[j[ok]], nrm)
+    rms = float(np.sqrt(np.mean(res**2)))
+    if rms > cfg.max_rms_m:
+        return None
+    rel = m[ok] - x[:2]
+    jac = np.column_stack([nrm, nrm[:, 1] * rel[:, 0] - nrm[:, 0] * rel[:, 1]])
+    s2 = max(float(res @ res) / max(n - 3, 1), 2 * range_sigma_m**2)
     info = jac.T @ jac / (s2 * cfg.tempering)
     floor = np.diag([cfg.min_sigma_m**2, cfg.min_sigma_m**2, cfg.min_sigma_rad**2])
     # A direction the walls do not constrain gets (almost) no information: its variance
@@ -168,6 +221,5 @@ def scan_to_scan(
     w, v = np.linalg.eigh(info)
     w = np.maximum(w, 1e-6)
     cov = (v / w) @ v.T + floor
-    dtheta = math.pi / 2 - p.azimuth
-    dtheta = (dtheta + math.pi) % (2 * math.pi) - math.pi
-    return Motion(p.easting, p.northing, dtheta, (cov + cov.T) / 2, n, icp.rms_m)
+    dtheta = (float(x[2]) + math.pi) % (2 * math.pi) - math.pi
+    return Motion(float(x[0]), float(x[1]), dtheta, (cov + cov.T) / 2, n, rms)

@@ -165,6 +165,7 @@ def track_run(
                     fh.write(json.dumps(rec) + "\n")
                     nodes.append(Node.of(step))
                     summary.scans += 1
+                    summary.coasted += step.motion is not None and step.motion.matches == 0
                     if step.fix.ok:
                         summary.fixes += 1
                         adj = step.fix.adjustment

@@ -24,13 +24,12 @@ import numpy as np
 from numpy.typing import NDArray
 
 from mast.core.beacon import Survey
-from mast.core.geometry import PanelSet
 from mast.core.pose import Pose2D
 from mast.core.scan import Scan
 from mast.pipeline.locator import Fix, LocatorConfig, locate_near
 from mast.pipeline.tracking import Prior
 from mast.runs.model import PlacedScan
-from mast.runs.odometry import Motion, OdometryConfig, lines_of, scan_to_scan
+from mast.runs.odometry import Keyframe, Motion, OdometryConfig, keyframe, scan_to_scan
 
 __all__ = ["RunTracker", "Step", "TrackConfig", "smooth"]
 
@@ -58,6 +57,10 @@ class TrackConfig:
         errors then add up once per keyframe (every half metre), not once per
         scan (every few centimetres at 25 Hz). A scan this far from its
         keyframe becomes the next one.
+    max_speed_mps, max_yaw_rate_rad_s, max_accel_mps2 : float
+        What a vehicle underground can do. A motion beyond them (ICP slid along
+        a smooth drift, or locked onto the wrong wall) is replaced by the
+        constant-velocity motion with the uncertainty the acceleration allows.
     """
 
     locator: LocatorConfig = field(default_factory=LocatorConfig)
@@ -70,6 +73,9 @@ class TrackConfig:
     huber_k: float = 1.345
     keyframe_m: float = 0.5
     keyframe_rad: float = math.radians(5.0)
+    max_speed_mps: float = 6.0
+    max_yaw_rate_rad_s: float = math.radians(90.0)
+    max_accel_mps2: float = 3.0
 
 
 @dataclass(frozen=True, slots=True)
@@ -128,10 +134,12 @@ class RunTracker:
         self.config = config or TrackConfig()
         self._stamp: int | None = None
         # The keyframe: its scan index, lines, and pose with covariance (if placed).
-        self._key: tuple[int, PanelSet] | None = None
+        self._key: tuple[int, Keyframe] | None = None
         self._key_pose: Pose2D | None = None
         self._key_cov = np.zeros((3, 3))
-        self._last: Motion | None = None
+        self._key_stamp = 0
+        self._last: tuple[float, float, float] | None = None
+        self._velocity = (0.0, 0.0, 0.0)
 
     def _prior(self, pose: Pose2D, cov: NDArray[np.float64]) -> Prior:
         cfg = self.config
@@ -151,16 +159,27 @@ class RunTracker:
             and self._stamp is not None
             and 0 <= scan.stamp_ns - self._stamp <= cfg.max_gap_s * 1e9
         ):
-            ref, lines = self._key
-            last = self._last
-            guess = (0.0, 0.0, 0.0) if last is None else (last.dx, last.dy, last.dtheta)
+            ref, key = self._key
+            dt = (scan.stamp_ns - self._stamp) * 1e-9
+            # Constant velocity: the last scan's place in the keyframe, one more step on.
+            v = self._velocity
+            step = (v[0] * dt, v[1] * dt, v[2] * dt)
+            last = (0.0, 0.0, 0.0) if self._last is None else self._last
+            guess = _chain(last, step)
             motion = scan_to_scan(
-                lines,
+                key,
                 scan,
                 guess=guess,
                 range_sigma_m=cfg.locator.range_sigma_m,
                 config=cfg.odometry,
             )
+            since_key = (scan.stamp_ns - self._key_stamp) * 1e-9
+            if motion is None or not self._plausible(motion, guess, since_key):
+                motion = self._coasting(guess, since_key)
+            inc = _chain(_inverse(last), (motion.dx, motion.dy, motion.dtheta))
+            self._velocity = (inc[0] / dt, inc[1] / dt, inc[2] / dt) if dt > 0 else v
+        else:
+            self._velocity = (0.0, 0.0, 0.0)
         predicted, cov = None, np.zeros((3, 3))
         if motion is not None and self._key_pose is not None:
             predicted, cov = compose(self._key_pose, self._key_cov, motion)
@@ -178,14 +197,49 @@ class RunTracker:
             or math.hypot(motion.dx, motion.dy) > cfg.keyframe_m
             or abs(motion.dtheta) > cfg.keyframe_rad
         ):
-            self._key = (index, lines_of(fix.segmentation, cfg.odometry.min_line_m))
+            self._key = (index, keyframe(scan, cfg.odometry))
+            self._key_stamp = scan.stamp_ns
             self._key_pose, self._key_cov = pose, cov
             self._last = None
         else:
-            self._last = motion
+            self._last = (motion.dx, motion.dy, motion.dtheta)
         return Step(
             index, scan.stamp_ns, fix, motion, ref if motion is not None else None, predicted
         )
+
+    def _plausible(
+        self, motion: Motion, guess: tuple[float, float, float], since_key: float
+    ) -> bool:
+        """Whether a vehicle can have made this motion: not beyond its speed and turn
+        rate, and not further from constant velocity than its acceleration allows."""
+        cfg = self.config
+        far = math.hypot(motion.dx, motion.dy) > cfg.max_speed_mps * since_key + 0.05
+        turned = abs(motion.dtheta) > cfg.max_yaw_rate_rad_s * since_key + 0.02
+        off = math.hypot(motion.dx - guess[0], motion.dy - guess[1]) > self._slack(since_key)
+        return not (far or turned or off)
+
+    def _slack(self, since_key: float) -> float:
+        return 0.05 + self.config.max_accel_mps2 * max(since_key, 0.04)
+
+    def _coasting(self, guess: tuple[float, float, float], since_key: float) -> Motion:
+        """The constant-velocity motion, as uncertain as the vehicle's acceleration makes it:
+        the run goes on through a scan whose returns did not find the keyframe's walls."""
+        s = self._slack(since_key)
+        yaw = 0.02 + self.config.max_yaw_rate_rad_s * 0.1 * max(since_key, 0.04)
+        return Motion(*guess, np.diag([s**2, s**2, yaw**2]), 0, math.nan)
+
+
+def _chain(
+    a: tuple[float, float, float], b: tuple[float, float, float]
+) -> tuple[float, float, float]:
+    """Relative pose ``b`` (in ``a``'s frame) after ``a``: (dx, dy, dtheta) composition."""
+    c, s = math.cos(a[2]), math.sin(a[2])
+    return (a[0] + c * b[0] - s * b[1], a[1] + s * b[0] + c * b[1], a[2] + b[2])
+
+
+def _inverse(a: tuple[float, float, float]) -> tuple[float, float, float]:
+    c, s = math.cos(a[2]), math.sin(a[2])
+    return (-c * a[0] - s * a[1], s * a[0] - c * a[1], -a[2])
 
 
 @dataclass(frozen=True, slots=True)
