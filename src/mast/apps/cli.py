@@ -167,19 +167,7 @@ def _load_scans(
         return [scan], False
     bag_kind(path)  # a clear error for anything that is neither
     scans = list(read_laserscans(path, topic=topic))
-    if range_min is not None or range_max is not None:
-        scans = [
-            Scan(
-                s.angles_rad,
-                s.ranges_m,
-                s.intensities,
-                range_min if range_min is not None else s.range_min_m,
-                range_max if range_max is not None else s.range_max_m,
-                s.stamp_ns,
-                s.frame_id,
-            )
-            for s in scans
-        ]
+    scans = [s.with_range_limits(range_min, range_max) for s in scans]
     if not scans:
         raise InputError("bag holds no LaserScan message on that topic", path=path)
     return scans, True

@@ -143,6 +143,20 @@ class Scan:
     def __len__(self) -> int:
         return int(self.ranges_m.size)
 
+    def with_range_limits(self, range_min_m: float | None, range_max_m: float | None) -> Scan:
+        """The same beams with other range limits (None keeps the scan's own)."""
+        if range_min_m is None and range_max_m is None:
+            return self
+        return Scan(
+            self.angles_rad,
+            self.ranges_m,
+            self.intensities,
+            self.range_min_m if range_min_m is None else range_min_m,
+            self.range_max_m if range_max_m is None else range_max_m,
+            self.stamp_ns,
+            self.frame_id,
+        )
+
     @property
     def valid(self) -> NDArray[np.bool_]:
         """Mask of beams with a usable return."""

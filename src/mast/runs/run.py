@@ -138,18 +138,7 @@ def track_run(
 
     def scans(on_skip: Callable[[str], None]) -> Any:
         for s in read_laserscans(bag, topic=topic, on_skip=on_skip):
-            lo, hi = range_limits
-            if lo is not None or hi is not None:
-                s = Scan(
-                    s.angles_rad,
-                    s.ranges_m,
-                    s.intensities,
-                    lo if lo is not None else s.range_min_m,
-                    hi if hi is not None else s.range_max_m,
-                    s.stamp_ns,
-                    s.frame_id,
-                )
-            yield s
+            yield s.with_range_limits(*range_limits)
 
     tracker = RunTracker(survey, cfg)
     nodes: list[Node] = []
