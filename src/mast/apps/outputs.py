@@ -48,9 +48,10 @@ def check_output_file(
     :class:`OutputError`.
     """
     known = sorted(suffixes)
+    example = ".png" if ".png" in known else known[0]
     if path.is_dir():
         raise InputError(
-            f"{option} must name a file (such as fix{known[0]}), not a folder", path=path
+            f"{option} must name a file (such as fix{example}), not a folder", path=path
         )
     if path.suffix.lower() not in known:
         raise InputError(
