@@ -1,3 +1,5 @@
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -309,3 +311,17 @@ def test_a_sigma_no_scanner_has_warns_with_its_unit(
     assert len(warning) == 1
     assert option in warning[0]
     assert unit in warning[0]
+
+
+def test_the_command_starts_without_the_heavy_libraries() -> None:
+    # `mast --help` must start fast: matplotlib, scipy, GTSAM and the pipeline are
+    # imported inside the commands that need them.
+    code = (
+        "import sys, mast.apps.cli; "
+        "print(sorted(m for m in ('matplotlib', 'scipy', 'gtsam', 'mast.pipeline.locator', "
+        "'dask', 'laspy', 'ezdxf', 'rosbags') if m in sys.modules))"
+    )
+    done = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, timeout=60, check=True
+    )
+    assert done.stdout.strip() == "[]"

@@ -22,15 +22,14 @@ from typing import TYPE_CHECKING, Annotated
 import typer
 
 from mast import __version__
-from mast.apps.outputs import check_output_file, check_output_folder
-from mast.apps.plot import PLOT_SUFFIXES
+from mast.apps.outputs import PLOT_SUFFIXES, check_output_file, check_output_folder
 from mast.core.noise import DEFAULT_ANGLE_SIGMA_RAD, DEFAULT_RANGE_SIGMA_M, DEFAULT_SURVEY_SIGMA_M
 from mast.core.scan import Scan
 from mast.errors import InputError, MastError, NoFixError, OutputError
-from mast.pipeline.tracking import Prior
 
 if TYPE_CHECKING:
     from mast.pipeline.locator import LocatorConfig
+    from mast.pipeline.tracking import Prior
 
 EXIT_OK = 0
 EXIT_BAD_INPUT = 2

@@ -11,7 +11,13 @@ from pathlib import Path
 
 from mast.errors import InputError, OutputError
 
-__all__ = ["check_output_file", "check_output_folder", "write_bytes"]
+__all__ = ["PLOT_SUFFIXES", "check_output_file", "check_output_folder", "write_bytes"]
+
+#: File suffixes a plot can be written as (matplotlib's Agg and vector back-ends); here,
+#: not in the plotting module, so that checking a path does not import matplotlib.
+PLOT_SUFFIXES = frozenset(
+    {".png", ".pdf", ".svg", ".svgz", ".jpg", ".jpeg", ".tif", ".tiff", ".webp", ".eps", ".ps"}
+)
 
 
 def _same_file(a: Path, b: Path) -> bool:

@@ -32,6 +32,7 @@ from matplotlib.patches import Circle, Ellipse
 from matplotlib.ticker import MaxNLocator, ScalarFormatter
 from numpy.typing import NDArray
 
+from mast.apps.outputs import PLOT_SUFFIXES
 from mast.core.beacon import Survey
 from mast.core.geometry import PanelSet
 from mast.core.pose import Pose2D, format_dms
@@ -42,10 +43,6 @@ from mast.pipeline.segmentation import Segment
 
 __all__ = ["PLOT_SUFFIXES", "fix_figure", "plot_fix"]
 
-#: File suffixes a plot can be written as (matplotlib's Agg and vector back-ends).
-PLOT_SUFFIXES = frozenset(
-    {".png", ".pdf", ".svg", ".svgz", ".jpg", ".jpeg", ".tif", ".tiff", ".webp", ".eps", ".ps"}
-)
 
 #: Resolution of raster plots (dots per inch).
 DPI = 100
