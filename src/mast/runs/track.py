@@ -54,7 +54,7 @@ class TrackConfig:
         Huber kernel threshold, in standard deviations, of every factor.
     keyframe_m, keyframe_rad : float
         Scans are matched to a keyframe, not to the scan before them: odometry
-        errors then add up once per keyframe (every half metre), not once per
+        errors then add up once per keyframe (every metre), not once per
         scan (every few centimetres at 25 Hz). A scan this far from its
         keyframe becomes the next one.
     max_speed_mps, max_yaw_rate_rad_s, max_accel_mps2 : float
@@ -71,7 +71,7 @@ class TrackConfig:
     prior_azimuth_rad: float = math.radians(5.0)
     max_prior_azimuth_rad: float = math.radians(10.0)
     huber_k: float = 1.345
-    keyframe_m: float = 0.5
+    keyframe_m: float = 1.0
     keyframe_rad: float = math.radians(5.0)
     max_speed_mps: float = 6.0
     max_yaw_rate_rad_s: float = math.radians(90.0)
