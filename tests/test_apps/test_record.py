@@ -353,3 +353,25 @@ def test_readme_and_docs_links_resolve_inside_the_repository() -> None:
             assert resolved.exists(), f"{page.name}: link {target} does not resolve"
             assert root.resolve() in resolved.parents, f"{page.name}: {target} leaves the clone"
     assert "fix.schema.json" in (root / "README.md").read_text(encoding="utf-8")
+
+
+def test_a_tracked_fix_says_its_first_pose_came_from_the_prior(files: Path) -> None:
+    rec = json.loads(
+        _locate_paper(files, "scan_001.csv", "--range-sigma", "0.012", "--format", "json").output
+    )
+    near = f"{rec['easting'] + 0.1},{rec['northing'] - 0.1},{rec['azimuth_deg'] + 1}"
+    r = _locate_paper(
+        files,
+        "scan_001.csv",
+        "--range-sigma",
+        "0.012",
+        "--near",
+        near,
+        "--radius",
+        "0.5",
+        "--azimuth-tolerance",
+        "5",
+    )
+    assert r.exit_code == 0, r.output
+    assert "First pose from a search of the prior's window (0.5 m around" in r.output
+    assert "matched corners" not in r.output

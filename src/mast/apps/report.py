@@ -384,11 +384,19 @@ def fix_text(
             f"  {b} edge {e}: corner identified by {OPTION_WORDS.get(o, '?')} "
             f"(MAST paper, Table 1 option {o})"
         )
-    if fix.similarity is not None:
+    refined = (
+        f"refined by fitting the returns to the surveyed panels ({fix.icp_iterations} "
+        f"iterations), {1e3 * fix.elapsed_s:.1f} ms in all"
+    )
+    prior = fix.config.prior
+    if fix.chosen is not None and fix.chosen.hypothesis.kind == "prior" and prior is not None:
+        lines.append(
+            f"  First pose from a search of the prior's window ({prior.radius_m:g} m around "
+            f"E {prior.pose.easting:.3f}, N {prior.pose.northing:.3f}), {refined}"
+        )
+    elif fix.similarity is not None:
         lines.append(
             f"  First pose from the matched corners (scan-to-survey scale "
-            f"{fix.similarity.scale:.6f}; 1 when they agree in size), refined by fitting the "
-            f"returns to the surveyed panels ({fix.icp_iterations} iterations), "
-            f"{1e3 * fix.elapsed_s:.1f} ms in all"
+            f"{fix.similarity.scale:.6f}; 1 when they agree in size), {refined}"
         )
     return "\n".join(lines)
