@@ -315,6 +315,7 @@ def locate(
 
     from mast.apps.report import ReportInputs, fix_record, fix_text
     from mast.io import read_survey
+    from mast.io.bags import laserscan_topic
     from mast.pipeline.locator import locate_sequence
 
     cfg, defaults = _precisions(range_sigma, angle_sigma, scanner, survey_sigma)
@@ -334,7 +335,7 @@ def locate(
             scan_file="<stdin>" if scan_path == Path("-") else str(scan_path),
             survey_file=str(beacons),
             scanner=scanner,
-            topic=_bag_topic(scan_path, topic) if many else None,
+            topic=laserscan_topic(scan_path, topic) if many else None,
             defaults=frozenset(defaults),
         )
         source = inputs.scan_file or str(scan_path)
@@ -563,12 +564,6 @@ def _precisions(
         cfg = replace(cfg, survey_sigma_m=survey_sigma)
         defaults.discard("survey_sigma_m")
     return cfg, defaults
-
-
-def _bag_topic(path: Path, topic: str | None) -> str | None:
-    from mast.io.bags import laserscan_topic
-
-    return laserscan_topic(path, topic)
 
 
 bench_app = typer.Typer(

@@ -161,7 +161,7 @@ def exclude_inconsistent(
     *,
     noise: NoiseModel,
     min_beacons: int,
-) -> tuple[Observations, Adjustment, list[int], int] | list[int]:
+) -> tuple[Observations, Adjustment, list[int], int, list[BeaconTest]] | list[int]:
     """Leave out, one at a time, a beacon whose ranges disagree with the others.
 
     A beacon is at fault only when its removal alone leaves the others
@@ -170,16 +170,18 @@ def exclude_inconsistent(
 
     Returns
     -------
-    (obs, adj, excluded, outliers) when the rest is consistent (``excluded``:
-    beacon indices left out; ``outliers``: returns data snooping removed on
-    the way), or the list of suspect beacon indices when it cannot be made so.
+    (obs, adj, excluded, outliers, tests) when the rest is consistent
+    (``excluded``: beacon indices left out; ``outliers``: returns data snooping
+    removed on the way; ``tests``: the beacon tests of ``obs`` and ``adj``, all
+    passed), or the list of suspect beacon indices when it cannot be made so.
     """
     excluded: list[int] = []
     outliers = 0
     while True:
-        failed = [t for t in beacon_tests(obs, adj, noise=noise) if t.failed]
+        tests = beacon_tests(obs, adj, noise=noise)
+        failed = [t for t in tests if t.failed]
         if not failed:
-            return obs, adj, excluded, outliers
+            return obs, adj, excluded, outliers, tests
         culprits = []
         for b in sorted(set(obs.beacon.tolist())):
             rest = obs.subset(obs.beacon != b)
@@ -251,11 +253,13 @@ def residual_summary(
     ids: tuple[str, ...],
     panel_numbers: NDArray[np.intp],
     noise: NoiseModel,
+    tests: list[BeaconTest] | None = None,
 ) -> Residuals:
     """Residuals of an adjustment, overall, per beacon and per panel, with the beacon tests.
 
     ``ids`` names the beacon indices of ``obs.beacon``; ``panel_numbers`` gives
-    the panel number (1..3) of each panel index in ``obs.panel``.
+    the panel number (1..3) of each panel index in ``obs.panel``; ``tests`` are
+    the beacon tests of ``obs`` and ``adj`` when already computed.
     """
     v, w = adj.residuals_m, standardised_residuals(adj)
     per_beacon = {
@@ -267,12 +271,13 @@ def residual_summary(
         )
         for k in np.unique(obs.panel)
     }
-    tests = {ids[t.beacon]: t for t in beacon_tests(obs, adj, noise=noise)}
+    if tests is None:
+        tests = beacon_tests(obs, adj, noise=noise)
     return Residuals(
         rms_m=float(np.sqrt(np.mean(v**2))),
         max_abs_w=float(np.max(np.abs(w))),
         w_critical=w_critical(len(obs)),
         per_beacon=per_beacon,
         per_panel=per_panel,
-        beacon_tests=tests,
+        beacon_tests={ids[t.beacon]: t for t in tests},
     )

@@ -47,7 +47,13 @@ from mast.pipeline.identification import (
     PanelIdentification,
     identify_panels,
 )
-from mast.pipeline.integrity import Residuals, exclude_inconsistent, residual_summary, snoop
+from mast.pipeline.integrity import (
+    BeaconTest,
+    Residuals,
+    exclude_inconsistent,
+    residual_summary,
+    snoop,
+)
 from mast.pipeline.segmentation import Segmentation, SegmentationConfig, segment_scan
 from mast.pipeline.tracking import Prior, TrackingConfig, prior_hypotheses
 from mast.pipeline.verification import VerificationConfig, Verified, verify
@@ -361,8 +367,12 @@ def locate(scan: Scan, survey: Survey, *, config: LocatorConfig | None = None) -
     obs, adj = adjusted
     obs, adj, outliers = snoop(obs, adj, noise=noise)
 
-    def summary(obs: Observations, adj: Adjustment) -> Residuals:
-        return residual_summary(obs, adj, ids=panels.ids, panel_numbers=panels.panel, noise=noise)
+    def summary(
+        obs: Observations, adj: Adjustment, tests: list[BeaconTest] | None = None
+    ) -> Residuals:
+        return residual_summary(
+            obs, adj, ids=panels.ids, panel_numbers=panels.panel, noise=noise, tests=tests
+        )
 
     cleaned = exclude_inconsistent(obs, adj, noise=noise, min_beacons=cfg.min_beacons)
     if isinstance(cleaned, list):
@@ -381,13 +391,13 @@ def locate(scan: Scan, survey: Survey, *, config: LocatorConfig | None = None) -
             f"may have been moved or mis-surveyed{most}",
             residuals=res,
         )
-    obs, adj, excluded, more = cleaned
+    obs, adj, excluded, more, tests = cleaned
     if adj.dof > 0 and stats.chi2.sf(adj.reference_variance * adj.dof, adj.dof) < cfg.reject_alpha:
         return finish(
             reason="rejected",
             detail=f"reference variance {adj.reference_variance:.2f} on {adj.dof} degrees "
             "of freedom: the returns do not fit the surveyed beacons",
-            residuals=summary(obs, adj),
+            residuals=summary(obs, adj, tests),
         )
     if noise.survey_sigma_m > 0:
         adj = replace(
@@ -408,7 +418,7 @@ def locate(scan: Scan, survey: Survey, *, config: LocatorConfig | None = None) -
         crb=cramer_rao_bound(adj.pose, obs.angles_rad, obs.normals, obs.offsets, noise=noise),
         excluded_beacons=tuple(panels.ids[b] for b in excluded),
         outliers_removed=outliers + more,
-        residuals=summary(obs, adj),
+        residuals=summary(obs, adj, tests),
     )
 
 

@@ -13,7 +13,7 @@ import json
 import math
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -22,7 +22,6 @@ from numpy.typing import NDArray
 
 from mast.apps.report import ReportInputs, fix_record
 from mast.core.beacon import Survey
-from mast.core.scan import Scan
 from mast.errors import OutputError
 from mast.runs.model import PlacedScan, RunSummary
 from mast.runs.track import Node, RunTracker, TrackConfig, smooth
@@ -73,7 +72,7 @@ class RunResult:
     warnings: list[str] = field(default_factory=list)
 
 
-def _walls(scan: Scan, fix_segments: Any) -> NDArray[np.float64]:
+def _walls(fix_segments: Any) -> NDArray[np.float64]:
     """The scan's straight pieces (scanner frame) as an (n, 2, 2) array of end points."""
     segs = [s for s in fix_segments if s.length >= 0.5]
     if not segs:
@@ -125,8 +124,10 @@ def track_run(
 
     cfg = config or TrackConfig()
     t0 = time.perf_counter()
-    name = laserscan_topic(bag, topic)
-    inputs = inputs or ReportInputs(scan_file=str(bag), topic=name)
+    inputs = inputs or ReportInputs()
+    # The caller may have resolved the topic already (opening a bag is not free).
+    name = inputs.topic if inputs.topic is not None else laserscan_topic(bag, topic)
+    inputs = replace(inputs, scan_file=inputs.scan_file or str(bag), topic=name)
     summary = RunSummary(run=str(bag), topic=name)
     result = RunResult(summary, [], out)
 
@@ -168,7 +169,7 @@ def track_run(
                     if pose is not None and (
                         last_wall is None or math.dist(pose.position, last_wall) >= WALL_SPACING_M
                     ):
-                        walls[i] = _walls(scan, step.fix.segmentation.segments)
+                        walls[i] = _walls(step.fix.segmentation.segments)
                         last_wall = pose.position
                     if progress is not None:
                         progress(summary.scans, summary.fixes)
