@@ -27,7 +27,7 @@ import pytest
 from mast.core.beacon import Beacon, Survey
 from mast.core.pose import Pose2D, format_dms
 from mast.errors import InputError, OutputError
-from mast.runs.model import PlacedScan, RunSummary
+from mast.runs.model import PlacedScan, RunSummary, Trajectory
 from mast.runs.outputs import (
     DXF_LAYERS,
     TRAJECTORY_HEADER,
@@ -569,3 +569,35 @@ def test_the_render_check_catches_errors(tmp_path: Path) -> None:
     errors = _render(page, tmp_path)["errors"]
     assert any(e.startswith("uncaught:") and "notDefined" in e for e in errors), errors
     assert any(e.startswith("resource failed:") and "missing.png" in e for e in errors), errors
+
+
+def test_a_dense_run_draws_by_distance_in_the_dxf(tmp_path: Path) -> None:
+    # 2 000 scans 1 cm apart, every one fixed: 20 m of drift.
+    az = math.radians(AZIMUTH_DEG)
+    cov = np.diag([1e-6, 1e-6, 1e-8])
+    placed = Trajectory(
+        [
+            PlacedScan(
+                i,
+                T0_NS + i * STEP_NS,
+                Pose2D(E0 + 0.01 * i * math.sin(az), N0 + 0.01 * i * math.cos(az), az),
+                cov,
+                "fix",
+            )
+            for i in range(2000)
+        ]
+    )
+    assert len(placed) == 2000
+    assert placed[-1].pose.easting == pytest.approx(E0 + 19.99 * math.sin(az))
+    assert placed[5].covariance.tolist() == cov.tolist()
+    path = tmp_path / "map.dxf"
+    write_map_dxf(path, _survey(), placed, [], iter(placed))
+    msp = ezdxf.readfile(path).modelspace()
+    (traj,) = msp.query('LWPOLYLINE[layer=="MAST_TRAJECTORY"]')
+    xy = np.array(traj.get_points("xy"))
+    # A vertex every 10 cm (11 where rounding puts one a hair short) and the last
+    # scan's: the path, not the scans.
+    assert 180 <= len(xy) <= 201
+    assert np.max(np.hypot(*np.diff(xy, axis=0).T)) < 0.111
+    assert xy[-1].tolist() == [placed[-1].pose.easting, placed[-1].pose.northing]
+    assert len(msp.query('CIRCLE[layer=="MAST_FIXES"]')) in (19, 20)

@@ -29,9 +29,11 @@ from __future__ import annotations
 import calendar
 import html
 import io
+import itertools
 import math
 import re
 from collections.abc import Iterable, Iterator, Mapping, Sequence
+from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
 from types import TracebackType
@@ -43,7 +45,7 @@ from numpy.typing import ArrayLike, NDArray
 from mast.core.beacon import Survey
 from mast.core.pose import format_dms
 from mast.errors import InputError, OutputError
-from mast.runs.model import PlacedScan, RunSummary
+from mast.runs.model import PlacedScan, RunSummary, Trajectory
 
 __all__ = [
     "DXF_LAYERS",
@@ -94,6 +96,11 @@ DXF_TEXT_HEIGHT_M: Final = 0.25
 DXF_FIX_RADIUS_M: Final = 0.05
 #: Length of a fix's azimuth tick in the DXF (from the fix along the scanner's +x), metres.
 DXF_FIX_TICK_M: Final = 0.5
+#: The DXF's trajectory keeps a vertex at least this far from the last one kept
+#: (and the last of each stretch): a scan every few centimetres is noise in CAD.
+DXF_VERTEX_SPACING_M: Final = 0.1
+#: Fixes are drawn in the DXF at least this far apart (every fix is in trajectory.csv).
+DXF_FIX_SPACING_M: Final = 1.0
 #: $INSUNITS code for metres.
 _DXF_METRES: Final = 6
 
@@ -101,6 +108,8 @@ _DXF_METRES: Final = 6
 MAX_TABLE_ROWS: Final = 2000
 #: At most this many wall points are drawn in the report's map (evenly thinned).
 MAX_FIGURE_POINTS: Final = 50_000
+#: At most this many poses of a run are drawn per series in the report (evenly thinned).
+MAX_FIGURE_POSES: Final = 4000
 #: Markers beyond this many in one series are drawn as an image inside the SVG:
 #: as vector marks they would make the page megabytes long.
 MAX_VECTOR_MARKERS: Final = 5000
@@ -204,19 +213,73 @@ def _write_lines(path: str | Path, lines: Iterable[str]) -> int:
     return max(rows, 0)
 
 
-def _stretches(placed: Sequence[PlacedScan]) -> list[list[PlacedScan]]:
-    """Placed scans split where the run was not placed: a scan index skipped.
+@dataclass(frozen=True, slots=True)
+class _Poses:
+    """A run's placed scans as arrays; ``stretch`` numbers the unbroken stretches.
 
-    Between two stretches the scanner's path is unknown (the scans there were
-    neither fixed nor chained to a fix), so the trajectory is not drawn across.
+    Between two stretches (a scan index skipped) the scanner's path is unknown:
+    the scans there were neither fixed nor chained to a fix, so the trajectory
+    is not drawn across.
     """
-    out: list[list[PlacedScan]] = []
-    for p in placed:
-        if out and p.scan == out[-1][-1].scan + 1:
-            out[-1].append(p)
+
+    scan: NDArray[np.int64]
+    stamp_ns: NDArray[np.int64]
+    xy: NDArray[np.float64]
+    azimuth: NDArray[np.float64]
+    sigma: NDArray[np.float64]
+    fix: NDArray[np.bool_]
+    stretch: NDArray[np.int64]
+
+    @classmethod
+    def of(cls, placed: Iterable[PlacedScan]) -> _Poses:
+        if isinstance(placed, Trajectory):
+            c = placed.columns()
+            scan, stamp, pose, fix = c["scan"], c["stamp_ns"], c["pose"], c["fix"]
+            var = np.diagonal(c["covariance"], axis1=1, axis2=2)
         else:
-            out.append([p])
-    return out
+            rows = list(placed)
+            scan = np.array([p.scan for p in rows], dtype=np.int64)
+            stamp = np.array([p.stamp_ns for p in rows], dtype=np.int64)
+            pose = np.array(
+                [(p.pose.easting, p.pose.northing, p.pose.azimuth) for p in rows], dtype=float
+            ).reshape(-1, 3)
+            fix = np.array([p.source == "fix" for p in rows], dtype=bool)
+            var = np.array([np.diag(p.covariance) for p in rows], dtype=float).reshape(-1, 3)
+        stretch = np.concatenate([[0], np.cumsum(np.diff(scan) != 1)]) if len(scan) else scan
+        return cls(
+            scan.astype(np.int64),
+            stamp.astype(np.int64),
+            pose[:, :2].astype(float),
+            pose[:, 2].astype(float),
+            np.sqrt(np.maximum(var, 0.0)),
+            fix.astype(bool),
+            stretch.astype(np.int64),
+        )
+
+    def __len__(self) -> int:
+        return len(self.scan)
+
+    def spans(self) -> Iterator[slice]:
+        """Each unbroken stretch as a slice."""
+        cuts = np.flatnonzero(np.diff(self.stretch)) + 1
+        bounds = [0, *cuts.tolist(), len(self)]
+        for a, b in itertools.pairwise(bounds):
+            if b > a:
+                yield slice(a, b)
+
+    def thinned(self, limit: int) -> NDArray[np.intp]:
+        """Indices of at most about ``limit`` poses, evenly spread (first and last kept)."""
+        n = len(self)
+        if n <= limit:
+            return np.arange(n)
+        return np.unique(np.round(np.linspace(0, n - 1, limit)).astype(np.intp))
+
+    def length_m(self) -> float:
+        """Distance along the placed trajectory, not across its breaks."""
+        if len(self) < 2:
+            return 0.0
+        step = np.hypot(*np.diff(self.xy, axis=0).T)
+        return float(np.sum(step[np.diff(self.stretch) == 0]))
 
 
 # --------------------------------------------------------------------------- trajectory
@@ -563,10 +626,15 @@ def write_map_dxf(
     ``MAST_TRAJECTORY``
         one LWPOLYLINE per unbroken stretch of placed scans (consecutive scan
         indices), a POINT for a stretch of one scan: the path is not drawn
-        where the run was not placed;
+        where the run was not placed; a vertex at least
+        :data:`DXF_VERTEX_SPACING_M` from the last one kept;
     ``MAST_FIXES``
-        per fix, a CIRCLE (:data:`DXF_FIX_RADIUS_M`) and a LINE of
-        :data:`DXF_FIX_TICK_M` from it along its azimuth.
+        per fix at least :data:`DXF_FIX_SPACING_M` from the last one drawn, a
+        CIRCLE (:data:`DXF_FIX_RADIUS_M`) and a LINE of :data:`DXF_FIX_TICK_M`
+        from it along its azimuth.
+
+    The drawing grows with the distance driven, not with the scans: a run
+    scanned at 50 Hz draws as one at 10 Hz.
 
     Raises
     ------
@@ -596,15 +664,26 @@ def write_map_dxf(
             b.id, height=DXF_TEXT_HEIGHT_M, dxfattribs={"layer": "MAST_BEACONS"}
         ).set_placement((float(c[0]), float(c[1])), align=TextEntityAlignment.BOTTOM_CENTER)
 
-    for stretch in _stretches(list(placed)):
-        xy = [(s.pose.easting, s.pose.northing) for s in stretch]
-        if len(xy) == 1:
-            msp.add_point(xy[0], dxfattribs={"layer": "MAST_TRAJECTORY"})
+    poses = _Poses.of(placed)
+    for span in poses.spans():
+        xy = poses.xy[span]
+        keep = [0]
+        for k in range(1, len(xy) - 1):
+            if math.dist(xy[k], xy[keep[-1]]) >= DXF_VERTEX_SPACING_M:
+                keep.append(k)
+        if len(xy) > 1:
+            keep.append(len(xy) - 1)
+        if len(keep) == 1:
+            msp.add_point(xy[0].tolist(), dxfattribs={"layer": "MAST_TRAJECTORY"})
         else:
-            msp.add_lwpolyline(xy, dxfattribs={"layer": "MAST_TRAJECTORY"})
+            msp.add_lwpolyline(xy[keep].tolist(), dxfattribs={"layer": "MAST_TRAJECTORY"})
 
+    last: tuple[float, float] | None = None
     for f in fixes:
         e, n, a = f.pose.easting, f.pose.northing, f.pose.azimuth
+        if last is not None and math.dist((e, n), last) < DXF_FIX_SPACING_M:
+            continue
+        last = (e, n)
         msp.add_circle((e, n), DXF_FIX_RADIUS_M, dxfattribs={"layer": "MAST_FIXES"})
         tip = (e + DXF_FIX_TICK_M * math.sin(a), n + DXF_FIX_TICK_M * math.cos(a))
         msp.add_line((e, n), tip, dxfattribs={"layer": "MAST_FIXES"})
@@ -696,22 +775,23 @@ def _new_figure(width_in: float, height_in: float, rows: int = 1) -> tuple[Any, 
 
 
 def _broken(
-    t: NDArray[np.float64], y: NDArray[np.float64], scans: NDArray[np.int64]
+    t: NDArray[np.float64], y: NDArray[np.float64], stretch: NDArray[np.int64]
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """``t, y`` with a NaN inserted where scan indices skip: lines break at gaps."""
+    """``t, y`` with a NaN inserted where the stretch changes: lines break at gaps."""
     if len(t) < 2:
         return t, y
-    gaps = np.nonzero(np.diff(scans) != 1)[0] + 1
+    gaps = np.nonzero(np.diff(stretch) != 0)[0] + 1
     return np.insert(t, gaps, np.nan), np.insert(y, gaps, np.nan)
 
 
 def _map_figure(
     survey: Survey,
-    placed: Sequence[PlacedScan],
+    poses: _Poses,
     wall_points: NDArray[np.float64],
 ) -> tuple[str, str]:
     """The trajectory over the beacons and the wall points; SVG and caption."""
-    pose_xy = np.array([[p.pose.easting, p.pose.northing] for p in placed]).reshape(-1, 2)
+    drawn = poses.thinned(MAX_FIGURE_POSES)
+    pose_xy = poses.xy[drawn]
     edges = np.vstack([b.edges for b in survey]) if len(survey) else np.zeros((0, 2))
     walls = _finite_rows(wall_points)
     if len(walls) > MAX_FIGURE_POINTS:
@@ -745,12 +825,11 @@ def _map_figure(
             color="darkgreen",
             zorder=5,
         )
-    if len(placed):
-        scans = np.array([p.scan for p in placed], dtype=np.int64)
+    if len(drawn):
         xy = pose_xy - o
-        te, tn = _broken(xy[:, 0], xy[:, 1], scans)
+        te, tn = _broken(xy[:, 0], xy[:, 1], poses.stretch[drawn])
         ax.plot(te, tn, "-", color=_ODO_COLOUR, lw=1.0, zorder=4, label="trajectory")
-        fix = np.array([p.source == "fix" for p in placed])
+        fix = poses.fix[drawn]
         if np.any(~fix):
             ax.plot(
                 *xy[~fix].T,
@@ -797,12 +876,13 @@ def _map_figure(
     return svg, caption
 
 
-def _precision_figure(placed: Sequence[PlacedScan], t0_ns: int) -> tuple[str, str]:
+def _precision_figure(poses: _Poses, t0_ns: int) -> tuple[str, str]:
     """σE, σN (mm) and σA (arc-seconds) against time since the first scan."""
-    t = np.array([(p.stamp_ns - t0_ns) / 1e9 for p in placed])
-    sig = np.array([p.sigma for p in placed]).reshape(-1, 3)
-    scans = np.array([p.scan for p in placed], dtype=np.int64)
-    fix = np.array([p.source == "fix" for p in placed], dtype=bool)
+    drawn = poses.thinned(MAX_FIGURE_POSES)
+    t = (poses.stamp_ns[drawn] - t0_ns) / 1e9
+    sig = poses.sigma[drawn]
+    stretch = poses.stretch[drawn]
+    fix = poses.fix[drawn]
     fig, (ax_pos, ax_az) = _new_figure(10.0, 5.5, rows=2)
     series = (
         (ax_pos, sig[:, 0] * 1000.0, "σE", "tab:blue"),
@@ -810,7 +890,7 @@ def _precision_figure(placed: Sequence[PlacedScan], t0_ns: int) -> tuple[str, st
         (ax_az, sig[:, 2] * _ARCSEC_PER_RAD, "σA", "tab:purple"),
     )
     for ax, y, name, colour in series:
-        ax.plot(*_broken(t, y, scans), "-", lw=1.0, color=colour, label=name)
+        ax.plot(*_broken(t, y, stretch), "-", lw=1.0, color=colour, label=name)
         if np.any(fix):
             ax.plot(
                 t[fix],
@@ -955,11 +1035,11 @@ def _utc(stamp_ns: int) -> str:
 
 def _summary_rows(
     summary: RunSummary,
-    placed: Sequence[PlacedScan],
+    poses: _Poses,
     t0_ns: int | None,
     t1_ns: int | None,
 ) -> list[tuple[str, str]]:
-    n_odo = sum(p.source == "odometry" for p in placed)
+    n_odo = int(np.count_nonzero(~poses.fix))
 
     def share(k: int) -> str:
         return f"{k}" if summary.scans <= 0 else f"{k} ({100.0 * k / summary.scans:.1f} %)"
@@ -978,12 +1058,8 @@ def _summary_rows(
         rows.append(
             ("Recorded", f"{_utc(t0_ns)}, {(t1_ns - t0_ns) / 1e9:.1f} s from first to last scan")
         )
-    if placed:
-        length = 0.0
-        for stretch in _stretches(placed):
-            xy = np.array([[p.pose.easting, p.pose.northing] for p in stretch])
-            length += float(np.sum(np.hypot(*np.diff(xy, axis=0).T))) if len(xy) > 1 else 0.0
-        rows.append(("Distance along the placed trajectory", f"{length:.1f} m"))
+    if len(poses):
+        rows.append(("Distance along the placed trajectory", f"{poses.length_m():.1f} m"))
     rate = f", {summary.scans / summary.elapsed_s:.1f} scans/s" if summary.elapsed_s > 0 else ""
     rows.append(("Processing time", f"{summary.elapsed_s:.1f} s{rate}"))
     return rows
@@ -1011,7 +1087,8 @@ def write_report_html(
         Every placed scan, in time order.
     records : sequence of dict
         The run's fix records (``fixes.jsonl``, docs/fix.schema.json); those
-        with ``status`` ``fix`` make the table.
+        with ``status`` ``fix`` make the table. The first ``max_table_rows``
+        fixes are enough: the counts come from ``summary`` when it has them.
     survey : Survey
         The surveyed beacons.
     wall_points : array_like, shape (n, 2)
@@ -1047,9 +1124,11 @@ def write_report_html(
     from mast.pipeline.locator import NO_FIX_REASONS
 
     walls = np.asarray(wall_points, dtype=float).reshape(-1, 2)
-    stamps = [p.stamp_ns for p in placed] + [
-        int(r["stamp_ns"]) for r in records if r.get("stamp_ns") is not None
-    ]
+    poses = _Poses.of(placed)
+    stamps = [int(r["stamp_ns"]) for r in records if r.get("stamp_ns") is not None]
+    stamps += [t for t in (summary.first_stamp_ns, summary.last_stamp_ns) if t is not None]
+    if len(poses):
+        stamps += [int(poses.stamp_ns.min()), int(poses.stamp_ns.max())]
     t0 = min(stamps) if stamps else None
     t1 = max(stamps) if stamps else None
 
@@ -1063,7 +1142,7 @@ def write_report_html(
         f"<p class='sub'>{_e(summary.run)}</p>",
         "<h2>Summary</h2><table class='summary'>",
     ]
-    for key, value in _summary_rows(summary, placed, t0, t1):
+    for key, value in _summary_rows(summary, poses, t0, t1):
         parts.append(f"<tr><th>{_e(key)}</th><td>{_e(value)}</td></tr>")
     parts.append("</table>")
 
@@ -1081,11 +1160,11 @@ def write_report_html(
         parts.append("<p>Every scan read was fixed.</p>" if summary.scans else "<p>No scan.</p>")
 
     figures: list[tuple[str, str, str]] = []
-    if placed or len(survey) or len(walls):
-        svg, cap = _map_figure(survey, placed, walls)
+    if len(poses) or len(survey) or len(walls):
+        svg, cap = _map_figure(survey, poses, walls)
         figures.append(("Trajectory", svg, cap))
-    if placed and t0 is not None:
-        svg, cap = _precision_figure(placed, t0)
+    if len(poses) and t0 is not None:
+        svg, cap = _precision_figure(poses, t0)
         figures.append(("Precision along the run", svg, cap))
     rv = _reference_variance_figure(summary.reference_variances)
     for k, (title, svg, cap) in enumerate(figures, start=1):
@@ -1099,16 +1178,18 @@ def write_report_html(
         parts.append(
             f"<figure>{svg}<figcaption>Figure {len(figures) + 1}. {_e(cap)}</figcaption></figure>"
         )
-        tests: dict[str, int] = {}
-        for r in records:
-            if r.get("status") == "fix" and r.get("chi2_test"):
-                tests[str(r["chi2_test"])] = tests.get(str(r["chi2_test"]), 0) + 1
+        tests = dict(summary.chi2_tests)
+        if not tests:
+            for r in records:
+                if r.get("status") == "fix" and r.get("chi2_test"):
+                    tests[str(r["chi2_test"])] = tests.get(str(r["chi2_test"]), 0) + 1
         if tests:
             words = ", ".join(f"{_e(k)} {v}" for k, v in sorted(tests.items()))
             parts.append(f"<p>χ² test of the reference variance at 5 %: {words}.</p>")
 
     parts.append("<h2>Fixes</h2>")
     table, n_fix = _fix_table(records, t0, max_table_rows)
+    n_fix = max(n_fix, summary.fixes)
     if n_fix == 0:
         parts.append("<p>No fix.</p>")
     else:

@@ -23,8 +23,8 @@ from numpy.typing import NDArray
 from mast.apps.report import ReportInputs, fix_record
 from mast.core.beacon import Survey
 from mast.errors import OutputError
-from mast.runs.model import PlacedScan, RunSummary
-from mast.runs.track import Node, RunTracker, TrackConfig, smooth
+from mast.runs.model import RunSummary, Trajectory
+from mast.runs.track import Node, RunTracker, Smoother, TrackConfig
 
 __all__ = ["RUN_FILES", "RunResult", "track_run"]
 
@@ -66,7 +66,7 @@ class RunResult:
     """What a run produced."""
 
     summary: RunSummary
-    placed: list[PlacedScan]
+    placed: Trajectory
     out: Path
     interrupted: bool = False
     warnings: list[str] = field(default_factory=list)
@@ -129,7 +129,7 @@ def track_run(
     name = inputs.topic if inputs.topic is not None else laserscan_topic(bag, topic)
     inputs = replace(inputs, scan_file=inputs.scan_file or str(bag), topic=name)
     summary = RunSummary(run=str(bag), topic=name)
-    result = RunResult(summary, [], out)
+    result = RunResult(summary, Trajectory(), out)
 
     def skipped(text: str) -> None:
         if "skipped" in text:
@@ -141,8 +141,13 @@ def track_run(
         for s in read_laserscans(bag, topic=topic, on_skip=on_skip):
             yield s.with_range_limits(*range_limits)
 
+    from mast.runs.outputs import MAX_TABLE_ROWS
+
     tracker = RunTracker(survey, cfg)
-    nodes: list[Node] = []
+    # Each scan is placed for good once enough fixes after it are known: memory
+    # holds the longest stretch between fixes, not the run.
+    smoother = Smoother(cfg)
+    placed = result.placed
     table: list[dict[str, Any]] = []
     walls: dict[int, NDArray[np.float64]] = {}
     last_wall: NDArray[np.float64] | None = None
@@ -153,15 +158,23 @@ def track_run(
                     step = tracker.step(i, scan)
                     rec = fix_record(step.fix, source=str(bag), index=i, scan=scan, inputs=inputs)
                     fh.write(json.dumps(rec) + "\n")
-                    nodes.append(Node.of(step))
+                    for p in smoother.push(Node.of(step)):
+                        placed.append(p)
                     summary.scans += 1
+                    if summary.first_stamp_ns is None:
+                        summary.first_stamp_ns = scan.stamp_ns
+                    summary.last_stamp_ns = scan.stamp_ns
                     summary.coasted += step.motion is not None and step.motion.matches == 0
                     if step.fix.ok:
                         summary.fixes += 1
                         adj = step.fix.adjustment
                         if adj is not None:
                             summary.reference_variances.append((adj.reference_variance, adj.dof))
-                        table.append({k: rec.get(k) for k in _TABLE_KEYS})
+                        test = str(rec.get("chi2_test") or "")
+                        if test:
+                            summary.chi2_tests[test] = summary.chi2_tests.get(test, 0) + 1
+                        if len(table) < MAX_TABLE_ROWS:
+                            table.append({k: rec.get(k) for k in _TABLE_KEYS})
                     else:
                         reason = step.fix.reason or "unknown"
                         summary.reasons[reason] = summary.reasons.get(reason, 0) + 1
@@ -179,40 +192,42 @@ def track_run(
         raise OutputError(
             f"cannot write: {err.strerror or err}", path=out / "fixes.jsonl"
         ) from None
-    placed = smooth(nodes, cfg)
+    for p in smoother.finish():
+        placed.append(p)
     summary.placed = len(placed)
-    result.placed = placed
-    by_scan = {p.scan: p for p in placed}
     try:
         outputs.write_trajectory_csv(out / "trajectory.csv", placed)
         outputs.write_trajectory_tum(out / "trajectory.tum", placed)
         origin = _origin(survey, placed)
         sample: list[NDArray[np.float64]] = []
+        wall_lines: list[NDArray[np.float64]] = []
         points = 0
+        poses = iter(placed)
+        here = next(poses, None)
         with outputs.LasMapWriter(out / "map.las", origin_e=origin[0], origin_n=origin[1]) as las:
             for i, scan in enumerate(scans(lambda _: None)):
-                if i >= summary.scans:
+                if i >= summary.scans or here is None:
                     break  # an interrupted run maps what it read
-                p = by_scan.get(i)
-                if p is None:
+                if here.scan != i:
                     continue
                 beams, pts = scan.points()
-                mine = p.pose.scanner_to_mine(pts)
+                mine = here.pose.scanner_to_mine(pts)
                 inten = None if scan.intensities is None else scan.intensities[beams]
                 las.add(i, scan.stamp_ns, mine, inten)
                 points += len(mine)
                 sample.append(mine[:: max(1, len(placed) * len(mine) // REPORT_POINTS + 1)])
-        wall_lines = [
-            by_scan[i].pose.scanner_to_mine(seg.reshape(-1, 2)).reshape(-1, 2, 2)
-            for i, seg in walls.items()
-            if i in by_scan and len(seg)
-        ]
+                seg = walls.get(i)
+                if seg is not None and len(seg):
+                    wall_lines.extend(
+                        here.pose.scanner_to_mine(seg.reshape(-1, 2)).reshape(-1, 2, 2)
+                    )
+                here = next(poses, None)
         outputs.write_map_dxf(
             out / "map.dxf",
             survey,
             placed,
-            [w for lines in wall_lines for w in lines],
-            [p for p in placed if p.source == "fix"],
+            wall_lines,
+            (q for q in placed if q.source == "fix"),
         )
         summary.elapsed_s = time.perf_counter() - t0
         wall_points = np.vstack(sample) if sample else np.zeros((0, 2))
@@ -224,7 +239,7 @@ def track_run(
     return result
 
 
-def _origin(survey: Survey, placed: list[PlacedScan]) -> tuple[float, float]:
+def _origin(survey: Survey, placed: Trajectory) -> tuple[float, float]:
     """A round point near the run, for the map's coordinate offsets."""
     pts = [b.edges.mean(axis=0) for b in survey]
     if placed:
