@@ -182,8 +182,37 @@ class PanelSet:
         """Nearest panel of each point, within ``gate`` of its line and inside its extent.
 
         Returns the panel index per point (-1 for none) and the signed distance
-        from the panel's line (along its normal).
+        from the panel's line (along its normal). Compiled
+        (:func:`mast.pipeline._kernels.associate`); :meth:`_associate_reference`
+        is the same in numpy.
         """
+        from mast.pipeline._kernels import associate
+
+        panels = np.arange(len(self)) if subset is None else subset
+        pts = np.ascontiguousarray(points_mine, dtype=float).reshape(-1, 2)
+        gates = np.asarray(gate, dtype=float).reshape(-1)
+        if gates.size not in (1, pts.shape[0]):
+            gates = gates[:1]
+        if pts.shape[0] == 0 or panels.size == 0 or gates.size == 0:
+            return np.full(pts.shape[0], -1, dtype=np.intp), np.full(pts.shape[0], np.inf)
+        return associate(  # type: ignore[no-any-return]
+            pts,
+            self.a,
+            self.direction,
+            self.normal,
+            self.length,
+            np.ascontiguousarray(panels, dtype=np.intp),
+            np.ascontiguousarray(gates),
+        )
+
+    def _associate_reference(
+        self,
+        points_mine: NDArray[np.float64],
+        gate: float | NDArray[np.float64],
+        *,
+        subset: NDArray[np.intp] | None = None,
+    ) -> tuple[NDArray[np.intp], NDArray[np.float64]]:
+        """:meth:`associate` in numpy (the tests compare the two)."""
         n = points_mine.shape[0]
         idx = np.full(n, -1, dtype=np.intp)
         dist = np.full(n, np.inf)

@@ -278,11 +278,13 @@ def _cumulative_moments(
     )
 
 
-def _partition_impl(
-    points: NDArray[np.float64], var: float, max_piece: int
-) -> list[tuple[int, int]]:
+def _partition_reference(
+    points: NDArray[np.float64], var: float, max_piece: int = MAX_PIECE
+) -> NDArray[np.intp]:
+    """Back-pointers of the optimal partition, in numpy: the readable reference of
+    :func:`mast.pipeline._kernels.partition_dp` (the tests compare them)."""
     n = points.shape[0]
-    u, (sx, sy, sxx, syy, sxy, uxx, uyy, uxy) = _cumulative_moments(points)
+    _, (sx, sy, sxx, syy, sxy, uxx, uyy, uxy) = _cumulative_moments(points)
     w = min(n, max_piece)
     d = np.arange(1, w + 1)  # piece lengths
     m = d[None, :].astype(float)
@@ -324,6 +326,19 @@ def _partition_impl(
             arg = int(np.argmin(total))
             best[jj] = total[arg]
             last[jj] = jj - 1 - arg
+    return last
+
+
+def _partition_impl(
+    points: NDArray[np.float64], var: float, max_piece: int
+) -> list[tuple[int, int]]:
+    from mast.pipeline._kernels import partition_dp
+
+    n = points.shape[0]
+    u, moments = _cumulative_moments(points)
+    w = min(n, max_piece)
+    pen = _penalty(n)
+    last = partition_dp(*moments, float(var), pen, w)
     pieces: list[tuple[int, int]] = []
     e = n
     while e > 0:

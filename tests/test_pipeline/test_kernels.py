@@ -1,0 +1,89 @@
+"""The compiled kernels give what their numpy references give, to the last bit."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from mast.core.geometry import PanelSet
+from mast.pipeline import segmentation as seg
+from mast.pipeline._kernels import partition_dp
+from mast.sim import paper_scene, simulate_scan
+
+
+def _kernel_pointers(points: np.ndarray, var: float, max_piece: int = seg.MAX_PIECE) -> np.ndarray:
+    _, moments = seg._cumulative_moments(points)
+    n = points.shape[0]
+    return np.asarray(partition_dp(*moments, var, seg._penalty(n), min(n, max_piece)))
+
+
+def _scans() -> list[np.ndarray]:
+    scene = paper_scene()
+    out = []
+    for k, shot in enumerate(scene.shots[:6]):
+        for noisy in (False, True):
+            rng = np.random.default_rng(k)
+            scanner = shot.scanner if noisy else shot.scanner.noise_free()
+            scan = simulate_scan(scene.world, shot.pose, scanner, rng=rng).scan
+            out.append(scan.points()[1])
+    return out
+
+
+@pytest.mark.parametrize("max_piece", [seg.MAX_PIECE, 16])
+def test_partition_kernel_matches_the_reference_on_scans(max_piece: int) -> None:
+    for pts in _scans():
+        for var in (1e-10, 0.003**2, 0.02**2):
+            ref = seg._partition_reference(pts, var, max_piece)
+            np.testing.assert_array_equal(_kernel_pointers(pts, var, max_piece), ref)
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    n=st.integers(1, 300),
+    seed=st.integers(0, 2**32 - 1),
+    corners=st.integers(0, 5),
+    sigma=st.sampled_from([0.0, 1e-3, 0.02]),
+)
+def test_partition_kernel_matches_the_reference_on_polylines(
+    n: int, seed: int, corners: int, sigma: float
+) -> None:
+    rng = np.random.default_rng(seed)
+    # A polyline of straight pieces seen from the origin, with range noise.
+    knots = np.sort(rng.uniform(0, 1, corners))
+    t = np.linspace(0, 1, n)
+    heading = np.cumsum(np.r_[0.0, rng.uniform(-1.2, 1.2, corners)])
+    piece = np.searchsorted(knots, t)
+    step = np.column_stack([np.cos(heading[piece]), np.sin(heading[piece])]) * (8.0 / max(n, 1))
+    pts = np.array([3.0, -4.0]) + np.cumsum(step, axis=0)
+    r = np.hypot(*pts.T)
+    pts = pts * ((r + sigma * rng.standard_normal(n)) / r)[:, None]
+    var = max(sigma, 1e-4) ** 2
+    np.testing.assert_array_equal(_kernel_pointers(pts, var), seg._partition_reference(pts, var))
+
+
+def test_association_kernel_matches_the_reference() -> None:
+    scene = paper_scene()
+    panels = PanelSet.from_survey(scene.survey)
+    rng = np.random.default_rng(1)
+    lo, hi = panels.a.min(axis=0) - 1.0, panels.a.max(axis=0) + 1.0
+    pts = rng.uniform(lo, hi, size=(4000, 2))
+    # Points on the panels themselves, and exactly between two of them (ties).
+    on = panels.a + panels.direction * (0.5 * panels.length)[:, None]
+    pts = np.vstack([pts, on, on + 1e-3 * panels.normal, panels.a, panels.b])
+    subsets = [None, np.arange(len(panels))[::2], np.array([3, 1, 2], dtype=np.intp)]
+    for subset in subsets:
+        for gate in (0.05, 0.5, 10.0, rng.uniform(0.0, 0.4, len(pts))):
+            idx, dist = panels.associate(pts, gate, subset=subset)
+            ref_idx, ref_dist = panels._associate_reference(pts, gate, subset=subset)
+            np.testing.assert_array_equal(idx, ref_idx)
+            np.testing.assert_array_equal(dist, ref_dist)
+    empty_idx, empty_dist = panels.associate(np.zeros((0, 2)), 0.1)
+    assert empty_idx.shape == empty_dist.shape == (0,)
+    idx, dist = panels.associate(pts[:5], 0.1, subset=np.zeros(0, dtype=np.intp))
+    assert np.all(idx == -1)
+    assert np.all(np.isinf(dist))
+    assert math.isinf(float(dist[0]))
