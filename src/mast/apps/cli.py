@@ -674,6 +674,66 @@ def bench_run(
     run_runs(tuple(scans) if scans else DEFAULT_SCANS, seed=seed, echo=typer.echo)
 
 
+@bench_app.command("speed")
+def bench_speed(
+    scans: Annotated[
+        int, typer.Option("--scans", min=0, help="Scans located at 1081 beams (0: skip).")
+    ] = 300,
+    scans_360: Annotated[
+        int, typer.Option("--scans-360", min=0, help="Scans located at 1800 beams (0: skip).")
+    ] = 100,
+    bag: Annotated[
+        list[int] | None,
+        typer.Option(
+            "--bag",
+            min=0,
+            help="Bag length read and located by mast locate, repeatable; 0 skips "
+            "[default: 1000 3000].",
+        ),
+    ] = None,
+    track: Annotated[
+        list[int] | None,
+        typer.Option(
+            "--track",
+            min=0,
+            help="Bag length tracked by mast track, repeatable; 0 skips [default: 1000].",
+        ),
+    ] = None,
+    minewide_poses: Annotated[
+        int, typer.Option("--minewide-poses", min=0, help="Mine-wide scans (0: skip).")
+    ] = 40,
+    beacons: Annotated[
+        int, typer.Option("--beacons", min=3, help="Beacons of the mine-wide survey.")
+    ] = 200,
+    startup_runs: Annotated[
+        int, typer.Option("--startup-runs", min=0, help="Fresh 'mast --help' runs (0: skip).")
+    ] = 5,
+    seed: Annotated[int, typer.Option("--seed", help="Seed of the drives and scenes.")] = 0,
+    out: Annotated[
+        Path | None, typer.Option("--out", help="Also write the figures to this text file.")
+    ] = None,
+) -> None:
+    """Speed: locate per scan and per stage (1081 and 1800 beams), bags read, located and
+    tracked (each in a fresh process: throughput, peak memory), a 200-beacon survey,
+    start-up, and a peer (small_gicp point-to-plane ICP) on the same scans."""
+    from mast.apps.bench.speed import DEFAULT_BAG_SCANS, DEFAULT_TRACK_SCANS, run_speed
+
+    if out is not None:
+        check_output_file(out, suffixes=(".txt", ".md", ".log"), option="--out")
+    run_speed(
+        scans=scans,
+        scans_360=scans_360,
+        bag_scans=tuple(n for n in bag if n) if bag else DEFAULT_BAG_SCANS,
+        track_scans=tuple(n for n in track if n) if track else DEFAULT_TRACK_SCANS,
+        minewide_poses=minewide_poses,
+        survey_beacons=beacons,
+        startup_runs=startup_runs,
+        seed=seed,
+        out=out,
+        echo=typer.echo,
+    )
+
+
 @bench_app.command("clutter")
 def bench_clutter(
     data: Annotated[
