@@ -6,6 +6,7 @@ from __future__ import annotations
 import csv
 import json
 import math
+import subprocess
 from pathlib import Path
 from typing import Any
 
@@ -28,6 +29,20 @@ SCHEMA = Path(__file__).resolve().parents[2] / "docs" / "fix.schema.json"
 CONFIG = TrackConfig(locator=LocatorConfig(range_sigma_m=0.012))
 
 
+def _track(bag: Path, drive: Path, out: Path) -> subprocess.CompletedProcess[str]:
+    """``mast track`` of ``bag`` with the drive's survey and range noise."""
+    return run_mast_text(
+        "track",
+        str(bag),
+        "-b",
+        str(drive / "beacons.csv"),
+        "--out",
+        str(out),
+        "--range-sigma",
+        "0.012",
+    )
+
+
 @pytest.fixture(scope="module")
 def drive(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A 250-scan drive (10 s at 25 Hz) past beacons and into a stretch without any."""
@@ -39,16 +54,7 @@ def drive(tmp_path_factory: pytest.TempPathFactory) -> Path:
 @pytest.fixture(scope="module")
 def tracked(drive: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
     out = tmp_path_factory.mktemp("run")
-    r = run_mast_text(
-        "track",
-        str(drive / "scans.bag"),
-        "-b",
-        str(drive / "beacons.csv"),
-        "--out",
-        str(out),
-        "--range-sigma",
-        "0.012",
-    )
+    r = _track(drive / "scans.bag", drive, out)
     assert r.returncode == 0, r.stderr
     assert "250 scans" in r.stdout
     return out
@@ -120,16 +126,7 @@ def test_a_bag_cut_short_gives_the_scans_it_holds(tmp_path: Path, drive: Path) -
     cut = tmp_path / "cut.bag"
     cut.write_bytes(data[: int(len(data) * 0.85)])
     out = tmp_path / "run"
-    r = run_mast_text(
-        "track",
-        str(cut),
-        "-b",
-        str(drive / "beacons.csv"),
-        "--out",
-        str(out),
-        "--range-sigma",
-        "0.012",
-    )
+    r = _track(cut, drive, out)
     assert r.returncode == 0, r.stderr
     assert "cut short" in r.stderr
     records = (out / "fixes.jsonl").read_text().splitlines()
