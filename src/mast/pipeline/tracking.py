@@ -118,6 +118,126 @@ def _likelihood_field(
     return np.asarray(np.exp(-0.5 * (dist / sigma) ** 2))
 
 
+# Beyond this many sigmas from every panel the field is taken as zero (e^-18).
+_FIELD_CUTOFF_SIGMAS = 6.0
+# Elements of the (translations x returns) arrays scored at once.
+_SCORE_CHUNK = 1 << 18
+
+
+@dataclass(frozen=True, slots=True)
+class _TiledField:
+    """The likelihood field kept only where it is not zero: a tile about each beacon.
+
+    A field over the whole box of the panels in reach is mostly zeros and,
+    with beacons tens of metres apart, millions of cells (about 100 MB and
+    100 ms a scan). Each beacon's tile covers its panels' box widened by the
+    cutoff, and holds the field of every panel that reaches into it, so the
+    largest value over the tiles that contain a point is the field there.
+
+    Attributes
+    ----------
+    lo : ndarray, shape (k, 2)
+        Lower corner of each tile, metres.
+    shape : ndarray of int, shape (k, 2)
+        Cells of each tile along E and N.
+    offset : ndarray of int, shape (k,)
+        Where each tile starts in ``values``.
+    values : ndarray, shape (cells + 1,)
+        The tiles' cells, row by row, one after the other; the last cell is a
+        zero that every lookup outside a tile reads.
+    res : float
+        Cell size, metres.
+    """
+
+    lo: NDArray[np.float64]
+    shape: NDArray[np.intp]
+    offset: NDArray[np.intp]
+    values: NDArray[np.float64]
+    res: float
+
+    @classmethod
+    def build(
+        cls, panels: PanelSet, subset: NDArray[np.intp], res: float, sigma: float
+    ) -> _TiledField:
+        margin = _FIELD_CUTOFF_SIGMAS * sigma + 2.0 * res
+        ends = np.concatenate([panels.a[subset], panels.b[subset]])
+        owner = np.concatenate([panels.beacon[subset], panels.beacon[subset]])
+        lows, shapes, offsets, chunks = [], [], [], []
+        total = 0
+        for b in np.unique(owner):
+            box = ends[owner == b]
+            lo = box.min(axis=0) - margin
+            hi = box.max(axis=0) + margin
+            shape = (int((hi[0] - lo[0]) / res) + 1, int((hi[1] - lo[1]) / res) + 1)
+            # Every panel reaching into the tile is drawn in it, not only this beacon's.
+            a, bb = panels.a[subset], panels.b[subset]
+            touch = (
+                (np.minimum(a[:, 0], bb[:, 0]) <= hi[0])
+                & (np.maximum(a[:, 0], bb[:, 0]) >= lo[0])
+                & (np.minimum(a[:, 1], bb[:, 1]) <= hi[1])
+                & (np.maximum(a[:, 1], bb[:, 1]) >= lo[1])
+            )
+            field = _likelihood_field(panels, subset[touch], lo, shape, res, sigma)
+            lows.append(lo)
+            shapes.append(shape)
+            offsets.append(total)
+            chunks.append(field.ravel())
+            total += field.size
+        chunks.append(np.zeros(1))
+        return cls(
+            np.array(lows, dtype=float).reshape(-1, 2),
+            np.array(shapes, dtype=np.intp).reshape(-1, 2),
+            np.array(offsets, dtype=np.intp),
+            np.concatenate(chunks),
+            res,
+        )
+
+    @property
+    def outside(self) -> int:
+        """Index of the zero cell read outside every tile."""
+        return self.values.size - 1
+
+    def reaching(
+        self, centres: NDArray[np.float64], reach: NDArray[np.float64]
+    ) -> NDArray[np.intp]:
+        """Per point, the tiles its box ``centre +- reach`` meets; -1 pads, shape (n, slots)."""
+        lo, hi = self.lo, self.lo + self.shape * self.res
+        meets = np.all(
+            (centres[:, None, :] + reach[:, None, None] >= lo[None, :, :])
+            & (centres[:, None, :] - reach[:, None, None] <= hi[None, :, :]),
+            axis=2,
+        )
+        slots = max(1, int(meets.sum(axis=1).max(initial=0)))
+        out = np.full((centres.shape[0], slots), -1, dtype=np.intp)
+        for i, tiles in enumerate(meets):
+            k = np.flatnonzero(tiles)
+            out[i, : k.size] = k
+        return out
+
+    def lookup(
+        self,
+        cells: NDArray[np.float64],
+        tile: NDArray[np.intp],
+        shift: NDArray[np.float64],
+    ) -> NDArray[np.float64]:
+        """Field values at points moved by translations, one tile per point.
+
+        ``cells`` are the points in cells of the grid anchored at the origin
+        (``position / res``), shape (n, 2); ``tile`` the tile each point is
+        looked up in (-1: none), shape (n,); ``shift`` the translations in
+        cells, shape (m, 2). Returns shape (m, n).
+        """
+        has = tile >= 0
+        t = np.where(has, tile, 0)
+        local = cells - self.lo[t] / self.res
+        gi = np.floor(local[None, :, 0] + shift[:, 0, None]).astype(np.intp)
+        gj = np.floor(local[None, :, 1] + shift[:, 1, None]).astype(np.intp)
+        w, h = self.shape[t, 0], self.shape[t, 1]
+        inside = has & (gi >= 0) & (gi < w) & (gj >= 0) & (gj < h)
+        flat = np.where(inside, self.offset[t] + gi * h + gj, self.outside)
+        return np.asarray(self.values[flat])
+
+
 def prior_hypotheses(
     points_scanner: NDArray[np.float64],
     panels: PanelSet,
@@ -163,32 +283,35 @@ def prior_hypotheses(
         pts, r = pts[keep], r[keep]
     step = config.step_m
     res = config.field_resolution_m
-    span = np.concatenate([panels.a[near], panels.b[near]])
-    lo = span.min(axis=0) - 0.5
-    hi = span.max(axis=0) + 0.5
-    shape = (int((hi[0] - lo[0]) / res) + 1, int((hi[1] - lo[1]) / res) + 1)
-    field = _likelihood_field(panels, near, lo, shape, res, sigma=step)
+    field = _TiledField.build(panels, near, res, sigma=step)
     n_t = math.ceil(prior.radius_m / step)
     offs = np.arange(-n_t, n_t + 1) * step
     tx, ty = np.meshgrid(offs, offs, indexing="ij")
     inside = np.hypot(tx, ty) <= prior.radius_m + 1e-9
-    tx, ty = tx[inside], ty[inside]
+    shifts = np.column_stack([tx[inside], ty[inside]])
     d_rot = step / max(float(r.max()), step)
     n_r = math.ceil(tol / d_rot)
     rot0 = math.pi / 2 - prior.pose.azimuth
+    # The tiles each return can reach anywhere in the window.
+    at_prior = prior.pose.scanner_to_mine(pts)
+    tiles = field.reaching(at_prior, prior.radius_m + r * math.sin(tol) + step + res)
+    chunk = max(1, _SCORE_CHUNK // max(1, pts.shape[0]))
+    keep_best = 4 * config.candidates
     best: list[tuple[float, float, float, float]] = []
     for k in range(-n_r, n_r + 1):
         rot = rot0 + k * d_rot
         c, s = math.cos(rot), math.sin(rot)
-        m = pts @ np.array([[c, s], [-s, c]]) + prior.pose.position
-        ij = (m - lo) / res
-        gi = np.floor(ij[:, 0][None, :] + tx[:, None] / res).astype(int)
-        gj = np.floor(ij[:, 1][None, :] + ty[:, None] / res).astype(int)
-        ok = (gi >= 0) & (gi < shape[0]) & (gj >= 0) & (gj < shape[1])
-        score = np.where(ok, field[np.clip(gi, 0, shape[0] - 1), np.clip(gj, 0, shape[1] - 1)], 0.0)
-        total = score.sum(axis=1)
-        for t in np.argsort(total)[-4 * config.candidates :]:
-            best.append((float(total[t]), rot, float(tx[t]), float(ty[t])))
+        cells = (pts @ np.array([[c, s], [-s, c]]) + prior.pose.position) / res
+        total = np.empty(shifts.shape[0])
+        for start in range(0, shifts.shape[0], chunk):
+            part = shifts[start : start + chunk] / res
+            score = field.lookup(cells, tiles[:, 0], part)
+            for slot in range(1, tiles.shape[1]):
+                np.maximum(score, field.lookup(cells, tiles[:, slot], part), out=score)
+            total[start : start + chunk] = score.sum(axis=1)
+        top = np.argpartition(total, -keep_best)[-keep_best:] if total.size > keep_best else None
+        for t in np.arange(total.size) if top is None else top:
+            best.append((float(total[t]), rot, float(shifts[t, 0]), float(shifts[t, 1])))
     best.sort(reverse=True)
     out: list[Hypothesis] = []
     chosen: list[tuple[float, float, float]] = []
