@@ -10,6 +10,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from mast.core.geometry import PanelSet
+from mast.core.pose import Pose2D
 from mast.pipeline import segmentation as seg
 from mast.pipeline._kernels import partition_dp
 from mast.sim import paper_scene, simulate_scan
@@ -87,3 +88,85 @@ def test_association_kernel_matches_the_reference() -> None:
     assert np.all(idx == -1)
     assert np.all(np.isinf(dist))
     assert math.isinf(float(dist[0]))
+
+
+def _icp_cases() -> list[tuple[np.ndarray, Pose2D, PanelSet, tuple[float, ...], np.ndarray]]:
+    """Whole noisy scans with every kind of start verification gives ICP: near the truth,
+    off by a metre and degrees (wide gates), and at UTM-sized coordinates."""
+    rng = np.random.default_rng(7)
+    cases = []
+    for variant in ("parallel", "divergent"):
+        scene = paper_scene(variant, range_sigma_m=0.01, seed=3)
+        panels = PanelSet.from_survey(scene.survey)
+        for shot, sim in zip(scene.shots, scene.simulate_all(), strict=True):
+            _, pts = sim.scan.points()
+            for scale in (0.01, 0.1, 0.5):
+                start = Pose2D(
+                    shot.pose.easting + scale * rng.normal(),
+                    shot.pose.northing + scale * rng.normal(),
+                    shot.pose.azimuth + math.radians(scale * 5 * rng.normal()),
+                )
+                gates = (0.5, 0.15, 0.05, 0.03) if scale > 0.1 else (0.15, 0.05, 0.03)
+                near = panels.near(start.position, 100.0)
+                cases.append((pts, start, panels, gates, near))
+    return cases
+
+
+def test_icp_kernel_matches_the_reference() -> None:
+    from mast.pipeline.alignment import _icp_reference, icp_point_to_line
+
+    cases = _icp_cases()
+    assert len(cases) >= 30
+    converged = 0
+    for pts, start, panels, gates, near in cases:
+        got = icp_point_to_line(pts, start, panels, gates_m=gates, subset=near)
+        ref = _icp_reference(pts, start, panels, gates_m=gates, subset=near)
+        assert got.iterations == ref.iterations
+        assert got.converged == ref.converged
+        converged += got.converged
+        # The same solver on the same sums: equal to the last few bits.
+        assert got.pose.easting == pytest.approx(ref.pose.easting, abs=1e-9)
+        assert got.pose.northing == pytest.approx(ref.pose.northing, abs=1e-9)
+        assert math.remainder(got.pose.azimuth - ref.pose.azimuth, 2 * math.pi) == pytest.approx(
+            0.0, abs=1e-11
+        )
+        np.testing.assert_array_equal(got.panel, ref.panel)
+    assert converged >= len(cases) // 2
+
+
+def test_within_kernel_matches_the_reference() -> None:
+    panels = PanelSet.from_survey(paper_scene().survey)
+    rng = np.random.default_rng(2)
+    lo, hi = panels.a.min(axis=0) - 1.0, panels.a.max(axis=0) + 1.0
+    pts = np.vstack([rng.uniform(lo, hi, size=(5000, 2)), panels.a, panels.b])
+    for subset in (None, np.arange(len(panels))[1::2], np.zeros(0, dtype=np.intp)):
+        for reach in (0.0, 0.05, 0.3, 5.0):
+            near, reached = panels.within(pts, reach, subset=subset)
+            ref_near, ref_reached = panels._within_reference(pts, reach, subset=subset)
+            np.testing.assert_array_equal(near, ref_near)
+            np.testing.assert_array_equal(reached, ref_reached)
+    assert np.any(panels.within(pts, 0.05)[0])
+    assert not np.all(panels.within(pts, 0.05)[0])
+
+
+def test_first_hits_kernel_matches_the_reference() -> None:
+    from mast.core.geometry import _first_hits_reference, first_hits
+
+    rng = np.random.default_rng(4)
+    seg_a = rng.uniform(-10, 10, (30, 2))
+    seg_b = seg_a + rng.normal(0, 2, (30, 2))
+    # A segment through the origin, one parallel to a ray, a degenerate one.
+    seg_a = np.vstack([seg_a, [[-1.0, 0.0], [1.0, 1.0], [3.0, 3.0]]])
+    seg_b = np.vstack([seg_b, [[1.0, 0.0], [5.0, 1.0], [3.0, 3.0]]])
+    ang = np.concatenate([rng.uniform(-np.pi, np.pi, 2000), [0.0, np.pi / 2]])
+    dirs = np.column_stack([np.cos(ang), np.sin(ang)])
+    for origin in (np.zeros(2), np.array([0.3, -0.2]), np.array([4e5, 7e6])):
+        t, j = first_hits(origin, dirs, seg_a + origin, seg_b + origin)
+        ref_t, ref_j = _first_hits_reference(origin, dirs, seg_a + origin, seg_b + origin)
+        np.testing.assert_array_equal(j, ref_j)
+        np.testing.assert_array_equal(t, ref_t)
+        assert np.any(j >= 0)
+        assert np.any(j < 0)
+    empty_t, empty_j = first_hits(np.zeros(2), dirs, np.zeros((0, 2)), np.zeros((0, 2)))
+    assert np.all(np.isinf(empty_t))
+    assert np.all(empty_j == -1)

@@ -23,8 +23,6 @@ def first_hits(
     directions: NDArray[np.float64],
     seg_a: NDArray[np.float64],
     seg_b: NDArray[np.float64],
-    *,
-    chunk_elements: int = CHUNK_ELEMENTS,
 ) -> tuple[NDArray[np.float64], NDArray[np.intp]]:
     """Distance along each ray to the first segment it crosses.
 
@@ -42,7 +40,32 @@ def first_hits(
         Distance to the first crossing, ``inf`` for none.
     index : ndarray of int, shape (n,)
         Index of the segment crossed first, -1 for none.
+
+    Compiled (:func:`mast.pipeline._kernels.first_hits`, no (rays x segments)
+    arrays); :func:`_first_hits_reference` is the same in numpy.
     """
+    from mast.pipeline._kernels import first_hits as kernel
+
+    def flat(v: NDArray[np.float64]) -> NDArray[np.float64]:
+        return np.ascontiguousarray(v, dtype=float).reshape(-1, 2)
+
+    return kernel(  # type: ignore[no-any-return]
+        np.ascontiguousarray(origin, dtype=float).reshape(2),
+        flat(directions),
+        flat(seg_a),
+        flat(seg_b),
+    )
+
+
+def _first_hits_reference(
+    origin: NDArray[np.float64],
+    directions: NDArray[np.float64],
+    seg_a: NDArray[np.float64],
+    seg_b: NDArray[np.float64],
+    *,
+    chunk_elements: int = CHUNK_ELEMENTS,
+) -> tuple[NDArray[np.float64], NDArray[np.intp]]:
+    """:func:`first_hits` in numpy, in chunks of ``chunk_elements`` (the tests compare)."""
     n = directions.shape[0]
     best = np.full(n, np.inf)
     which = np.full(n, -1, dtype=np.intp)
@@ -155,8 +178,35 @@ class PanelSet:
         """Points within ``reach_m`` (Euclidean) of any panel segment, and those panels.
 
         Returns a mask over the points and the indices of the panels (of
-        ``subset``) that have any point within ``reach_m``.
+        ``subset``) that have any point within ``reach_m``. Compiled
+        (:func:`mast.pipeline._kernels.within`); :meth:`_within_reference` is
+        the same in numpy.
         """
+        from mast.pipeline._kernels import within
+
+        panels = np.arange(len(self)) if subset is None else subset
+        n = points_mine.shape[0]
+        if n == 0 or panels.size == 0:
+            return np.zeros(n, dtype=bool), np.zeros(0, dtype=np.intp)
+        near, reached = within(
+            np.ascontiguousarray(points_mine, dtype=float).reshape(-1, 2),
+            self.a,
+            self.direction,
+            self.normal,
+            self.length,
+            np.ascontiguousarray(panels, dtype=np.intp),
+            float(reach_m),
+        )
+        return near, panels[reached]
+
+    def _within_reference(
+        self,
+        points_mine: NDArray[np.float64],
+        reach_m: float,
+        *,
+        subset: NDArray[np.intp] | None = None,
+    ) -> tuple[NDArray[np.bool_], NDArray[np.intp]]:
+        """:meth:`within` in numpy (the tests compare the two)."""
         panels = np.arange(len(self)) if subset is None else subset
         n = points_mine.shape[0]
         if n == 0 or panels.size == 0:

@@ -16,7 +16,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-__all__ = ["associate", "partition_dp"]
+__all__ = ["associate", "first_hits", "icp_stages", "partition_dp", "within"]
 
 
 def _partition_dp(
@@ -127,6 +127,185 @@ def _associate(
     return idx, dist
 
 
+def _first_hits(
+    origin: NDArray[np.float64],
+    directions: NDArray[np.float64],
+    seg_a: NDArray[np.float64],
+    seg_b: NDArray[np.float64],
+) -> tuple[NDArray[np.float64], NDArray[np.intp]]:
+    """``geometry._first_hits_reference`` ray by ray: the same crossing formulas,
+    the first segment on a tie (as ``argmin``)."""
+    n = directions.shape[0]
+    m = seg_a.shape[0]
+    best = np.full(n, np.inf)
+    which = np.full(n, -1, dtype=np.intp)
+    ex = np.empty(m)
+    ey = np.empty(m)
+    wx = np.empty(m)
+    wy = np.empty(m)
+    w_x_e = np.empty(m)
+    for k in range(m):
+        ex[k] = seg_b[k, 0] - seg_a[k, 0]
+        ey[k] = seg_b[k, 1] - seg_a[k, 1]
+        wx[k] = seg_a[k, 0] - origin[0]
+        wy[k] = seg_a[k, 1] - origin[1]
+        w_x_e[k] = wx[k] * ey[k] - wy[k] * ex[k]
+    for i in range(n):
+        dx, dy = directions[i, 0], directions[i, 1]
+        bt = np.inf
+        bj = -1
+        for k in range(m):
+            den = dx * ey[k] - dy * ex[k]
+            if den == 0.0:
+                continue
+            t = w_x_e[k] / den
+            s = (wx[k] * dy - wy[k] * dx) / den
+            if t > 1e-12 and s >= 0.0 and s <= 1.0 and t < bt:
+                bt = t
+                bj = k
+        best[i] = bt
+        which[i] = bj
+    return best, which
+
+
+def _within(
+    points: NDArray[np.float64],
+    a: NDArray[np.float64],
+    direction: NDArray[np.float64],
+    normal: NDArray[np.float64],
+    length: NDArray[np.float64],
+    panels: NDArray[np.intp],
+    reach: float,
+) -> tuple[NDArray[np.bool_], NDArray[np.bool_]]:
+    """Points within ``reach`` (Euclidean) of any of ``panels``, and which of ``panels``
+    have a point that close: ``PanelSet._within_reference`` without its
+    (points x panels) arrays."""
+    n = points.shape[0]
+    near = np.zeros(n, dtype=np.bool_)
+    reached = np.zeros(panels.shape[0], dtype=np.bool_)
+    r2 = reach * reach
+    for p in range(n):
+        for k in range(panels.shape[0]):
+            q = panels[k]
+            rx = points[p, 0] - a[q, 0]
+            ry = points[p, 1] - a[q, 1]
+            t = rx * direction[q, 0] + ry * direction[q, 1]
+            s = rx * normal[q, 0] + ry * normal[q, 1]
+            over = max(max(-t, t - length[q]), 0.0)
+            if over * over + s * s <= r2:
+                near[p] = True
+                reached[k] = True
+    return near, reached
+
+
+def _icp_stages(
+    points: NDArray[np.float64],
+    easting: float,
+    northing: float,
+    azimuth: float,
+    a: NDArray[np.float64],
+    direction: NDArray[np.float64],
+    normal: NDArray[np.float64],
+    length: NDArray[np.float64],
+    panels: NDArray[np.intp],
+    gates: NDArray[np.float64],
+    max_iterations: int,
+    tolerance_m: float,
+    tolerance_rad: float,
+) -> tuple[float, float, float, int, bool]:
+    """The iterations of ``alignment._icp_reference``: ``(E, N, azimuth, iterations, converged)``.
+
+    Each stage associates every point with its nearest panel within the
+    stage's gate (:func:`_associate`), stops a coarse stage once the matches
+    stop changing, closes a loop of matches met before in the stage, and
+    otherwise takes the least-squares step of the linearised point-to-line
+    problem (Low 2004) for a translation and a rotation about the scanner:
+    the same rules and the same LAPACK solver (``lstsq``) as the reference.
+    """
+    n = points.shape[0]
+    e, nn, az = easting, northing, azimuth
+    total = 0
+    converged = False
+    panel = np.full(n, -1, dtype=np.intp)
+    m = np.empty((n, 2))
+    n_stages = gates.shape[0]
+    for stage in range(n_stages):
+        converged = False
+        final = stage == n_stages - 1
+        previous = panel
+        seen = np.empty((max_iterations, n), dtype=np.intp)
+        n_seen = 0
+        gate = gates[stage : stage + 1]
+        for _ in range(max_iterations):
+            total += 1
+            sa, ca = math.sin(az), math.cos(az)
+            for i in range(n):
+                x, y = points[i, 0], points[i, 1]
+                m[i, 0] = sa * x - ca * y + e
+                m[i, 1] = ca * x + sa * y + nn
+            panel, dist = _associate_jit(m, a, direction, normal, length, panels, gate)
+            same = True
+            for i in range(n):
+                if panel[i] != previous[i]:
+                    same = False
+                    break
+            if not final and same:
+                converged = True
+                break
+            if not same:
+                met = False
+                for k in range(n_seen):
+                    met = True
+                    for i in range(n):
+                        if seen[k, i] != panel[i]:
+                            met = False
+                            break
+                    if met:
+                        break
+                if met:
+                    converged = True
+                    break
+            if n_seen < max_iterations:
+                seen[n_seen, :] = panel
+                n_seen += 1
+            previous = panel
+            k_ok = 0
+            for i in range(n):
+                if panel[i] >= 0:
+                    k_ok += 1
+            if k_ok < 3:
+                break
+            design = np.empty((k_ok, 3))
+            rhs = np.empty(k_ok)
+            r = 0
+            for i in range(n):
+                q = panel[i]
+                if q < 0:
+                    continue
+                rx, ry = m[i, 0] - e, m[i, 1] - nn
+                design[r, 0] = normal[q, 0]
+                design[r, 1] = normal[q, 1]
+                design[r, 2] = normal[q, 1] * rx - normal[q, 0] * ry
+                rhs[r] = -dist[i]
+                r += 1
+            step = np.linalg.lstsq(design, rhs)[0]
+            omega = math.pi / 2 - az + step[2]
+            e = e + step[0]
+            nn = nn + step[1]
+            az = (math.pi / 2 - omega) % (2 * math.pi)
+            tol_m = max(tolerance_m, 4 * np.spacing(max(abs(e), abs(nn), 1.0)))
+            if math.hypot(step[0], step[1]) < tol_m and abs(step[2]) < max(
+                tolerance_rad, tol_m / 100.0
+            ):
+                converged = True
+                break
+    return e, nn, az, total, converged
+
+
 #: Compiled on first use (numba's own types; mypy sees plain callables).
 partition_dp: Callable[..., NDArray[np.intp]] = njit(cache=True, nogil=True)(_partition_dp)
 associate: Callable[..., Any] = njit(cache=True, nogil=True)(_associate)
+_associate_jit = associate
+icp_stages: Callable[..., Any] = njit(cache=True, nogil=True)(_icp_stages)
+within: Callable[..., Any] = njit(cache=True, nogil=True)(_within)
+first_hits: Callable[..., Any] = njit(cache=True, nogil=True)(_first_hits)

@@ -148,7 +148,49 @@ def icp_point_to_line(
     tolerance_m, tolerance_rad : float
         The last stage stops when a step moves the pose less than this; the
         pose is a start for the adjustment, which iterates to full precision.
+
+    The iterations are compiled (:func:`mast.pipeline._kernels.icp_stages`);
+    :func:`_icp_reference` is the same in numpy (the tests compare the two).
     """
+    from mast.pipeline._kernels import icp_stages
+
+    near, reached = panels.within(
+        pose.scanner_to_mine(points_scanner), 2.0 * max(gates_m) + 0.05, subset=subset
+    )
+    e, n, az, total, converged = icp_stages(
+        np.ascontiguousarray(points_scanner[near], dtype=float).reshape(-1, 2),
+        pose.easting,
+        pose.northing,
+        pose.azimuth,
+        panels.a,
+        panels.direction,
+        panels.normal,
+        panels.length,
+        np.ascontiguousarray(reached, dtype=np.intp),
+        np.asarray(gates_m, dtype=float),
+        max_iterations,
+        tolerance_m,
+        tolerance_rad,
+    )
+    p = Pose2D(float(e), float(n), float(az))
+    m = p.scanner_to_mine(points_scanner)
+    panel, dist = panels.associate(m, gates_m[-1], subset=subset)
+    resid = np.where(panel >= 0, dist, np.nan)
+    return IcpResult(p, int(total), bool(converged), panel, resid)
+
+
+def _icp_reference(
+    points_scanner: NDArray[np.float64],
+    pose: Pose2D,
+    panels: PanelSet,
+    *,
+    gates_m: Sequence[float],
+    max_iterations: int = 50,
+    tolerance_m: float = 1e-7,
+    tolerance_rad: float = 1e-9,
+    subset: NDArray[np.intp] | None = None,
+) -> IcpResult:
+    """:func:`icp_point_to_line` in numpy (the tests compare the two)."""
     p = pose
     total = 0
     converged = False

@@ -143,10 +143,10 @@ class _SectorWorld(World):
     """A :class:`World` of segments only, ray-cast by :func:`_sector_first_hits`."""
 
     def raycast(
-        self, origin: ArrayLike, directions: ArrayLike, *, chunk_elements: int = 2_000_000
+        self, origin: ArrayLike, directions: ArrayLike
     ) -> tuple[NDArray[np.float64], NDArray[np.intp]]:
         if self.circ_c.shape[0]:  # pragma: no cover - the drive has no round objects
-            return super().raycast(origin, directions, chunk_elements=chunk_elements)
+            return super().raycast(origin, directions)
         o = np.asarray(origin, dtype=float).reshape(2)
         d = np.asarray(directions, dtype=float).reshape(-1, 2)
         t, j = _sector_first_hits(o, d, self.seg_a, self.seg_b)

@@ -49,7 +49,7 @@ class World:
     surfaces: tuple[Surface, ...]
 
     def raycast(
-        self, origin: ArrayLike, directions: ArrayLike, *, chunk_elements: int = 2_000_000
+        self, origin: ArrayLike, directions: ArrayLike
     ) -> tuple[NDArray[np.float64], NDArray[np.intp]]:
         """Distance to the first surface along each ray.
 
@@ -73,7 +73,7 @@ class World:
         best = np.full(n, np.inf)
         which = np.full(n, -1, dtype=np.intp)
         if self.seg_a.shape[0]:
-            best, j = first_hits(o, d, self.seg_a, self.seg_b, chunk_elements=chunk_elements)
+            best, j = first_hits(o, d, self.seg_a, self.seg_b)
             which = np.where(j >= 0, self.seg_surface[np.maximum(j, 0)], -1)
         if self.circ_c.shape[0]:
             w = self.circ_c - o  # (k, 2)
