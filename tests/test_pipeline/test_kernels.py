@@ -90,11 +90,14 @@ def test_association_kernel_matches_the_reference() -> None:
     assert math.isinf(float(dist[0]))
 
 
-def _icp_cases() -> list[tuple[np.ndarray, Pose2D, PanelSet, tuple[float, ...], np.ndarray]]:
+IcpCase = tuple[np.ndarray, Pose2D, PanelSet, tuple[float, ...], np.ndarray]
+
+
+def _icp_cases() -> list[IcpCase]:
     """Whole noisy scans with every kind of start verification gives ICP: near the truth,
     off by a metre and degrees (wide gates), and at UTM-sized coordinates."""
     rng = np.random.default_rng(7)
-    cases = []
+    cases: list[IcpCase] = []
     for variant in ("parallel", "divergent"):
         scene = paper_scene(variant, range_sigma_m=0.01, seed=3)
         panels = PanelSet.from_survey(scene.survey)
