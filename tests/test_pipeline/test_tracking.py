@@ -84,3 +84,21 @@ def test_tiles_stay_small_when_beacons_are_far_apart() -> None:
     # Each tile: a beacon (about a metre) widened by the cutoff.
     assert field.values.size < 20_000 * beacons
     assert field.values.size < box_cells / 50
+
+
+def test_compiled_window_scores_match_the_lookups() -> None:
+    panels = PanelSet.from_survey(paper_scene().survey)
+    field = _TiledField.build(panels, np.arange(len(panels)), RES, SIGMA)
+    rng = np.random.default_rng(5)
+    on = panels.a + panels.direction * rng.uniform(0, 1, (len(panels), 1)) * panels.length[:, None]
+    pts = (on[:, None, :] + rng.normal(0.0, 0.3, (len(panels), 40, 2))).reshape(-1, 2)
+    # Reaches wide enough that returns between the two beacons meet both tiles.
+    tiles = field.reaching(pts, np.full(len(pts), 10.0))
+    assert tiles.shape[1] >= 2  # some returns reach two tiles: the largest value counts
+    shifts = rng.uniform(-0.5, 0.5, (300, 2)) / RES
+    got = field.scores(pts / RES, tiles, shifts)
+    ref = field.lookup(pts / RES, tiles[:, 0], shifts)
+    for slot in range(1, tiles.shape[1]):
+        ref = np.maximum(ref, field.lookup(pts / RES, tiles[:, slot], shifts))
+    np.testing.assert_allclose(got, ref.sum(axis=1), rtol=1e-12, atol=1e-12)
+    assert np.ptp(got) > 1.0  # the translations score differently

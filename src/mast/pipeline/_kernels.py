@@ -16,7 +16,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-__all__ = ["associate", "first_hits", "icp_stages", "partition_dp", "within"]
+__all__ = ["associate", "first_hits", "icp_stages", "partition_dp", "window_scores", "within"]
 
 
 def _partition_dp(
@@ -302,10 +302,58 @@ def _icp_stages(
     return e, nn, az, total, converged
 
 
+def _window_scores(
+    cells: NDArray[np.float64],
+    tiles: NDArray[np.intp],
+    tile_lo: NDArray[np.float64],
+    tile_shape: NDArray[np.intp],
+    tile_offset: NDArray[np.intp],
+    values: NDArray[np.float64],
+    shifts: NDArray[np.float64],
+) -> NDArray[np.float64]:
+    """Sum over the points of the tiled likelihood field, for each translation.
+
+    ``tracking._TiledField.lookup`` summed over the points, without its
+    (translations x points) arrays: a point moved by ``shifts[m]`` (cells)
+    reads, in each tile it can reach (``tiles``, -1 pads), the cell
+    ``floor(cells - tile_lo + shift)`` and keeps the largest value.
+    """
+    n = cells.shape[0]
+    slots = tiles.shape[1]
+    local = np.empty((n, slots, 2))
+    for i in range(n):
+        for k in range(slots):
+            t = tiles[i, k]
+            if t >= 0:
+                local[i, k, 0] = cells[i, 0] - tile_lo[t, 0]
+                local[i, k, 1] = cells[i, 1] - tile_lo[t, 1]
+    out = np.zeros(shifts.shape[0])
+    for m in range(shifts.shape[0]):
+        sx, sy = shifts[m, 0], shifts[m, 1]
+        total = 0.0
+        for i in range(n):
+            best = 0.0
+            for k in range(slots):
+                t = tiles[i, k]
+                if t < 0:
+                    continue
+                gi = math.floor(local[i, k, 0] + sx)
+                gj = math.floor(local[i, k, 1] + sy)
+                w, h = tile_shape[t, 0], tile_shape[t, 1]
+                if gi >= 0 and gi < w and gj >= 0 and gj < h:
+                    v = values[tile_offset[t] + gi * h + gj]
+                    if v > best:
+                        best = v
+            total += best
+        out[m] = total
+    return out
+
+
 #: Compiled on first use (numba's own types; mypy sees plain callables).
 partition_dp: Callable[..., NDArray[np.intp]] = njit(cache=True, nogil=True)(_partition_dp)
 associate: Callable[..., Any] = njit(cache=True, nogil=True)(_associate)
 _associate_jit = associate
 icp_stages: Callable[..., Any] = njit(cache=True, nogil=True)(_icp_stages)
 within: Callable[..., Any] = njit(cache=True, nogil=True)(_within)
+window_scores: Callable[..., NDArray[np.float64]] = njit(cache=True, nogil=True)(_window_scores)
 first_hits: Callable[..., Any] = njit(cache=True, nogil=True)(_first_hits)

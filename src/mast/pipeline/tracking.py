@@ -120,8 +120,6 @@ def _likelihood_field(
 
 # Beyond this many sigmas from every panel the field is taken as zero (e^-18).
 _FIELD_CUTOFF_SIGMAS = 6.0
-# Elements of the (translations x returns) arrays scored at once.
-_SCORE_CHUNK = 1 << 18
 
 
 @dataclass(frozen=True, slots=True)
@@ -214,6 +212,31 @@ class _TiledField:
             out[i, : k.size] = k
         return out
 
+    def scores(
+        self,
+        cells: NDArray[np.float64],
+        tiles: NDArray[np.intp],
+        shift: NDArray[np.float64],
+    ) -> NDArray[np.float64]:
+        """The field summed over the points, for each translation: shape (m,).
+
+        ``cells`` and ``shift`` as in :meth:`lookup`; ``tiles`` as from
+        :meth:`reaching` (each point takes the largest value over its tiles).
+        Compiled (:func:`mast.pipeline._kernels.window_scores`): no
+        (translations x points) arrays. :meth:`lookup` is the reference.
+        """
+        from mast.pipeline._kernels import window_scores
+
+        return window_scores(
+            np.ascontiguousarray(cells, dtype=float),
+            np.ascontiguousarray(tiles, dtype=np.intp),
+            self.lo / self.res,
+            self.shape,
+            self.offset,
+            self.values,
+            np.ascontiguousarray(shift, dtype=float),
+        )
+
     def lookup(
         self,
         cells: NDArray[np.float64],
@@ -225,7 +248,8 @@ class _TiledField:
         ``cells`` are the points in cells of the grid anchored at the origin
         (``position / res``), shape (n, 2); ``tile`` the tile each point is
         looked up in (-1: none), shape (n,); ``shift`` the translations in
-        cells, shape (m, 2). Returns shape (m, n).
+        cells, shape (m, 2). Returns shape (m, n). The reference of
+        :meth:`scores` (the tests compare the two).
         """
         has = tile >= 0
         t = np.where(has, tile, 0)
@@ -289,26 +313,20 @@ def prior_hypotheses(
     tx, ty = np.meshgrid(offs, offs, indexing="ij")
     inside = np.hypot(tx, ty) <= prior.radius_m + 1e-9
     shifts = np.column_stack([tx[inside], ty[inside]])
+    shift_cells = shifts / res
     d_rot = step / max(float(r.max()), step)
     n_r = math.ceil(tol / d_rot)
     rot0 = math.pi / 2 - prior.pose.azimuth
     # The tiles each return can reach anywhere in the window.
     at_prior = prior.pose.scanner_to_mine(pts)
     tiles = field.reaching(at_prior, prior.radius_m + r * math.sin(tol) + step + res)
-    chunk = max(1, _SCORE_CHUNK // max(1, pts.shape[0]))
     keep_best = 4 * config.candidates
     best: list[tuple[float, float, float, float]] = []
     for k in range(-n_r, n_r + 1):
         rot = rot0 + k * d_rot
         c, s = math.cos(rot), math.sin(rot)
         cells = (pts @ np.array([[c, s], [-s, c]]) + prior.pose.position) / res
-        total = np.empty(shifts.shape[0])
-        for start in range(0, shifts.shape[0], chunk):
-            part = shifts[start : start + chunk] / res
-            score = field.lookup(cells, tiles[:, 0], part)
-            for slot in range(1, tiles.shape[1]):
-                np.maximum(score, field.lookup(cells, tiles[:, slot], part), out=score)
-            total[start : start + chunk] = score.sum(axis=1)
+        total = field.scores(cells, tiles, shift_cells)
         top = np.argpartition(total, -keep_best)[-keep_best:] if total.size > keep_best else None
         for t in np.arange(total.size) if top is None else top:
             best.append((float(total[t]), rot, float(shifts[t, 0]), float(shifts[t, 1])))
