@@ -521,6 +521,9 @@ def measure_runs(
 ) -> list[ProcessRun]:
     """Simulate a drive bag of each length; read it, ``mast locate`` it (``bag_scans``)
     and ``mast track`` it (``track_scans``), each in a fresh process."""
+    from mast.pipeline._kernels import compile_all
+
+    compile_all()  # the children load the compiled kernels, as an installed tool does
     runs: list[ProcessRun] = []
     with tempfile.TemporaryDirectory(prefix="mast-bench-speed-") as tmp:
         root = Path(folder or tmp)
