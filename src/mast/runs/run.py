@@ -215,7 +215,8 @@ def track_run(
                 inten = None if scan.intensities is None else scan.intensities[beams]
                 las.add(i, scan.stamp_ns, mine, inten)
                 points += len(mine)
-                sample.append(mine[:: max(1, len(placed) * len(mine) // REPORT_POINTS + 1)])
+                # A copy: a slice would keep every scan's returns alive to the end.
+                sample.append(mine[:: max(1, len(placed) * len(mine) // REPORT_POINTS + 1)].copy())
                 seg = walls.get(i)
                 if seg is not None and len(seg):
                     wall_lines.extend(
