@@ -18,7 +18,6 @@ Run: ``python -m mast.apps.bench.dense`` (or ``run_dense`` from Python).
 from __future__ import annotations
 
 import json
-import math
 import subprocess
 import sys
 import tempfile
@@ -28,6 +27,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+
+from mast.apps._rss import peak_rss_mb
 
 __all__ = [
     "DEFAULT_BEAMS",
@@ -158,28 +159,6 @@ def run_dense(
     return out
 
 
-def _peak_rss_mb() -> float:
-    """This process's peak resident memory, MB.
-
-    On Linux, the high-water mark of this program's own memory (``VmHWM``):
-    ``ru_maxrss`` also counts the parent's, which a child started by
-    ``vfork`` and ``exec`` inherits. Elsewhere ``ru_maxrss``.
-    """
-    try:
-        for line in Path("/proc/self/status").read_text().splitlines():
-            if line.startswith("VmHWM:"):
-                return float(line.split()[1]) / 1024  # kB
-    except OSError:
-        pass
-    try:
-        import resource
-    except ImportError:  # not on this platform
-        return math.nan
-    peak = float(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)
-    # kilobytes on Linux, bytes on macOS
-    return peak / 1e6 if sys.platform == "darwin" else peak / 1024
-
-
 def _child(scan_csv: str, survey_csv: str) -> None:
     """Read and locate one scan as ``mast locate`` does; print the figures as JSON."""
     from mast.io import read_scan_csv, read_survey
@@ -196,7 +175,7 @@ def _child(scan_csv: str, survey_csv: str) -> None:
         "beams": len(scan),
         "read_s": t1 - t0,
         "locate_s": t2 - t1,
-        "peak_rss_mb": _peak_rss_mb(),
+        "peak_rss_mb": peak_rss_mb(),
         "status": status,
     }
     print(json.dumps(figures))

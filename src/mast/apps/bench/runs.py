@@ -27,7 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
-from mast.apps.bench.dense import _peak_rss_mb
+from mast.apps._rss import peak_rss_mb
 
 __all__ = ["DEFAULT_SCANS", "RunFigures", "run_runs"]
 
@@ -86,7 +86,7 @@ def _child(mode: str, args: list[str]) -> None:
             warn=lambda _: None,
         )
         n = result.summary.scans
-    print(json.dumps({"scans": n, "s": time.perf_counter() - t0, "peak_mb": _peak_rss_mb()}))
+    print(json.dumps({"scans": n, "s": time.perf_counter() - t0, "peak_mb": peak_rss_mb()}))
 
 
 def _measure(*args: str) -> dict[str, float]:

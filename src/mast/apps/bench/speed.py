@@ -153,9 +153,8 @@ OTHER_STAGE = "other"
 
 # A fresh process for a whole run: times itself from before its first mast import to
 # its end and writes its figures to a side file (standard output may be /dev/null).
-# Its peak memory is VmHWM: ru_maxrss of a child started by vfork and exec also counts
-# the parent (see mast.apps.bench.dense._peak_rss_mb, not imported here so that the
-# child loads nothing the command does not).
+# Its peak memory comes from mast.apps._rss (standard library only), imported after
+# the measured work.
 _CHILD = r"""
 import json, sys, time
 t0 = time.perf_counter()
@@ -172,17 +171,8 @@ try:
 except SystemExit as stop:
     code = 0 if stop.code is None else stop.code if isinstance(stop.code, int) else 1
 seconds = time.perf_counter() - t0
-peak = float("nan")
-try:
-    with open("/proc/self/status") as fh:
-        for line in fh:
-            if line.startswith("VmHWM:"):
-                peak = float(line.split()[1]) / 1024
-except OSError:
-    import resource
-    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
-    if sys.platform == "darwin":
-        peak /= 1024
+from mast.apps._rss import peak_rss_mb
+peak = peak_rss_mb()
 with open(side, "w") as fh:
     json.dump({"s": seconds, "peak_mb": peak, "code": code, "scans": scans}, fh)
 """
