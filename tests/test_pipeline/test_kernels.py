@@ -9,10 +9,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from mast.core._kernels import partition_dp
 from mast.core.geometry import PanelSet
 from mast.core.pose import Pose2D
 from mast.pipeline import segmentation as seg
-from mast.pipeline._kernels import partition_dp
 from mast.sim import paper_scene, simulate_scan
 
 

@@ -41,10 +41,10 @@ def first_hits(
     index : ndarray of int, shape (n,)
         Index of the segment crossed first, -1 for none.
 
-    Compiled (:func:`mast.pipeline._kernels.first_hits`, no (rays x segments)
+    Compiled (:func:`mast.core._kernels.first_hits`, no (rays x segments)
     arrays); :func:`_first_hits_reference` is the same in numpy.
     """
-    from mast.pipeline._kernels import first_hits as kernel
+    from mast.core._kernels import first_hits as kernel
 
     def flat(v: NDArray[np.float64]) -> NDArray[np.float64]:
         return np.ascontiguousarray(v, dtype=float).reshape(-1, 2)
@@ -179,10 +179,10 @@ class PanelSet:
 
         Returns a mask over the points and the indices of the panels (of
         ``subset``) that have any point within ``reach_m``. Compiled
-        (:func:`mast.pipeline._kernels.within`); :meth:`_within_reference` is
+        (:func:`mast.core._kernels.within`); :meth:`_within_reference` is
         the same in numpy.
         """
-        from mast.pipeline._kernels import within
+        from mast.core._kernels import within
 
         panels = np.arange(len(self)) if subset is None else subset
         n = points_mine.shape[0]
@@ -233,10 +233,10 @@ class PanelSet:
 
         Returns the panel index per point (-1 for none) and the signed distance
         from the panel's line (along its normal). Compiled
-        (:func:`mast.pipeline._kernels.associate`); :meth:`_associate_reference`
+        (:func:`mast.core._kernels.associate`); :meth:`_associate_reference`
         is the same in numpy.
         """
-        from mast.pipeline._kernels import associate
+        from mast.core._kernels import associate
 
         panels = np.arange(len(self)) if subset is None else subset
         pts = np.ascontiguousarray(points_mine, dtype=float).reshape(-1, 2)

@@ -149,10 +149,10 @@ def icp_point_to_line(
         The last stage stops when a step moves the pose less than this; the
         pose is a start for the adjustment, which iterates to full precision.
 
-    The iterations are compiled (:func:`mast.pipeline._kernels.icp_stages`);
+    The iterations are compiled (:func:`mast.core._kernels.icp_stages`);
     :func:`_icp_reference` is the same in numpy (the tests compare the two).
     """
-    from mast.pipeline._kernels import icp_stages
+    from mast.core._kernels import icp_stages
 
     near, reached = panels.within(
         pose.scanner_to_mine(points_scanner), 2.0 * max(gates_m) + 0.05, subset=subset

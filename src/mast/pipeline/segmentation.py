@@ -282,7 +282,7 @@ def _partition_reference(
     points: NDArray[np.float64], var: float, max_piece: int = MAX_PIECE
 ) -> NDArray[np.intp]:
     """Back-pointers of the optimal partition, in numpy: the readable reference of
-    :func:`mast.pipeline._kernels.partition_dp` (the tests compare them)."""
+    :func:`mast.core._kernels.partition_dp` (the tests compare them)."""
     n = points.shape[0]
     _, (sx, sy, sxx, syy, sxy, uxx, uyy, uxy) = _cumulative_moments(points)
     w = min(n, max_piece)
@@ -332,7 +332,7 @@ def _partition_reference(
 def _partition_impl(
     points: NDArray[np.float64], var: float, max_piece: int
 ) -> list[tuple[int, int]]:
-    from mast.pipeline._kernels import partition_dp
+    from mast.core._kernels import partition_dp
 
     n = points.shape[0]
     u, moments = _cumulative_moments(points)

@@ -222,10 +222,10 @@ class _TiledField:
 
         ``cells`` and ``shift`` as in :meth:`lookup`; ``tiles`` as from
         :meth:`reaching` (each point takes the largest value over its tiles).
-        Compiled (:func:`mast.pipeline._kernels.window_scores`): no
+        Compiled (:func:`mast.core._kernels.window_scores`): no
         (translations x points) arrays. :meth:`lookup` is the reference.
         """
-        from mast.pipeline._kernels import window_scores
+        from mast.core._kernels import window_scores
 
         return window_scores(
             np.ascontiguousarray(cells, dtype=float),

@@ -127,7 +127,7 @@ def run_runs(
     echo: Callable[[str], object] = print,
 ) -> list[RunFigures]:
     """Simulate, read and track a drive of each length; print and return the figures."""
-    from mast.pipeline._kernels import compile_all
+    from mast.apps.bench.warmup import compile_all
     from mast.sim import drive_scene, write_scenario
 
     compile_all()  # the children load the compiled kernels, as an installed tool does

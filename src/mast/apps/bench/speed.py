@@ -511,7 +511,7 @@ def measure_runs(
 ) -> list[ProcessRun]:
     """Simulate a drive bag of each length; read it, ``mast locate`` it (``bag_scans``)
     and ``mast track`` it (``track_scans``), each in a fresh process."""
-    from mast.pipeline._kernels import compile_all
+    from mast.apps.bench.warmup import compile_all
 
     compile_all()  # the children load the compiled kernels, as an installed tool does
     runs: list[ProcessRun] = []

@@ -18,7 +18,6 @@ from numpy.typing import NDArray
 
 __all__ = [
     "associate",
-    "compile_all",
     "first_hits",
     "icp_stages",
     "partition_dp",
@@ -365,22 +364,3 @@ icp_stages: Callable[..., Any] = njit(cache=True, nogil=True)(_icp_stages)
 within: Callable[..., Any] = njit(cache=True, nogil=True)(_within)
 window_scores: Callable[..., NDArray[np.float64]] = njit(cache=True, nogil=True)(_window_scores)
 first_hits: Callable[..., Any] = njit(cache=True, nogil=True)(_first_hits)
-
-
-def compile_all() -> None:
-    """Compile (or load from the cache) every kernel, through the code that calls them.
-
-    A process that finds no cached machine code compiles each kernel on its
-    first call: seconds and about 100 MB of compiler memory. Benchmarks call
-    this once before they start the processes they measure, so that those
-    load the cache as an installed tool does after its first run.
-    """
-    from mast.pipeline.locator import LocatorConfig, locate, locate_near
-    from mast.pipeline.tracking import Prior
-    from mast.sim import paper_scene
-
-    scene = paper_scene()
-    for shot, sim in zip(scene.shots[:1], scene.simulate_all()[:1], strict=True):
-        locate(sim.scan, scene.survey)
-        prior = Prior(shot.pose, 0.1, math.radians(1.0))
-        locate_near(sim.scan, scene.survey, prior, config=LocatorConfig())
