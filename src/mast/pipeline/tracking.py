@@ -160,21 +160,17 @@ class _TiledField:
         margin = _FIELD_CUTOFF_SIGMAS * sigma + 2.0 * res
         ends = np.concatenate([panels.a[subset], panels.b[subset]])
         owner = np.concatenate([panels.beacon[subset], panels.beacon[subset]])
+        a, b = panels.a[subset], panels.b[subset]
+        low, high = np.minimum(a, b), np.maximum(a, b)
         lows, shapes, offsets, chunks = [], [], [], []
         total = 0
-        for b in np.unique(owner):
-            box = ends[owner == b]
+        for beacon in np.unique(owner):
+            box = ends[owner == beacon]
             lo = box.min(axis=0) - margin
             hi = box.max(axis=0) + margin
             shape = (int((hi[0] - lo[0]) / res) + 1, int((hi[1] - lo[1]) / res) + 1)
             # Every panel reaching into the tile is drawn in it, not only this beacon's.
-            a, bb = panels.a[subset], panels.b[subset]
-            touch = (
-                (np.minimum(a[:, 0], bb[:, 0]) <= hi[0])
-                & (np.maximum(a[:, 0], bb[:, 0]) >= lo[0])
-                & (np.minimum(a[:, 1], bb[:, 1]) <= hi[1])
-                & (np.maximum(a[:, 1], bb[:, 1]) >= lo[1])
-            )
+            touch = np.all((low <= hi) & (high >= lo), axis=1)
             field = _likelihood_field(panels, subset[touch], lo, shape, res, sigma)
             lows.append(lo)
             shapes.append(shape)
