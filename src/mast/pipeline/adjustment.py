@@ -20,11 +20,11 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import stats
 
 from mast.core.geometry import PanelSet, first_hits
 from mast.core.noise import NoiseModel
 from mast.core.pose import Pose2D
+from mast.core.quantiles import chi2_ppf, f_ppf, norm_ppf, t_ppf
 from mast.core.scan import Scan
 
 __all__ = [
@@ -163,8 +163,8 @@ class Adjustment:
     def quantile95(self) -> float:
         """Two-sided 95 % factor: normal for a-priori, Student t for a-posteriori scaling."""
         if self.scaled:
-            return float(stats.t.ppf(0.975, max(self.dof, 1)))
-        return float(stats.norm.ppf(0.975))
+            return t_ppf(0.975, max(self.dof, 1))
+        return norm_ppf(0.975)
 
     def interval95(self) -> NDArray[np.float64]:
         """Half-widths of the 95 % intervals for (E [m], N [m], A [rad])."""
@@ -175,9 +175,9 @@ class Adjustment:
         c = self.covariance[:2, :2]
         w, v = np.linalg.eigh(c)
         if self.scaled:
-            k = math.sqrt(2 * float(stats.f.ppf(confidence, 2, max(self.dof, 1))))
+            k = math.sqrt(2 * f_ppf(confidence, 2, max(self.dof, 1)))
         else:
-            k = math.sqrt(float(stats.chi2.ppf(confidence, 2)))
+            k = math.sqrt(chi2_ppf(confidence, 2))
         major = v[:, 1]
         az = math.atan2(major[0], major[1]) % math.pi
         return ErrorEllipse(
@@ -240,8 +240,8 @@ def adjust_pose(
     Q: NDArray[np.float64] = np.asarray(np.linalg.inv(N), dtype=np.float64)
     dof = n - 3
     s0 = float(v @ (w * v) / dof) if dof > 0 else math.nan
-    lo = float(stats.chi2.ppf(0.025, dof) / dof) if dof > 0 else 0.0
-    hi = float(stats.chi2.ppf(0.975, dof) / dof) if dof > 0 else math.inf
+    lo = chi2_ppf(0.025, dof) / dof if dof > 0 else 0.0
+    hi = chi2_ppf(0.975, dof) / dof if dof > 0 else math.inf
     # Surveying practice: when the global test passes, the a-priori precisions
     # stand (sigma_0 = 1); when it rejects high, they were too optimistic and
     # the covariance is scaled by the a-posteriori reference variance.
@@ -351,8 +351,8 @@ def _robust_inliers(
     std = adj.residuals_m / adj.sigmas_m
     scale = 1.0
     if std.size:
-        mad = stats.median_abs_deviation(std, scale="normal", center=lambda x, axis: 0.0)
-        scale = min(1.0, float(mad))
+        mad = float(np.median(np.abs(std))) / norm_ppf(0.75)  # about the prediction, 0
+        scale = min(1.0, mad)
     rho, jac, d_phi = range_model(adj.pose, angles_rad, normals, offsets)
     pred = np.einsum("ij,jk,ik->i", jac, adj.cofactor, jac)
     sig = np.sqrt(noise.variance(d_phi) + pred)

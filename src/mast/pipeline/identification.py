@@ -128,23 +128,51 @@ def _extent_from_node(seg: Segment, node: NDArray[np.float64], before: bool) -> 
     return float(t.min()), float(t.max())
 
 
+@dataclass(frozen=True, slots=True)
+class _CornerExtent:
+    """What every beacon design's test of one corner shares: the two segments'
+    extents from the node, the length tolerance, the centroid distance."""
+
+    near_a: float
+    far_a: float
+    near_b: float
+    far_b: float
+    tol: float
+    c_meas: float
+
+    @classmethod
+    def of(
+        cls,
+        corner: Corner,
+        a: Segment,
+        b: Segment,
+        noise: float,
+        survey_sigma_m: float,
+        sigmas: float,
+    ) -> _CornerExtent:
+        near_a, far_a = _extent_from_node(a, corner.node, before=True)
+        near_b, far_b = _extent_from_node(b, corner.node, before=False)
+        sin_d = max(abs(math.sin(corner.deflection)), 1e-3)
+        # Along-line uncertainty of the node and of the ends: noise over the corner's sine.
+        sig_along = noise * (1.0 + 1.0 / sin_d) + survey_sigma_m
+        # Centroid of the seen extent (mid-point), not the mean of the returns,
+        # which crowd towards the scanner.
+        c_meas = float(np.hypot(*(a.midpoint - b.midpoint)))
+        return cls(near_a, far_a, near_b, far_b, sigmas * sig_along, c_meas)
+
+
 def _test_corner(
     corner: Corner,
     a: Segment,
     b: Segment,
     beacon: Beacon,
-    noise: float,
+    ext: _CornerExtent,
     survey_sigma_m: float,
     cfg: IdentificationConfig,
 ) -> list[NodeMatch]:
     tpl = beacon.template
     out: list[NodeMatch] = []
-    near_a, far_a = _extent_from_node(a, corner.node, before=True)
-    near_b, far_b = _extent_from_node(b, corner.node, before=False)
-    sin_d = max(abs(math.sin(corner.deflection)), 1e-3)
-    # Along-line uncertainty of the node and of the ends: noise over the corner's sine.
-    sig_along = noise * (1.0 + 1.0 / sin_d) + survey_sigma_m
-    tol = cfg.sigmas * sig_along
+    near_a, far_a, near_b, far_b, tol = ext.near_a, ext.far_a, ext.near_b, ext.far_b, ext.tol
     if near_a < -tol or near_b < -tol:
         return out  # the lines meet inside a segment: not a corner of two panels
     sig_theta = math.hypot(a.sigma_direction, b.sigma_direction)
@@ -172,9 +200,7 @@ def _test_corner(
                 continue
             ok_a = far_a >= la - a.spacing_start - tol
             ok_b = far_b >= lb - b.spacing_end - tol
-            # Centroid of the seen extent (mid-point), not the mean of the returns,
-            # which crowd towards the scanner.
-            c_meas = float(np.hypot(*(a.midpoint - b.midpoint)))
+            c_meas = ext.c_meas
             c_design = float(tpl.centroid_distances[j])
             slack = 0.5 * (max(near_a, 0) + (la - far_a) + max(near_b, 0) + (lb - far_b))
             ok_c = abs(c_meas - c_design) <= abs(slack) + tol
@@ -234,10 +260,11 @@ def identify_panels(
     beacons = list(beacons)
     for corner in segmentation.corners:
         a, b = segs[corner.first], segs[corner.second]
+        ext = _CornerExtent.of(corner, a, b, segmentation.noise_m, survey_sigma_m, config.sigmas)
+        if ext.near_a < -ext.tol or ext.near_b < -ext.tol:
+            continue  # the lines meet inside a segment: not a corner of two panels
         for beacon in beacons:
-            nodes.extend(
-                _test_corner(corner, a, b, beacon, segmentation.noise_m, survey_sigma_m, config)
-            )
+            nodes.extend(_test_corner(corner, a, b, beacon, ext, survey_sigma_m, config))
     singles: list[SingleMatch] = []
     noise = segmentation.noise_m
     for seg in segs:

@@ -27,10 +27,10 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import stats
 
 from mast.core.linalg import grouped_quadratic_form
 from mast.core.noise import NoiseModel
+from mast.core.quantiles import chi2_isf, norm_ppf
 from mast.pipeline.adjustment import Adjustment, Observations
 
 __all__ = [
@@ -58,7 +58,7 @@ def standardised_residuals(adj: Adjustment) -> NDArray[np.float64]:
 
 def w_critical(n: int, alpha: float = W_TEST_ALPHA) -> float:
     """Critical |w| for the largest of ``n`` standardised residuals (two-sided, Bonferroni)."""
-    return float(stats.norm.ppf(1 - alpha / 2 / max(n, 1)))
+    return norm_ppf(1 - alpha / 2 / max(n, 1))
 
 
 def snoop(
@@ -151,7 +151,7 @@ def beacon_tests(
         if dof_rest > 0:
             t /= max(1.0, float(v_rest @ (w[rest] * v_rest)) / dof_rest)
         n = int(d.size)
-        out.append(BeaconTest(int(b), t, n, float(stats.chi2.ppf(1 - alpha / ids.size, n))))
+        out.append(BeaconTest(int(b), t, n, chi2_isf(alpha / ids.size, n)))
     return out
 
 

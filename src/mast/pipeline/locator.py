@@ -20,7 +20,6 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import stats
 
 from mast.core.beacon import Survey
 from mast.core.geometry import PanelSet
@@ -32,6 +31,7 @@ from mast.core.noise import (
     NoiseModel,
 )
 from mast.core.pose import Pose2D
+from mast.core.quantiles import chi2_sf
 from mast.core.scan import Scan
 from mast.pipeline.adjustment import (
     Adjustment,
@@ -392,7 +392,7 @@ def locate(scan: Scan, survey: Survey, *, config: LocatorConfig | None = None) -
             residuals=res,
         )
     obs, adj, excluded, more, tests = cleaned
-    if adj.dof > 0 and stats.chi2.sf(adj.reference_variance * adj.dof, adj.dof) < cfg.reject_alpha:
+    if adj.dof > 0 and chi2_sf(adj.reference_variance * adj.dof, adj.dof) < cfg.reject_alpha:
         return finish(
             reason="rejected",
             detail=f"reference variance {adj.reference_variance:.2f} on {adj.dof} degrees "

@@ -29,12 +29,12 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import stats
 
 from mast.core.geometry import PanelSet, first_hits
 from mast.core.index import SurveyIndex
 from mast.core.noise import NoiseModel
 from mast.core.pose import Pose2D
+from mast.core.quantiles import chi2_isf, chi2_sf
 from mast.core.scan import Scan
 from mast.pipeline.alignment import IcpResult, icp_point_to_line
 from mast.pipeline.hypotheses import Hypothesis, corner_covariance, node_sigma
@@ -351,12 +351,12 @@ def _shows_a_bend(chi_line: float, chi_beacon: float, alpha: float) -> bool:
     (the line has two free parameters; the panels none). Roughness and extra
     noise inflate both sums alike, so rough rock does not pass for a bend.
     """
-    return chi_line - chi_beacon > float(stats.chi2.isf(alpha, 2))
+    return chi_line - chi_beacon > chi2_isf(alpha, 2)
 
 
 def _fits_in_place(chi_beacon: float, n: int, alpha: float) -> bool:
     """Whether a beacon's returns lie on its surveyed panels at the pose, within their noise."""
-    return n > 0 and float(stats.chi2.sf(chi_beacon, n)) > alpha
+    return n > 0 and chi2_sf(chi_beacon, n) > alpha
 
 
 def _stray_corner(
