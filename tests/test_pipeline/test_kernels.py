@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from mast.core._kernels import partition_dp
+from mast.core._kernels import line_fits, partition_dp, segment_run
 from mast.core.geometry import PanelSet
 from mast.core.pose import Pose2D
 from mast.pipeline import segmentation as seg
@@ -64,6 +64,67 @@ def test_partition_kernel_matches_the_reference_on_polylines(
     pts = pts * ((r + sigma * rng.standard_normal(n)) / r)[:, None]
     var = max(sigma, 1e-4) ** 2
     np.testing.assert_array_equal(_kernel_pointers(pts, var), seg._partition_reference(pts, var))
+
+
+def _pieces_reference(points: np.ndarray, var: float, min_points: int = 3) -> np.ndarray:
+    pieces = seg._refine(points, seg._partition(points, var), var, min_points)
+    return np.array(pieces, dtype=np.intp).reshape(-1, 2)
+
+
+def _runs_of(points: np.ndarray) -> list[np.ndarray]:
+    """The scan's stretches without a breakpoint, as segment_scan cuts them."""
+    step = np.hypot(*np.diff(points, axis=0).T)
+    cuts = np.flatnonzero(step > 0.3) + 1
+    return [r for r in np.split(points, cuts) if len(r) >= 3]
+
+
+def test_segment_run_kernel_matches_partition_and_refine_on_scans() -> None:
+    for pts in _scans():
+        for run in _runs_of(pts):
+            for var in (1e-10, 0.003**2, 0.02**2):
+                got = segment_run(np.ascontiguousarray(run), var, 3, seg.MAX_PIECE)
+                np.testing.assert_array_equal(got, _pieces_reference(run, var))
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    n=st.integers(3, 400),
+    seed=st.integers(0, 2**32 - 1),
+    corners=st.integers(0, 6),
+    sigma=st.sampled_from([0.0, 1e-3, 0.02]),
+)
+def test_segment_run_kernel_matches_the_reference_on_polylines(
+    n: int, seed: int, corners: int, sigma: float
+) -> None:
+    rng = np.random.default_rng(seed)
+    knots = np.sort(rng.uniform(0, 1, corners))
+    t = np.linspace(0, 1, n)
+    heading = np.cumsum(np.r_[0.0, rng.uniform(-1.2, 1.2, corners)])
+    piece = np.searchsorted(knots, t)
+    step = np.column_stack([np.cos(heading[piece]), np.sin(heading[piece])]) * (12.0 / n)
+    pts = np.array([3.0, -4.0]) + np.cumsum(step, axis=0)
+    r = np.hypot(*pts.T)
+    pts = pts * ((r + sigma * rng.standard_normal(n)) / r)[:, None]
+    var = max(sigma, 1e-4) ** 2
+    got = segment_run(np.ascontiguousarray(pts), var, 3, seg.MAX_PIECE)
+    np.testing.assert_array_equal(got, _pieces_reference(pts, var))
+
+
+def test_line_fit_kernel_matches_make_segment() -> None:
+    for pts in _scans():
+        for run in _runs_of(pts):
+            pieces = _pieces_reference(run, 0.003**2)
+            fits = line_fits(np.ascontiguousarray(run), pieces, 0.003)
+            for (i, j), fit in zip(pieces.tolist(), fits, strict=True):
+                ref = seg._make_segment(0, 0, np.arange(i, j), run[i:j], 0.003)
+                got = seg._segment_of(0, 0, np.arange(i, j), run[i:j], fit)
+                for name in ("centroid", "direction", "normal", "start", "end"):
+                    np.testing.assert_allclose(
+                        getattr(got, name), getattr(ref, name), rtol=0, atol=1e-9, err_msg=name
+                    )
+                for name in ("length", "rms", "spacing_start", "spacing_end"):
+                    assert getattr(got, name) == pytest.approx(getattr(ref, name), abs=1e-9)
+                assert got.sigma_direction == pytest.approx(ref.sigma_direction, rel=1e-7)
 
 
 def test_association_kernel_matches_the_reference() -> None:

@@ -20,7 +20,9 @@ __all__ = [
     "associate",
     "first_hits",
     "icp_stages",
+    "line_fits",
     "partition_dp",
+    "segment_run",
     "window_scores",
     "within",
 ]
@@ -356,8 +358,208 @@ def _window_scores(
     return out
 
 
+def _run_moments(points: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Cumulative sums (from 0) of the centred points' first and second moments and
+    of the unit beam vectors' second moments, rows in ``partition_dp``'s order
+    (``segmentation._cumulative_moments`` in numpy)."""
+    n = points.shape[0]
+    mx = 0.0
+    my = 0.0
+    for i in range(n):
+        mx += points[i, 0]
+        my += points[i, 1]
+    mx /= n
+    my /= n
+    out = np.zeros((8, n + 1))
+    for i in range(n):
+        x, y = points[i, 0], points[i, 1]
+        cx, cy = x - mx, y - my
+        r = math.hypot(x, y)
+        ux, uy = (x / r, y / r) if r > 0.0 else (x, y)
+        out[0, i + 1] = out[0, i] + cx
+        out[1, i + 1] = out[1, i] + cy
+        out[2, i + 1] = out[2, i] + cx * cx
+        out[3, i + 1] = out[3, i] + cy * cy
+        out[4, i + 1] = out[4, i] + cx * cy
+        out[5, i + 1] = out[5, i] + ux * ux
+        out[6, i + 1] = out[6, i] + uy * uy
+        out[7, i + 1] = out[7, i] + ux * uy
+    return out
+
+
+def _scatter(points: NDArray[np.float64], lo: int, hi: int) -> tuple[float, ...]:
+    """Centroid and centred scatter (two passes) of ``points[lo:hi]``."""
+    m = hi - lo
+    mx = 0.0
+    my = 0.0
+    for i in range(lo, hi):
+        mx += points[i, 0]
+        my += points[i, 1]
+    mx /= m
+    my /= m
+    vxx = 0.0
+    vyy = 0.0
+    vxy = 0.0
+    for i in range(lo, hi):
+        cx, cy = points[i, 0] - mx, points[i, 1] - my
+        vxx += cx * cx
+        vyy += cy * cy
+        vxy += cx * cy
+    return mx, my, vxx, vyy, vxy
+
+
+def _major_axis(vxx: float, vyy: float, vxy: float) -> tuple[float, float, float]:
+    """Smallest eigenvalue of the scatter (the TLS SSE, >= 0) and the unit major axis."""
+    dv = vxx - vyy
+    q = 0.25 * dv * dv + vxy * vxy
+    half_r = math.sqrt(q) if q > 0.0 else 0.0
+    sse = max(0.5 * (vxx + vyy) - half_r, 0.0)
+    theta = 0.5 * math.atan2(2.0 * vxy, dv)
+    return sse, math.cos(theta), math.sin(theta)
+
+
+def _piece_sse_nu2(points: NDArray[np.float64], lo: int, hi: int) -> tuple[float, float]:
+    """TLS SSE of ``points[lo:hi]`` (0 below three points) and mean (normal . u)^2."""
+    _, _, vxx, vyy, vxy = _scatter_jit(points, lo, hi)
+    sse, dx, dy = _major_axis_jit(vxx, vyy, vxy)
+    nx, ny = -dy, dx
+    acc = 0.0
+    for i in range(lo, hi):
+        x, y = points[i, 0], points[i, 1]
+        r = math.hypot(x, y)
+        if r > 0.0:
+            x, y = x / r, y / r
+        c = nx * x + ny * y
+        acc += c * c
+    return (sse if hi - lo >= 3 else 0.0), acc / (hi - lo)
+
+
+def _partition_run(points: NDArray[np.float64], var: float, max_piece: int) -> NDArray[np.intp]:
+    """``segmentation._partition_impl`` compiled: the optimal partition of one run,
+    cuts that only the cap on piece length made undone; pieces as (start, end) rows."""
+    n = points.shape[0]
+    mom = _run_moments_jit(points)
+    w = min(n, max_piece)
+    pen = 4.0 * math.log(max(n, 2)) + 12.0
+    last = _partition_dp_jit(
+        mom[0], mom[1], mom[2], mom[3], mom[4], mom[5], mom[6], mom[7], var, pen, w
+    )
+    k = 0
+    e = n
+    while e > 0:
+        k += 1
+        e = last[e]
+    pieces = np.empty((k, 2), dtype=np.intp)
+    e = n
+    for q in range(k - 1, -1, -1):
+        pieces[q, 0] = last[e]
+        pieces[q, 1] = e
+        e = last[e]
+    out = np.empty((k, 2), dtype=np.intp)
+    m = 0
+    for q in range(k):
+        a0, b0 = pieces[q, 0], pieces[q, 1]
+        if m > 0 and b0 - out[m - 1, 0] > w:
+            s0 = out[m - 1, 0]
+            sse_j, _ = _piece_sse_nu2_jit(points, s0, a0)
+            sse_p, _ = _piece_sse_nu2_jit(points, a0, b0)
+            sse_b, nu2_b = _piece_sse_nu2_jit(points, s0, b0)
+            if (sse_b - sse_j - sse_p) / (var * max(nu2_b, 0.05)) <= pen:
+                out[m - 1, 1] = b0
+                continue
+        out[m, 0] = a0
+        out[m, 1] = b0
+        m += 1
+    return out[:m]
+
+
+def _segment_run(
+    points: NDArray[np.float64], var: float, min_points: int, max_piece: int
+) -> NDArray[np.intp]:
+    """One run's pieces: partitioned, then each piece partitioned again with the
+    penalty of its own length (``segmentation._partition`` then ``_refine``)."""
+    n = points.shape[0]
+    first = _partition_run_jit(points, var, max_piece)
+    parts = []
+    for q in range(first.shape[0]):
+        i, j = first[q, 0], first[q, 1]
+        if j - i >= 2 * min_points and j - i < n:
+            sub = _partition_run_jit(points[i:j], var, max_piece)
+            for s in range(sub.shape[0]):
+                parts.append((i + sub[s, 0], i + sub[s, 1]))
+        else:
+            parts.append((i, j))
+    out = np.empty((len(parts), 2), dtype=np.intp)
+    for q in range(len(parts)):
+        out[q, 0] = parts[q][0]
+        out[q, 1] = parts[q][1]
+    return out
+
+
+def _line_fits(
+    points: NDArray[np.float64], pieces: NDArray[np.intp], noise: float
+) -> NDArray[np.float64]:
+    """Every piece's total-least-squares line (``segmentation.fit_line`` and
+    ``_make_segment``): rows of centroid (2), direction (2), rms, length, start
+    and end along the line from the centroid, the spacings at both ends, and the
+    direction's standard deviation for range noise ``noise``."""
+    out = np.empty((pieces.shape[0], 10))
+    for q in range(pieces.shape[0]):
+        lo, hi = pieces[q, 0], pieces[q, 1]
+        m = hi - lo
+        mx, my, vxx, vyy, vxy = _scatter_jit(points, lo, hi)
+        _, dx, dy = _major_axis_jit(vxx, vyy, vxy)
+        if (points[hi - 1, 0] - points[lo, 0]) * dx + (points[hi - 1, 1] - points[lo, 1]) * dy < 0:
+            dx, dy = -dx, -dy
+        nx, ny = -dy, dx
+        res2 = 0.0
+        t_spread = 0.0
+        nu2 = 0.0
+        for i in range(lo, hi):
+            x, y = points[i, 0], points[i, 1]
+            cx, cy = x - mx, y - my
+            res = cx * nx + cy * ny
+            tt = cx * dx + cy * dy
+            res2 += res * res
+            t_spread += tt * tt
+            r = math.hypot(x, y)
+            c = (x * nx + y * ny) / r
+            nu2 += c * c
+        t0 = (points[lo, 0] - mx) * dx + (points[lo, 1] - my) * dy
+        t1 = (points[hi - 1, 0] - mx) * dx + (points[hi - 1, 1] - my) * dy
+        s0 = s1 = 0.0
+        if m > 1:
+            s0 = abs(
+                (points[lo + 1, 0] - points[lo, 0]) * dx + (points[lo + 1, 1] - points[lo, 1]) * dy
+            )
+            s1 = abs(
+                (points[hi - 1, 0] - points[hi - 2, 0]) * dx
+                + (points[hi - 1, 1] - points[hi - 2, 1]) * dy
+            )
+        perp = noise * math.sqrt(max(nu2 / m, 1e-6))
+        out[q, 0] = mx
+        out[q, 1] = my
+        out[q, 2] = dx
+        out[q, 3] = dy
+        out[q, 4] = math.sqrt(res2 / m)
+        out[q, 5] = t0
+        out[q, 6] = t1
+        out[q, 7] = s0
+        out[q, 8] = s1
+        out[q, 9] = perp / math.sqrt(t_spread) if t_spread > 0.0 else math.inf
+    return out
+
+
 #: Compiled on first use (numba's own types; mypy sees plain callables).
 partition_dp: Callable[..., NDArray[np.intp]] = njit(cache=True, nogil=True)(_partition_dp)
+_partition_dp_jit = partition_dp
+_run_moments_jit: Callable[..., Any] = njit(cache=True, nogil=True)(_run_moments)
+_scatter_jit: Callable[..., Any] = njit(cache=True, nogil=True)(_scatter)
+_major_axis_jit: Callable[..., Any] = njit(cache=True, nogil=True)(_major_axis)
+_piece_sse_nu2_jit: Callable[..., Any] = njit(cache=True, nogil=True)(_piece_sse_nu2)
+_partition_run_jit: Callable[..., Any] = njit(cache=True, nogil=True)(_partition_run)
+segment_run: Callable[..., NDArray[np.intp]] = njit(cache=True, nogil=True)(_segment_run)
+line_fits: Callable[..., NDArray[np.float64]] = njit(cache=True, nogil=True)(_line_fits)
 associate: Callable[..., Any] = njit(cache=True, nogil=True)(_associate)
 _associate_jit = associate
 icp_stages: Callable[..., Any] = njit(cache=True, nogil=True)(_icp_stages)

@@ -110,7 +110,8 @@ def _line_variances(seg: Segment, noise: float, node: NDArray[np.float64]) -> fl
     ``sigma_direction^2``; at a distance ``t`` from the centroid along the
     line the offset varies by ``s^2/n + t^2 sigma_direction^2``.
     """
-    t = float(np.dot(node - seg.centroid, seg.direction))
+    c, d = seg.centroid, seg.direction
+    t = float((node[0] - c[0]) * d[0] + (node[1] - c[1]) * d[1])
     return noise**2 / max(len(seg), 1) + (t * seg.sigma_direction) ** 2
 
 
@@ -124,13 +125,18 @@ def corner_covariance(
     ``N^-1 d o`` (``N`` the rows ``n_k``), so ``C = N^-1 diag(var_k) N^-T``.
     Shallow corners are poorly placed along their lines, as they should be.
     """
-    nmat = np.array([first.normal, second.normal])
-    det = float(np.linalg.det(nmat))
-    if abs(det) < 1e-3:
-        nmat = nmat + np.array([[0.0, 0.0], [1e-3, 0.0]])
-    inv = np.linalg.inv(nmat)
-    var = np.diag([_line_variances(first, noise_m, at), _line_variances(second, noise_m, at)])
-    return np.asarray(inv @ var @ inv.T)
+    (a, b), (c, d) = first.normal.tolist(), second.normal.tolist()
+    if abs(a * d - b * c) < 1e-3:
+        c += 1e-3  # nearly parallel lines: a finite, very long ellipse along them
+    det = a * d - b * c
+    # N^-1 = [[d, -b], [-c, a]] / det, by hand (a 2x2 is cheaper so than through LAPACK)
+    i00, i01, i10, i11 = d / det, -b / det, -c / det, a / det
+    v0 = _line_variances(first, noise_m, at)
+    v1 = _line_variances(second, noise_m, at)
+    cxx = i00 * i00 * v0 + i01 * i01 * v1
+    cxy = i00 * i10 * v0 + i01 * i11 * v1
+    cyy = i10 * i10 * v0 + i11 * i11 * v1
+    return np.array([[cxx, cxy], [cxy, cyy]])
 
 
 def node_covariance(node: NodeMatch, segmentation: Segmentation) -> NDArray[np.float64]:
@@ -141,7 +147,13 @@ def node_covariance(node: NodeMatch, segmentation: Segmentation) -> NDArray[np.f
 
 def node_sigma(node: NodeMatch, segmentation: Segmentation) -> float:
     """Largest standard deviation of an identified node's position (the ellipse's major axis)."""
-    return math.sqrt(float(np.linalg.eigvalsh(node_covariance(node, segmentation))[-1]))
+    return major_sigma(node_covariance(node, segmentation))
+
+
+def major_sigma(cov: NDArray[np.float64]) -> float:
+    """Square root of a 2x2 covariance's largest eigenvalue (the ellipse's semi-major axis)."""
+    (a, b), (_, c) = cov.tolist()
+    return math.sqrt(max(0.5 * (a + c) + math.hypot(0.5 * (a - c), b), 0.0))
 
 
 def _node_rotations(
@@ -255,9 +267,9 @@ def pose_hypotheses(
                 sim = similarity_transform(
                     np.array([a.node_scanner, b.node_scanner]), np.array([edge_a, edge_b])
                 )
-                spread = math.sqrt(float(np.linalg.eigvalsh(cov[i])[-1])) + 2.0 * float(
-                    np.hypot(*a.node_scanner)
-                ) * min(s_rot, math.pi)
+                spread = major_sigma(cov[i]) + 2.0 * float(np.hypot(*a.node_scanner)) * min(
+                    s_rot, math.pi
+                )
                 pairs.append(Hypothesis((na, nb), sim, max(mis_d, mis_r), "pair", spread))
     # Prefer hypotheses whose nodes were identified with more panels (lower Table 1 option).
     pairs.sort(key=lambda h: (sum(n.option for n in h.nodes), h.misfit))

@@ -458,6 +458,35 @@ def _make_segment(
     )
 
 
+def _segment_of(
+    index: int,
+    run: int,
+    beams: NDArray[np.intp],
+    pts: NDArray[np.float64],
+    fit: NDArray[np.float64],
+) -> Segment:
+    """A segment from its row of :func:`mast.core._kernels.line_fits`."""
+    centroid = fit[0:2].copy()
+    direction = fit[2:4].copy()
+    t0, t1 = float(fit[5]), float(fit[6])
+    return Segment(
+        index=index,
+        run=run,
+        beams=beams,
+        points=pts,
+        centroid=centroid,
+        direction=direction,
+        normal=np.array([-direction[1], direction[0]]),
+        length=t1 - t0,
+        start=centroid + t0 * direction,
+        end=centroid + t1 * direction,
+        rms=float(fit[4]),
+        sigma_direction=float(fit[9]),
+        spacing_start=float(fit[7]),
+        spacing_end=float(fit[8]),
+    )
+
+
 def _runs(
     scan: Scan, beams: NDArray[np.intp], pts: NDArray[np.float64], config: SegmentationConfig
 ) -> tuple[NDArray[np.intp], float]:
@@ -504,21 +533,25 @@ def segment_scan(scan: Scan, config: SegmentationConfig = SegmentationConfig()) 
     if beams.size == 0:
         return Segmentation((), (), config.noise_floor_m)
     run_ids, noise = _runs(scan, beams, pts, config)
+    from mast.core._kernels import line_fits, segment_run
+
     segments: list[Segment] = []
     corners: list[Corner] = []
     # run_ids never decrease: each run is one slice of the returns
     bounds = np.flatnonzero(np.diff(run_ids)) + 1
+    pts = np.ascontiguousarray(pts, dtype=float)
     for lo, hi in zip([0, *bounds.tolist()], [*bounds.tolist(), beams.size], strict=True):
         if hi - lo < config.min_points:
             continue
         run = int(run_ids[lo])
         p = pts[lo:hi]
-        pieces = _refine(p, _partition(p, noise**2), noise**2, config.min_points)
+        # the compiled _refine(p, _partition(p, var), var, min_points)
+        pieces = segment_run(p, noise**2, config.min_points, MAX_PIECE)
+        pieces = pieces[pieces[:, 1] - pieces[:, 0] >= config.min_points]
+        fits = line_fits(p, pieces, noise)  # the compiled _make_segment's fits
         prev: Segment | None = None
-        for i, j in pieces:
-            if j - i < config.min_points:
-                continue
-            seg = _make_segment(len(segments), run, beams[lo + i : lo + j].copy(), p[i:j], noise)
+        for (i, j), fit in zip(pieces.tolist(), fits, strict=True):
+            seg = _segment_of(len(segments), run, beams[lo + i : lo + j].copy(), p[i:j], fit)
             if prev is not None and prev.last_beam + 1 + config.max_gap_beams >= seg.first_beam:
                 corner = _corner(prev, seg)
                 if corner is not None:

@@ -396,8 +396,36 @@ def _stray_corner(
     return False
 
 
+def _panel_counts(icp: IcpResult, panels: PanelSet) -> dict[tuple[str, int], int]:
+    """Returns matched to each (beacon, panel) at the refined pose."""
+    counts: dict[tuple[str, int], int] = {}
+    idx, n = np.unique(icp.panel[icp.panel >= 0], return_counts=True)
+    for k, c in zip(idx, n, strict=True):
+        counts[(panels.ids[panels.beacon[k]], int(panels.panel[k]))] = int(c)
+    return counts
+
+
+def _by_beacon(counts: dict[tuple[str, int], int]) -> dict[str, list[int]]:
+    per_beacon: dict[str, list[int]] = {}
+    for (b, _panel), c in counts.items():
+        per_beacon.setdefault(b, []).append(c)
+    return per_beacon
+
+
+def _may_support(counts: dict[tuple[str, int], int], cfg: VerificationConfig) -> frozenset[str]:
+    """Beacons whose returns are enough for :func:`_support` to consider them at all
+    (two panels with returns, as many in all as two panels need): every beacon that
+    supports a pose is one of these, whatever the beams and corners say."""
+    return frozenset(
+        b
+        for b, cs in _by_beacon(counts).items()
+        if len(cs) >= 2 and sum(cs) >= 2 * cfg.min_panel_points
+    )
+
+
 def _support(
     icp: IcpResult,
+    counts: dict[tuple[str, int], int],
     points_mine: NDArray[np.float64],
     panels: PanelSet,
     index: SurveyIndex,
@@ -407,8 +435,8 @@ def _support(
     noise: NoiseModel,
     cfg: VerificationConfig,
     tracked: bool = False,
-) -> tuple[dict[tuple[str, int], int], tuple[str, ...], tuple[str, ...], tuple[str, ...]]:
-    """Beacons that confirm a pose, the returns on each panel, the cornered and the shaped beacons.
+) -> tuple[tuple[str, ...], tuple[str, ...], tuple[str, ...]]:
+    """Beacons that confirm a pose, the cornered and the shaped beacons.
 
     A beacon confirms the pose when, at that pose, (1) two of its panels
     have returns, ``2 * min_panel_points`` in all, (2) at least
@@ -425,20 +453,12 @@ def _support(
     confirm a pose the beams do not prove); a stray corner beside an edge is
     not held against them (the prior, not a corner, names the beacon).
     """
-    counts: dict[tuple[str, int], int] = {}
-    idx, n = np.unique(icp.panel[icp.panel >= 0], return_counts=True)
-    for k, c in zip(idx, n, strict=True):
-        counts[(panels.ids[panels.beacon[k]], int(panels.panel[k]))] = int(c)
     # Loosely: two panels with returns and as many in all as two panels need.
-    per_beacon: dict[str, list[int]] = {}
-    for (b, _panel), c in counts.items():
-        per_beacon.setdefault(b, []).append(c)
+    per_beacon = _by_beacon(counts)
     candidates = {
         b
-        for b, cs in per_beacon.items()
-        if len(cs) >= 2
-        and sum(cs) >= 2 * cfg.min_panel_points
-        and checks.get(b, BeamCheck()).coverage >= cfg.min_coverage
+        for b in _may_support(counts, cfg)
+        if checks.get(b, BeamCheck()).coverage >= cfg.min_coverage
         and _seen_from_front(index.survey[b].edges, icp.pose.position)
     }
     gate = cfg.gate_sigmas * noise.gate_sigma_m
@@ -491,7 +511,25 @@ def _support(
             supported.add(b)
             if bent:
                 shaped.add(b)
-    return counts, tuple(sorted(supported)), tuple(sorted(node_ok)), tuple(sorted(shaped))
+    return tuple(sorted(supported)), tuple(sorted(node_ok)), tuple(sorted(shaped))
+
+
+@dataclass(eq=False, slots=True)
+class _Refined:
+    """A start refined by ICP; judged by the beams only when some hypothesis needs it."""
+
+    hypothesis: Hypothesis
+    icp: IcpResult
+    counts: dict[tuple[str, int], int]
+    may_support: frozenset[str]
+    near: NDArray[np.intp]  # the panels in reach of the start
+    verified: Verified | None = None
+
+    def same_pose(self, other: Pose2D, cfg: VerificationConfig) -> bool:
+        p = self.icp.pose
+        d = math.hypot(other.easting - p.easting, other.northing - p.northing)
+        da = abs(math.remainder(other.azimuth - p.azimuth, 2 * math.pi))
+        return d < cfg.duplicate_m and da < cfg.duplicate_rad
 
 
 def verify(
@@ -508,23 +546,48 @@ def verify(
 
     A hypothesis is kept when the beacons it was formed from support the
     refined pose and few beams pass through surveyed panels. Hypotheses that
-    start where an earlier one ended are skipped (the same pose again).
+    start where an earlier one ended are skipped (the same pose again). A
+    refined pose is judged by the beams (:func:`check_beams`, :func:`_support`)
+    only when its returns leave the hypothesis' beacons a chance of support:
+    otherwise the hypothesis could not be kept whatever the beams say.
     """
     _, pts = scan.points()
     final_gate = cfg.gate_sigmas * noise.gate_sigma_m
     gates = (*cfg.coarse_gates_m, final_gate)
     reach = scan.range_max_m + 1.0
     out: list[Verified] = []
-    done: list[Verified] = []
+    done: list[_Refined] = []
+
+    def judged(r: _Refined) -> Verified:
+        """``r`` judged by the beams, under the hypothesis it was refined for."""
+        if r.verified is None:
+            h0, icp = r.hypothesis, r.icp
+            checks = check_beams(scan, icp.pose, panels, noise, cfg, subset=r.near)
+            supported, cornered, shaped = _support(
+                icp,
+                r.counts,
+                icp.pose.scanner_to_mine(pts),
+                panels,
+                index,
+                ident,
+                seg,
+                checks,
+                noise,
+                cfg,
+                tracked=h0.kind == "prior",
+            )
+            r.verified = Verified(h0, icp, r.counts, supported, checks, cornered, shaped)
+        return r.verified
+
     for h in hypotheses:
         start = h.similarity.pose()
-        again = next((v for v in done if v.same_pose(start, cfg)), None)
+        again = next((r for r in done if r.same_pose(start, cfg)), None)
         if again is not None:
             # The same start refines to the same pose: judge it again under this
             # hypothesis' labels (another beacon's name may be the right one).
-            if any(o.same_pose(again.pose, cfg) for o in out):
+            if any(o.same_pose(again.icp.pose, cfg) for o in out):
                 continue
-            v = replace(again, hypothesis=h)
+            refined = again
         else:
             near = panels.near(start.position, reach)
             if near.size == 0:
@@ -534,21 +597,14 @@ def verify(
             icp = icp_point_to_line(pts, start, panels, gates_m=(*wide, *gates), subset=near)
             if any(v.same_pose(icp.pose, cfg) for v in out):
                 continue  # converged onto a pose already confirmed
-            checks = check_beams(scan, icp.pose, panels, noise, cfg, subset=near)
-            counts, supported, cornered, shaped = _support(
-                icp,
-                icp.pose.scanner_to_mine(pts),
-                panels,
-                index,
-                ident,
-                seg,
-                checks,
-                noise,
-                cfg,
-                tracked=h.kind == "prior",
-            )
-            v = Verified(h, icp, counts, supported, checks, cornered, shaped)
-            done.append(v)
+            counts = _panel_counts(icp, panels)
+            refined = _Refined(h, icp, counts, _may_support(counts, cfg), near)
+            done.append(refined)
+        if not set(h.beacons) <= refined.may_support:
+            continue  # its beacons cannot support the pose: no beam need be checked
+        v = judged(refined)
+        if again is not None:
+            v = replace(v, hypothesis=h)
         supported, checks = v.supported, v.checks
         if not set(h.beacons) <= set(supported):
             continue

@@ -1,0 +1,75 @@
+"""Where two fitted lines meet, and how well: the node covariance against Monte Carlo."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from mast.pipeline.hypotheses import corner_covariance, major_sigma
+from mast.pipeline.segmentation import _make_segment
+
+
+def _segment(points: np.ndarray, noise: float, index: int = 0):  # type: ignore[no-untyped-def]
+    return _make_segment(index, 0, np.arange(len(points)), points, noise)
+
+
+def _corner(a_dir: float, b_dir: float, n: int, rng: np.random.Generator, noise: float):  # type: ignore[no-untyped-def]
+    """Two straight runs of returns meeting at (4, 1), ranges noisy by ``noise``."""
+    node = np.array([4.0, 1.0])
+    t = np.linspace(0.05, 0.6, n)
+    ua = np.array([math.cos(a_dir), math.sin(a_dir)])
+    ub = np.array([math.cos(b_dir), math.sin(b_dir)])
+    a = node - t[::-1, None] * ua
+    b = node + t[:, None] * ub
+
+    def noisy(p: np.ndarray) -> np.ndarray:
+        r = np.hypot(*p.T)
+        return p * ((r + noise * rng.standard_normal(len(r))) / r)[:, None]
+
+    return _segment(noisy(a), noise), _segment(noisy(b), noise, 1), node
+
+
+def _meet(a, b) -> np.ndarray:  # type: ignore[no-untyped-def]
+    nmat = np.array([a.normal, b.normal])
+    return np.linalg.solve(nmat, [a.normal @ a.centroid, b.normal @ b.centroid])
+
+
+@pytest.mark.parametrize("turn_deg", [90.0, 30.0, 150.0])
+def test_corner_covariance_matches_the_scatter_of_intersections(turn_deg: float) -> None:
+    rng = np.random.default_rng(4)
+    noise = 0.01
+    nodes, covs = [], []
+    for _ in range(600):
+        a, b, _node = _corner(1.2, 1.2 + math.radians(turn_deg), 40, rng, noise)
+        at = _meet(a, b)
+        nodes.append(at)
+        covs.append(corner_covariance(a, b, at, noise))
+    scatter = np.cov(np.array(nodes).T)
+    predicted = np.mean(covs, axis=0)
+    # Never optimistic (beyond Monte Carlo error, ~6 % for 600 draws), and not much
+    # wider: the range noise bounds the noise across each line (face-on beams).
+    ratio = np.trace(predicted) / np.trace(scatter)
+    assert 0.85 <= ratio <= 2.0
+    assert 0.9 <= major_sigma(predicted) / major_sigma(scatter) <= 1.5
+
+
+def test_corner_covariance_equals_the_matrix_formula() -> None:
+    rng = np.random.default_rng(1)
+    for turn in (90.0, 10.0, 0.01):  # the last nearly parallel: regularised, still finite
+        a, b, node = _corner(0.3, 0.3 + math.radians(turn), 20, rng, 0.005)
+        nmat = np.array([a.normal, b.normal])
+        if abs(np.linalg.det(nmat)) < 1e-3:
+            nmat = nmat + np.array([[0.0, 0.0], [1e-3, 0.0]])
+        inv = np.linalg.inv(nmat)
+
+        var = [
+            0.005**2 / len(s) + (float((node - s.centroid) @ s.direction) * s.sigma_direction) ** 2
+            for s in (a, b)
+        ]
+        ref = inv @ np.diag(var) @ inv.T
+        got = corner_covariance(a, b, node, 0.005)
+        np.testing.assert_allclose(got, ref, rtol=1e-10, atol=0)
+        assert np.all(np.isfinite(got))
+        assert major_sigma(got) == pytest.approx(math.sqrt(np.linalg.eigvalsh(ref)[-1]), rel=1e-10)
