@@ -7,6 +7,7 @@ on stderr and an exit status: 2 bad input, 3 no fix.
 
 from __future__ import annotations
 
+import itertools
 import math
 import os
 import sys
@@ -152,24 +153,25 @@ class OutputFormat(StrEnum):
 
 def _load_scans(
     path: Path, *, topic: str | None, range_min: float | None, range_max: float | None
-) -> tuple[list[Scan], bool]:
-    """The scans in a file: one for a CSV, all LaserScans of a topic for a bag."""
+) -> tuple[Iterator[Scan], bool]:
+    """The scans in a file: one for a CSV, the LaserScans of a topic for a bag, read one
+    at a time as they are located (a bag's scans are never all in memory at once)."""
     from mast.io import read_laserscans, read_scan_csv
     from mast.io.bags import bag_kind
 
     if path == Path("-"):
-        return [_read_stdin_scan(range_min, range_max)], False
+        return iter([_read_stdin_scan(range_min, range_max)]), False
     if not path.exists():
         raise InputError("scan file not found", path=path)
     if path.is_file() and path.suffix.lower() in {".csv", ".txt"}:
         scan = read_scan_csv(path, range_min_m=range_min or 0.0, range_max_m=range_max or math.inf)
-        return [scan], False
+        return iter([scan]), False
     bag_kind(path)  # a clear error for anything that is neither
-    scans = list(read_laserscans(path, topic=topic))
-    scans = [s.with_range_limits(range_min, range_max) for s in scans]
-    if not scans:
+    scans = (s.with_range_limits(range_min, range_max) for s in read_laserscans(path, topic=topic))
+    first = next(scans, None)
+    if first is None:
         raise InputError("bag holds no LaserScan message on that topic", path=path)
-    return scans, True
+    return itertools.chain([first], scans), True
 
 
 def _read_stdin_scan(range_min: float | None, range_max: float | None) -> Scan:
@@ -339,8 +341,10 @@ def locate(
             defaults=frozenset(defaults),
         )
         source = inputs.scan_file or str(scan_path)
+        # tee keeps the one scan being located for its record, not the whole bag
+        mine, theirs = itertools.tee(scans)
         for i, (scan, fix) in enumerate(
-            zip(scans, locate_sequence(scans, survey, config=cfg), strict=True)
+            zip(mine, locate_sequence(theirs, survey, config=cfg), strict=True)
         ):
             fixed += fix.ok
             label = f"{source}#{i}" if many else source
