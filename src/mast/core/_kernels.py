@@ -21,6 +21,7 @@ __all__ = [
     "first_hits",
     "icp_stages",
     "line_fits",
+    "nearest_within",
     "partition_dp",
     "segment_run",
     "window_scores",
@@ -550,6 +551,59 @@ def _line_fits(
     return out
 
 
+def _nearest_within(
+    query: NDArray[np.float64],
+    points: NDArray[np.float64],
+    origin: NDArray[np.float64],
+    cell: float,
+    nx: int,
+    ny: int,
+    start: NDArray[np.intp],
+    order: NDArray[np.intp],
+    gate: float,
+) -> tuple[NDArray[np.float64], NDArray[np.intp]]:
+    """Nearest of ``points`` to each query point closer than ``gate``, through a grid.
+
+    ``points`` are binned in cells of side ``cell`` from ``origin`` (``nx`` by
+    ``ny``; cell ``ix * ny + iy`` holds ``order[start[c]:start[c + 1]]``). As
+    ``scipy.spatial.cKDTree.query(query, distance_upper_bound=gate)`` (the tests
+    compare the two): the distance, or ``inf`` and ``len(points)`` when none is
+    nearer than the gate; equal distances go to the lower index.
+    """
+    m = query.shape[0]
+    n = points.shape[0]
+    dist = np.full(m, np.inf)
+    idx = np.full(m, n, dtype=np.intp)
+    reach = int(math.ceil(gate / cell))  # noqa: RUF046 (an int under numba too)
+    g2 = gate * gate
+    for i in range(m):
+        qx, qy = query[i, 0], query[i, 1]
+        fx = (qx - origin[0]) / cell
+        fy = (qy - origin[1]) / cell
+        if not (math.isfinite(fx) and math.isfinite(fy)):
+            continue
+        # clamped before the conversion: far points meet no cell, and no overflow
+        cx = int(math.floor(min(max(fx, -reach - 1.0), nx + reach + 1.0)))  # noqa: RUF046
+        cy = int(math.floor(min(max(fy, -reach - 1.0), ny + reach + 1.0)))  # noqa: RUF046
+        best = g2
+        bj = -1
+        for ix in range(max(cx - reach, 0), min(cx + reach, nx - 1) + 1):
+            for iy in range(max(cy - reach, 0), min(cy + reach, ny - 1) + 1):
+                c = ix * ny + iy
+                for s in range(start[c], start[c + 1]):
+                    k = order[s]
+                    dx = points[k, 0] - qx
+                    dy = points[k, 1] - qy
+                    d2 = dx * dx + dy * dy
+                    if d2 < best or (d2 == best and bj >= 0 and k < bj):
+                        best = d2
+                        bj = k
+        if bj >= 0:
+            dist[i] = math.sqrt(best)
+            idx[i] = bj
+    return dist, idx
+
+
 #: Compiled on first use (numba's own types; mypy sees plain callables).
 partition_dp: Callable[..., NDArray[np.intp]] = njit(cache=True, nogil=True)(_partition_dp)
 _partition_dp_jit = partition_dp
@@ -560,6 +614,7 @@ _piece_sse_nu2_jit: Callable[..., Any] = njit(cache=True, nogil=True)(_piece_sse
 _partition_run_jit: Callable[..., Any] = njit(cache=True, nogil=True)(_partition_run)
 segment_run: Callable[..., NDArray[np.intp]] = njit(cache=True, nogil=True)(_segment_run)
 line_fits: Callable[..., NDArray[np.float64]] = njit(cache=True, nogil=True)(_line_fits)
+nearest_within: Callable[..., Any] = njit(cache=True, nogil=True)(_nearest_within)
 associate: Callable[..., Any] = njit(cache=True, nogil=True)(_associate)
 _associate_jit = associate
 icp_stages: Callable[..., Any] = njit(cache=True, nogil=True)(_icp_stages)

@@ -25,8 +25,8 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.spatial import cKDTree
 
+from mast.core.neighbours import PointGrid
 from mast.core.scan import Scan
 
 __all__ = ["Keyframe", "Motion", "OdometryConfig", "keyframe", "scan_to_scan"]
@@ -76,7 +76,7 @@ class Keyframe:
 
     points: NDArray[np.float64]
     normals: NDArray[np.float64]
-    tree: cKDTree
+    grid: PointGrid
 
     def __len__(self) -> int:
         return int(self.points.shape[0])
@@ -88,7 +88,8 @@ def keyframe(scan: Scan, config: OdometryConfig | None = None) -> Keyframe:
     _, pts = scan.points()
     n = pts.shape[0]
     if n < 3:
-        return Keyframe(np.zeros((0, 2)), np.zeros((0, 2)), cKDTree(np.zeros((0, 2))))
+        empty = np.zeros((0, 2))
+        return Keyframe(empty, empty, PointGrid.build(empty, max(cfg.gates_m)))
     # Runs of consecutive returns without a jump; a window never crosses one.
     step = np.hypot(*np.diff(pts, axis=0).T)
     r = np.hypot(pts[:, 0], pts[:, 1])
@@ -123,7 +124,7 @@ def keyframe(scan: Scan, config: OdometryConfig | None = None) -> Keyframe:
     good = (k >= 5) & (lmin <= cfg.max_planarity * np.maximum(lmax, 1e-12))
     nrm = np.column_stack([-np.sin(ang), np.cos(ang)])
     keep = pts[good]
-    return Keyframe(keep, nrm[good], cKDTree(keep))
+    return Keyframe(keep, nrm[good], PointGrid.build(keep, max(cfg.gates_m)))
 
 
 @dataclass(frozen=True, slots=True)
@@ -187,7 +188,7 @@ def scan_to_scan(
         for _ in range(cfg.max_iterations):
             c, s_ = math.cos(x[2]), math.sin(x[2])
             m = pts @ np.array([[c, s_], [-s_, c]]) + x[:2]
-            dist, j = key.tree.query(m, distance_upper_bound=gate)
+            dist, j = key.grid.query(m, gate)
             ok = np.isfinite(dist)
             if np.count_nonzero(ok) < cfg.min_matches:
                 return None
@@ -201,7 +202,7 @@ def scan_to_scan(
                 break
     c, s_ = math.cos(x[2]), math.sin(x[2])
     m = pts @ np.array([[c, s_], [-s_, c]]) + x[:2]
-    dist, j = key.tree.query(m, distance_upper_bound=cfg.gates_m[-1])
+    dist, j = key.grid.query(m, cfg.gates_m[-1])
     ok = np.isfinite(dist)
     n = int(np.count_nonzero(ok))
     if n < cfg.min_matches:
