@@ -50,8 +50,10 @@ def test_far_and_non_finite_queries_find_nothing() -> None:
     points = np.array([[0.0, 0.0], [1.0, 0.0]])
     query = np.array([[1e300, 0.0], [-1e300, 5.0], [np.nan, 0.0], [np.inf, 1.0], [0.05, 0.0]])
     dist, idx = PointGrid.build(points, 0.3).query(query, 0.3)
-    assert np.all(np.isinf(dist[:4])) and np.all(idx[:4] == 2)
-    assert idx[4] == 0 and dist[4] == pytest.approx(0.05)
+    assert np.all(np.isinf(dist[:4]))
+    assert np.all(idx[:4] == 2)
+    assert idx[4] == 0
+    assert dist[4] == pytest.approx(0.05)
 
 
 def test_a_wide_extent_keeps_the_grid_small() -> None:
@@ -63,4 +65,5 @@ def test_a_wide_extent_keeps_the_grid_small() -> None:
 
 def test_an_empty_grid_finds_nothing() -> None:
     dist, idx = PointGrid.build(np.zeros((0, 2)), 0.3).query(np.ones((3, 2)), 0.3)
-    assert np.all(np.isinf(dist)) and np.all(idx == 0)
+    assert np.all(np.isinf(dist))
+    assert np.all(idx == 0)
