@@ -17,6 +17,7 @@ def compile_all() -> None:
     """
     from mast.pipeline.locator import LocatorConfig, locate, locate_near
     from mast.pipeline.tracking import Prior
+    from mast.runs.odometry import keyframe, scan_to_scan
     from mast.sim import paper_scene
 
     scene = paper_scene()
@@ -24,3 +25,4 @@ def compile_all() -> None:
         locate(sim.scan, scene.survey)
         prior = Prior(shot.pose, 0.1, math.radians(1.0))
         locate_near(sim.scan, scene.survey, prior, config=LocatorConfig())
+        scan_to_scan(keyframe(sim.scan), sim.scan, range_sigma_m=0.01)  # the odometry's grid
