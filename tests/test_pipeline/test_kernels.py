@@ -234,3 +234,35 @@ def test_first_hits_kernel_matches_the_reference() -> None:
     empty_t, empty_j = first_hits(np.zeros(2), dirs, np.zeros((0, 2)), np.zeros((0, 2)))
     assert np.all(np.isinf(empty_t))
     assert np.all(empty_j == -1)
+
+
+def test_beam_check_kernel_matches_the_reference() -> None:
+    from mast.core.noise import NoiseModel
+    from mast.pipeline.verification import (
+        VerificationConfig,
+        _check_beams_reference,
+        check_beams,
+    )
+
+    scene = paper_scene()
+    panels = PanelSet.from_survey(scene.survey)
+    cfg = VerificationConfig()
+    rng = np.random.default_rng(3)
+    for k, shot in enumerate(scene.shots[:6]):
+        scan = simulate_scan(scene.world, shot.pose, shot.scanner, rng=rng).scan
+        for dx, dy, da in ((0.0, 0.0, 0.0), (0.03, -0.02, 0.004), (0.5, 0.3, -0.05)):
+            pose = Pose2D(shot.pose.easting + dx, shot.pose.northing + dy, shot.pose.azimuth + da)
+            for subset in (None, np.arange(len(panels))[k % 2 :: 2]):
+                noise = NoiseModel(range_sigma_m=0.01)
+                got = check_beams(scan, pose, panels, noise, cfg, subset=subset)
+                ref = _check_beams_reference(scan, pose, panels, noise, cfg, subset=subset)
+                assert got.keys() == ref.keys()
+                for b, c in ref.items():
+                    g = got[b]
+                    assert (g.hit, g.occluded, g.through, g.missing) == (
+                        c.hit,
+                        c.occluded,
+                        c.through,
+                        c.missing,
+                    )
+                    assert g.log_likelihood == pytest.approx(c.log_likelihood, rel=1e-12, abs=1e-9)

@@ -18,6 +18,7 @@ from numpy.typing import NDArray
 
 __all__ = [
     "associate",
+    "beam_checks",
     "first_hits",
     "icp_stages",
     "line_fits",
@@ -604,6 +605,86 @@ def _nearest_within(
     return dist, idx
 
 
+def _beam_checks(
+    origin: NDArray[np.float64],
+    azimuth: float,
+    angles: NDArray[np.float64],
+    ranges: NDArray[np.float64],
+    valid: NDArray[np.bool_],
+    range_min: float,
+    range_max: float,
+    seg_a: NDArray[np.float64],
+    seg_b: NDArray[np.float64],
+    normals: NDArray[np.float64],
+    owner: NDArray[np.intp],
+    owners: int,
+    min_sin: float,
+    gate: float,
+    sigma: float,
+    hit_ll0: float,
+    through_ll: float,
+) -> tuple[NDArray[np.intp], NDArray[np.float64]]:
+    """``verification._check_beams_reference`` beam by beam: for every beam that
+    meets a segment (panels shrunk at their ends) within the range limits, not
+    near grazing, its verdict (hit, occluded, through, missing) counted per owner
+    (beacon), and the log-likelihood of the hits plus ``through_ll`` per through.
+
+    Returns counts, shape (owners, 4), and log-likelihoods, shape (owners,).
+    The ray-segment test is :func:`_first_hits`'s, to the bit.
+    """
+    n = angles.shape[0]
+    m = seg_a.shape[0]
+    counts = np.zeros((owners, 4), dtype=np.intp)
+    ll = np.zeros(owners)
+    ex = np.empty(m)
+    ey = np.empty(m)
+    wx = np.empty(m)
+    wy = np.empty(m)
+    w_x_e = np.empty(m)
+    for k in range(m):
+        ex[k] = seg_b[k, 0] - seg_a[k, 0]
+        ey[k] = seg_b[k, 1] - seg_a[k, 1]
+        wx[k] = seg_a[k, 0] - origin[0]
+        wy[k] = seg_a[k, 1] - origin[1]
+        w_x_e[k] = wx[k] * ey[k] - wy[k] * ex[k]
+    for i in range(n):
+        bearing = azimuth - angles[i]
+        dx, dy = math.sin(bearing), math.cos(bearing)
+        bt = np.inf
+        bj = -1
+        for k in range(m):
+            den = dx * ey[k] - dy * ex[k]
+            if den == 0.0:
+                continue
+            tt = w_x_e[k] / den
+            s = (wx[k] * dy - wy[k] * dx) / den
+            if tt > 1e-12 and s >= 0.0 and s <= 1.0 and tt < bt:
+                bt = tt
+                bj = k
+        if bj < 0 or bt > range_max or bt < range_min:
+            continue
+        if abs(normals[bj, 0] * dx + normals[bj, 1] * dy) <= min_sin:
+            continue
+        b = owner[bj]
+        if not valid[i]:
+            counts[b, 3] += 1
+            continue
+        res = ranges[i] - bt
+        if abs(res) <= gate:
+            counts[b, 0] += 1
+            z = res / sigma
+            ll[b] += hit_ll0 - 0.5 * z * z
+        elif res < -gate:
+            counts[b, 1] += 1
+        elif res > gate:
+            counts[b, 2] += 1
+        else:  # a NaN range marked valid: no verdict but missing
+            counts[b, 3] += 1
+    for b in range(owners):
+        ll[b] += counts[b, 2] * through_ll
+    return counts, ll
+
+
 #: Compiled on first use (numba's own types; mypy sees plain callables).
 partition_dp: Callable[..., NDArray[np.intp]] = njit(cache=True, nogil=True)(_partition_dp)
 _partition_dp_jit = partition_dp
@@ -615,6 +696,7 @@ _partition_run_jit: Callable[..., Any] = njit(cache=True, nogil=True)(_partition
 segment_run: Callable[..., NDArray[np.intp]] = njit(cache=True, nogil=True)(_segment_run)
 line_fits: Callable[..., NDArray[np.float64]] = njit(cache=True, nogil=True)(_line_fits)
 nearest_within: Callable[..., Any] = njit(cache=True, nogil=True)(_nearest_within)
+beam_checks: Callable[..., Any] = njit(cache=True, nogil=True)(_beam_checks)
 associate: Callable[..., Any] = njit(cache=True, nogil=True)(_associate)
 _associate_jit = associate
 icp_stages: Callable[..., Any] = njit(cache=True, nogil=True)(_icp_stages)

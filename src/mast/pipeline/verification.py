@@ -160,7 +160,61 @@ def check_beams(
     legitimately miss. The log-likelihood ratio of a hit is that of a
     Gaussian about the predicted range against a return anywhere in the
     scanner's range; a through-beam costs ``log(through_probability)``.
+
+    Compiled (:func:`mast.core._kernels.beam_checks`); :func:`_check_beams_reference`
+    is the same in numpy (the tests compare the two).
     """
+    from mast.core._kernels import beam_checks
+
+    sel = np.arange(len(panels)) if subset is None else subset
+    a = panels.a[sel] + cfg.edge_margin_m * panels.direction[sel]
+    b = panels.b[sel] - cfg.edge_margin_m * panels.direction[sel]
+    sigma = noise.gate_sigma_m
+    span = max(_reach(scan), 1.0)
+    counts, ll = beam_checks(
+        np.asarray(pose.position, dtype=float),
+        pose.azimuth,
+        np.ascontiguousarray(scan.angles_rad, dtype=float),
+        np.ascontiguousarray(scan.ranges_m, dtype=float),
+        np.ascontiguousarray(scan.valid),
+        float(scan.range_min_m),
+        float(scan.range_max_m),
+        np.ascontiguousarray(a),
+        np.ascontiguousarray(b),
+        np.ascontiguousarray(panels.normal[sel]),
+        np.ascontiguousarray(panels.beacon[sel], dtype=np.intp),
+        len(panels.ids),
+        math.sin(math.radians(cfg.min_check_incidence_deg)),
+        cfg.gate_sigmas * sigma,
+        sigma,
+        math.log(span / (sigma * math.sqrt(2 * math.pi))),
+        math.log(cfg.through_probability),
+    )
+    out: dict[str, BeamCheck] = {}
+    for k in np.flatnonzero(counts.sum(axis=1)):
+        hit_n, occ_n, thr_n, mis_n = (int(c) for c in counts[k])
+        out[panels.ids[k]] = BeamCheck(hit_n, occ_n, thr_n, mis_n, float(ll[k]))
+    return out
+
+
+def _reach(scan: Scan) -> float:
+    """How far clutter may return: the scanner's range, or the farthest return when the
+    scan states no finite maximum."""
+    reach = scan.range_max_m
+    if not math.isfinite(reach):
+        reach = float(np.max(scan.ranges_m[scan.valid], initial=1.0))
+    return reach
+
+
+def _check_beams_reference(
+    scan: Scan,
+    pose: Pose2D,
+    panels: PanelSet,
+    noise: NoiseModel,
+    cfg: VerificationConfig,
+    subset: NDArray[np.intp] | None = None,
+) -> dict[str, BeamCheck]:
+    """:func:`check_beams` in numpy (the tests compare the two)."""
     sel = np.arange(len(panels)) if subset is None else subset
     dirs = pose.beam_directions(scan.angles_rad)
     a = panels.a[sel] + cfg.edge_margin_m * panels.direction[sel]
@@ -181,12 +235,8 @@ def check_beams(
     kind[valid & (res < -gate)] = 1
     kind[valid & (res > gate)] = 2
     kind[valid & (np.abs(res) <= gate)] = 0
-    # Clutter may return anywhere in the scanner's range (the farthest return
-    # when the scan states no finite maximum).
-    reach = scan.range_max_m
-    if not math.isfinite(reach):
-        reach = float(np.max(scan.ranges_m[scan.valid], initial=1.0))
-    span = max(reach, 1.0)
+    # Clutter may return anywhere in the scanner's range.
+    span = max(_reach(scan), 1.0)
     hit_ll = math.log(span / (sigma * math.sqrt(2 * math.pi))) - 0.5 * (res / sigma) ** 2
     beacon = panels.beacon[j]
     out: dict[str, BeamCheck] = {}
