@@ -34,6 +34,20 @@ def _scans() -> list[np.ndarray]:
     return out
 
 
+def _polyline(n: int, seed: int, corners: int, sigma: float, length: float) -> np.ndarray:
+    """``n`` returns along a polyline of straight pieces seen from the origin, range noise
+    ``sigma``."""
+    rng = np.random.default_rng(seed)
+    knots = np.sort(rng.uniform(0, 1, corners))
+    t = np.linspace(0, 1, n)
+    heading = np.cumsum(np.r_[0.0, rng.uniform(-1.2, 1.2, corners)])
+    piece = np.searchsorted(knots, t)
+    step = np.column_stack([np.cos(heading[piece]), np.sin(heading[piece])]) * (length / max(n, 1))
+    pts = np.array([3.0, -4.0]) + np.cumsum(step, axis=0)
+    r = np.hypot(*pts.T)
+    return np.asarray(pts * ((r + sigma * rng.standard_normal(n)) / r)[:, None])
+
+
 @pytest.mark.parametrize("max_piece", [seg.MAX_PIECE, 16])
 def test_partition_kernel_matches_the_reference_on_scans(max_piece: int) -> None:
     for pts in _scans():
@@ -52,16 +66,7 @@ def test_partition_kernel_matches_the_reference_on_scans(max_piece: int) -> None
 def test_partition_kernel_matches_the_reference_on_polylines(
     n: int, seed: int, corners: int, sigma: float
 ) -> None:
-    rng = np.random.default_rng(seed)
-    # A polyline of straight pieces seen from the origin, with range noise.
-    knots = np.sort(rng.uniform(0, 1, corners))
-    t = np.linspace(0, 1, n)
-    heading = np.cumsum(np.r_[0.0, rng.uniform(-1.2, 1.2, corners)])
-    piece = np.searchsorted(knots, t)
-    step = np.column_stack([np.cos(heading[piece]), np.sin(heading[piece])]) * (8.0 / max(n, 1))
-    pts = np.array([3.0, -4.0]) + np.cumsum(step, axis=0)
-    r = np.hypot(*pts.T)
-    pts = pts * ((r + sigma * rng.standard_normal(n)) / r)[:, None]
+    pts = _polyline(n, seed, corners, sigma, 8.0)
     var = max(sigma, 1e-4) ** 2
     np.testing.assert_array_equal(_kernel_pointers(pts, var), seg._partition_reference(pts, var))
 
@@ -96,15 +101,7 @@ def test_segment_run_kernel_matches_partition_and_refine_on_scans() -> None:
 def test_segment_run_kernel_matches_the_reference_on_polylines(
     n: int, seed: int, corners: int, sigma: float
 ) -> None:
-    rng = np.random.default_rng(seed)
-    knots = np.sort(rng.uniform(0, 1, corners))
-    t = np.linspace(0, 1, n)
-    heading = np.cumsum(np.r_[0.0, rng.uniform(-1.2, 1.2, corners)])
-    piece = np.searchsorted(knots, t)
-    step = np.column_stack([np.cos(heading[piece]), np.sin(heading[piece])]) * (12.0 / n)
-    pts = np.array([3.0, -4.0]) + np.cumsum(step, axis=0)
-    r = np.hypot(*pts.T)
-    pts = pts * ((r + sigma * rng.standard_normal(n)) / r)[:, None]
+    pts = _polyline(n, seed, corners, sigma, 12.0)
     var = max(sigma, 1e-4) ** 2
     got = segment_run(np.ascontiguousarray(pts), var, 3, seg.MAX_PIECE)
     np.testing.assert_array_equal(got, _pieces_reference(pts, var))

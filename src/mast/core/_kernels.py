@@ -138,18 +138,11 @@ def _associate(
     return idx, dist
 
 
-def _first_hits(
-    origin: NDArray[np.float64],
-    directions: NDArray[np.float64],
-    seg_a: NDArray[np.float64],
-    seg_b: NDArray[np.float64],
-) -> tuple[NDArray[np.float64], NDArray[np.intp]]:
-    """``geometry._first_hits_reference`` ray by ray: the same crossing formulas,
-    the first segment on a tie (as ``argmin``)."""
-    n = directions.shape[0]
+def _crossing_terms(
+    origin: NDArray[np.float64], seg_a: NDArray[np.float64], seg_b: NDArray[np.float64]
+) -> tuple[NDArray[np.float64], ...]:
+    """Per segment, what every ray from ``origin`` needs to find where it crosses it."""
     m = seg_a.shape[0]
-    best = np.full(n, np.inf)
-    which = np.full(n, -1, dtype=np.intp)
     ex = np.empty(m)
     ey = np.empty(m)
     wx = np.empty(m)
@@ -161,21 +154,50 @@ def _first_hits(
         wx[k] = seg_a[k, 0] - origin[0]
         wy[k] = seg_a[k, 1] - origin[1]
         w_x_e[k] = wx[k] * ey[k] - wy[k] * ex[k]
+    return ex, ey, wx, wy, w_x_e
+
+
+def _first_crossing(
+    dx: float,
+    dy: float,
+    ex: NDArray[np.float64],
+    ey: NDArray[np.float64],
+    wx: NDArray[np.float64],
+    wy: NDArray[np.float64],
+    w_x_e: NDArray[np.float64],
+) -> tuple[float, int]:
+    """Distance along the ray ``(dx, dy)`` to the first segment it crosses, and which
+    (``inf`` and -1 for none; the first segment on a tie, as ``argmin``)."""
+    bt = np.inf
+    bj = -1
+    for k in range(ex.shape[0]):
+        den = dx * ey[k] - dy * ex[k]
+        if den == 0.0:
+            continue
+        tt = w_x_e[k] / den
+        s = (wx[k] * dy - wy[k] * dx) / den
+        if tt > 1e-12 and s >= 0.0 and s <= 1.0 and tt < bt:
+            bt = tt
+            bj = k
+    return bt, bj
+
+
+def _first_hits(
+    origin: NDArray[np.float64],
+    directions: NDArray[np.float64],
+    seg_a: NDArray[np.float64],
+    seg_b: NDArray[np.float64],
+) -> tuple[NDArray[np.float64], NDArray[np.intp]]:
+    """``geometry._first_hits_reference`` ray by ray: the same crossing formulas,
+    the first segment on a tie (as ``argmin``)."""
+    n = directions.shape[0]
+    best = np.full(n, np.inf)
+    which = np.full(n, -1, dtype=np.intp)
+    ex, ey, wx, wy, w_x_e = _crossing_terms_jit(origin, seg_a, seg_b)
     for i in range(n):
-        dx, dy = directions[i, 0], directions[i, 1]
-        bt = np.inf
-        bj = -1
-        for k in range(m):
-            den = dx * ey[k] - dy * ex[k]
-            if den == 0.0:
-                continue
-            t = w_x_e[k] / den
-            s = (wx[k] * dy - wy[k] * dx) / den
-            if t > 1e-12 and s >= 0.0 and s <= 1.0 and t < bt:
-                bt = t
-                bj = k
-        best[i] = bt
-        which[i] = bj
+        best[i], which[i] = _first_crossing_jit(
+            directions[i, 0], directions[i, 1], ex, ey, wx, wy, w_x_e
+        )
     return best, which
 
 
@@ -633,34 +655,13 @@ def _beam_checks(
     The ray-segment test is :func:`_first_hits`'s, to the bit.
     """
     n = angles.shape[0]
-    m = seg_a.shape[0]
     counts = np.zeros((owners, 4), dtype=np.intp)
     ll = np.zeros(owners)
-    ex = np.empty(m)
-    ey = np.empty(m)
-    wx = np.empty(m)
-    wy = np.empty(m)
-    w_x_e = np.empty(m)
-    for k in range(m):
-        ex[k] = seg_b[k, 0] - seg_a[k, 0]
-        ey[k] = seg_b[k, 1] - seg_a[k, 1]
-        wx[k] = seg_a[k, 0] - origin[0]
-        wy[k] = seg_a[k, 1] - origin[1]
-        w_x_e[k] = wx[k] * ey[k] - wy[k] * ex[k]
+    ex, ey, wx, wy, w_x_e = _crossing_terms_jit(origin, seg_a, seg_b)
     for i in range(n):
         bearing = azimuth - angles[i]
         dx, dy = math.sin(bearing), math.cos(bearing)
-        bt = np.inf
-        bj = -1
-        for k in range(m):
-            den = dx * ey[k] - dy * ex[k]
-            if den == 0.0:
-                continue
-            tt = w_x_e[k] / den
-            s = (wx[k] * dy - wy[k] * dx) / den
-            if tt > 1e-12 and s >= 0.0 and s <= 1.0 and tt < bt:
-                bt = tt
-                bj = k
+        bt, bj = _first_crossing_jit(dx, dy, ex, ey, wx, wy, w_x_e)
         if bj < 0 or bt > range_max or bt < range_min:
             continue
         if abs(normals[bj, 0] * dx + normals[bj, 1] * dy) <= min_sin:
@@ -696,6 +697,8 @@ _partition_run_jit: Callable[..., Any] = njit(cache=True, nogil=True)(_partition
 segment_run: Callable[..., NDArray[np.intp]] = njit(cache=True, nogil=True)(_segment_run)
 line_fits: Callable[..., NDArray[np.float64]] = njit(cache=True, nogil=True)(_line_fits)
 nearest_within: Callable[..., Any] = njit(cache=True, nogil=True)(_nearest_within)
+_crossing_terms_jit: Callable[..., Any] = njit(cache=True, nogil=True)(_crossing_terms)
+_first_crossing_jit: Callable[..., Any] = njit(cache=True, nogil=True)(_first_crossing)
 beam_checks: Callable[..., Any] = njit(cache=True, nogil=True)(_beam_checks)
 associate: Callable[..., Any] = njit(cache=True, nogil=True)(_associate)
 _associate_jit = associate
