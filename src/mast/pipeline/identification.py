@@ -172,9 +172,8 @@ def _test_corner(
 ) -> list[NodeMatch]:
     tpl = beacon.template
     out: list[NodeMatch] = []
+    # (the caller has left out corners whose lines meet inside a segment)
     near_a, far_a, near_b, far_b, tol = ext.near_a, ext.far_a, ext.near_b, ext.far_b, ext.tol
-    if near_a < -tol or near_b < -tol:
-        return out  # the lines meet inside a segment: not a corner of two panels
     sig_theta = math.hypot(a.sigma_direction, b.sigma_direction)
     for forward in (True, False):
         for edge in (2, 3):

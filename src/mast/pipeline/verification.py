@@ -170,7 +170,7 @@ def check_beams(
     a = panels.a[sel] + cfg.edge_margin_m * panels.direction[sel]
     b = panels.b[sel] - cfg.edge_margin_m * panels.direction[sel]
     sigma = noise.gate_sigma_m
-    span = max(_reach(scan), 1.0)
+    span = _span(scan)
     counts, ll = beam_checks(
         np.asarray(pose.position, dtype=float),
         pose.azimuth,
@@ -197,13 +197,13 @@ def check_beams(
     return out
 
 
-def _reach(scan: Scan) -> float:
+def _span(scan: Scan) -> float:
     """How far clutter may return: the scanner's range, or the farthest return when the
-    scan states no finite maximum."""
+    scan states no finite maximum; 1 m at least."""
     reach = scan.range_max_m
     if not math.isfinite(reach):
         reach = float(np.max(scan.ranges_m[scan.valid], initial=1.0))
-    return reach
+    return max(reach, 1.0)
 
 
 def _check_beams_reference(
@@ -236,7 +236,7 @@ def _check_beams_reference(
     kind[valid & (res > gate)] = 2
     kind[valid & (np.abs(res) <= gate)] = 0
     # Clutter may return anywhere in the scanner's range.
-    span = max(_reach(scan), 1.0)
+    span = _span(scan)
     hit_ll = math.log(span / (sigma * math.sqrt(2 * math.pi))) - 0.5 * (res / sigma) ** 2
     beacon = panels.beacon[j]
     out: dict[str, BeamCheck] = {}
@@ -247,6 +247,13 @@ def _check_beams_reference(
         hit_n, occ_n, thr_n, mis_n = (int(c) for c in counts)
         out[panels.ids[k]] = BeamCheck(hit_n, occ_n, thr_n, mis_n, ll)
     return out
+
+
+def _same_pose(p: Pose2D, other: Pose2D, cfg: VerificationConfig) -> bool:
+    """Whether two poses are one for verification (within ``duplicate_m`` and ``duplicate_rad``)."""
+    d = math.hypot(other.easting - p.easting, other.northing - p.northing)
+    da = abs(math.remainder(other.azimuth - p.azimuth, 2 * math.pi))
+    return d < cfg.duplicate_m and da < cfg.duplicate_rad
 
 
 @dataclass(frozen=True, eq=False)
@@ -278,10 +285,7 @@ class Verified:
         return sum(c.log_likelihood for c in self.checks.values())
 
     def same_pose(self, other: Pose2D, cfg: VerificationConfig) -> bool:
-        p = self.icp.pose
-        d = math.hypot(other.easting - p.easting, other.northing - p.northing)
-        da = abs(math.remainder(other.azimuth - p.azimuth, 2 * math.pi))
-        return d < cfg.duplicate_m and da < cfg.duplicate_rad
+        return _same_pose(self.icp.pose, other, cfg)
 
 
 def _overrun(
@@ -576,10 +580,7 @@ class _Refined:
     verified: Verified | None = None
 
     def same_pose(self, other: Pose2D, cfg: VerificationConfig) -> bool:
-        p = self.icp.pose
-        d = math.hypot(other.easting - p.easting, other.northing - p.northing)
-        da = abs(math.remainder(other.azimuth - p.azimuth, 2 * math.pi))
-        return d < cfg.duplicate_m and da < cfg.duplicate_rad
+        return _same_pose(self.icp.pose, other, cfg)
 
 
 def verify(

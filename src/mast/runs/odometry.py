@@ -74,12 +74,16 @@ class OdometryConfig:
 class Keyframe:
     """A scan as a target for the next scans: its returns with their wall normals."""
 
-    points: NDArray[np.float64]
-    normals: NDArray[np.float64]
     grid: PointGrid
+    """The returns, binned for nearest-neighbour queries."""
+    normals: NDArray[np.float64]
+
+    @property
+    def points(self) -> NDArray[np.float64]:
+        return self.grid.points
 
     def __len__(self) -> int:
-        return int(self.points.shape[0])
+        return len(self.grid)
 
 
 def keyframe(scan: Scan, config: OdometryConfig | None = None) -> Keyframe:
@@ -88,8 +92,7 @@ def keyframe(scan: Scan, config: OdometryConfig | None = None) -> Keyframe:
     _, pts = scan.points()
     n = pts.shape[0]
     if n < 3:
-        empty = np.zeros((0, 2))
-        return Keyframe(empty, empty, PointGrid.build(empty, max(cfg.gates_m)))
+        return Keyframe(PointGrid.build(np.zeros((0, 2)), max(cfg.gates_m)), np.zeros((0, 2)))
     # Runs of consecutive returns without a jump; a window never crosses one.
     step = np.hypot(*np.diff(pts, axis=0).T)
     r = np.hypot(pts[:, 0], pts[:, 1])
@@ -123,8 +126,7 @@ def keyframe(scan: Scan, config: OdometryConfig | None = None) -> Keyframe:
     lmax, lmin = tr / 2 + det, tr / 2 - det
     good = (k >= 5) & (lmin <= cfg.max_planarity * np.maximum(lmax, 1e-12))
     nrm = np.column_stack([-np.sin(ang), np.cos(ang)])
-    keep = pts[good]
-    return Keyframe(keep, nrm[good], PointGrid.build(keep, max(cfg.gates_m)))
+    return Keyframe(PointGrid.build(pts[good], max(cfg.gates_m)), nrm[good])
 
 
 @dataclass(frozen=True, slots=True)
