@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from mast.core._kernels import line_fits, partition_dp, segment_run
+from mast.core._kernels import line_fits, partition_dp, penalty, segment_run
 from mast.core.geometry import PanelSet
 from mast.core.pose import Pose2D
 from mast.pipeline import segmentation as seg
@@ -19,7 +19,7 @@ from mast.sim import paper_scene, simulate_scan
 def _kernel_pointers(points: np.ndarray, var: float, max_piece: int = seg.MAX_PIECE) -> np.ndarray:
     _, moments = seg._cumulative_moments(points)
     n = points.shape[0]
-    return np.asarray(partition_dp(*moments, var, seg._penalty(n), min(n, max_piece)))
+    return np.asarray(partition_dp(*moments, var, penalty(n), min(n, max_piece)))
 
 
 def _scans() -> list[np.ndarray]:

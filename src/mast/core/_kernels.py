@@ -24,10 +24,20 @@ __all__ = [
     "line_fits",
     "nearest_within",
     "partition_dp",
+    "penalty",
     "segment_run",
     "window_scores",
     "within",
 ]
+
+
+def _penalty(n: int) -> float:
+    """SSE, in noise variances, that one more line must buy (BIC-like, grows as ln n).
+
+    A new line adds two parameters and a break point chosen among n; the
+    margin is wide because a false break costs a panel its identity.
+    """
+    return 4.0 * math.log(max(n, 2)) + 12.0
 
 
 def _partition_dp(
@@ -464,7 +474,7 @@ def _partition_run(points: NDArray[np.float64], var: float, max_piece: int) -> N
     n = points.shape[0]
     mom = _run_moments_jit(points)
     w = min(n, max_piece)
-    pen = 4.0 * math.log(max(n, 2)) + 12.0
+    pen = _penalty_jit(n)
     last = _partition_dp_jit(
         mom[0], mom[1], mom[2], mom[3], mom[4], mom[5], mom[6], mom[7], var, pen, w
     )
@@ -689,6 +699,8 @@ def _beam_checks(
 #: Compiled on first use (numba's own types; mypy sees plain callables).
 partition_dp: Callable[..., NDArray[np.intp]] = njit(cache=True, nogil=True)(_partition_dp)
 _partition_dp_jit = partition_dp
+penalty: Callable[[int], float] = njit(cache=True, nogil=True)(_penalty)
+_penalty_jit = penalty
 _run_moments_jit: Callable[..., Any] = njit(cache=True, nogil=True)(_run_moments)
 _scatter_jit: Callable[..., Any] = njit(cache=True, nogil=True)(_scatter)
 _major_axis_jit: Callable[..., Any] = njit(cache=True, nogil=True)(_major_axis)

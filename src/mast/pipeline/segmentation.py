@@ -204,15 +204,6 @@ def estimate_noise(points: NDArray[np.float64], run_ids: NDArray[np.intp]) -> fl
     return float(np.quantile(dist / nu[ok], NOISE_QUANTILE) / _HALF_NORMAL_Q / math.sqrt(1.5))
 
 
-def _penalty(n: int) -> float:
-    """SSE, in noise variances, that one more line must buy (BIC-like, grows as ln n).
-
-    A new line adds two parameters and a break point chosen among n; the
-    margin is wide because a false break costs a panel its identity.
-    """
-    return 4.0 * math.log(max(n, 2)) + 12.0
-
-
 #: Longest piece the optimal partition considers at once (returns): bounds its work
 #: to ``n * MAX_PIECE`` for a run of ``n``; longer straight pieces are put back
 #: together from these afterwards (only where the cap alone made the cut).
@@ -235,7 +226,7 @@ def _partition(
     where ``var`` is the range noise variance and ``(n . u_i)^2`` turns it
     into the noise across the piece's line for each beam ``u_i``: costs are in
     chi-square units, so a face-on panel and an oblique wall are judged
-    alike. Every break must buy more than :func:`_penalty` (the optimal
+    alike. Every break must buy more than :func:`mast.core._kernels.penalty` (the optimal
     partitioning changepoint method, Jackson et al. 2005). Returns left in a
     piece of one or two cost like outliers, so exact ties break towards real
     lines. Pieces hold at most ``max_piece`` returns, which bounds the work
@@ -283,12 +274,14 @@ def _partition_reference(
 ) -> NDArray[np.intp]:
     """Back-pointers of the optimal partition, in numpy: the readable reference of
     :func:`mast.core._kernels.partition_dp` (the tests compare them)."""
+    from mast.core._kernels import penalty
+
     n = points.shape[0]
     _, (sx, sy, sxx, syy, sxy, uxx, uyy, uxy) = _cumulative_moments(points)
     w = min(n, max_piece)
     d = np.arange(1, w + 1)  # piece lengths
     m = d[None, :].astype(float)
-    pen = _penalty(n)
+    pen = penalty(n)
     small = 4.0 * np.where(m < 3, m, 0.0)
 
     def costs(j0: int, j1: int) -> NDArray[np.float64]:
@@ -332,12 +325,12 @@ def _partition_reference(
 def _partition_impl(
     points: NDArray[np.float64], var: float, max_piece: int
 ) -> list[tuple[int, int]]:
-    from mast.core._kernels import partition_dp
+    from mast.core._kernels import partition_dp, penalty
 
     n = points.shape[0]
     u, moments = _cumulative_moments(points)
     w = min(n, max_piece)
-    pen = _penalty(n)
+    pen = penalty(n)
     last = partition_dp(*moments, float(var), pen, w)
     pieces: list[tuple[int, int]] = []
     e = n
