@@ -174,7 +174,7 @@ def test_culled_ray_casting_gives_the_whole_worlds_scans() -> None:
     """Each scan is cast only against the walls within reach, by beam sectors: the same
     ranges and surfaces as casting against the whole drift, all along it."""
     scene = drive_scene(5, scans=2500)
-    reach = drive_module._Reach.of(scene.world)
+    reach = drive_module.Reach.of(scene.world)
     for i in range(0, 2500, 250):
         shot = scene.shots[i]
         near = reach.near(shot.pose.position, 31.0)

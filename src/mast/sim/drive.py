@@ -43,6 +43,7 @@ __all__ = [
     "DEFAULT_DRIVE_SCANS",
     "DRIVE_START_NS",
     "DriveScene",
+    "Reach",
     "drive_scanner",
     "drive_scenario",
     "drive_scene",
@@ -154,7 +155,7 @@ class _SectorWorld(World):
 
 
 @dataclass(frozen=True, eq=False)
-class _Reach:
+class Reach:
     """The segments of a world within reach of a point (a whole drift is long)."""
 
     world: World
@@ -162,7 +163,7 @@ class _Reach:
     half: NDArray[np.float64]
 
     @classmethod
-    def of(cls, world: World) -> _Reach:
+    def of(cls, world: World) -> Reach:
         mid = 0.5 * (world.seg_a + world.seg_b)
         half = 0.5 * np.hypot(*(world.seg_b - world.seg_a).T)
         return cls(world, mid, half)
@@ -216,7 +217,7 @@ class DriveScene(Scene):
     def iter_simulated(self) -> Iterator[SimulatedScan]:
         """Every scan in time order, one at a time, ray-cast against the walls in reach."""
         rng = np.random.default_rng(self.seed)
-        reach = _Reach.of(self.world)
+        reach = Reach.of(self.world)
         for shot, stamp in zip(self.shots, self.stamps_ns, strict=True):
             world = reach.near(shot.pose.position, shot.scanner.range_max_m + _CULL_MARGIN_M)
             yield simulate_scan(world, shot.pose, shot.scanner, rng=rng, stamp_ns=int(stamp))

@@ -1,0 +1,1 @@
+"""Planning a beacon layout: predicted availability and precision along a drift."""
