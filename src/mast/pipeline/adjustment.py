@@ -172,17 +172,21 @@ class Adjustment:
 
     def ellipse(self, confidence: float = 0.95) -> ErrorEllipse:
         """Position confidence ellipse (chi-square with 2 degrees of freedom)."""
-        c = self.covariance[:2, :2]
-        w, v = np.linalg.eigh(c)
         if self.scaled:
             k = math.sqrt(2 * f_ppf(confidence, 2, max(self.dof, 1)))
         else:
             k = math.sqrt(chi2_ppf(confidence, 2))
-        major = v[:, 1]
-        az = math.atan2(major[0], major[1]) % math.pi
-        return ErrorEllipse(
-            k * math.sqrt(max(w[1], 0.0)), k * math.sqrt(max(w[0], 0.0)), az, confidence
-        )
+        return position_ellipse(self.covariance, k, confidence)
+
+
+def position_ellipse(cov: NDArray[np.float64], scale: float, confidence: float) -> ErrorEllipse:
+    """The ellipse of a pose covariance's (E, N) block, its axes ``scale`` standard deviations."""
+    w, v = np.linalg.eigh(cov[:2, :2])
+    major = v[:, 1]
+    az = math.atan2(major[0], major[1]) % math.pi
+    return ErrorEllipse(
+        scale * math.sqrt(max(w[1], 0.0)), scale * math.sqrt(max(w[0], 0.0)), az, confidence
+    )
 
 
 def adjust_pose(

@@ -24,10 +24,16 @@ from mast.core.noise import NoiseModel
 from mast.core.pose import Pose2D
 from mast.pipeline.adjustment import MIN_INCIDENCE_COS, range_model
 
-__all__ = ["cramer_rao_bound", "truth_bound"]
+__all__ = [
+    "bound_of",
+    "cramer_rao_bound",
+    "information",
+    "truth_bound",
+    "truth_information",
+]
 
 
-def cramer_rao_bound(
+def information(
     pose: Pose2D,
     angles_rad: NDArray[np.float64],
     normals: NDArray[np.float64],
@@ -35,7 +41,7 @@ def cramer_rao_bound(
     *,
     noise: NoiseModel,
 ) -> NDArray[np.float64]:
-    """Covariance bound ``(sum g g^T / sigma^2)^-1`` for (E [m], N [m], A [rad]).
+    """Fisher information ``sum g g^T / sigma^2`` of (E [m], N [m], A [rad]).
 
     Parameters
     ----------
@@ -48,15 +54,18 @@ def cramer_rao_bound(
     noise : NoiseModel
         Noise of a range and of a beam angle (the angle term enters through
         ``d rho / d phi``, as in the adjustment).
-
-    Returns
-    -------
-    ndarray, shape (3, 3)
-        ``inf`` on the diagonal when the beams do not determine the pose.
     """
     _, jac, d_phi = range_model(pose, angles_rad, normals, offsets)
     var = noise.variance(d_phi)
-    info = jac.T @ (jac / var[:, None])
+    info: NDArray[np.float64] = jac.T @ (jac / var[:, None])
+    return info
+
+
+def bound_of(info: NDArray[np.float64]) -> NDArray[np.float64]:
+    """The covariance bound ``info^-1``; ``inf`` on the diagonal when the pose is not
+    determined (singular or ill-conditioned information)."""
+    if not np.all(np.isfinite(info)):
+        return np.diag([math.inf] * 3)
     try:
         out: NDArray[np.float64] = np.asarray(np.linalg.inv(info), dtype=np.float64)
     except np.linalg.LinAlgError:
@@ -64,6 +73,50 @@ def cramer_rao_bound(
     if not np.all(np.isfinite(out)) or np.linalg.cond(info) > 1e14:
         return np.diag([math.inf] * 3)
     return out
+
+
+def cramer_rao_bound(
+    pose: Pose2D,
+    angles_rad: NDArray[np.float64],
+    normals: NDArray[np.float64],
+    offsets: NDArray[np.float64],
+    *,
+    noise: NoiseModel,
+) -> NDArray[np.float64]:
+    """Covariance bound ``(sum g g^T / sigma^2)^-1`` for (E [m], N [m], A [rad]).
+
+    The parameters are those of :func:`information`. Returns an array of shape
+    (3, 3), ``inf`` on the diagonal when the beams do not determine the pose.
+    """
+    return bound_of(information(pose, angles_rad, normals, offsets, noise=noise))
+
+
+def truth_information(
+    pose: Pose2D,
+    angles_rad: NDArray[np.float64],
+    valid: NDArray[np.bool_],
+    panels: PanelSet,
+    *,
+    noise: NoiseModel,
+    beacon_beams: NDArray[np.bool_] | None = None,
+) -> NDArray[np.float64]:
+    """The information from every valid beam that, at ``pose``, first hits a panel.
+
+    ``beacon_beams`` (e.g. the simulator's truth of which beams hit a panel)
+    restricts the beams further, so occlusion by other objects is honoured.
+    Beams within 2 degrees of grazing are left out, as the adjustment does.
+    """
+    use = valid if beacon_beams is None else valid & beacon_beams
+    if not np.any(use):
+        return np.zeros((3, 3))
+    dirs = pose.beam_directions(angles_rad[use])
+    _, j = first_hits(pose.position, dirs, panels.a, panels.b)
+    hit = j >= 0
+    k = j[hit]
+    nrm = panels.normal[k]
+    keep = np.abs(np.einsum("ij,ij->i", nrm, dirs[hit])) > MIN_INCIDENCE_COS
+    off = np.einsum("ij,ij->i", nrm, panels.a[k])
+    return information(pose, angles_rad[use][hit][keep], nrm[keep], off[keep], noise=noise)
 
 
 def truth_bound(
@@ -75,27 +128,10 @@ def truth_bound(
     noise: NoiseModel,
     beacon_beams: NDArray[np.bool_] | None = None,
 ) -> NDArray[np.float64]:
-    """The bound from every valid beam that, at ``pose``, first hits a surveyed panel.
-
-    ``beacon_beams`` (e.g. the simulator's truth of which beams hit a panel)
-    restricts the beams further, so occlusion by other objects is honoured.
-    Beams within 2 degrees of grazing are left out, as the adjustment does.
-    """
+    """The bound from every valid beam that, at ``pose``, first hits a surveyed panel
+    (:func:`truth_information`)."""
     panels = PanelSet.from_survey(survey)
-    dirs = pose.beam_directions(angles_rad)
-    _, j = first_hits(pose.position, dirs, panels.a, panels.b)
-    use = valid & (j >= 0)
-    if beacon_beams is not None:
-        use &= beacon_beams
-    k = j[use]
-    nrm = panels.normal[k]
-    nu = np.abs(np.einsum("ij,ij->i", nrm, dirs[use]))
-    keep = nu > MIN_INCIDENCE_COS
-    off = np.einsum("ij,ij->i", nrm, panels.a[k])
-    return cramer_rao_bound(
-        pose,
-        angles_rad[use][keep],
-        nrm[keep],
-        off[keep],
-        noise=noise,
+    info = truth_information(
+        pose, angles_rad, valid, panels, noise=noise, beacon_beams=beacon_beams
     )
+    return bound_of(info)

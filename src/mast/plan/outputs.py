@@ -12,8 +12,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from mast.apps.outputs import write_bytes
+from mast.core.quantiles import chi2_ppf
 from mast.errors import OutputError
-from mast.plan.predict import CHI2_2_95, Plan
+from mast.pipeline.adjustment import position_ellipse
+from mast.plan.predict import Plan
 
 __all__ = [
     "PLAN_COLUMNS",
@@ -64,17 +66,10 @@ DXF_LAYERS = {
 
 def _ellipse(cov: NDArray[np.float64]) -> tuple[float, float, float]:
     """95 % position ellipse: semi-major, semi-minor (m) and the major axis' azimuth (deg)."""
-    c = cov[:2, :2]
-    if not np.all(np.isfinite(c)):
+    if not np.all(np.isfinite(cov[:2, :2])):
         return math.nan, math.nan, math.nan
-    w, v = np.linalg.eigh(c)
-    major = v[:, 1]
-    az = math.degrees(math.atan2(major[0], major[1])) % 180.0
-    return (
-        math.sqrt(CHI2_2_95 * max(w[1], 0.0)),
-        math.sqrt(CHI2_2_95 * max(w[0], 0.0)),
-        az,
-    )
+    e = position_ellipse(cov, math.sqrt(chi2_ppf(0.95, 2)), 0.95)
+    return e.semi_major_m, e.semi_minor_m, math.degrees(e.azimuth_rad)
 
 
 def _num(value: float, digits: int = 6) -> str:

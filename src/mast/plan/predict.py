@@ -31,11 +31,12 @@ if TYPE_CHECKING:
     from mast.pipeline.locator import LocatorConfig
 
 from mast.core.beacon import Survey
-from mast.core.geometry import PanelSet, first_hits
+from mast.core.geometry import PanelSet
 from mast.core.noise import DEFAULT_SURVEY_SIGMA_M, NoiseModel
 from mast.core.pose import Pose2D, wrap_angle
 from mast.errors import InputError
-from mast.pipeline.adjustment import MIN_INCIDENCE_COS, range_model
+from mast.pipeline.bounds import bound_of, truth_information
+from mast.pipeline.hypotheses import major_sigma
 from mast.plan.drift import Drift, Grid, build_grid
 from mast.sim.drive import Reach
 from mast.sim.scanner import ScannerModel, SimulatedScan, simulate_scan
@@ -57,8 +58,6 @@ __all__ = [
 MIN_PANEL_RETURNS = 3
 #: A panel seen closer than this to grazing does not count.
 MIN_INCIDENCE_DEG = 10.0
-#: chi-square(2) 95 % quantile: the 95 % error ellipse's semi-axes are sqrt(this * eigenvalue).
-CHI2_2_95 = 5.991464547107979
 
 Progress = Callable[[int, int], None]
 
@@ -151,19 +150,13 @@ class CellView:
 
 def covariance(information: NDArray[np.float64]) -> NDArray[np.float64]:
     """The bound ``information^-1``; ``inf`` on the diagonal when the pose is not determined."""
-    if not np.all(np.isfinite(information)) or np.linalg.cond(information) > 1e14:
-        return np.diag([math.inf] * 3)
-    out: NDArray[np.float64] = np.asarray(np.linalg.inv(information), dtype=np.float64)
-    return out
+    return bound_of(information)
 
 
 def position_major_sigma(cov: NDArray[np.float64]) -> float:
     """Semi-major axis of the 1-sigma position ellipse of a (3, 3) covariance."""
     c = cov[:2, :2]
-    if not np.all(np.isfinite(c)):
-        return math.inf
-    a, b, d = float(c[0, 0]), float(c[0, 1]), float(c[1, 1])
-    return math.sqrt(max(0.0, 0.5 * (a + d) + math.hypot(0.5 * (a - d), b)))
+    return major_sigma(c) if np.all(np.isfinite(c)) else math.inf
 
 
 def plan_world(drift: Drift, survey: Survey, *, roughness_m: float = 0.0, seed: int = 0) -> World:
@@ -200,30 +193,6 @@ def _panels_seen(sim: SimulatedScan) -> dict[str, tuple[int, ...]]:
     return {b: tuple(p) for b, p in seen.items()}
 
 
-def _information(
-    pose: Pose2D, sim: SimulatedScan, panels: PanelSet, noise: NoiseModel
-) -> NDArray[np.float64]:
-    """Fisher information from the valid beams whose first hit is a panel.
-
-    As :func:`mast.pipeline.bounds.truth_bound`: the beams the simulator says hit a
-    beacon, on the surveyed panel lines, none within 2 degrees of grazing.
-    """
-    use = sim.beacon_mask()
-    if not np.any(use):
-        return np.zeros((3, 3))
-    angles = sim.scan.angles_rad[use]
-    dirs = pose.beam_directions(angles)
-    _, j = first_hits(pose.position, dirs, panels.a, panels.b)
-    ok = j >= 0
-    nrm = panels.normal[j[ok]]
-    keep = np.abs(np.einsum("ij,ij->i", nrm, dirs[ok])) > MIN_INCIDENCE_COS
-    off = np.einsum("ij,ij->i", nrm, panels.a[j[ok]])
-    _, jac, d_phi = range_model(pose, angles[ok][keep], nrm[keep], off[keep])
-    var = noise.variance(d_phi)
-    info: NDArray[np.float64] = jac.T @ (jac / var[:, None])
-    return info
-
-
 def view_cell(
     world: World,
     panels: PanelSet,
@@ -233,7 +202,15 @@ def view_cell(
     """The noise-free view from ``pose``: panels seen and the pose's Fisher information."""
     sim = simulate_scan(world, pose, scanner.noise_free())
     noise = NoiseModel(max(scanner.range_sigma_m, 1e-4), scanner.angle_sigma_rad, 0.0)
-    return CellView(_panels_seen(sim), _information(pose, sim, panels, noise))
+    info = truth_information(
+        pose,
+        sim.scan.angles_rad,
+        sim.scan.valid,
+        panels,
+        noise=noise,
+        beacon_beams=sim.beacon_mask(),
+    )
+    return CellView(_panels_seen(sim), info)
 
 
 @dataclass(frozen=True, eq=False)

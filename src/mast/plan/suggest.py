@@ -24,7 +24,8 @@ from numpy.typing import NDArray
 from mast.core.beacon import Beacon, Survey
 from mast.core.noise import NoiseModel
 from mast.core.pose import Pose2D, wrap_angle
-from mast.pipeline.adjustment import MIN_INCIDENCE_COS, range_model
+from mast.pipeline.adjustment import MIN_INCIDENCE_COS
+from mast.pipeline.bounds import information
 from mast.plan.drift import Drift, wall_distance
 from mast.plan.predict import (
     MIN_INCIDENCE_DEG,
@@ -201,9 +202,7 @@ def _candidate_view(
         return seen >= 2, np.zeros((3, 3))
     nrm = normals[panel[use]]
     off = np.einsum("ij,ij->i", nrm, edges[panel[use]])
-    _, jac, d_phi = range_model(pose, sel[use], nrm, off)
-    info: NDArray[np.float64] = jac.T @ (jac / noise.variance(d_phi)[:, None])
-    return seen >= 2, info
+    return seen >= 2, information(pose, sel[use], nrm, off, noise=noise)
 
 
 _Effect = dict[tuple[int, int], tuple[int, NDArray[np.float64]]]
