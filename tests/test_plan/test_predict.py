@@ -31,12 +31,12 @@ def plan():  # type: ignore[no-untyped-def]
 
 
 def _fresh(plan, row: int, col: int, heading: int, n: int, seed: int):  # type: ignore[no-untyped-def]
-    from mast.plan.predict import _cell_pose
+    from mast.plan.predict import cell_pose
 
     world = plan_world(
         plan.drift, plan.survey, roughness_m=SETTINGS.roughness_m, seed=SETTINGS.seed
     )
-    pose = _cell_pose(plan.grid, row, col, heading)
+    pose = cell_pose(plan.grid, row, col, heading)
     cfg = locator_config(SCANNER, SETTINGS)
     rng = np.random.default_rng(seed)
     errors = []

@@ -52,9 +52,9 @@ def test_suggestions_cover_more_of_the_drift(tmp_path: Path) -> None:
     world = plan_world(drift, proposed)
     rows, cols, heads = np.nonzero(found.after.has_fix & ~plan.has_fix)
     assert len(rows) > 0
-    from mast.plan.predict import _cell_pose
+    from mast.plan.predict import cell_pose
 
-    pose = _cell_pose(grid, int(rows[0]), int(cols[0]), int(heads[0]))
+    pose = cell_pose(grid, int(rows[0]), int(cols[0]), int(heads[0]))
     cfg = locator_config(SCANNER, settings)
     rng = np.random.default_rng(5)
     used = set()

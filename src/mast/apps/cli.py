@@ -532,10 +532,8 @@ def _precisions(
     cfg = LocatorConfig()
     defaults = {"range_sigma_m", "angle_sigma_rad", "survey_sigma_m"}
     if scanner is not None:
-        model = scanner_model(scanner)
-        cfg = replace(
-            cfg, range_sigma_m=max(model.range_sigma_m, 1e-4), angle_sigma_rad=model.angle_sigma_rad
-        )
+        noise = scanner_model(scanner).noise()
+        cfg = replace(cfg, range_sigma_m=noise.range_sigma_m, angle_sigma_rad=noise.angle_sigma_rad)
         defaults -= {"range_sigma_m", "angle_sigma_rad"}
     checks = (
         ("--range-sigma", range_sigma),

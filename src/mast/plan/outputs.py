@@ -16,6 +16,7 @@ from mast.core.quantiles import chi2_ppf
 from mast.errors import OutputError
 from mast.pipeline.adjustment import position_ellipse
 from mast.plan.predict import Plan
+from mast.runs.outputs import add_dxf_beacons, new_dxf, save_dxf
 
 __all__ = [
     "PLAN_COLUMNS",
@@ -53,6 +54,8 @@ PLAN_COLUMNS = (
 #: Contours of the position sigma drawn in plan.dxf (those within the plan's range).
 SIGMA_LEVELS_M = (0.001, 0.002, 0.005, 0.01, 0.02, 0.05, 0.1, 0.2, 0.5)
 
+#: Height of the beacons' ids in plan.dxf, metres.
+DXF_TEXT_HEIGHT_M = 0.3
 #: DXF layers and their ACI colours.
 DXF_LAYERS = {
     "MAST_WALLS": 8,
@@ -120,11 +123,7 @@ def write_plan_csv(path: Path, plan: Plan) -> int:
 
 def longest_gap_m(covered: NDArray[np.bool_], step_m: float) -> float:
     """Longest run of uncovered stations (one row per station), in metres of centreline."""
-    longest = run = 0
-    for ok in covered:
-        run = 0 if ok else run + 1
-        longest = max(longest, run)
-    return longest * step_m
+    return max((last - first + 1 for first, last in _stretches(~covered)), default=0) * step_m
 
 
 def summary(plan: Plan, *, before: Plan | None = None) -> dict[str, Any]:
@@ -299,26 +298,14 @@ def write_plan_dxf(path: Path, plan: Plan) -> None:
     centreline without a fix (one layer per heading: along the centreline's direction and
     against it), and the position sigma's contours, one layer per level
     (``MAST_SIGMA_005MM`` ...). DXF R2010, metres, full doubles."""
-    from ezdxf import units
-    from ezdxf.enums import TextEntityAlignment
-    from ezdxf.filemanagement import new
-
     grid = plan.grid
-    doc = new("R2010", units=units.M)
-    doc.header["$INSUNITS"] = 6
-    doc.header["$MEASUREMENT"] = 1
-    for name, colour in DXF_LAYERS.items():
-        doc.layers.add(name, color=colour)
-    msp = doc.modelspace()
+    doc, msp = new_dxf(DXF_LAYERS)
     for w in plan.drift.walls:
         msp.add_lwpolyline(w.points.tolist(), dxfattribs={"layer": "MAST_WALLS"})
-    for b in plan.survey:
-        layer = "MAST_PROPOSED" if b.id in plan.proposed else "MAST_BEACONS"
-        msp.add_lwpolyline(np.asarray(b.edges).tolist(), dxfattribs={"layer": layer})
-        c = b.centroid
-        msp.add_text(b.id, height=0.3, dxfattribs={"layer": layer}).set_placement(
-            (float(c[0]), float(c[1])), align=TextEntityAlignment.BOTTOM_CENTER
-        )
+    proposed = [b for b in plan.survey if b.id in plan.proposed]
+    surveyed = [b for b in plan.survey if b.id not in plan.proposed]
+    add_dxf_beacons(msp, surveyed, "MAST_BEACONS", text_height_m=DXF_TEXT_HEIGHT_M)
+    add_dxf_beacons(msp, proposed, "MAST_PROPOSED", text_height_m=DXF_TEXT_HEIGHT_M)
     msp.add_lwpolyline(grid.centreline.tolist(), dxfattribs={"layer": "MAST_CENTRELINE"})
     line_s = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(grid.centreline, axis=0).T))])
     stretches = [
@@ -344,7 +331,4 @@ def write_plan_dxf(path: Path, plan: Plan) -> None:
             doc.layers.add(name, color=5)
         for p in lines:
             msp.add_lwpolyline(p.tolist(), dxfattribs={"layer": name})
-    try:
-        doc.saveas(path)
-    except OSError as err:
-        raise OutputError(f"cannot write: {err.strerror or err}", path=path) from None
+    save_dxf(doc, path)

@@ -32,7 +32,7 @@ if TYPE_CHECKING:
 
 from mast.core.beacon import Survey
 from mast.core.geometry import PanelSet
-from mast.core.noise import DEFAULT_SURVEY_SIGMA_M, NoiseModel
+from mast.core.noise import DEFAULT_SURVEY_SIGMA_M
 from mast.core.pose import Pose2D, wrap_angle
 from mast.errors import InputError
 from mast.pipeline.bounds import bound_of, truth_information
@@ -49,6 +49,7 @@ __all__ = [
     "CellView",
     "Plan",
     "PlanSettings",
+    "cell_pose",
     "plan_world",
     "predict",
     "view_cell",
@@ -201,7 +202,7 @@ def view_cell(
 ) -> CellView:
     """The noise-free view from ``pose``: panels seen and the pose's Fisher information."""
     sim = simulate_scan(world, pose, scanner.noise_free())
-    noise = NoiseModel(max(scanner.range_sigma_m, 1e-4), scanner.angle_sigma_rad, 0.0)
+    noise = scanner.noise()
     info = truth_information(
         pose,
         sim.scan.angles_rad,
@@ -309,7 +310,8 @@ class Plan:
         return ok
 
 
-def _cell_pose(grid: Grid, row: int, col: int, heading: int) -> Pose2D:
+def cell_pose(grid: Grid, row: int, col: int, heading: int) -> Pose2D:
+    """The scanner's pose at a cell, heading 0 along the centreline's direction, 1 against."""
     az = float(grid.azimuth_rad[row]) + (math.pi if heading else 0.0)
     e, n = grid.xy[row, col]
     return Pose2D(float(e), float(n), az % (2 * math.pi))
@@ -319,9 +321,10 @@ def locator_config(scanner: ScannerModel, settings: PlanSettings) -> LocatorConf
     """The locator as ``mast locate --scanner`` would run it."""
     from mast.pipeline.locator import LocatorConfig
 
+    noise = scanner.noise()
     return LocatorConfig(
-        range_sigma_m=max(scanner.range_sigma_m, 1e-4),
-        angle_sigma_rad=scanner.angle_sigma_rad,
+        range_sigma_m=noise.range_sigma_m,
+        angle_sigma_rad=noise.angle_sigma_rad,
         survey_sigma_m=settings.survey_sigma_m,
     )
 
@@ -401,7 +404,7 @@ def predict(
     for r, c in todo:
         near = reach.near(grid.xy[r, c], scanner.range_max_m + 1.0)
         for h in (0, 1):
-            pose = _cell_pose(grid, int(r), int(c), h)
+            pose = cell_pose(grid, int(r), int(c), h)
             views[r, c, h] = view_cell(near, panels, pose, scanner)
             rng = np.random.default_rng([settings.seed, 101, int(r), int(c), h])
             fixes[r, c, h], wrong[r, c, h] = _locate_cell(

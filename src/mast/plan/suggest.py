@@ -31,6 +31,7 @@ from mast.plan.predict import (
     MIN_INCIDENCE_DEG,
     MIN_PANEL_RETURNS,
     Plan,
+    cell_pose,
     covariance,
     plan_world,
     position_major_sigma,
@@ -208,25 +209,22 @@ def _candidate_view(
 _Effect = dict[tuple[int, int], tuple[int, NDArray[np.float64]]]
 
 
-def _effect(plan: Plan, world: World, cand: Candidate) -> _Effect:
-    """What the candidate adds at each uncovered centreline cell and heading within reach:
-    two panels in view (1 or 0) and the information of its beams."""
-    from mast.plan.predict import _cell_pose
-
+def _effect(plan: Plan, world: World, cand: Candidate, covered: NDArray[np.bool_]) -> _Effect:
+    """What the candidate adds at each centreline cell and heading within reach that
+    ``covered`` (the plan's) leaves out: two panels in view (1 or 0) and the information
+    of its beams."""
     grid = plan.grid
     c = grid.centre
     reach = plan.scanner.range_max_m + 1.0
     rows = np.flatnonzero(np.hypot(*(grid.xy[:, c] - cand.edges.mean(axis=0)).T) <= reach)
-    covered = plan.covered
-    scanner = plan.scanner
-    noise = NoiseModel(max(scanner.range_sigma_m, 1e-4), scanner.angle_sigma_rad, 0.0)
+    noise = plan.scanner.noise()
     w = _with_beacon(world, cand.edges, "?")
     out: _Effect = {}
     for r in rows:
         for h in (0, 1):
             if not covered[r, c, h]:
                 two, info = _candidate_view(
-                    w, cand.edges, _cell_pose(grid, int(r), c, h), plan, noise
+                    w, cand.edges, cell_pose(grid, int(r), c, h), plan, noise
                 )
                 if two or np.any(info):
                     out[int(r), h] = (int(two), info)
@@ -321,7 +319,8 @@ def suggest(
             seed=current.settings.seed,
         )
         cands = _candidates(current, designs, step)
-        effects = [_effect(current, world, cand) for cand in cands]
+        covered = current.covered
+        effects = [_effect(current, world, cand, covered) for cand in cands]
         singles = [(*_score(current, [e], target), i) for i, e in enumerate(effects)]
         options: list[tuple[float, list[Candidate]]] = [
             (g, [cands[i]]) for g, _, i in singles if g > 0

@@ -42,7 +42,7 @@ from typing import Any, Final
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from mast.core.beacon import Survey
+from mast.core.beacon import Beacon, Survey
 from mast.core.pose import format_dms
 from mast.errors import InputError, OutputError
 from mast.runs.model import PlacedScan, RunSummary, Trajectory
@@ -641,28 +641,14 @@ def write_map_dxf(
     OutputError
         The file cannot be written.
     """
-    from ezdxf import units
-    from ezdxf.enums import TextEntityAlignment
-    from ezdxf.filemanagement import new
-
-    doc = new("R2010", units=units.M)
-    doc.header["$INSUNITS"] = _DXF_METRES
-    doc.header["$MEASUREMENT"] = 1
-    for name, colour in DXF_LAYERS.items():
-        doc.layers.add(name, color=colour)
-    msp = doc.modelspace()
+    doc, msp = new_dxf(DXF_LAYERS)
 
     for piece in walls:
         p = _finite_rows(piece)
         if len(p) >= 2:
             msp.add_lwpolyline(p.tolist(), dxfattribs={"layer": "MAST_WALLS"})
 
-    for b in survey:
-        msp.add_lwpolyline(np.asarray(b.edges).tolist(), dxfattribs={"layer": "MAST_BEACONS"})
-        c = b.centroid
-        msp.add_text(
-            b.id, height=DXF_TEXT_HEIGHT_M, dxfattribs={"layer": "MAST_BEACONS"}
-        ).set_placement((float(c[0]), float(c[1])), align=TextEntityAlignment.BOTTOM_CENTER)
+    add_dxf_beacons(msp, survey, "MAST_BEACONS")
 
     poses = _Poses.of(placed)
     for span in poses.spans():
@@ -688,6 +674,39 @@ def write_map_dxf(
         tip = (e + DXF_FIX_TICK_M * math.sin(a), n + DXF_FIX_TICK_M * math.cos(a))
         msp.add_line((e, n), tip, dxfattribs={"layer": "MAST_FIXES"})
 
+    save_dxf(doc, path)
+
+
+def new_dxf(layers: Mapping[str, int]) -> tuple[Any, Any]:
+    """An empty DXF R2010 drawing in metres (``$INSUNITS`` 6, ``$MEASUREMENT`` 1 metric)
+    with these layers (name: ACI colour), and its modelspace."""
+    from ezdxf import units
+    from ezdxf.filemanagement import new
+
+    doc = new("R2010", units=units.M)
+    doc.header["$INSUNITS"] = _DXF_METRES
+    doc.header["$MEASUREMENT"] = 1
+    for name, colour in layers.items():
+        doc.layers.add(name, color=colour)
+    return doc, doc.modelspace()
+
+
+def add_dxf_beacons(
+    msp: Any, beacons: Iterable[Beacon], layer: str, *, text_height_m: float = DXF_TEXT_HEIGHT_M
+) -> None:
+    """Per beacon, an LWPOLYLINE through its four edges and a TEXT of its id at its centre."""
+    from ezdxf.enums import TextEntityAlignment
+
+    for b in beacons:
+        msp.add_lwpolyline(np.asarray(b.edges).tolist(), dxfattribs={"layer": layer})
+        c = b.centroid
+        msp.add_text(b.id, height=text_height_m, dxfattribs={"layer": layer}).set_placement(
+            (float(c[0]), float(c[1])), align=TextEntityAlignment.BOTTOM_CENTER
+        )
+
+
+def save_dxf(doc: Any, path: str | Path) -> None:
+    """Write a drawing, turning a failure into an :class:`OutputError` naming the file."""
     try:
         doc.saveas(path)
     except OSError as exc:

@@ -8,12 +8,17 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from numpy.typing import NDArray
 
+from mast.core.noise import NoiseModel
 from mast.core.pose import Pose2D
 from mast.core.scan import Scan
 from mast.errors import InputError
 from mast.sim.world import Surface, World
 
 __all__ = ["SCANNERS", "ScannerModel", "SimulatedScan", "scanner_model", "simulate_scan"]
+
+
+#: The smallest range sigma a scanner's returns are weighted with, metres.
+MIN_WEIGHT_SIGMA_M = 1e-4
 
 
 @dataclass(frozen=True, slots=True)
@@ -86,6 +91,16 @@ class ScannerModel:
         """Nominal beam angles, radians, counter-clockwise from +x, increasing."""
         step = math.radians(self.resolution_deg)
         return np.asarray(self.angle_min_rad + step * np.arange(self.beam_count), dtype=np.float64)
+
+    def noise(self, survey_sigma_m: float = 0.0) -> NoiseModel:
+        """The precisions this scanner's returns are weighted with.
+
+        The range sigma is at least :data:`MIN_WEIGHT_SIGMA_M`: a noise-free
+        model's returns still get a finite weight.
+        """
+        return NoiseModel(
+            max(self.range_sigma_m, MIN_WEIGHT_SIGMA_M), self.angle_sigma_rad, survey_sigma_m
+        )
 
     def noise_free(self) -> ScannerModel:
         return replace(
