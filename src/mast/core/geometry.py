@@ -3,6 +3,8 @@ points against panels."""
 
 from __future__ import annotations
 
+import functools
+
 from dataclasses import dataclass
 
 import numpy as np
@@ -149,9 +151,18 @@ class PanelSet:
     def __len__(self) -> int:
         return int(self.length.size)
 
+    @functools.cached_property
+    def _mid(self) -> NDArray[np.float64]:
+        return 0.5 * (self.a + self.b)
+
+    @functools.cached_property
+    def number(self) -> dict[str, int]:
+        """Position of each beacon id in :attr:`ids` (the value in :attr:`beacon`)."""
+        return {bid: k for k, bid in enumerate(self.ids)}
+
     def near(self, position: NDArray[np.float64], radius_m: float) -> NDArray[np.intp]:
         """Indices of the panels any part of which lies within ``radius_m`` of ``position``."""
-        mid = 0.5 * (self.a + self.b)
+        mid = self._mid
         d = np.hypot(mid[:, 0] - position[0], mid[:, 1] - position[1])
         return np.flatnonzero(d <= radius_m + 0.5 * self.length)
 

@@ -19,7 +19,9 @@ from __future__ import annotations
 
 import itertools
 import math
+from collections.abc import Iterator
 from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -225,7 +227,7 @@ def pose_hypotheses(
     nodes = identification.nodes
     cov = [node_covariance(n, segmentation) for n in nodes]
     rots = [_node_rotations(n, segmentation, index) for n in nodes]
-    pairs: list[Hypothesis] = []
+    found: list[tuple[tuple[int, float], tuple[NodeMatch, NodeMatch, Any, Any, float]]] = []
     for i in range(len(nodes)):
         for j in range(i + 1, len(nodes)):
             a, b = nodes[i], nodes[j]
@@ -264,20 +266,37 @@ def pose_hypotheses(
                     mis_r = max(mis_r, abs(_wrap(r_k - rot)) / tol)
                 if mis_r > 1.0:
                     continue
-                sim = similarity_transform(
-                    np.array([a.node_scanner, b.node_scanner]), np.array([edge_a, edge_b])
-                )
                 spread = major_sigma(cov[i]) + 2.0 * float(np.hypot(*a.node_scanner)) * min(
                     s_rot, math.pi
                 )
-                pairs.append(Hypothesis((na, nb), sim, max(mis_d, mis_r), "pair", spread))
-    # Prefer hypotheses whose nodes were identified with more panels (lower Table 1 option).
-    pairs.sort(key=lambda h: (sum(n.option for n in h.nodes), h.misfit))
+                misfit = max(mis_d, mis_r)
+                found.append(((na.option + nb.option, misfit), (na, nb, edge_a, edge_b, spread)))
+    # Prefer hypotheses whose nodes were identified with more panels (lower Table 1 option);
+    # only those kept are solved (a mine's look-alikes past the cap never are).
+    found.sort(key=lambda f: f[0])
+    pairs = [
+        Hypothesis(
+            (na, nb),
+            similarity_transform(
+                np.array([na.node_scanner, nb.node_scanner]), np.array([edge_a, edge_b])
+            ),
+            rank[1],
+            "pair",
+            spread,
+        )
+        for rank, (na, nb, edge_a, edge_b, spread) in found[: config.max_pair_hypotheses]
+    ]
+
     # Single nodes take turns (lowest Table 1 option first), so that one corner's
     # many look-alikes in a mine-wide survey cannot crowd out another corner's beacon.
-    per_node: list[list[Hypothesis]] = []
-    for n in sorted(nodes, key=lambda n: n.option):
-        mine = [_single_hypothesis(n, b, segmentation, index) for b in index.beacons_like(n.beacon)]
-        per_node.append([h for h in mine if h is not None])
-    singles = [h for turn in itertools.zip_longest(*per_node) for h in turn if h is not None]
-    return pairs[: config.max_pair_hypotheses] + singles[: config.max_single_hypotheses]
+    # Made lazily: a whole mine's look-alikes past the cap are never computed.
+    def singles_of(n: NodeMatch) -> Iterator[Hypothesis]:
+        for b in index.beacons_like(n.beacon):
+            h = _single_hypothesis(n, b, segmentation, index)
+            if h is not None:
+                yield h
+
+    per_node = [singles_of(n) for n in sorted(nodes, key=lambda n: n.option)]
+    turns = itertools.chain.from_iterable(itertools.zip_longest(*per_node))
+    singles = itertools.islice((h for h in turns if h is not None), config.max_single_hypotheses)
+    return pairs + list(singles)

@@ -359,7 +359,7 @@ def locate(scan: Scan, survey: Survey, *, config: LocatorConfig | None = None) -
         if c.coverage >= cfg.verification.min_coverage
         and c.hit >= cfg.verification.min_panel_points
     }
-    keep = np.flatnonzero(np.isin(panels.beacon, [panels.ids.index(b) for b in agree]))
+    keep = np.flatnonzero(np.isin(panels.beacon, [panels.number[b] for b in agree]))
     gate_sigmas = cfg.verification.gate_sigmas
     adjusted = adjust_on_panels(scan, best.pose, panels, keep, noise=noise, gate_sigmas=gate_sigmas)
     if isinstance(adjusted, str):

@@ -519,8 +519,10 @@ def _support(
     gate_node = cfg.gate_sigmas * math.hypot(seg.noise_m * 3.0, noise.gate_sigma_m)
     node_ok: set[str] = set()
     for node in ident.nodes:
-        for b in index.beacons_like(node.beacon):
-            if b not in candidates or b in node_ok:
+        design = index.design_of(node.beacon)
+        # The candidates of the node's design (not every look-alike in a mine's survey).
+        for b in sorted(candidates - node_ok):
+            if index.design_of(b) != design:
                 continue
             mapped = icp.pose.scanner_to_mine(node.node_scanner[None, :])[0]
             edge = index.survey[b].edges[node.edge - 1]
@@ -536,7 +538,7 @@ def _support(
         candidates = {
             b for b in candidates if sum(c >= cfg.min_panel_points for c in per_beacon[b]) >= 2
         }
-    beacon_no = {bid: k for k, bid in enumerate(panels.ids)}
+    beacon_no = panels.number
     for b in candidates - node_ok:
         mine = np.flatnonzero(panels.beacon == beacon_no[b])
         on = np.isin(icp.panel, mine)
