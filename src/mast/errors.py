@@ -9,7 +9,18 @@ from __future__ import annotations
 
 from pathlib import Path
 
-__all__ = ["BeaconError", "InputError", "MastError", "NoFixError", "OutputError"]
+__all__ = [
+    "BeaconError",
+    "InputError",
+    "MastError",
+    "NoFixError",
+    "OutputError",
+    "quoted",
+    "shorten",
+]
+
+#: Longest piece of a user's value an error message repeats.
+ECHO_CHARS = 60
 
 
 class MastError(Exception):
@@ -53,3 +64,19 @@ class NoFixError(MastError):
         self.reason = reason
         self.detail = detail
         super().__init__(f"no fix ({reason}): {detail}")
+
+
+def quoted(value: object, limit: int = ECHO_CHARS) -> str:
+    """``repr(value)`` for an error message, cut to about ``limit`` characters."""
+    text = repr(value) if isinstance(value, str) else repr(str(value))
+    if len(text) <= limit:
+        return text
+    return f"{text[: limit - 1]}...' ({len(str(value))} characters)"
+
+
+def shorten(message: str, limit: int = ECHO_CHARS) -> str:
+    """``message`` with every run of more than ``limit`` characters without a space cut
+    short (a long value a user typed or a file held), and on one line."""
+    words = message.replace("\r", " ").replace("\n", " ").split(" ")
+    out = [w if len(w) <= limit else f"{w[: limit - 1]}...({len(w)} characters)" for w in words]
+    return " ".join(out)

@@ -7,6 +7,7 @@ on stderr and an exit status: 2 bad input, 3 no fix.
 
 from __future__ import annotations
 
+import contextlib
 import itertools
 import math
 import os
@@ -26,7 +27,7 @@ from mast import __version__
 from mast.apps.outputs import PLOT_SUFFIXES, check_output_file, check_output_folder
 from mast.core.noise import DEFAULT_ANGLE_SIGMA_RAD, DEFAULT_RANGE_SIGMA_M, DEFAULT_SURVEY_SIGMA_M
 from mast.core.scan import Scan
-from mast.errors import InputError, MastError, NoFixError, OutputError
+from mast.errors import InputError, MastError, NoFixError, OutputError, shorten
 
 if TYPE_CHECKING:
     from mast.pipeline.locator import LocatorConfig
@@ -176,14 +177,13 @@ def _load_scans(
 
 def _read_stdin_scan(range_min: float | None, range_max: float | None) -> Scan:
     """A scan CSV from standard input, spooled to a temporary file and named ``<stdin>``."""
-    import shutil
-
     from mast.io import read_scan_csv
+    from mast.limits import read_stream
 
     with tempfile.TemporaryDirectory(prefix="mast-stdin-") as tmp:
         spool = Path(tmp) / "stdin.csv"
-        with spool.open("wb") as fh:
-            shutil.copyfileobj(sys.stdin.buffer, fh, 1 << 20)
+        data = read_stream(sys.stdin.buffer, "<stdin>")
+        spool.write_bytes(data)
         try:
             return read_scan_csv(
                 spool, range_min_m=range_min or 0.0, range_max_m=range_max or math.inf
@@ -1010,42 +1010,71 @@ def demo(
 
 def main() -> None:
     """Entry point: every way the command can end is one line and a documented exit status."""
+    try:  # typer carries its own click (0.20 and later); earlier ones use click itself
+        from typer._click import exceptions as click
+    except ImportError:  # pragma: no cover - depends on the installed typer
+        import click  # type: ignore[no-redef]
+
     try:
         try:
-            app(standalone_mode=True)
+            status = app(standalone_mode=False)
         finally:
             sys.stdout.flush()
+    except click.UsageError as err:
+        # A bad option or value: click's message, with a long value cut short.
+        if type(err).__name__ == "NoArgsIsHelpError":
+            _say_error(err.show)
+        else:
+            _say_error(click.UsageError(shorten(err.format_message(), 80), ctx=err.ctx).show)
+        sys.exit(err.exit_code)
+    except click.ClickException as err:
+        _say(f"mast: error: {shorten(err.format_message(), 80)}")
+        sys.exit(EXIT_BAD_INPUT)
+    except (typer.Abort, KeyboardInterrupt):
+        _say("mast: interrupted")
+        sys.exit(130)
     except NoFixError as err:
-        print(f"mast: {err}", file=sys.stderr)
+        _say(f"mast: {shorten(str(err), 80)}")
         sys.exit(EXIT_NO_FIX)
     except OutputError as err:
-        print(f"mast: error: {err}", file=sys.stderr)
+        _say(f"mast: error: {shorten(str(err), 80)}")
         sys.exit(EXIT_CANNOT_WRITE)
     except MastError as err:  # InputError and the rest: what was given is wrong
-        print(f"mast: error: {err}", file=sys.stderr)
+        _say(f"mast: error: {shorten(str(err), 80)}")
         sys.exit(EXIT_BAD_INPUT)
-    except KeyboardInterrupt:
-        print("mast: interrupted", file=sys.stderr)
-        sys.exit(130)
     except BrokenPipeError:
-        # The reader of standard output went away (``mast locate ... | head``).
+        # The reader of standard output went away (``mast locate ... | head``): stop
+        # quietly, as command-line tools do, with the status of a write that failed.
         _silence_stdout()
         sys.exit(EXIT_CANNOT_WRITE)
     except OSError as err:
         _silence_stdout()
         where = f"{err.filename}: " if err.filename else "standard output: "
-        print(f"mast: error: cannot write {where}{err.strerror or err}", file=sys.stderr)
+        _say(f"mast: error: cannot write {where}{err.strerror or err}")
         sys.exit(EXIT_CANNOT_WRITE)
+    except MemoryError:
+        _say("mast: error: out of memory (the input is too large for this machine)")
+        sys.exit(EXIT_BAD_INPUT)
     except Exception as err:
         if os.environ.get("MAST_DEBUG"):
             raise
         text = str(err).splitlines()[0][:200] if str(err) else ""
-        print(
-            f"mast: internal error: {type(err).__name__}: {text} (a bug in MAST: please "
-            "report it with the command; MAST_DEBUG=1 shows the traceback)",
-            file=sys.stderr,
+        _say(
+            f"mast: internal error: {type(err).__name__}: {shorten(text, 80)} (a bug in MAST: "
+            "please report it with the command; MAST_DEBUG=1 shows the traceback)"
         )
         sys.exit(EXIT_INTERNAL)
+    sys.exit(status if isinstance(status, int) else EXIT_OK)
+
+
+def _say(line: str) -> None:
+    """One line on standard error; nothing if standard error itself is gone."""
+    _say_error(lambda: print(line, file=sys.stderr, flush=True))
+
+
+def _say_error(show: Callable[[], object]) -> None:
+    with contextlib.suppress(OSError, ValueError):
+        show()
 
 
 def _silence_stdout() -> None:

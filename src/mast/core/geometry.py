@@ -4,7 +4,6 @@ points against panels."""
 from __future__ import annotations
 
 import functools
-
 from dataclasses import dataclass
 
 import numpy as np

@@ -8,6 +8,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from mast import limits
 from mast.errors import InputError
 
 __all__ = ["Scan"]
@@ -63,6 +64,11 @@ class Scan:
         if angles.shape != ranges.shape:
             raise InputError(
                 f"scan has {angles.size} angles but {ranges.size} ranges; they must match"
+            )
+        if angles.size > limits.MAX_BEAMS:
+            raise InputError(
+                f"scan has {angles.size} beams, more than the {limits.MAX_BEAMS} MAST takes "
+                "(mast.limits.MAX_BEAMS)"
             )
         if self.intensities is not None:
             inten: NDArray[np.float64] | None = _frozen(self.intensities)

@@ -11,6 +11,7 @@ from types import TracebackType
 from typing import Any
 
 from mast.errors import InputError
+from mast.limits import MAX_LINE_BYTES, read_bounded
 
 __all__ = [
     "STREAM_CHUNK_BYTES",
@@ -99,14 +100,21 @@ class _NulGuard(io.RawIOBase):
     def __init__(self, raw: io.RawIOBase):
         super().__init__()
         self._raw = raw
+        self._since_newline = 0
 
     def readable(self) -> bool:
         return True
 
     def readinto(self, buffer: Any) -> int:
         n = self._raw.readinto(buffer)
-        if n and memoryview(buffer)[:n].tobytes().find(b"\x00") >= 0:
-            raise IrregularError("NUL byte")
+        if n:
+            data = memoryview(buffer)[:n].tobytes()
+            if data.find(b"\x00") >= 0:
+                raise IrregularError("NUL byte")
+            last = data.rfind(b"\n")
+            self._since_newline = (self._since_newline + n) if last < 0 else n - last - 1
+            if self._since_newline > MAX_LINE_BYTES:
+                raise IrregularError("long line")
         return int(n or 0)
 
     def close(self) -> None:
@@ -131,6 +139,8 @@ class CsvStream:
         self, path: str | Path, *, required: tuple[str, ...], optional: tuple[str, ...] = ()
     ):
         self.path = Path(path)
+        if not self.path.is_file():  # a pipe or a device is read once, whole, by CsvRows
+            raise IrregularError("not a regular file")
         raw = io.FileIO(self.path, "r")
         self._text = io.TextIOWrapper(
             io.BufferedReader(_NulGuard(raw), STREAM_CHUNK_BYTES),
@@ -172,14 +182,7 @@ class CsvRows:
         self, path: str | Path, *, required: tuple[str, ...], optional: tuple[str, ...] = ()
     ):
         self.path = Path(path)
-        try:
-            raw = self.path.read_bytes()
-        except FileNotFoundError:
-            raise InputError("file not found", path=self.path) from None
-        except IsADirectoryError:
-            raise InputError("is a folder, not a CSV file", path=self.path) from None
-        except OSError as err:
-            raise InputError(f"cannot read: {err.strerror}", path=self.path) from None
+        raw = read_bounded(self.path, what="CSV file")
         try:
             text = raw.decode("utf-8-sig")
         except UnicodeDecodeError as err:

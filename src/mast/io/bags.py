@@ -7,16 +7,19 @@ and sqlite3 (``.db3``) or MCAP storage. No ROS installation is needed.
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
-from pathlib import Path
+from pathlib import Path, PurePosixPath
 from typing import Any, Literal
 
 import numpy as np
 
+from mast import limits
 from mast.core.scan import Scan
-from mast.errors import InputError
+from mast.errors import InputError, quoted
+from mast.limits import read_bounded
 
 __all__ = [
     "BagKind",
@@ -43,6 +46,11 @@ def bag_kind(path: str | Path) -> Literal["rosbag1", "rosbag2"]:
         raise InputError("folder is not a ROS 2 bag (no metadata.yaml in it)", path=p)
     if not p.exists():
         raise InputError("bag not found", path=p)
+    if not p.is_file():
+        # A bag is read by seeking to its index: a pipe or a device cannot be one.
+        raise InputError(
+            "not a regular file (a pipe or a device); a bag must be a file or a folder", path=p
+        )
     try:
         with p.open("rb") as fh:
             head = fh.read(len(_ROS1_MAGIC))
@@ -80,18 +88,127 @@ def _open(path: Path) -> tuple[Any, Any, bool]:
             reader: Any = Reader1(path)
             store = get_typestore(Stores.ROS1_NOETIC)
             ros1 = True
+            reader.open()
+            _bound_ros1_chunks(reader, path)
         else:
             from rosbags.rosbag2 import Reader as Reader2
 
-            reader = Reader2(path if path.is_dir() else path.parent)
+            folder = path if path.is_dir() else path.parent
+            check_metadata(folder)
+            _bound_mcap_chunks()
+            reader = Reader2(folder)
             store = get_typestore(Stores.ROS2_HUMBLE)
             ros1 = False
-        reader.open()
+            reader.open()
     except InputError:
         raise
     except Exception as err:  # rosbags raises several kinds (ReaderError, AssertionError, ...)
         raise InputError(f"unreadable bag: {_describe(err)}", path=path) from None
     return reader, store, ros1
+
+
+def _bound_ros1_chunks(reader: Any, path: Path) -> None:
+    """Make every chunk of an opened ROS 1 reader decompress to at most the size its
+    header declares (and :data:`mast.limits.MAX_BAG_CHUNK_BYTES`): rosbags would
+    otherwise decompress a lying chunk whole, however large it grows."""
+    from mast.io.ros1_tolerant import chunk_fields, decompress_chunk
+
+    with path.open("rb") as fh:
+        for pos, chunk in list(reader.chunks.items()):
+            fields = chunk_fields(fh, pos)
+            reader.chunks[pos] = chunk._replace(
+                decompressor=functools.partial(decompress_chunk, fields, pos=pos)
+            )
+
+
+def _bounded_zstd(data: bytes, size: int) -> bytes:
+    from backports import zstd
+
+    return bytes(zstd.ZstdDecompressor().decompress(data, max_length=_chunk_cap(size)))
+
+
+def _bounded_lz4(data: bytes, size: int) -> bytes:
+    import lz4.frame  # type: ignore[import-untyped]
+
+    return bytes(lz4.frame.LZ4FrameDecompressor().decompress(data, max_length=_chunk_cap(size)))
+
+
+def _chunk_cap(size: int) -> int:
+    """Bytes a chunk declaring ``size`` may decompress to: one more than it declares
+    (so that a lie is seen), and never past the limit."""
+    if size > limits.MAX_BAG_CHUNK_BYTES:
+        raise ValueError(
+            f"chunk declares {size} bytes, more than {limits.MAX_BAG_CHUNK_BYTES} "
+            "(mast.limits.MAX_BAG_CHUNK_BYTES)"
+        )
+    return max(size, 0) + 1
+
+
+def _bound_mcap_chunks() -> None:
+    """Make rosbags' MCAP reader decompress a chunk to at most the size it declares, plus
+    one byte (then rosbags refuses it for the mismatch), within the limit."""
+    from rosbags.rosbag2 import storage_mcap
+
+    table = storage_mcap.DECOMPRESSORS
+    table["zstd"] = _bounded_zstd
+    table["lz4"] = _bounded_lz4
+
+
+def check_metadata(folder: Path) -> None:
+    """Check a ROS 2 bag's ``metadata.yaml`` before rosbags reads it.
+
+    It must be a regular file of at most :data:`mast.limits.MAX_METADATA_BYTES`,
+    plain YAML without anchors or aliases (none are written by ROS 2, and an
+    alias is how a few bytes expand into an exhaustive document), nested no
+    deeper than 32, and every storage file it names must lie inside the bag's
+    folder (no absolute path, no ``..``).
+    """
+    from ruamel.yaml import YAML
+    from ruamel.yaml.error import YAMLError
+    from ruamel.yaml.events import AliasEvent, CollectionEndEvent, CollectionStartEvent
+
+    meta = folder / "metadata.yaml"
+    raw = read_bounded(
+        meta, limit=limits.MAX_METADATA_BYTES, what="metadata file", name="MAX_METADATA_BYTES"
+    )
+    try:
+        text = raw.decode("utf-8")
+        depth = 0
+        for event in YAML(typ="safe").parse(text):
+            if isinstance(event, AliasEvent) or getattr(event, "anchor", None):
+                line = event.start_mark.line + 1 if event.start_mark else None
+                raise InputError(
+                    "uses a YAML anchor or alias; a ROS 2 bag's metadata has none",
+                    path=meta,
+                    line=line,
+                )
+            if isinstance(event, CollectionStartEvent):
+                depth += 1
+                if depth > 32:
+                    raise InputError("nested more than 32 deep", path=meta)
+            elif isinstance(event, CollectionEndEvent):
+                depth -= 1
+        doc = YAML(typ="safe").load(text)
+    except UnicodeDecodeError:
+        raise InputError("not UTF-8 text", path=meta) from None
+    except YAMLError as err:
+        first = str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
+        raise InputError(f"not valid YAML ({first})", path=meta) from None
+    info = doc.get("rosbag2_bagfile_information") if isinstance(doc, dict) else None
+    names = info.get("relative_file_paths") if isinstance(info, dict) else None
+    if not isinstance(names, list):
+        raise InputError(
+            "lacks rosbag2_bagfile_information.relative_file_paths; not a ROS 2 bag's metadata",
+            path=meta,
+        )
+    for name in names:
+        pure = PurePosixPath(str(name))
+        if pure.is_absolute() or ".." in pure.parts or "\\" in str(name):
+            raise InputError(
+                f"names the storage file {quoted(str(name))} outside the bag's folder; "
+                "only files inside it are read",
+                path=meta,
+            )
 
 
 def _describe(err: BaseException) -> str:

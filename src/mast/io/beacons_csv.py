@@ -7,14 +7,91 @@ import math
 from pathlib import Path
 
 import numpy as np
+from numpy.typing import NDArray
 
+from mast import limits
 from mast.core.beacon import Beacon, IdentifiabilityRules, Survey
-from mast.errors import BeaconError, InputError
+from mast.errors import BeaconError, InputError, quoted
 from mast.io._csv import CsvRows, parse_number
 
-__all__ = ["read_survey", "write_survey"]
+__all__ = ["COINCIDENT_M", "read_survey", "write_survey"]
 
 _DEFAULT_RULES = IdentifiabilityRules()
+#: Two surveyed edge points closer than this are one point surveyed twice, metres.
+COINCIDENT_M = 1e-3
+
+
+def _coordinate(text: str, column: str, path: Path, line: int) -> float:
+    """An easting or northing: a finite number within ±MAX_COORDINATE_M."""
+    value = parse_number(text, column=column, path=path, line=line)
+    if abs(value) > limits.MAX_COORDINATE_M:
+        raise InputError(
+            f"column {column!r}: {value:g} m is beyond ±{limits.MAX_COORDINATE_M:g} m, not a "
+            "plausible grid coordinate (mast.limits.MAX_COORDINATE_M)",
+            path=path,
+            line=line,
+        )
+    return value
+
+
+def _crosses(
+    a0: NDArray[np.float64],
+    a1: NDArray[np.float64],
+    b0: NDArray[np.float64],
+    b1: NDArray[np.float64],
+) -> bool:
+    """Whether the segments a0-a1 and b0-b1 cross or touch."""
+
+    def side(p: NDArray[np.float64], q: NDArray[np.float64], r: NDArray[np.float64]) -> float:
+        return float((q[0] - p[0]) * (r[1] - p[1]) - (q[1] - p[1]) * (r[0] - p[0]))
+
+    d1, d2 = side(a0, a1, b0), side(a0, a1, b1)
+    d3, d4 = side(b0, b1, a0), side(b0, b1, a1)
+    return d1 * d2 <= 0 and d3 * d4 <= 0
+
+
+def _check_shape(bid: str, xy: NDArray[np.float64], lines: list[int], path: Path) -> None:
+    """Refuse a beacon with two edges at one point or whose panels cross (folded on itself)."""
+    for i in range(4):
+        for j in range(i + 1, 4):
+            if math.dist(xy[i], xy[j]) < COINCIDENT_M:
+                raise InputError(
+                    f"beacon {quoted(bid)}: edges {i + 1} and {j + 1} are the same point "
+                    f"(less than {COINCIDENT_M * 1000:g} mm apart; line {lines[i]} and this one)",
+                    path=path,
+                    line=lines[j],
+                )
+    if _crosses(xy[0], xy[1], xy[2], xy[3]):
+        raise InputError(
+            f"beacon {quoted(bid)} is folded on itself: its panels P1 (edges 1-2) and P3 "
+            "(edges 3-4) cross; edges must be in polyline order along the beacon",
+            path=path,
+            line=lines[3],
+        )
+
+
+def _check_apart(
+    beacons: list[Beacon], rows: dict[str, dict[int, tuple[float, float, float, int]]], path: Path
+) -> None:
+    """Refuse two beacons sharing an edge point (a beacon surveyed twice under two ids)."""
+    from scipy.spatial import cKDTree
+
+    xy = np.concatenate([b.edges for b in beacons])
+    close = cKDTree(xy).query_pairs(COINCIDENT_M, output_type="ndarray")
+    for i, j in sorted(map(tuple, close.tolist())):
+        a, b = beacons[i // 4], beacons[j // 4]
+        if a.id == b.id:
+            continue  # within one beacon: checked with its shape
+        line_a = rows[a.id][i % 4 + 1][3]
+        line_b = rows[b.id][j % 4 + 1][3]
+        first, second = sorted((line_a, line_b))
+        raise InputError(
+            f"beacons {quoted(a.id)} and {quoted(b.id)} share an edge point (edge {i % 4 + 1} "
+            f"and edge {j % 4 + 1} less than {COINCIDENT_M * 1000:g} mm apart, lines {first} and "
+            f"{second}): one beacon surveyed twice?",
+            path=path,
+            line=second,
+        )
 
 
 def read_survey(
@@ -40,6 +117,7 @@ def read_survey(
     )
     p = rows.path
     edges: dict[str, dict[int, tuple[float, float, float, int]]] = {}
+    last_id: str | None = None
     for line, f in rows:
         bid = f["beacon"].strip()
         if not bid:
@@ -47,24 +125,49 @@ def read_survey(
         e = parse_number(f["edge"], column="edge", path=p, line=line)
         if e != int(e) or not 1 <= e <= 4:
             raise InputError(
-                f"column 'edge': {f['edge'].strip()!r} is not an edge number 1..4",
+                f"column 'edge': {quoted(f['edge'].strip())} is not an edge number 1..4",
                 path=p,
                 line=line,
             )
         k = int(e)
-        east = parse_number(f["easting"], column="easting", path=p, line=line)
-        north = parse_number(f["northing"], column="northing", path=p, line=line)
+        east = _coordinate(f["easting"], "easting", p, line)
+        north = _coordinate(f["northing"], "northing", p, line)
         elev = math.nan
         if rows.has("elevation") and f["elevation"].strip():
             elev = parse_number(f["elevation"], column="elevation", path=p, line=line)
-        got = edges.setdefault(bid, {})
+            if abs(elev) > limits.MAX_ELEVATION_M:
+                raise InputError(
+                    f"column 'elevation': {elev:g} m is beyond ±{limits.MAX_ELEVATION_M:g} m, "
+                    "not a plausible elevation (mast.limits.MAX_ELEVATION_M)",
+                    path=p,
+                    line=line,
+                )
+        got = edges.get(bid)
+        if got is None:
+            if len(edges) >= limits.MAX_BEACONS:
+                raise InputError(
+                    f"more than {limits.MAX_BEACONS} beacons, the most MAST takes in one survey "
+                    "(mast.limits.MAX_BEACONS)",
+                    path=p,
+                    line=line,
+                )
+            got = edges[bid] = {}
+        elif bid != last_id and len(got) == 4:
+            first = min(v[3] for v in got.values())
+            raise InputError(
+                f"beacon id {quoted(bid)} is used twice: a beacon of that id was given "
+                f"on lines {first}-{max(v[3] for v in got.values())}",
+                path=p,
+                line=line,
+            )
         if k in got:
             raise InputError(
-                f"beacon {bid!r} edge {k} given twice (first on line {got[k][3]})",
+                f"beacon {quoted(bid)} edge {k} given twice (first on line {got[k][3]})",
                 path=p,
                 line=line,
             )
         got[k] = (east, north, elev, line)
+        last_id = bid
     if not edges:
         raise InputError("no beacon rows after the header", path=p, line=rows.header_line)
     beacons = []
@@ -73,23 +176,25 @@ def read_survey(
         if len(got) != 4:
             missing = [str(k) for k in range(1, 5) if k not in got]
             raise InputError(
-                f"beacon {bid!r} has {len(got)} edge(s); edge(s) {', '.join(missing)} missing "
-                "(every beacon needs edges 1, 2, 3 and 4)",
+                f"beacon {quoted(bid)} has {len(got)} edge(s); edge(s) {', '.join(missing)} "
+                "missing (every beacon needs edges 1, 2, 3 and 4)",
                 path=p,
                 line=first,
             )
         xy = np.array([[got[k][0], got[k][1]] for k in range(1, 5)])
+        _check_shape(bid, xy, [got[k][3] for k in range(1, 5)], p)
         z = np.array([got[k][2] for k in range(1, 5)])
         beacon = Beacon(bid, xy, None if np.all(np.isnan(z)) else z)
         if rules is not None:
             problems = beacon.identifiability_problems(rules)
             if problems:
                 raise BeaconError(
-                    f"beacon {bid!r} is not identifiable: " + "; ".join(problems),
+                    f"beacon {quoted(bid)} is not identifiable: " + "; ".join(problems),
                     path=p,
                     line=first,
                 )
         beacons.append(beacon)
+    _check_apart(beacons, edges, p)
     return Survey(beacons, source=str(p))
 
 

@@ -29,6 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
+from mast import limits
 from mast.core.pose import Pose2D, normalize_azimuth
 from mast.core.scan import Scan
 from mast.errors import InputError
@@ -89,12 +90,19 @@ def read_carmen_log(
         line_no = 0
         while True:
             try:
-                raw = fh.readline()
+                raw = fh.readline(limits.MAX_LINE_BYTES + 1)
             except (OSError, EOFError) as err:
                 raise InputError(f"cannot read: {err}", path=p, line=line_no + 1) from None
             if not raw:
                 return
             line_no += 1
+            if len(raw) > limits.MAX_LINE_BYTES:
+                raise InputError(
+                    f"line longer than {limits.size_text(limits.MAX_LINE_BYTES)} "
+                    "(mast.limits.MAX_LINE_BYTES)",
+                    path=p,
+                    line=line_no,
+                )
             tokens = raw.split()
             if not tokens:
                 continue

@@ -6,18 +6,21 @@ order; or a DXF drawing with the walls as polylines.
 
 from __future__ import annotations
 
+import io
 from pathlib import Path
 
 import numpy as np
 
-from mast.errors import InputError
+from mast import limits
+from mast.errors import InputError, shorten
 from mast.io._csv import CsvRows, parse_number
+from mast.limits import read_bounded
 from mast.plan.drift import Drift, Wall
 
 __all__ = ["MAX_COORDINATE_M", "read_drift"]
 
 #: Coordinates beyond this are no mine grid (UTM northings stay under 10 000 km).
-MAX_COORDINATE_M = 1e8
+MAX_COORDINATE_M = limits.MAX_COORDINATE_M
 
 #: DXF entities read as walls: 2D and 3D polylines and single lines (z is dropped).
 _DXF_WALL_TYPES = ("LWPOLYLINE", "POLYLINE", "LINE")
@@ -111,14 +114,16 @@ def _read_dxf(path: Path, layers: tuple[str, ...]) -> Drift:
     from ezdxf import recover
     from ezdxf.lldxf.const import DXFStructureError
 
-    if not path.is_file():
-        raise InputError("file not found" if not path.exists() else "not a file", path=path)
+    # Bounded like every text input (a drawing is text; binary DXF is not read).
+    data = read_bounded(path, what="DXF drawing", text=False)
     try:
-        doc, auditor = recover.readfile(path)
+        doc, auditor = recover.read(io.BytesIO(data))
     except DXFStructureError as err:
-        raise InputError(f"not a readable DXF drawing: {err}", path=path) from None
-    except OSError as err:
-        raise InputError(f"cannot read: {err.strerror or err}", path=path) from None
+        raise InputError(f"not a readable DXF drawing: {shorten(str(err))}", path=path) from None
+    except (ValueError, UnicodeDecodeError, IndexError, KeyError, TypeError) as err:
+        raise InputError(
+            f"not a readable DXF drawing ({type(err).__name__}: {shorten(str(err))})", path=path
+        ) from None
     if auditor.has_errors:
         raise InputError(
             f"DXF drawing damaged beyond recovery ({len(auditor.errors)} error(s))", path=path

@@ -20,11 +20,18 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import BinaryIO
 
-__all__ = ["MAX_CHUNK_BYTES", "BagFormatError", "RawMessage", "iter_ros1_bag", "walk_ros1_bag"]
+from mast import limits
+
+__all__ = [
+    "BagFormatError",
+    "RawMessage",
+    "chunk_fields",
+    "decompress_chunk",
+    "iter_ros1_bag",
+    "walk_ros1_bag",
+]
 
 _MAGIC = b"#ROSBAG V2.0\n"
-#: Largest chunk (compressed or as declared decompressed) the walk will hold in memory.
-MAX_CHUNK_BYTES = 512 * 1024 * 1024
 
 
 @dataclass(frozen=True, slots=True)
@@ -92,12 +99,27 @@ def _read(fh: BinaryIO, n: int, pos: int, what: str) -> bytes:
     return data
 
 
+def chunk_fields(fh: BinaryIO, pos: int) -> dict[str, bytes]:
+    """The header fields of the record at byte ``pos`` of an open bag."""
+    fh.seek(pos)
+    (hlen,) = struct.unpack("<I", _read(fh, 4, pos, "record"))
+    if hlen > limits.MAX_BAG_CHUNK_BYTES:
+        raise BagFormatError(f"record header at byte {pos} is implausibly long")
+    return _fields(_read(fh, hlen, pos, "record header"), pos + 4)
+
+
+def decompress_chunk(fields: dict[str, bytes], data: bytes, *, pos: int) -> bytes:
+    """A chunk's data decompressed: never past the size its header declares (nor
+    :data:`mast.limits.MAX_BAG_CHUNK_BYTES`); a chunk that would grow beyond is an error."""
+    return _decompress(fields, data, pos)
+
+
 def _decompress(fields: dict[str, bytes], data: bytes, pos: int) -> bytes:
     kind = fields.get("compression", b"none")
     size = struct.unpack("<I", fields["size"][:4])[0] if "size" in fields else None
-    if size is not None and size > MAX_CHUNK_BYTES:
+    if size is not None and size > limits.MAX_BAG_CHUNK_BYTES:
         raise BagFormatError(f"chunk at byte {pos} declares {size} bytes, beyond the limit")
-    limit = MAX_CHUNK_BYTES if size is None else size
+    limit = limits.MAX_BAG_CHUNK_BYTES if size is None else size
     try:
         if kind == b"none":
             return data
@@ -141,7 +163,7 @@ def iter_ros1_bag(
                 if len(head) < 4:
                     raise BagFormatError(f"record at byte {pos} is cut short (the file ends)")
                 (hlen,) = struct.unpack("<I", head)
-                if hlen > MAX_CHUNK_BYTES:
+                if hlen > limits.MAX_BAG_CHUNK_BYTES:
                     raise BagFormatError(f"record header at byte {pos} is implausibly long")
                 fields = _fields(_read(fh, hlen, pos, "record header"), pos + 4)
                 (dlen,) = struct.unpack("<I", _read(fh, 4, pos, "record"))
@@ -151,7 +173,7 @@ def iter_ros1_bag(
                     fh.seek(12 * count, 1)
                     pos = fh.tell()
                     continue
-                if dlen > MAX_CHUNK_BYTES:
+                if dlen > limits.MAX_BAG_CHUNK_BYTES:
                     raise BagFormatError(f"record at byte {pos} declares {dlen} bytes")
                 if op in (0x05, 0x07, 0x02):
                     data = _read(fh, dlen, pos, "record")

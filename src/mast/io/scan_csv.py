@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
+from mast import limits
 from mast.core.scan import Scan
 from mast.errors import InputError
 from mast.io._csv import CsvRows, CsvStream, IrregularError, parse_number
@@ -104,6 +105,8 @@ def _stream(path: str | Path) -> _Columns:
                     r = _range_value(r_text, p, 0)
             angles.append(a)
             ranges.append(r)
+            if len(angles) > limits.MAX_BEAMS:
+                raise IrregularError("too many beams")
             if ii is not None:
                 t = row[ii] if ii < len(row) else ""
                 try:
@@ -142,6 +145,13 @@ def _read_whole(path: str | Path) -> _Columns:
                 line=line,
             )
         angles.append(a)
+        if len(angles) > limits.MAX_BEAMS:
+            raise InputError(
+                f"more than {limits.MAX_BEAMS} beams, the most MAST takes in one scan "
+                "(mast.limits.MAX_BEAMS)",
+                path=p,
+                line=line,
+            )
         ranges.append(_range_value(f["range_m"], p, line))
         if rows.has("intensity"):
             inten.append(_intensity_value(f["intensity"], p, line))

@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
+from mast import limits
 from mast.core.scan import Scan
 from mast.errors import InputError
 
@@ -36,7 +37,14 @@ def read_urg_log(
         raise InputError(f"cannot read: {err.strerror}", path=p) from None
     angle_min = -_STEP_RAD * (URG04LX_BEAMS - 1) / 2
     with fh:
-        for line_no, raw in enumerate(fh, 1):
+        for line_no, raw in enumerate(iter(lambda: fh.readline(limits.MAX_LINE_BYTES + 1), b""), 1):
+            if len(raw) > limits.MAX_LINE_BYTES:
+                raise InputError(
+                    f"line longer than {limits.size_text(limits.MAX_LINE_BYTES)} "
+                    "(mast.limits.MAX_LINE_BYTES)",
+                    path=p,
+                    line=line_no,
+                )
             tokens = raw.split()
             if not tokens:
                 continue
