@@ -145,7 +145,7 @@ def test_upper_case_suffix_is_known(utm: tuple[Scan, Survey, Fix], tmp_path: Pat
 
 def test_missing_folder_is_an_output_error(utm: tuple[Scan, Survey, Fix], tmp_path: Path) -> None:
     target = tmp_path / "no" / "such" / "fix.png"
-    with pytest.raises(OutputError, match="cannot write the plot") as err:
+    with pytest.raises(OutputError, match="cannot write") as err:
         plot_fix(*utm, target)
     assert err.value.path == str(target)
     assert "No such file or directory" in str(err.value)
@@ -157,19 +157,29 @@ def test_read_only_folder_is_an_output_error(utm: tuple[Scan, Survey, Fix], tmp_
     folder.mkdir()
     folder.chmod(0o500)
     try:
-        with pytest.raises(OutputError, match="cannot write the plot: Permission denied"):
+        with pytest.raises(OutputError, match="cannot write: Permission denied"):
             plot_fix(*utm, folder / "fix.png")
     finally:
         folder.chmod(0o700)
 
 
 @pytest.mark.skipif(not Path("/dev/full").exists(), reason="needs /dev/full")
-def test_full_disk_is_an_output_error(utm: tuple[Scan, Survey, Fix], tmp_path: Path) -> None:
-    # a file that opens but takes no byte: what a full disk does to a write
+def test_full_disk_is_an_output_error(
+    utm: tuple[Scan, Survey, Fix], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # every file written takes no byte (/dev/full): what a full disk does to a write
+    import builtins
+
+    import mast.io.atomic
+
+    def full(_path: object, mode: str = "r", **kw: object) -> object:
+        return builtins.open("/dev/full", mode, **kw)  # type: ignore[call-overload]
+
+    monkeypatch.setattr(mast.io.atomic, "open", full, raising=False)
     target = tmp_path / "fix.png"
-    target.symlink_to("/dev/full")
-    with pytest.raises(OutputError, match="cannot write the plot: No space left on device"):
+    with pytest.raises(OutputError, match="cannot write: No space left on device"):
         plot_fix(*utm, target)
+    assert list(tmp_path.iterdir()) == []  # no plot, and no half of one
 
 
 # --------------------------------------------------------------------------- coordinates
@@ -397,6 +407,6 @@ def test_a_folder_in_the_way_is_an_output_error(
 ) -> None:
     target = tmp_path / "fix.png"
     target.mkdir()
-    with pytest.raises(OutputError, match="cannot write the plot: Is a directory"):
+    with pytest.raises(OutputError, match="cannot write: Is a directory"):
         plot_fix(*utm, target)
     assert target.is_dir()  # left as it was

@@ -284,15 +284,19 @@ def test_las_quantum_at_utm_size_is_exact(tmp_path: Path) -> None:
 
 
 def test_las_streams_instead_of_accumulating(tmp_path: Path) -> None:
-    """Each add() reaches the file: its size grows before close(), scan by scan."""
+    """Each add() reaches the file: its size grows before close(), scan by scan; the map
+    is written under a temporary name and appears under its own once complete."""
     path = tmp_path / "map.las"
     p = _placed()[0]
     pts = np.repeat(p.pose.position[None, :], 2000, axis=0) + np.arange(2000)[:, None] * 1e-3
     with LasMapWriter(path, origin_e=E0, origin_n=N0) as las:
         las.add(0, p.stamp_ns, pts)
-        first = path.stat().st_size
+        first = las.writing.stat().st_size
         las.add(1, p.stamp_ns, pts)
-        second = path.stat().st_size
+        second = las.writing.stat().st_size
+        assert not path.exists()
+    assert path.is_file()
+    assert not las.writing.exists()
     # A point of format 6 with a uint32 extra dimension is 34 bytes.
     assert first > 2000 * 34 * 0.8
     assert second >= first + 2000 * 34 * 0.8

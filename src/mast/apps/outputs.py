@@ -8,10 +8,17 @@ from __future__ import annotations
 import os
 from collections.abc import Iterable
 from pathlib import Path
+from typing import Any
 
 from mast.errors import InputError, OutputError
 
-__all__ = ["PLOT_SUFFIXES", "check_output_file", "check_output_folder", "write_bytes"]
+__all__ = [
+    "PLOT_SUFFIXES",
+    "check_output_file",
+    "check_output_folder",
+    "save_figure",
+    "write_bytes",
+]
 
 #: File suffixes a plot can be written as (matplotlib's Agg and vector back-ends); here,
 #: not in the plotting module, so that checking a path does not import matplotlib.
@@ -76,7 +83,17 @@ def check_output_file(
 
 def write_bytes(path: Path, data: bytes) -> None:
     """Write a whole file, turning a failure (full disk, permissions) into an OutputError."""
-    try:
-        path.write_bytes(data)
-    except OSError as err:
-        raise OutputError(f"cannot write: {err.strerror or err}", path=path) from None
+    from mast.io.atomic import write_atomic
+
+    write_atomic(path, data)
+
+
+def save_figure(fig: Any, path: Path, **kwargs: Any) -> None:
+    """Save a matplotlib figure: drawn in memory in the format of ``path``'s suffix, then
+    written whole by :func:`write_bytes`, so that a failed write (a full disk) is an
+    :class:`OutputError` rather than an error the plotting library swallows."""
+    import io
+
+    buf = io.BytesIO()
+    fig.savefig(buf, format=path.suffix.lower().lstrip(".") or "png", **kwargs)
+    write_bytes(path, buf.getvalue())

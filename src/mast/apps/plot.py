@@ -15,8 +15,6 @@ local grid under 10 km) are drawn as they are.
 
 from __future__ import annotations
 
-import contextlib
-import io
 import math
 import textwrap
 from collections.abc import Sequence
@@ -32,12 +30,12 @@ from matplotlib.patches import Circle, Ellipse
 from matplotlib.ticker import MaxNLocator, ScalarFormatter
 from numpy.typing import NDArray
 
-from mast.apps.outputs import PLOT_SUFFIXES
+from mast.apps.outputs import PLOT_SUFFIXES, save_figure
 from mast.core.beacon import Survey
 from mast.core.geometry import PanelSet
 from mast.core.pose import Pose2D, format_dms
 from mast.core.scan import Scan
-from mast.errors import InputError, OutputError
+from mast.errors import InputError
 from mast.pipeline.locator import NO_FIX_REASONS, Fix
 from mast.pipeline.segmentation import Segment
 
@@ -85,25 +83,8 @@ def plot_fix(scan: Scan, survey: Survey, fix: Fix, path: str | Path, *, title: s
             path=target,
         )
     fig = fix_figure(scan, survey, fix, title=title)
-    buf = io.BytesIO()
-    fig.savefig(buf, format=suffix[1:], dpi=DPI)
+    save_figure(fig, target, dpi=DPI)
     fig.clear()
-    _write(target, buf.getvalue())
-
-
-def _write(target: Path, data: bytes) -> None:
-    """Write the whole file; any failure is an OutputError, a half-written file removed."""
-    try:
-        fh = target.open("wb")
-    except OSError as err:
-        raise OutputError(f"cannot write the plot: {err.strerror or err}", path=target) from None
-    try:
-        with fh:
-            fh.write(data)
-    except OSError as err:
-        with contextlib.suppress(OSError):
-            target.unlink()
-        raise OutputError(f"cannot write the plot: {err.strerror or err}", path=target) from None
 
 
 def fix_figure(scan: Scan, survey: Survey, fix: Fix, *, title: str = "") -> Figure:

@@ -19,7 +19,9 @@ from pathlib import Path
 
 import numpy as np
 
+from mast.apps.outputs import save_figure
 from mast.core.pose import format_dms, parse_azimuth
+from mast.io.atomic import atomic_open, write_atomic
 from mast.pipeline.locator import LocatorConfig, locate
 from mast.sim import PAPER_VARIANTS, Scene, paper_scene, simulate_scan
 
@@ -187,7 +189,7 @@ def reproduce_paper(
     _write_csv(out_dir / "results.csv", results)
     _figures(out_dir, results)
     report = out_dir / "report.md"
-    report.write_text(_report(results, draws), encoding="utf-8")
+    write_atomic(report, _report(results, draws).encode("utf-8"))
     echo(f"wrote {report}")
     return report
 
@@ -195,7 +197,7 @@ def reproduce_paper(
 def _write_csv(path: Path, rows: list[ShotResult]) -> None:
     from dataclasses import asdict
 
-    with path.open("w", newline="", encoding="utf-8") as fh:
+    with atomic_open(path, "w", newline="", encoding="utf-8") as fh:
         w = csv.DictWriter(fh, fieldnames=list(asdict(rows[0])))
         w.writeheader()
         for r in rows:
@@ -249,7 +251,7 @@ def _figures(out: Path, rows: list[ShotResult]) -> None:
         ax.legend(title="resolution")
     fig.suptitle(f"Errors by position, {1000 * NOISE_M:g} mm range noise, beacons 0.998 m × 0.2 m")
     fig.tight_layout()
-    fig.savefig(out / "errors_by_position.png", dpi=110)
+    save_figure(fig, out / "errors_by_position.png", dpi=110)
     plt.close(fig)
 
     fig, axes = plt.subplots(1, 2, figsize=(11, 4))
@@ -269,7 +271,7 @@ def _figures(out: Path, rows: list[ShotResult]) -> None:
         ax.legend(title="resolution")
     fig.suptitle(f"Errors by beacon size and resolution, {1000 * NOISE_M:g} mm range noise")
     fig.tight_layout()
-    fig.savefig(out / "errors_by_size.png", dpi=110)
+    save_figure(fig, out / "errors_by_size.png", dpi=110)
     plt.close(fig)
 
 

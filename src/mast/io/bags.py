@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import functools
 import math
+import os
+import tempfile
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path, PurePosixPath
@@ -18,7 +20,8 @@ import numpy as np
 
 from mast import limits
 from mast.core.scan import Scan
-from mast.errors import InputError, quoted
+from mast.errors import InputError, OutputError, quoted
+from mast.io.atomic import atomic_path
 from mast.limits import read_bounded
 
 __all__ = [
@@ -422,13 +425,35 @@ def write_laserscans(
         raise InputError("exists already; not overwriting a bag", path=p)
     ros1 = kind == "rosbag1"
     store = get_typestore(Stores.ROS1_NOETIC if ros1 else Stores.ROS2_HUMBLE)
+    # Whole or not at all: written under a temporary name, renamed when complete. A ROS 2
+    # bag names its storage file after its folder, so it is staged in a temporary folder
+    # under its own name.
+    if ros1:
+        with atomic_path(p) as tmp:
+            n = _write_scans(tmp, scans, ros1=ros1, kind=kind, topic=topic, store=store)
+        return n
+    try:
+        staging = tempfile.TemporaryDirectory(dir=p.parent, prefix=f".{p.name}.")
+        with staging as stage:
+            staged = Path(stage) / p.name
+            n = _write_scans(staged, scans, ros1=ros1, kind=kind, topic=topic, store=store)
+            os.replace(staged, p)
+    except OSError as err:
+        raise OutputError(f"cannot write: {err.strerror or err}", path=p) from None
+    return n
+
+
+def _write_scans(
+    path: Path, scans: Iterable[Scan], *, ros1: bool, kind: BagKind, topic: str, store: Any
+) -> int:
+    """:func:`write_laserscans` into ``path`` (a temporary name its caller renames)."""
     LaserScan = store.types[LASERSCAN]
     Header = store.types["std_msgs/msg/Header"]
     Time = store.types["builtin_interfaces/msg/Time"]
     if ros1:
         from rosbags.rosbag1 import Writer as Writer1
 
-        writer: Any = Writer1(p)
+        writer: Any = Writer1(path)
         # rosbag record's chunk size: a bag cut short loses at most one chunk of scans.
         writer.chunk_threshold = ROS1_CHUNK_BYTES
     else:
@@ -436,7 +461,7 @@ def write_laserscans(
         from rosbags.rosbag2 import Writer as Writer2
 
         plugin = StoragePlugin.MCAP if kind == "mcap" else StoragePlugin.SQLITE3
-        writer = Writer2(p, version=Writer2.VERSION_LATEST, storage_plugin=plugin)
+        writer = Writer2(path, version=Writer2.VERSION_LATEST, storage_plugin=plugin)
     n = 0
     with writer:
         conn = writer.add_connection(topic, LASERSCAN, typestore=store)

@@ -13,6 +13,7 @@ from mast import limits
 from mast.core.beacon import Beacon, IdentifiabilityRules, Survey
 from mast.errors import BeaconError, InputError, quoted
 from mast.io._csv import CsvRows, parse_number
+from mast.io.atomic import atomic_open
 
 __all__ = ["COINCIDENT_M", "read_survey", "write_survey"]
 
@@ -201,7 +202,7 @@ def read_survey(
 def write_survey(path: str | Path, survey: Survey) -> None:
     """Write a survey in the beacon CSV contract (full double precision)."""
     with_z = any(b.elevations is not None for b in survey)
-    with Path(path).open("w", newline="", encoding="utf-8") as fh:
+    with atomic_open(path, "w", newline="", encoding="utf-8") as fh:
         w = csv.writer(fh)
         w.writerow(["beacon", "edge", "easting", "northing", *(["elevation"] if with_z else [])])
         for b in survey:

@@ -14,6 +14,7 @@ from mast import limits
 from mast.core.scan import Scan
 from mast.errors import InputError
 from mast.io._csv import CsvRows, CsvStream, IrregularError, parse_number
+from mast.io.atomic import atomic_open
 
 __all__ = ["read_scan_csv", "write_scan_csv"]
 
@@ -163,7 +164,7 @@ def _read_whole(path: str | Path) -> _Columns:
 
 def write_scan_csv(path: str | Path, scan: Scan) -> None:
     """Write a scan in the single-scan CSV contract (no return as an empty field)."""
-    with Path(path).open("w", newline="", encoding="utf-8") as fh:
+    with atomic_open(path, "w", newline="", encoding="utf-8") as fh:
         w = csv.writer(fh)
         has_i = scan.intensities is not None
         w.writerow(["angle_rad", "range_m", *(["intensity"] if has_i else [])])

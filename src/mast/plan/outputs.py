@@ -11,9 +11,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from mast.apps.outputs import write_bytes
+from mast.apps.outputs import save_figure, write_bytes
 from mast.core.quantiles import chi2_ppf
-from mast.errors import OutputError
 from mast.pipeline.adjustment import position_ellipse
 from mast.plan.predict import Plan
 from mast.runs.outputs import add_dxf_beacons, new_dxf, save_dxf
@@ -254,12 +253,7 @@ def write_plan_png(path: Path, plan: Plan, *, title: str = "") -> None:
     axes[1].set_xlabel("Easting (m)")
     if title:
         fig.suptitle(title, fontsize=10)
-    try:
-        fig.savefig(path, dpi=130)
-    except OSError as err:
-        raise OutputError(f"cannot write: {err.strerror or err}", path=path) from None
-    if not path.is_file() or path.stat().st_size == 0:
-        raise OutputError("the figure was not written", path=path)
+    save_figure(fig, path, dpi=130)
 
 
 def _stretches(flags: NDArray[np.bool_]) -> list[tuple[int, int]]:

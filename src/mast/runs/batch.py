@@ -14,6 +14,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 
 from mast.errors import MastError
+from mast.io.atomic import atomic_open
 
 __all__ = ["RunOutcome", "expand_runs", "track_runs"]
 
@@ -158,7 +159,7 @@ def track_runs(
         if cluster is not None:
             cluster.close()
     ordered = [outcomes[f] for f in folders]
-    with (out / "index.csv").open("w", newline="", encoding="utf-8") as fh:
+    with atomic_open(out / "index.csv", "w", newline="", encoding="utf-8") as fh:
         w = csv.DictWriter(fh, fieldnames=list(asdict(ordered[0]).keys()) if ordered else [])
         w.writeheader()
         for o in ordered:

@@ -27,10 +27,12 @@ cannot be written.
 from __future__ import annotations
 
 import calendar
+import contextlib
 import html
 import io
 import itertools
 import math
+import os
 import re
 from collections.abc import Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
@@ -45,6 +47,7 @@ from numpy.typing import ArrayLike, NDArray
 from mast.core.beacon import Beacon, Survey
 from mast.core.pose import format_dms
 from mast.errors import InputError, OutputError
+from mast.io.atomic import atomic_open, atomic_path
 from mast.runs.model import PlacedScan, RunSummary, Trajectory
 
 __all__ = [
@@ -191,25 +194,14 @@ def _num(value: float) -> str:
     return repr(float(value))
 
 
-def _open_text(path: str | Path) -> io.TextIOWrapper:
-    try:
-        return open(path, "w", encoding="utf-8", newline="\n")
-    except OSError as exc:
-        raise OutputError(f"cannot write: {exc.strerror or exc}", path=path) from None
-
-
 def _write_lines(path: str | Path, lines: Iterable[str]) -> int:
     """Write ``lines`` (each without its newline); the number of lines after the first."""
     rows = -1
-    f = _open_text(path)
-    try:
-        with f:
-            for line in lines:
-                f.write(line)
-                f.write("\n")
-                rows += 1
-    except OSError as exc:
-        raise OutputError(f"cannot write: {exc.strerror or exc}", path=path) from None
+    with atomic_open(path, "w", encoding="utf-8", newline="\n") as f:
+        for line in lines:
+            f.write(line)
+            f.write("\n")
+            rows += 1
     return max(rows, 0)
 
 
@@ -471,10 +463,17 @@ class LasMapWriter:
         self._header = header
         self.count = 0
         self._closed = False
+        # Written under a temporary name, renamed onto the map when complete.
+        self._tmp = self.path.with_name(f".{self.path.name}.{os.getpid()}.part")
         try:
-            self._writer = laspy.open(self.path, mode="w", header=header)
+            self._writer = laspy.open(self._tmp, mode="w", header=header)
         except OSError as exc:
             raise OutputError(f"cannot write: {exc.strerror or exc}", path=self.path) from None
+
+    @property
+    def writing(self) -> Path:
+        """The temporary file being written; renamed onto :attr:`path` by :meth:`close`."""
+        return self._tmp
 
     def __enter__(self) -> LasMapWriter:
         return self
@@ -485,7 +484,15 @@ class LasMapWriter:
         exc: BaseException | None,
         tb: TracebackType | None,
     ) -> None:
-        self.close()
+        if exc_type is None:
+            self.close()
+            return
+        # Failed part-way: no map rather than half of one.
+        self._closed = True
+        with contextlib.suppress(Exception):
+            self._writer.close()
+        with contextlib.suppress(OSError):
+            self._tmp.unlink()
 
     def add(
         self,
@@ -574,7 +581,10 @@ class LasMapWriter:
             self._closed = True
             try:
                 self._writer.close()
+                os.replace(self._tmp, self.path)
             except OSError as exc:
+                with contextlib.suppress(OSError):
+                    self._tmp.unlink()
                 raise OutputError(f"cannot write: {exc.strerror or exc}", path=self.path) from None
         return self.count
 
@@ -706,11 +716,10 @@ def add_dxf_beacons(
 
 
 def save_dxf(doc: Any, path: str | Path) -> None:
-    """Write a drawing, turning a failure into an :class:`OutputError` naming the file."""
-    try:
-        doc.saveas(path)
-    except OSError as exc:
-        raise OutputError(f"cannot write: {exc.strerror or exc}", path=path) from None
+    """Write a drawing whole (a temporary name, renamed when complete); a failure is an
+    :class:`OutputError` naming the file."""
+    with atomic_path(path) as tmp:
+        doc.saveas(tmp)
 
 
 # --------------------------------------------------------------------------- report

@@ -23,6 +23,7 @@ from numpy.typing import NDArray
 from mast.apps.report import ReportInputs, fix_record
 from mast.core.beacon import Survey
 from mast.errors import OutputError
+from mast.io.atomic import atomic_open
 from mast.runs.model import RunSummary, Trajectory
 from mast.runs.track import Node, RunTracker, Smoother, TrackConfig
 
@@ -152,7 +153,7 @@ def track_run(
     walls: dict[int, NDArray[np.float64]] = {}
     last_wall: NDArray[np.float64] | None = None
     try:
-        with (out / "fixes.jsonl").open("w", encoding="utf-8") as fh:
+        with atomic_open(out / "fixes.jsonl", "w", encoding="utf-8") as fh:
             try:
                 for i, scan in enumerate(scans(skipped)):
                     step = tracker.step(i, scan)

@@ -21,6 +21,7 @@ from mast.core.beacon import Beacon, Survey
 from mast.core.pose import Pose2D
 from mast.errors import InputError
 from mast.io import write_laserscans, write_scan_csv, write_survey
+from mast.io.atomic import atomic_open, write_atomic
 from mast.io.bags import BagKind
 from mast.sim.design import BeaconDesign, paper_design, random_design
 from mast.sim.scanner import SCANNERS, ScannerModel, SimulatedScan, simulate_scan
@@ -417,7 +418,7 @@ def write_scenario(
             files = [name]
             scan_paths = [p]
         truth_path = folder / "truth.csv"
-        with truth_path.open("w", newline="", encoding="utf-8") as fh:
+        with atomic_open(truth_path, "w", newline="", encoding="utf-8") as fh:
             truth = csv.writer(fh)
             truth.writerow(TRUTH_COLUMNS)
             sims = _with_truth(scene, files, truth)
@@ -440,9 +441,13 @@ def write_scenario(
                 "scanner_models": {s.scanner.name: asdict(s.scanner) for s in scene.shots},
             }
         )
-    (root / "scenario.json").write_text(
-        json.dumps({"scenario": scenario, "seed": seed, "format": fmt, "scenes": meta}, indent=2)
-        + "\n",
-        encoding="utf-8",
+    write_atomic(
+        root / "scenario.json",
+        (
+            json.dumps(
+                {"scenario": scenario, "seed": seed, "format": fmt, "scenes": meta}, indent=2
+            )
+            + "\n"
+        ).encode("utf-8"),
     )
     return written

@@ -33,6 +33,7 @@ from mast.apps.bench.detection import (
     detection_rows,
     detection_table,
 )
+from mast.io.atomic import atomic_open
 from mast.pipeline.bounds import truth_bound
 from mast.pipeline.locator import LocatorConfig, locate
 from mast.sim import ScannerModel, Scene, Shot, random_scene, simulate_scan
@@ -257,7 +258,7 @@ def _write_rows(path: Path, rows: list[dict[str, object]]) -> None:
     keys: list[str] = []
     for r in rows:
         keys += [k for k in r if k not in keys]
-    with path.open("w", newline="", encoding="utf-8") as fh:
+    with atomic_open(path, "w", newline="", encoding="utf-8") as fh:
         w = csv.DictWriter(fh, fieldnames=keys)
         w.writeheader()
         w.writerows(rows)

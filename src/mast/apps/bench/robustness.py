@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from mast.core.pose import Pose2D
+from mast.io.atomic import atomic_open
 from mast.pipeline.locator import Fix, LocatorConfig, locate
 from mast.sim import Scene, drift_scene, hard_scene
 from mast.sim.scanner import SimulatedScan
@@ -139,8 +140,8 @@ def run_robustness(
         echo(s.line())
         if out_dir is not None:
             out_dir.mkdir(parents=True, exist_ok=True)
-            with (out_dir / f"robustness_{family}.csv").open(
-                "w", newline="", encoding="utf-8"
+            with atomic_open(
+                out_dir / f"robustness_{family}.csv", "w", newline="", encoding="utf-8"
             ) as fh:
                 w = csv.DictWriter(fh, fieldnames=list(rows[0]))
                 w.writeheader()
