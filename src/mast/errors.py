@@ -75,8 +75,19 @@ def quoted(value: object, limit: int = ECHO_CHARS) -> str:
 
 
 def shorten(message: str, limit: int = ECHO_CHARS) -> str:
-    """``message`` with every run of more than ``limit`` characters without a space cut
-    short (a long value a user typed or a file held), and on one line."""
-    words = message.replace("\r", " ").replace("\n", " ").split(" ")
+    """``message`` on one line, with every run of more than ``limit`` characters without
+    a space cut short (a long value a user typed or a file held), and control
+    characters and line separators a file held written as escapes (``\\x0b``)."""
+    text = "".join(
+        ch if ch == " " or not _unprintable(ch) else ch.encode("unicode_escape").decode("ascii")
+        for ch in message
+    )
+    words = text.split(" ")
     out = [w if len(w) <= limit else f"{w[: limit - 1]}...({len(w)} characters)" for w in words]
     return " ".join(out)
+
+
+def _unprintable(ch: str) -> bool:
+    import unicodedata
+
+    return unicodedata.category(ch) in {"Cc", "Cf", "Zl", "Zp", "Cs"} or ch.isspace()

@@ -32,6 +32,7 @@ __all__ = [
     "MAX_LINE_BYTES",
     "MAX_METADATA_BYTES",
     "MAX_TEXT_BYTES",
+    "MAX_WALL_LENGTH_M",
     "check_lines",
     "read_bounded",
     "read_stream",
@@ -54,6 +55,8 @@ MAX_BEAMS = 1_000_000
 MAX_BEACONS = 100_000
 #: Largest easting or northing, metres: any projected grid (UTM northings reach 1e7 m).
 MAX_COORDINATE_M = 1e8
+#: Total length of a drift's walls ``mast plan`` takes (a drift of 50 km): 100 km.
+MAX_WALL_LENGTH_M = 100_000.0
 #: Largest elevation in magnitude, metres (the deepest mine is ~4 km below the surface).
 MAX_ELEVATION_M = 1e5
 

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import contextlib
 import itertools
+import logging
 import math
 import os
 import sys
@@ -462,7 +463,7 @@ def track(
     )
 
     def warn(text: str) -> None:
-        typer.echo(f"mast: warning: {text}", err=True)
+        typer.echo(f"mast: warning: {shorten(text, 80)}", err=True)
 
     with _progress(f"tracking {run.name}") as progress:
         result = track_run(
@@ -592,6 +593,27 @@ def bench_accuracy(
     if out is not None:
         check_output_folder(out)
     run_accuracy(poses=poses, draws=draws, seed=seed, out_dir=out, echo=typer.echo)
+
+
+@bench_app.command("fuzz")
+def bench_fuzz(
+    inputs: Annotated[
+        int, typer.Option("--inputs", min=1, help="Damaged or crafted inputs to run.")
+    ] = 10_000,
+    seed: Annotated[int, typer.Option("--seed", help="Seed of the mutations.")] = 0,
+    keep: Annotated[
+        Path | None, typer.Option("--keep", help="Folder to copy failing cases into.")
+    ] = None,
+) -> None:
+    """Damaged and crafted files through every reader and output path, each run in a
+    child with memory, file-size and time limits: tracebacks, undocumented exit
+    statuses, memory and time beyond bounds, fixes that differ, half-written outputs."""
+    from mast.apps.bench.fuzz import run_fuzz
+
+    if keep is not None:
+        check_output_folder(keep, option="--keep")
+    with _cell_progress("fuzzing") as progress:
+        run_fuzz(inputs=inputs, seed=seed, echo=typer.echo, progress=progress, keep_failures=keep)
 
 
 @bench_app.command("robustness")
@@ -888,6 +910,14 @@ def plan(
     seed: Annotated[
         int, typer.Option("--seed", help="Seed of the noise and the rock texture.")
     ] = 0,
+    check: Annotated[
+        bool,
+        typer.Option(
+            "--check",
+            help="Only read and check the drift and the survey, and say how large "
+            "the job is; write nothing.",
+        ),
+    ] = False,
 ) -> None:
     """Predict where along a drift a scanner gets a fix, how precise, and where beacons help.
 
@@ -933,6 +963,17 @@ def plan(
         **({} if survey_sigma is None else {"survey_sigma_m": survey_sigma}),
     )
     survey = read_survey(beacons)
+    if check:
+        from mast.io.drift import read_drift
+
+        walls = read_drift(drift, layers=tuple(layer or ()))
+        along = walls.length_m / 2  # two walls to a drift
+        stations = math.ceil(along / (step or settings.step_m)) + 1
+        typer.echo(
+            f"{drift}: {len(walls.walls)} walls, {walls.length_m:.0f} m of wall (about "
+            f"{along:.0f} m of drift, {stations} stations); {beacons}: {len(survey)} beacons"
+        )
+        return
     check_output_folder(out)
     with _cell_progress("plan") as update:
         result = run_plan(
@@ -1015,11 +1056,21 @@ def main() -> None:
     except ImportError:  # pragma: no cover - depends on the installed typer
         import click  # type: ignore[no-redef]
 
+    # Libraries' log records (ezdxf's recoveries, rosbags') never reach the terminal as
+    # stray lines: MAST reports what matters itself, one line each.
+    logging.getLogger().addHandler(logging.NullHandler())
     try:
         try:
             status = app(standalone_mode=False)
         finally:
             sys.stdout.flush()
+    except SystemExit as exc:
+        # click ends a run whose standard output was closed (EPIPE) with status 1: that is
+        # a write that failed, quietly, like BrokenPipeError below.
+        if exc.code == 1:
+            _silence_stdout()
+            sys.exit(EXIT_CANNOT_WRITE)
+        raise
     except click.UsageError as err:
         # A bad option or value: click's message, with a long value cut short.
         if type(err).__name__ == "NoArgsIsHelpError":

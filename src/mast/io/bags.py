@@ -390,6 +390,19 @@ def _read_tolerant(
 
 def _to_scan(msg: Any, path: Path, index: int) -> Scan:
     stamp = msg.header.stamp
+    n = len(msg.ranges)
+    a0, a1, inc = float(msg.angle_min), float(msg.angle_max), float(msg.angle_increment)
+    # angle_max is redundant: where it disagrees with angle_min + (n - 1) * increment by
+    # more than one increment (drivers differ by that much), a field is damaged, and
+    # every beam's angle would be wrong (a rotated scan fixes a rotated pose).
+    if n > 1 and all(map(math.isfinite, (a0, a1, inc))):
+        off = a0 + (n - 1) * inc - a1
+        if abs(off) > 1.01 * abs(inc) + 1e-5:
+            raise InputError(
+                f"message {index}: angle_min {a0:.9g} + {n - 1} x angle_increment {inc:.9g} "
+                f"misses angle_max {a1:.9g} by {off:.3g} rad; the message is damaged",
+                path=path,
+            )
     try:
         return Scan.from_laserscan(
             angle_min=float(msg.angle_min),
@@ -411,11 +424,13 @@ def write_laserscans(
     *,
     kind: BagKind = "rosbag1",
     topic: str = "/scan",
+    compression: Literal["none", "bz2", "lz4"] = "none",
 ) -> int:
     """Write scans as ``LaserScan`` messages; returns the number written.
 
     ``kind`` is ``"rosbag1"`` (a ``.bag`` file), ``"sqlite3"`` or ``"mcap"``
-    (ROS 2 bag folders). Beams must be evenly spaced, as a LaserScan has one
+    (ROS 2 bag folders); ``compression`` (``"bz2"`` or ``"lz4"``) compresses a ROS 1
+    bag's chunks. Beams must be evenly spaced, as a LaserScan has one
     ``angle_increment``. Each scan's ``stamp_ns`` is its bag time.
     """
     from rosbags.typesys import Stores, get_typestore
@@ -430,7 +445,9 @@ def write_laserscans(
     # under its own name.
     if ros1:
         with atomic_path(p) as tmp:
-            n = _write_scans(tmp, scans, ros1=ros1, kind=kind, topic=topic, store=store)
+            n = _write_scans(
+                tmp, scans, ros1=ros1, kind=kind, topic=topic, store=store, compression=compression
+            )
         return n
     try:
         staging = tempfile.TemporaryDirectory(dir=p.parent, prefix=f".{p.name}.")
@@ -444,7 +461,14 @@ def write_laserscans(
 
 
 def _write_scans(
-    path: Path, scans: Iterable[Scan], *, ros1: bool, kind: BagKind, topic: str, store: Any
+    path: Path,
+    scans: Iterable[Scan],
+    *,
+    ros1: bool,
+    kind: BagKind,
+    topic: str,
+    store: Any,
+    compression: str = "none",
 ) -> int:
     """:func:`write_laserscans` into ``path`` (a temporary name its caller renames)."""
     LaserScan = store.types[LASERSCAN]
@@ -456,6 +480,8 @@ def _write_scans(
         writer: Any = Writer1(path)
         # rosbag record's chunk size: a bag cut short loses at most one chunk of scans.
         writer.chunk_threshold = ROS1_CHUNK_BYTES
+        if compression != "none":  # as rosbag record --bz2 / --lz4 writes
+            writer.set_compression(Writer1.CompressionFormat[compression.upper()])
     else:
         from rosbags.rosbag2 import StoragePlugin
         from rosbags.rosbag2 import Writer as Writer2

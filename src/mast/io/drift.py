@@ -42,9 +42,15 @@ def read_drift(path: str | Path, *, layers: tuple[str, ...] = ()) -> Drift:
         Naming the file, the line (CSV) or the entity (DXF), and the problem.
     """
     p = Path(path)
-    if p.suffix.lower() == ".dxf":
-        return _read_dxf(p, layers)
-    return _read_csv(p)
+    drift = _read_dxf(p, layers) if p.suffix.lower() == ".dxf" else _read_csv(p)
+    if drift.length_m > limits.MAX_WALL_LENGTH_M:
+        raise InputError(
+            f"walls {drift.length_m / 1000:.0f} km long in all, more than the "
+            f"{limits.MAX_WALL_LENGTH_M / 1000:g} km MAST plans at once "
+            "(mast.limits.MAX_WALL_LENGTH_M): a coordinate out of place, or a drawing to split",
+            path=p,
+        )
+    return drift
 
 
 def _coordinate(text: str, column: str, path: Path, line: int) -> float:
