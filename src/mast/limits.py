@@ -96,7 +96,7 @@ def read_stream(
     fh: BinaryIO,
     path: str | Path,
     *,
-    limit: int = MAX_TEXT_BYTES,
+    limit: int | None = None,
     text: bool = True,
     name: str = "MAX_TEXT_BYTES",
 ) -> bytes:
@@ -105,6 +105,7 @@ def read_stream(
     With ``text``, a NUL byte or a line longer than :data:`MAX_LINE_BYTES` ends
     the reading as soon as it arrives (an endless device fails at once).
     """
+    limit = MAX_TEXT_BYTES if limit is None else limit
     parts: list[bytes] = []
     total = 0
     line = 1
@@ -144,7 +145,7 @@ def read_stream(
 def read_bounded(
     path: str | Path,
     *,
-    limit: int = MAX_TEXT_BYTES,
+    limit: int | None = None,
     text: bool = True,
     what: str = "file",
     name: str = "MAX_TEXT_BYTES",
@@ -157,6 +158,7 @@ def read_bounded(
     :data:`MAX_LINE_BYTES` long and no byte may be NUL. Errors are
     :class:`InputError` naming the file (and the line).
     """
+    limit = MAX_TEXT_BYTES if limit is None else limit
     p = Path(path)
     st = _stat(p)
     if stat.S_ISDIR(st.st_mode):

@@ -10,8 +10,9 @@ from pathlib import Path
 from types import TracebackType
 from typing import Any
 
+from mast import limits
 from mast.errors import InputError
-from mast.limits import MAX_LINE_BYTES, read_bounded
+from mast.limits import read_bounded
 
 __all__ = [
     "STREAM_CHUNK_BYTES",
@@ -111,10 +112,12 @@ class _NulGuard(io.RawIOBase):
             data = memoryview(buffer)[:n].tobytes()
             if data.find(b"\x00") >= 0:
                 raise IrregularError("NUL byte")
+            try:  # every line of the chunk, with what came of the first before it
+                limits.check_lines(data, "", carried=self._since_newline)
+            except InputError:
+                raise IrregularError("long line") from None
             last = data.rfind(b"\n")
             self._since_newline = (self._since_newline + n) if last < 0 else n - last - 1
-            if self._since_newline > MAX_LINE_BYTES:
-                raise IrregularError("long line")
         return int(n or 0)
 
     def close(self) -> None:

@@ -1,0 +1,77 @@
+"""The survey index: the same look-ups as a walk over every pair, in time linear in the pairs."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from mast.core.beacon import Beacon, Survey
+from mast.core.index import NODE_EDGES, DesignTolerance, SurveyIndex, _same_design
+from mast.sim.design import random_design
+
+
+def _survey(n: int, designs: int, seed: int = 0, spacing_m: float = 12.0) -> Survey:
+    rng = np.random.default_rng(seed)
+    kinds = [random_design(rng) for _ in range(designs)]
+    beacons = []
+    for k in range(n):
+        turn = rng.uniform(0, 2 * math.pi)
+        rot = np.array([[math.cos(turn), -math.sin(turn)], [math.sin(turn), math.cos(turn)]])
+        at = np.array([(k % 30) * spacing_m, (k // 30) * spacing_m]) + rng.normal(0, 1, 2)
+        beacons.append(Beacon(f"B{k}", kinds[k % designs].edges_local @ rot.T + at))
+    return Survey(beacons)
+
+
+def _designs_by_walk(survey: Survey, tol: DesignTolerance) -> list[list[str]]:
+    groups: list[list[str]] = []
+    for b in survey:
+        for g in groups:
+            if _same_design(survey[g[0]], b, tol):
+                g.append(b.id)
+                break
+        else:
+            groups.append([b.id])
+    return groups
+
+
+def _pairs_by_walk(
+    index: SurveyIndex, a: str, ea: int, b: str, eb: int, d: float, tol: float, same: bool
+) -> list[tuple[str, str]]:
+    """Every surveyed edge pair of these designs and edges at that distance, sorted as the
+    index sorts them: (distance, first row, second row)."""
+    survey = index.survey
+    ids = survey.ids
+    rows = [(i, bid, e) for i, bid in enumerate(ids) for e in NODE_EDGES]
+    found = []
+    for ri, (_, ba, e1) in enumerate(rows):
+        if index.design_of(ba) != index.design_of(a) or e1 != ea:
+            continue
+        for rj, (_, bb, e2) in enumerate(rows):
+            if index.design_of(bb) != index.design_of(b) or e2 != eb:
+                continue
+            diff = survey[bb].edges[e2 - 1] - survey[ba].edges[e1 - 1]
+            dist = float(np.hypot(diff[0], diff[1]))
+            if dist == 0 or dist > DesignTolerance().max_pair_distance_m:
+                continue
+            if abs(dist - d) <= tol and (same or ba != bb):
+                found.append((dist, ri, rj, ba, bb))
+    return [(x[3], x[4]) for x in sorted(found)]
+
+
+@pytest.mark.parametrize("designs", [3, 40])
+def test_look_ups_match_a_walk_over_every_pair(designs: int) -> None:
+    survey = _survey(120, designs)
+    index = SurveyIndex.from_survey(survey)
+    assert [list(g) for g in index.designs] == _designs_by_walk(survey, DesignTolerance())
+    rng = np.random.default_rng(1)
+    ids = survey.ids
+    for _ in range(60):
+        a, b = ids[int(rng.integers(len(ids)))], ids[int(rng.integers(len(ids)))]
+        ea, eb = (int(x) for x in rng.choice(NODE_EDGES, 2))
+        d = float(rng.uniform(0.2, 60.0))
+        tol = float(rng.choice([0.05, 2.0, 10.0]))
+        same = bool(rng.integers(2))
+        got = [(p[0], p[1]) for p in index.edge_pairs(a, ea, b, eb, d, tol, same_beacon=same)]
+        assert got == _pairs_by_walk(index, a, ea, b, eb, d, tol, same)
