@@ -350,3 +350,16 @@ def test_the_fuzzing_campaign_finds_nothing(tmp_path: Path) -> None:
     assert summary.failed == 0, "\n".join(lines)
     assert summary.peak_bytes < limits.MAX_TEXT_BYTES * 8
     assert not (tmp_path / "kept").exists()
+
+
+def test_no_file_content_is_evaluated() -> None:
+    """No pickle, eval, exec or unsafe YAML loader anywhere in MAST's source."""
+    root = Path(__file__).resolve().parents[2] / "src" / "mast"
+    banned = re.compile(r"\bimport pickle\b|\bpickle\.|\beval\(|\bexec\(|typ=.unsafe|yaml\.load\(")
+    found = [
+        f"{p.relative_to(root)}:{k}"
+        for p in root.rglob("*.py")
+        for k, line in enumerate(p.read_text(encoding="utf-8").splitlines(), 1)
+        if banned.search(line) and not line.lstrip().startswith("#")
+    ]
+    assert found == []

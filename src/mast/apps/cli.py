@@ -595,6 +595,19 @@ def bench_accuracy(
     run_accuracy(poses=poses, draws=draws, seed=seed, out_dir=out, echo=typer.echo)
 
 
+@bench_app.command("survey")
+def bench_survey(
+    beacons: Annotated[
+        int, typer.Option("--beacons", min=1, help="Beacons in the mine's survey.")
+    ] = 10_000,
+) -> None:
+    """A whole mine's survey read, checked and indexed: seconds, with a few designs and with
+    every beacon its own."""
+    from mast.apps.bench.surveyload import run_survey_load
+
+    run_survey_load(beacons=beacons, echo=typer.echo)
+
+
 @bench_app.command("fuzz")
 def bench_fuzz(
     inputs: Annotated[

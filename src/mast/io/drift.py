@@ -126,7 +126,7 @@ def _read_dxf(path: Path, layers: tuple[str, ...]) -> Drift:
         doc, auditor = recover.read(io.BytesIO(data))
     except DXFStructureError as err:
         raise InputError(f"not a readable DXF drawing: {shorten(str(err))}", path=path) from None
-    except (ValueError, UnicodeDecodeError, IndexError, KeyError, TypeError) as err:
+    except Exception as err:  # ezdxf on hostile bytes: anything its parser or audit raises
         raise InputError(
             f"not a readable DXF drawing ({type(err).__name__}: {shorten(str(err))})", path=path
         ) from None
@@ -137,36 +137,46 @@ def _read_dxf(path: Path, layers: tuple[str, ...]) -> Drift:
     wanted = {name.casefold() for name in layers}
     out: list[Wall] = []
     seen_layers: set[str] = set()
-    for entity in doc.modelspace():
-        kind = entity.dxftype()
-        if kind not in _DXF_WALL_TYPES:
-            continue
-        layer = str(entity.dxf.layer)
-        seen_layers.add(layer)
-        if wanted and layer.casefold() not in wanted:
-            continue
-        if kind == "LINE":
-            pts = [entity.dxf.start, entity.dxf.end]
-            closed = False
-        elif kind == "LWPOLYLINE":
-            pts = [(x, y) for x, y, *_ in entity.get_points("xy")]  # type: ignore[attr-defined]
-            closed = bool(entity.closed)  # type: ignore[attr-defined]
-        else:
-            pts = [v.dxf.location for v in entity.vertices]  # type: ignore[attr-defined]
-            closed = bool(entity.is_closed)  # type: ignore[attr-defined]
-        xy = np.array([[float(q[0]), float(q[1])] for q in pts], dtype=float).reshape(-1, 2)
-        handle = entity.dxf.handle
-        wid = f"{layer}:{handle}"
-        if closed and len(xy) >= 2:
-            xy = np.vstack([xy, xy[:1]])
-        if not np.all(np.isfinite(xy)) or (xy.size and np.abs(xy).max() > MAX_COORDINATE_M):
-            raise InputError(
-                f"{kind} {handle} on layer {layer!r}: a vertex is not a plausible coordinate",
-                path=path,
-            )
-        if len(xy) < 2:
-            continue
-        out.append(_wall(wid, xy, path, None))
+    from ezdxf.lldxf.const import DXFError
+
+    try:
+        for entity in doc.modelspace():
+            kind = entity.dxftype()
+            if kind not in _DXF_WALL_TYPES:
+                continue
+            layer = str(entity.dxf.layer)
+            seen_layers.add(layer)
+            if wanted and layer.casefold() not in wanted:
+                continue
+            if kind == "LINE":
+                pts = [entity.dxf.start, entity.dxf.end]
+                closed = False
+            elif kind == "LWPOLYLINE":
+                pts = [(x, y) for x, y, *_ in entity.get_points("xy")]  # type: ignore[attr-defined]
+                closed = bool(entity.closed)  # type: ignore[attr-defined]
+            else:
+                pts = [v.dxf.location for v in entity.vertices]  # type: ignore[attr-defined]
+                closed = bool(entity.is_closed)  # type: ignore[attr-defined]
+            xy = np.array([[float(q[0]), float(q[1])] for q in pts], dtype=float).reshape(-1, 2)
+            handle = entity.dxf.handle
+            wid = f"{layer}:{handle}"
+            if closed and len(xy) >= 2:
+                xy = np.vstack([xy, xy[:1]])
+            if not np.all(np.isfinite(xy)) or (xy.size and np.abs(xy).max() > MAX_COORDINATE_M):
+                raise InputError(
+                    f"{kind} {handle} on layer {layer!r}: a vertex is not a plausible coordinate",
+                    path=path,
+                )
+            if len(xy) < 2:
+                continue
+            out.append(_wall(wid, xy, path, None))
+    except (AttributeError, KeyError, ValueError, TypeError, IndexError, DXFError) as err:
+        # The recovery reader let through a structure its own entities cannot read.
+        # (InputError, raised above for implausible vertices, is none of these.)
+        raise InputError(
+            f"DXF drawing damaged beyond recovery ({type(err).__name__}: {shorten(str(err))})",
+            path=path,
+        ) from None
     if not out:
         if wanted:
             found = ", ".join(sorted(seen_layers)) or "none"

@@ -128,6 +128,11 @@ class FuzzSummary:
 # --------------------------------------------------------------------------- seeds
 
 
+#: An undamaged run: its processor seconds, its peak bytes, its fixes by stamp, and the
+#: true poses (E, N, azimuth in degrees) of the scans it holds.
+_Base = tuple[float, int, dict[int, tuple[float, ...]], list[tuple[float, float, float]]]
+
+
 @dataclass(frozen=True, slots=True)
 class _Seeds:
     root: Path
@@ -140,6 +145,7 @@ class _Seeds:
     drift_csv: Path
     drift_dxf: Path
     bomb: Path
+    truth: tuple[tuple[float, float, float], ...]
 
 
 def _make_seeds(root: Path) -> _Seeds:
@@ -184,7 +190,18 @@ def _make_seeds(root: Path) -> _Seeds:
         drift_csv,
         drift_dxf,
         bomb,
+        _truth(scene.truth),
     )
+
+
+def _truth(path: Path) -> tuple[tuple[float, float, float], ...]:
+    import csv
+
+    with path.open(encoding="utf-8", newline="") as fh:
+        return tuple(
+            (float(r["easting"]), float(r["northing"]), float(r["azimuth_deg"]))
+            for r in csv.DictReader(fh)
+        )
 
 
 def _write_drift_dxf(path: Path) -> None:
@@ -648,7 +665,9 @@ def _run(
 
 
 def _fixes(stdout: str) -> dict[int, tuple[float, ...]]:
-    """Each fixed scan's (E, N, azimuth in degrees, sigma E, sigma N, sigma azimuth)."""
+    """Each fixed scan's (E, N, azimuth in degrees, sigma E, sigma N, sigma azimuth), by its
+    time stamp (a damaged bag may lose messages, so a scan's place in the output is no
+    name for it)."""
     found: dict[int, tuple[float, ...]] = {}
     keys = (
         "easting",
@@ -662,7 +681,7 @@ def _fixes(stdout: str) -> dict[int, tuple[float, ...]]:
         with contextlib.suppress(ValueError, KeyError, TypeError):
             rec = json.loads(line)
             if rec.get("status") == "fix":
-                found[int(rec.get("scan", 0))] = tuple(float(rec[k]) for k in keys)
+                found[int(rec.get("stamp_ns", 0))] = tuple(float(rec[k]) for k in keys)
     return found
 
 
@@ -688,7 +707,7 @@ def _judge(
     peak: int,
     out: str,
     err: str,
-    base: dict[str, tuple[float, int, dict[int, tuple[float, ...]]]],
+    base: dict[str, _Base],
 ) -> tuple[str, ...]:
     problems: list[str] = []
     if "Traceback (most recent call last)" in err or status == 1:
@@ -714,14 +733,16 @@ def _judge(
     if status == -9 or (seed is not None and seconds > TIME_FACTOR * seed[0] + 1.0):
         problems.append("over time")
     if seed is not None:
-        ref = seed[2]
-        for scan, got in _fixes(out).items():
-            r = ref.get(scan)
-            if r is None:
-                problems.append("fix where the undamaged file has none")
-                break
-            if _differs(got, r):
+        ref, truth = seed[2], seed[3]
+        for stamp, got in _fixes(out).items():
+            r = ref.get(stamp)
+            if r is not None and _differs(got, r):
                 problems.append("fix differs from the undamaged file's")
+                break
+            # No undamaged fix of this scan (or its stamp was damaged): a true pose of the
+            # seed's scans must agree with it.
+            if r is None and all(_differs(got, (*t, 0.0, 0.0, 0.0)) for t in truth):
+                problems.append("fix away from every true pose")
                 break
     if status != 0:
         for target in case.outputs:
@@ -793,17 +814,23 @@ def run_fuzz(
             "ros2_sqlite": ("locate", str(seeds.ros2_sqlite), "-b", survey_s, "--format", "json"),
             "ros2_mcap": ("locate", str(seeds.ros2_mcap), "-b", survey_s, "--format", "json"),
         }  # fmt: skip
-        base: dict[str, tuple[float, int, dict[int, tuple[float, ...]]]] = {}
+        base: dict[str, _Base] = {}
         for key, argv in base_argv.items():
             undamaged = FuzzCase("undamaged", key, argv, None)
             runs = [_run(undamaged, tmp / f"base-{key}-{r}", as_limit, 120.0) for r in range(3)]
             status = runs[0][0]
             if status not in (0, 3):  # a fix, or an honest no-fix
                 raise RuntimeError(f"the undamaged {key} fails (exit {status}): {runs[0][4]}")
+            truth = (
+                list(seeds.truth)
+                if key.startswith(("bag", "ros2"))
+                else [seeds.truth[int(key[4:])]]
+            )
             base[key] = (
                 statistics.median(r[1] for r in runs),
                 max(r[2] for r in runs),
                 _fixes(runs[0][3]),
+                truth,
             )
         work = tmp / "cases"
         work.mkdir()
@@ -841,7 +868,7 @@ def run_fuzz(
 def _finish(
     child: _Child,
     got: tuple[int, float, int, str, str],
-    base: dict[str, tuple[float, int, dict[int, tuple[float, ...]]]],
+    base: dict[str, _Base],
     summary: FuzzSummary,
     keep_failures: Path | None,
 ) -> None:
@@ -859,7 +886,7 @@ def _finish(
     shutil.rmtree(child.folder, ignore_errors=True)
 
 
-def _count(s: FuzzSummary, r: FuzzResult, seed_run: tuple[float, int, object] | None) -> None:
+def _count(s: FuzzSummary, r: FuzzResult, seed_run: _Base | None) -> None:
     s.cases += 1
     s.by_family[r.case.family] = s.by_family.get(r.case.family, 0) + 1
     s.by_status[r.status] = s.by_status.get(r.status, 0) + 1
