@@ -34,6 +34,7 @@ __all__ = [
     "MAX_TEXT_BYTES",
     "MAX_WALL_LENGTH_M",
     "check_lines",
+    "line_too_long",
     "read_bounded",
     "read_stream",
     "size_text",
@@ -92,6 +93,15 @@ def _stat(path: Path) -> os.stat_result:
         raise InputError(f"cannot read: {err.strerror or err}", path=path) from None
 
 
+def line_too_long(path: str | Path, line: int) -> InputError:
+    """The error for a line longer than :data:`MAX_LINE_BYTES`, naming the file and line."""
+    return InputError(
+        f"line longer than {size_text(MAX_LINE_BYTES)} (mast.limits.MAX_LINE_BYTES)",
+        path=path,
+        line=line,
+    )
+
+
 def read_stream(
     fh: BinaryIO,
     path: str | Path,
@@ -132,11 +142,7 @@ def read_stream(
                 check_lines(chunk, path, first_line=line, carried=since_newline)
                 since_newline = len(chunk) - last - 1
             if since_newline > MAX_LINE_BYTES:
-                raise InputError(
-                    f"line longer than {size_text(MAX_LINE_BYTES)} (mast.limits.MAX_LINE_BYTES)",
-                    path=path,
-                    line=line + chunk.count(b"\n"),
-                )
+                raise line_too_long(path, line + chunk.count(b"\n"))
             line += chunk.count(b"\n")
         parts.append(chunk)
     return b"".join(parts)
@@ -191,8 +197,4 @@ def check_lines(data: bytes, path: str | Path, *, first_line: int = 1, carried: 
     # stream count it with what follows, so it is judged here only when it is too long.
     long = np.flatnonzero(lengths > MAX_LINE_BYTES)
     if long.size:
-        raise InputError(
-            f"line longer than {size_text(MAX_LINE_BYTES)} (mast.limits.MAX_LINE_BYTES)",
-            path=path,
-            line=first_line + int(long[0]),
-        )
+        raise line_too_long(path, first_line + int(long[0]))

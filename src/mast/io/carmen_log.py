@@ -97,12 +97,7 @@ def read_carmen_log(
                 return
             line_no += 1
             if len(raw) > limits.MAX_LINE_BYTES:
-                raise InputError(
-                    f"line longer than {limits.size_text(limits.MAX_LINE_BYTES)} "
-                    "(mast.limits.MAX_LINE_BYTES)",
-                    path=p,
-                    line=line_no,
-                )
+                raise limits.line_too_long(p, line_no)
             tokens = raw.split()
             if not tokens:
                 continue

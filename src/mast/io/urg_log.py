@@ -39,12 +39,7 @@ def read_urg_log(
     with fh:
         for line_no, raw in enumerate(iter(lambda: fh.readline(limits.MAX_LINE_BYTES + 1), b""), 1):
             if len(raw) > limits.MAX_LINE_BYTES:
-                raise InputError(
-                    f"line longer than {limits.size_text(limits.MAX_LINE_BYTES)} "
-                    "(mast.limits.MAX_LINE_BYTES)",
-                    path=p,
-                    line=line_no,
-                )
+                raise limits.line_too_long(p, line_no)
             tokens = raw.split()
             if not tokens:
                 continue
