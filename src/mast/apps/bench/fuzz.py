@@ -855,6 +855,7 @@ def run_fuzz(
             time.sleep(0.002)
     summary.seconds = time.perf_counter() - t_start
     echo(summary.line())
+    echo("families: " + ", ".join(f"{k} {v}" for k, v in sorted(summary.by_family.items())))
     echo("slowest: " + "; ".join(f"{what} {t:.2f} s" for t, what in summary.slowest[::-1]))
     for r in summary.failures[:50]:
         first = r.stderr.strip().splitlines()[-1] if r.stderr.strip() else ""
