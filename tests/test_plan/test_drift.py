@@ -46,7 +46,11 @@ def test_csv_vertices_are_ordered_by_number(tmp_path: Path) -> None:
         ("wall,vertex,easting\nw,1,0\n", 1, "northing"),
         ("wall,vertex,easting,northing\nw,1,0,0\nw,1,5,0\n", 3, "given twice"),
         ("wall,vertex,easting,northing\nw,1,0,0\nw,2,x,0\n", 3, "not a number"),
-        ("wall,vertex,easting,northing\nw,1,0,0\nw,2,1e300,0\n", 3, "beyond any mine grid"),
+        (
+            "wall,vertex,easting,northing\nw,1,0,0\nw,2,1e300,0\n",
+            3,
+            "not a plausible grid coordinate",
+        ),
         ("wall,vertex,easting,northing\nw,1.5,0,0\n", 2, "whole number"),
         ("wall,vertex,easting,northing\nw,1,0,0\nv,1,0,5\nv,2,9,5\n", 2, "one vertex"),
         ("wall,vertex,easting,northing\n,1,0,0\n", 2, "empty"),

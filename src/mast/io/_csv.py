@@ -20,6 +20,7 @@ __all__ = [
     "CsvStream",
     "IrregularError",
     "parse_number",
+    "parse_within",
     "read_header",
 ]
 
@@ -48,6 +49,29 @@ def parse_number(
         ) from None
     if finite and not math.isfinite(value):
         raise InputError(f"column {column!r}: {s!r} is not a finite number", path=path, line=line)
+    return value
+
+
+def parse_within(
+    text: str,
+    *,
+    column: str,
+    path: Path,
+    line: int,
+    bound: str = "MAX_COORDINATE_M",
+    what: str = "grid coordinate",
+) -> float:
+    """A finite number no larger in magnitude than ``mast.limits.<bound>`` (metres);
+    errors name the file, line, column and the bound."""
+    value = parse_number(text, column=column, path=path, line=line)
+    most = float(getattr(limits, bound))
+    if abs(value) > most:
+        raise InputError(
+            f"column {column!r}: {value:g} m is beyond ±{most:g} m, not a plausible {what} "
+            f"(mast.limits.{bound})",
+            path=path,
+            line=line,
+        )
     return value
 
 

@@ -12,7 +12,7 @@ from numpy.typing import NDArray
 from mast import limits
 from mast.core.beacon import Beacon, IdentifiabilityRules, Survey
 from mast.errors import BeaconError, InputError, quoted
-from mast.io._csv import CsvRows, parse_number
+from mast.io._csv import CsvRows, parse_number, parse_within
 from mast.io.atomic import atomic_open
 
 __all__ = ["COINCIDENT_M", "read_survey", "write_survey"]
@@ -20,19 +20,6 @@ __all__ = ["COINCIDENT_M", "read_survey", "write_survey"]
 _DEFAULT_RULES = IdentifiabilityRules()
 #: Two surveyed edge points closer than this are one point surveyed twice, metres.
 COINCIDENT_M = 1e-3
-
-
-def _coordinate(text: str, column: str, path: Path, line: int) -> float:
-    """An easting or northing: a finite number within ±MAX_COORDINATE_M."""
-    value = parse_number(text, column=column, path=path, line=line)
-    if abs(value) > limits.MAX_COORDINATE_M:
-        raise InputError(
-            f"column {column!r}: {value:g} m is beyond ±{limits.MAX_COORDINATE_M:g} m, not a "
-            "plausible grid coordinate (mast.limits.MAX_COORDINATE_M)",
-            path=path,
-            line=line,
-        )
-    return value
 
 
 def _crosses(
@@ -131,18 +118,18 @@ def read_survey(
                 line=line,
             )
         k = int(e)
-        east = _coordinate(f["easting"], "easting", p, line)
-        north = _coordinate(f["northing"], "northing", p, line)
+        east = parse_within(f["easting"], column="easting", path=p, line=line)
+        north = parse_within(f["northing"], column="northing", path=p, line=line)
         elev = math.nan
         if rows.has("elevation") and f["elevation"].strip():
-            elev = parse_number(f["elevation"], column="elevation", path=p, line=line)
-            if abs(elev) > limits.MAX_ELEVATION_M:
-                raise InputError(
-                    f"column 'elevation': {elev:g} m is beyond ±{limits.MAX_ELEVATION_M:g} m, "
-                    "not a plausible elevation (mast.limits.MAX_ELEVATION_M)",
-                    path=p,
-                    line=line,
-                )
+            elev = parse_within(
+                f["elevation"],
+                column="elevation",
+                path=p,
+                line=line,
+                bound="MAX_ELEVATION_M",
+                what="elevation",
+            )
         got = edges.get(bid)
         if got is None:
             if len(edges) >= limits.MAX_BEACONS:

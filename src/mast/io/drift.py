@@ -13,7 +13,7 @@ import numpy as np
 
 from mast import limits
 from mast.errors import InputError, shorten
-from mast.io._csv import CsvRows, parse_number
+from mast.io._csv import CsvRows, parse_number, parse_within
 from mast.limits import read_bounded
 from mast.plan.drift import Drift, Wall
 
@@ -53,18 +53,6 @@ def read_drift(path: str | Path, *, layers: tuple[str, ...] = ()) -> Drift:
     return drift
 
 
-def _coordinate(text: str, column: str, path: Path, line: int) -> float:
-    value = parse_number(text, column=column, path=path, line=line)
-    if abs(value) > MAX_COORDINATE_M:
-        raise InputError(
-            f"column {column!r}: {value:g} is beyond any mine grid "
-            f"(|value| > {MAX_COORDINATE_M:g})",
-            path=path,
-            line=line,
-        )
-    return value
-
-
 def _read_csv(path: Path) -> Drift:
     rows = CsvRows(path, required=("wall", "vertex", "easting", "northing"))
     walls: dict[str, dict[int, tuple[float, float, int]]] = {}
@@ -79,8 +67,8 @@ def _read_csv(path: Path) -> Drift:
                 path=path,
                 line=line,
             )
-        east = _coordinate(f["easting"], "easting", path, line)
-        north = _coordinate(f["northing"], "northing", path, line)
+        east = parse_within(f["easting"], column="easting", path=path, line=line)
+        north = parse_within(f["northing"], column="northing", path=path, line=line)
         got = walls.setdefault(wid, {})
         if int(v) in got:
             raise InputError(
