@@ -363,3 +363,22 @@ def test_no_file_content_is_evaluated() -> None:
         if banned.search(line) and not line.lstrip().startswith("#")
     ]
     assert found == []
+
+
+@pytest.mark.parametrize("kind", ["bz2", "lz4", "zstd"])
+def test_every_chunk_compression_stops_at_its_declared_size(kind: str) -> None:
+    """ROS 1 (bz2, lz4) and MCAP (lz4, zstd) chunks share one bounded decompression."""
+    import bz2
+
+    import lz4.frame  # type: ignore[import-untyped]
+    from backports import zstd
+
+    from mast.io.ros1_tolerant import BagFormatError, inflate
+
+    raw = b"\x00" * (8 << 20)
+    packed = {"bz2": bz2.compress, "lz4": lz4.frame.compress, "zstd": zstd.compress}[kind](raw)
+    assert inflate(kind, packed, len(raw), "chunk") == raw
+    with pytest.raises(BagFormatError, match="chunk decompresses beyond its declared size"):
+        inflate(kind, packed, 1024, "chunk")
+    with pytest.raises(BagFormatError, match="declares 4294967295 bytes, beyond the limit"):
+        inflate(kind, packed, 2**32 - 1, "chunk")

@@ -124,37 +124,16 @@ def _bound_ros1_chunks(reader: Any, path: Path) -> None:
             )
 
 
-def _bounded_zstd(data: bytes, size: int) -> bytes:
-    from backports import zstd
-
-    return bytes(zstd.ZstdDecompressor().decompress(data, max_length=_chunk_cap(size)))
-
-
-def _bounded_lz4(data: bytes, size: int) -> bytes:
-    import lz4.frame  # type: ignore[import-untyped]
-
-    return bytes(lz4.frame.LZ4FrameDecompressor().decompress(data, max_length=_chunk_cap(size)))
-
-
-def _chunk_cap(size: int) -> int:
-    """Bytes a chunk declaring ``size`` may decompress to: one more than it declares
-    (so that a lie is seen), and never past the limit."""
-    if size > limits.MAX_BAG_CHUNK_BYTES:
-        raise ValueError(
-            f"chunk declares {size} bytes, more than {limits.MAX_BAG_CHUNK_BYTES} "
-            "(mast.limits.MAX_BAG_CHUNK_BYTES)"
-        )
-    return max(size, 0) + 1
-
-
 def _bound_mcap_chunks() -> None:
-    """Make rosbags' MCAP reader decompress a chunk to at most the size it declares, plus
-    one byte (then rosbags refuses it for the mismatch), within the limit."""
+    """Make rosbags' MCAP reader decompress a chunk as a ROS 1 chunk is
+    (:func:`mast.io.ros1_tolerant.inflate`): never past its declared size nor the limit."""
     from rosbags.rosbag2 import storage_mcap
 
+    from mast.io.ros1_tolerant import inflate
+
     table = storage_mcap.DECOMPRESSORS
-    table["zstd"] = _bounded_zstd
-    table["lz4"] = _bounded_lz4
+    table["zstd"] = lambda data, size: inflate("zstd", data, size, "MCAP chunk")
+    table["lz4"] = lambda data, size: inflate("lz4", data, size, "MCAP chunk")
 
 
 def check_metadata(folder: Path) -> None:

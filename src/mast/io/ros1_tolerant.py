@@ -27,6 +27,7 @@ __all__ = [
     "RawMessage",
     "chunk_fields",
     "decompress_chunk",
+    "inflate",
     "iter_ros1_bag",
     "walk_ros1_bag",
 ]
@@ -109,34 +110,44 @@ def chunk_fields(fh: BinaryIO, pos: int) -> dict[str, bytes]:
 
 
 def decompress_chunk(fields: dict[str, bytes], data: bytes, *, pos: int) -> bytes:
-    """A chunk's data decompressed: never past the size its header declares (nor
-    :data:`mast.limits.MAX_BAG_CHUNK_BYTES`); a chunk that would grow beyond is an error."""
-    return _decompress(fields, data, pos)
-
-
-def _decompress(fields: dict[str, bytes], data: bytes, pos: int) -> bytes:
-    kind = fields.get("compression", b"none")
+    """A ROS 1 chunk's data decompressed (see :func:`inflate`), by its header ``fields``."""
+    kind = fields.get("compression", b"none").decode("ascii", "replace")
     size = struct.unpack("<I", fields["size"][:4])[0] if "size" in fields else None
-    if size is not None and size > limits.MAX_BAG_CHUNK_BYTES:
-        raise BagFormatError(f"chunk at byte {pos} declares {size} bytes, beyond the limit")
-    limit = limits.MAX_BAG_CHUNK_BYTES if size is None else size
+    return inflate(kind, data, size, f"chunk at byte {pos}")
+
+
+def inflate(kind: str, data: bytes, declared: int | None, where: str) -> bytes:
+    """``data`` decompressed (``none``, ``bz2``, ``lz4`` frames, ``zstd``), never past the
+    size its header ``declared`` nor :data:`mast.limits.MAX_BAG_CHUNK_BYTES`: a chunk
+    that would grow further is a :class:`BagFormatError` as soon as it passes, so a
+    decompression bomb costs at most the limit. ROS 1 and MCAP chunks alike."""
+    limit = limits.MAX_BAG_CHUNK_BYTES
+    if declared is not None and declared > limit:
+        raise BagFormatError(f"{where} declares {declared} bytes, beyond the limit")
+    if declared is not None:
+        limit = max(declared, 0)
     try:
-        if kind == b"none":
+        if kind in ("none", ""):
             return data
-        if kind == b"bz2":
-            dec = bz2.BZ2Decompressor()
-            out = dec.decompress(data, max_length=limit + 1)
-        elif kind == b"lz4":
+        if kind == "bz2":
+            out = bz2.BZ2Decompressor().decompress(data, max_length=limit + 1)
+        elif kind == "lz4":
             import lz4.frame  # type: ignore[import-untyped]
 
-            ctx = lz4.frame.LZ4FrameDecompressor()
-            out = ctx.decompress(data, max_length=limit + 1)
+            out = lz4.frame.LZ4FrameDecompressor().decompress(data, max_length=limit + 1)
+        elif kind == "zstd":
+            from backports import zstd
+
+            try:
+                out = zstd.ZstdDecompressor().decompress(data, max_length=limit + 1)
+            except zstd.ZstdError as err:
+                raise ValueError(str(err)) from None
         else:
-            raise BagFormatError(f"chunk at byte {pos}: unknown compression {kind!r}")
+            raise BagFormatError(f"{where}: unknown compression {kind!r}")
     except (OSError, ValueError, RuntimeError, EOFError) as err:
-        raise BagFormatError(f"chunk at byte {pos} cannot be decompressed ({err})") from None
+        raise BagFormatError(f"{where} cannot be decompressed ({err})") from None
     if len(out) > limit:
-        raise BagFormatError(f"chunk at byte {pos} decompresses beyond its declared size")
+        raise BagFormatError(f"{where} decompresses beyond its declared size")
     return bytes(out)
 
 
@@ -181,7 +192,7 @@ def iter_ros1_bag(
                     fh.seek(dlen, 1)
                     data = b""
                 if op == 0x05:
-                    chunk = _decompress(fields, data, pos)
+                    chunk = decompress_chunk(fields, data, pos=pos)
                     q = 0
                     while q < len(chunk):
                         f2, d2, l2 = _record(chunk, q)
