@@ -18,10 +18,27 @@ from typing import IO, Any
 
 from mast.errors import OutputError
 
-__all__ = ["atomic_open", "atomic_path", "write_atomic"]
+__all__ = ["atomic_open", "atomic_path", "commit", "discard", "part_path", "write_atomic"]
 
 
-def _discard(tmp: Path) -> None:
+def part_path(path: str | Path) -> Path:
+    """The temporary name ``path`` is written under: hidden, beside it, per process."""
+    final = Path(path)
+    return final.with_name(f".{final.name}.{os.getpid()}.part")
+
+
+def commit(tmp: Path, path: str | Path) -> None:
+    """Rename the complete ``tmp`` onto ``path``; on failure remove it and raise an
+    :class:`OutputError` naming ``path``."""
+    try:
+        os.replace(tmp, path)
+    except OSError as err:
+        discard(tmp)
+        raise OutputError(f"cannot write: {err.strerror or err}", path=path) from None
+
+
+def discard(tmp: Path) -> None:
+    """Remove a temporary file or folder, if it is there."""
     with contextlib.suppress(OSError):
         if tmp.is_dir() and not tmp.is_symlink():
             shutil.rmtree(tmp)
@@ -34,17 +51,17 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
     """A temporary path beside ``path`` to write (a file or a folder); renamed onto
     ``path`` when the block ends without an error, removed when it does not."""
     final = Path(path)
-    tmp = final.with_name(f".{final.name}.{os.getpid()}.part")
-    _discard(tmp)
+    tmp = part_path(final)
+    discard(tmp)
     try:
         yield tmp
-        os.replace(tmp, final)
     except OSError as err:
-        _discard(tmp)
+        discard(tmp)
         raise OutputError(f"cannot write: {err.strerror or err}", path=final) from None
     except BaseException:
-        _discard(tmp)
+        discard(tmp)
         raise
+    commit(tmp, final)
 
 
 @contextlib.contextmanager

@@ -32,7 +32,6 @@ import html
 import io
 import itertools
 import math
-import os
 import re
 from collections.abc import Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
@@ -47,7 +46,7 @@ from numpy.typing import ArrayLike, NDArray
 from mast.core.beacon import Beacon, Survey
 from mast.core.pose import format_dms
 from mast.errors import InputError, OutputError
-from mast.io.atomic import atomic_open, atomic_path
+from mast.io.atomic import atomic_open, atomic_path, commit, discard, part_path
 from mast.runs.model import PlacedScan, RunSummary, Trajectory
 
 __all__ = [
@@ -464,7 +463,7 @@ class LasMapWriter:
         self.count = 0
         self._closed = False
         # Written under a temporary name, renamed onto the map when complete.
-        self._tmp = self.path.with_name(f".{self.path.name}.{os.getpid()}.part")
+        self._tmp = part_path(self.path)
         try:
             self._writer = laspy.open(self._tmp, mode="w", header=header)
         except OSError as exc:
@@ -491,8 +490,7 @@ class LasMapWriter:
         self._closed = True
         with contextlib.suppress(Exception):
             self._writer.close()
-        with contextlib.suppress(OSError):
-            self._tmp.unlink()
+        discard(self._tmp)
 
     def add(
         self,
@@ -581,11 +579,10 @@ class LasMapWriter:
             self._closed = True
             try:
                 self._writer.close()
-                os.replace(self._tmp, self.path)
             except OSError as exc:
-                with contextlib.suppress(OSError):
-                    self._tmp.unlink()
+                discard(self._tmp)
                 raise OutputError(f"cannot write: {exc.strerror or exc}", path=self.path) from None
+            commit(self._tmp, self.path)
         return self.count
 
 
