@@ -17,7 +17,7 @@ from __future__ import annotations
 import os
 import stat
 from pathlib import Path
-from typing import BinaryIO
+from typing import BinaryIO, Protocol
 
 import numpy as np
 
@@ -36,6 +36,7 @@ __all__ = [
     "check_lines",
     "line_too_long",
     "read_bounded",
+    "read_line",
     "read_stream",
     "size_text",
 ]
@@ -100,6 +101,19 @@ def line_too_long(path: str | Path, line: int) -> InputError:
         path=path,
         line=line,
     )
+
+
+class _Lines(Protocol):
+    def readline(self, size: int = -1, /) -> bytes: ...
+
+
+def read_line(fh: _Lines, path: str | Path, line: int) -> bytes:
+    """The next line of ``fh`` (empty at the end), refused past :data:`MAX_LINE_BYTES`;
+    ``line`` is its number, for the error."""
+    raw = fh.readline(MAX_LINE_BYTES + 1)
+    if len(raw) > MAX_LINE_BYTES:
+        raise line_too_long(path, line)
+    return raw
 
 
 def read_stream(

@@ -981,7 +981,7 @@ def plan(
 
         walls = read_drift(drift, layers=tuple(layer or ()))
         along = walls.length_m / 2  # two walls to a drift
-        stations = math.ceil(along / (step or settings.step_m)) + 1
+        stations = math.ceil(along / settings.step_m) + 1
         typer.echo(
             f"{drift}: {len(walls.walls)} walls, {walls.length_m:.0f} m of wall (about "
             f"{along:.0f} m of drift, {stations} stations); {beacons}: {len(survey)} beacons"

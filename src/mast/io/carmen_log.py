@@ -90,14 +90,12 @@ def read_carmen_log(
         line_no = 0
         while True:
             try:
-                raw = fh.readline(limits.MAX_LINE_BYTES + 1)
+                raw = limits.read_line(fh, p, line_no + 1)
             except (OSError, EOFError) as err:
                 raise InputError(f"cannot read: {err}", path=p, line=line_no + 1) from None
             if not raw:
                 return
             line_no += 1
-            if len(raw) > limits.MAX_LINE_BYTES:
-                raise limits.line_too_long(p, line_no)
             tokens = raw.split()
             if not tokens:
                 continue

@@ -37,9 +37,9 @@ def read_urg_log(
         raise InputError(f"cannot read: {err.strerror}", path=p) from None
     angle_min = -_STEP_RAD * (URG04LX_BEAMS - 1) / 2
     with fh:
-        for line_no, raw in enumerate(iter(lambda: fh.readline(limits.MAX_LINE_BYTES + 1), b""), 1):
-            if len(raw) > limits.MAX_LINE_BYTES:
-                raise limits.line_too_long(p, line_no)
+        line_no = 0
+        while raw := limits.read_line(fh, p, line_no + 1):
+            line_no += 1
             tokens = raw.split()
             if not tokens:
                 continue

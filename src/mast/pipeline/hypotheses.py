@@ -21,7 +21,6 @@ import itertools
 import math
 from collections.abc import Iterator
 from dataclasses import dataclass, replace
-from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -227,7 +226,8 @@ def pose_hypotheses(
     nodes = identification.nodes
     cov = [node_covariance(n, segmentation) for n in nodes]
     rots = [_node_rotations(n, segmentation, index) for n in nodes]
-    found: list[tuple[tuple[int, float], tuple[NodeMatch, NodeMatch, Any, Any, float]]] = []
+    Found = tuple[NodeMatch, NodeMatch, NDArray[np.float64], NDArray[np.float64], float]
+    found: list[tuple[tuple[int, float], Found]] = []
     for i in range(len(nodes)):
         for j in range(i + 1, len(nodes)):
             a, b = nodes[i], nodes[j]
