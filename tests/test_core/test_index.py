@@ -37,7 +37,15 @@ def _designs_by_walk(survey: Survey, tol: DesignTolerance) -> list[list[str]]:
 
 
 def _pairs_by_walk(
-    index: SurveyIndex, a: str, ea: int, b: str, eb: int, d: float, tol: float, same: bool
+    index: SurveyIndex,
+    a: str,
+    ea: int,
+    b: str,
+    eb: int,
+    d: float,
+    tol: float,
+    same: bool,
+    reach: float = DesignTolerance().max_pair_distance_m,
 ) -> list[tuple[str, str]]:
     """Every surveyed edge pair of these designs and edges at that distance, sorted as the
     index sorts them: (distance, first row, second row)."""
@@ -53,17 +61,17 @@ def _pairs_by_walk(
                 continue
             diff = survey[bb].edges[e2 - 1] - survey[ba].edges[e1 - 1]
             dist = float(np.hypot(diff[0], diff[1]))
-            if dist == 0 or dist > DesignTolerance().max_pair_distance_m:
+            if dist == 0 or dist > reach:
                 continue
             if abs(dist - d) <= tol and (same or ba != bb):
                 found.append((dist, ri, rj, ba, bb))
     return [(x[3], x[4]) for x in sorted(found)]
 
 
-@pytest.mark.parametrize("designs", [3, 40])
-def test_look_ups_match_a_walk_over_every_pair(designs: int) -> None:
+@pytest.mark.parametrize(("designs", "reach"), [(3, math.inf), (40, math.inf), (3, 25.0)])
+def test_look_ups_match_a_walk_over_every_pair(designs: int, reach: float) -> None:
     survey = _survey(120, designs)
-    index = SurveyIndex.from_survey(survey)
+    index = SurveyIndex.from_survey(survey, reach_m=reach)
     assert [list(g) for g in index.designs] == _designs_by_walk(survey, DesignTolerance())
     rng = np.random.default_rng(1)
     ids = survey.ids
@@ -74,4 +82,5 @@ def test_look_ups_match_a_walk_over_every_pair(designs: int) -> None:
         tol = float(rng.choice([0.05, 2.0, 10.0]))
         same = bool(rng.integers(2))
         got = [(p[0], p[1]) for p in index.edge_pairs(a, ea, b, eb, d, tol, same_beacon=same)]
-        assert got == _pairs_by_walk(index, a, ea, b, eb, d, tol, same)
+        limit = min(reach, DesignTolerance().max_pair_distance_m)
+        assert got == _pairs_by_walk(index, a, ea, b, eb, d, tol, same, limit)

@@ -76,3 +76,49 @@ def test_single_segments_report_fitting_panels() -> None:
     ident = identify_panels(segment_scan(sim.scan), scene.survey)
     assert {(s.beacon, s.panel) for s in ident.singles} >= {("B1", 2), ("B2", 2)}
     assert np.all([s.panel in (1, 2, 3) for s in ident.singles])
+
+
+def test_many_designs_identify_as_testing_each_in_full() -> None:
+    """The deflection screen over a thousand designs drops only designs the full test
+    would refuse: the same nodes and singles, in the same order, as testing every one."""
+    from mast.core.beacon import Beacon
+    from mast.pipeline.identification import (
+        IdentificationConfig,
+        SingleMatch,
+        _CornerExtent,
+        _test_corner,
+    )
+    from mast.sim.design import random_design
+
+    rng = np.random.default_rng(3)
+    scene = paper_scene("parallel")
+    others = [Beacon(f"D{k}", random_design(rng).edges_local) for k in range(1000)]
+    beacons = [*scene.survey, *others]
+    cfg = IdentificationConfig()
+    compared = 0
+    for sim in scene.simulate_all():
+        seg = segment_scan(sim.scan)
+        for sigma in (0.0, 0.01):
+            got = identify_panels(seg, beacons, cfg, survey_sigma_m=sigma)
+            nodes = []
+            for corner in seg.corners:
+                a, b = seg.segments[corner.first], seg.segments[corner.second]
+                ext = _CornerExtent.of(corner, a, b, seg.noise_m, sigma, cfg.sigmas)
+                if ext.near_a < -ext.tol or ext.near_b < -ext.tol:
+                    continue
+                for beacon in beacons:
+                    nodes.extend(_test_corner(corner, a, b, beacon, ext, sigma, cfg))
+            tol = cfg.sigmas * (seg.noise_m + sigma)
+            singles = [
+                SingleMatch(beacon.id, k + 1, s.index)
+                for s in seg.segments
+                for beacon in beacons
+                for k, length in enumerate(beacon.template.panel_lengths)
+                if length - s.spacing_start - s.spacing_end - tol <= s.length <= length + tol
+            ]
+            assert [(n.beacon, n.edge, n.forward, n.option, n.segments) for n in got.nodes] == [
+                (n.beacon, n.edge, n.forward, n.option, n.segments) for n in nodes
+            ]
+            assert list(got.singles) == singles
+            compared += len(nodes)
+    assert compared > 20  # the scenes' own beacons and look-alike designs were identified

@@ -600,12 +600,18 @@ def bench_survey(
     beacons: Annotated[
         int, typer.Option("--beacons", min=1, help="Beacons in the mine's survey.")
     ] = 10_000,
+    range_max: Annotated[
+        float,
+        typer.Option(
+            "--range-max", min=0.1, help="Scanner's longest range, metres (sets the index's reach)."
+        ),
+    ] = 80.0,
 ) -> None:
     """A whole mine's survey read, checked and indexed: seconds, with a few designs and with
     every beacon its own."""
     from mast.apps.bench.surveyload import run_survey_load
 
-    run_survey_load(beacons=beacons, echo=typer.echo)
+    run_survey_load(beacons=beacons, range_max_m=range_max, echo=typer.echo)
 
 
 @bench_app.command("fuzz")
@@ -656,12 +662,18 @@ def bench_minewide(
         int, typer.Option("--copies", min=0, help="Copies of the designs surveyed elsewhere.")
     ] = 184,
     seed: Annotated[int, typer.Option("--seed", help="First scene seed.")] = 0,
+    distinct: Annotated[
+        bool,
+        typer.Option(
+            "--distinct", help="Each added beacon of a random design of its own, not a copy."
+        ),
+    ] = False,
 ) -> None:
     """The same scans against their local survey and a mine-wide one (the local beacons
     plus copies of their designs in other drifts): same fixes, and the time it costs."""
     from mast.apps.bench.minewide import run_minewide
 
-    run_minewide(poses=poses, copies=copies, seed=seed, echo=typer.echo)
+    run_minewide(poses=poses, copies=copies, seed=seed, distinct=distinct, echo=typer.echo)
 
 
 @bench_app.command("tracking")

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import functools
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -95,6 +96,10 @@ def _first_hits_reference(
     return best, which
 
 
+#: Surveys with more panels than this are searched for the panels near a point in a tree.
+_NEAR_SCAN_PANELS = 256
+
+
 @dataclass(frozen=True, eq=False)
 class PanelSet:
     """Every surveyed panel of a survey as arrays, mine frame.
@@ -159,9 +164,23 @@ class PanelSet:
         """Position of each beacon id in :attr:`ids` (the value in :attr:`beacon`)."""
         return {bid: k for k, bid in enumerate(self.ids)}
 
+    @functools.cached_property
+    def _mid_tree(self) -> Any:  # a scipy cKDTree (scipy is imported only when needed)
+        from scipy.spatial import cKDTree
+
+        return cKDTree(self._mid)
+
     def near(self, position: NDArray[np.float64], radius_m: float) -> NDArray[np.intp]:
-        """Indices of the panels any part of which lies within ``radius_m`` of ``position``."""
+        """Indices of the panels any part of which lies within ``radius_m`` of ``position``,
+        in order. A whole mine's survey is searched in a k-d tree of the panels' middles."""
         mid = self._mid
+        if len(self) > _NEAR_SCAN_PANELS:
+            half = 0.5 * float(self.length.max())
+            ball = self._mid_tree.query_ball_point(np.asarray(position), radius_m + half)
+            found: NDArray[np.intp] = np.sort(np.asarray(ball, dtype=np.intp))
+            d = np.hypot(mid[found, 0] - position[0], mid[found, 1] - position[1])
+            within: NDArray[np.intp] = found[d <= radius_m + 0.5 * self.length[found]]
+            return within
         d = np.hypot(mid[:, 0] - position[0], mid[:, 1] - position[1])
         return np.flatnonzero(d <= radius_m + 0.5 * self.length)
 

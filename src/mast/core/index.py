@@ -124,12 +124,12 @@ class _Bucket:
 class SurveyIndex:
     """Designs and edge-pair distances of a survey.
 
-    Every pair of surveyed node edges within
-    :attr:`DesignTolerance.max_pair_distance_m` is kept once, under the ordered
-    pair of its (design, edge) keys; a key pair's edge pairs are sorted by
-    distance the first time a scan asks for them, so building the index costs
-    one k-d tree search and one sort of the pairs by key, whatever the number
-    of designs.
+    Every pair of surveyed node edges within reach (twice the scanner's range,
+    at most :attr:`DesignTolerance.max_pair_distance_m`) is kept once, under
+    the ordered pair of its (design, edge) keys (both ways round when the keys
+    are one), sorted by key pair, distance and rows: building the index costs
+    one k-d tree search and three sorts of the pairs, whatever the number of
+    designs, and a scan's look-up is a bisection.
 
     Attributes
     ----------
@@ -145,19 +145,27 @@ class SurveyIndex:
     _row_xy: NDArray[np.float64] = field(repr=False)
     _row_key: NDArray[np.int64] = field(repr=False)
     _ids: tuple[str, ...] = field(repr=False)
-    #: Pairs grouped by key pair: rows ``i`` (key <= key of ``j``), ``j``, distance.
+    #: Mine-frame angle of each beacon's panels P1-P3 (from the lower- to the higher-numbered edge).
+    _panel_angle: NDArray[np.float64] = field(repr=False)
+    #: Pairs sorted by key pair and distance: rows ``i`` (key <= key of ``j``), ``j``, distance.
     _pair_i: NDArray[np.intp] = field(repr=False)
     _pair_j: NDArray[np.intp] = field(repr=False)
     _pair_d: NDArray[np.float64] = field(repr=False)
     #: Key-pair codes present (sorted) and where each one's pairs start in the arrays.
     _codes: NDArray[np.int64] = field(repr=False)
     _starts: NDArray[np.intp] = field(repr=False)
-    _sorted_buckets: dict[int, _Bucket] = field(repr=False, default_factory=dict)
 
     @classmethod
     def from_survey(
-        cls, survey: Survey, tolerance: DesignTolerance = DesignTolerance()
+        cls,
+        survey: Survey,
+        tolerance: DesignTolerance = DesignTolerance(),
+        *,
+        reach_m: float = math.inf,
     ) -> SurveyIndex:
+        """Index ``survey``; edge pairs farther apart than ``reach_m`` (twice the
+        scanner's longest range: no scan sees both) or than the tolerance's
+        ``max_pair_distance_m`` are left out."""
         designs = _designs(survey, tolerance)
         design_of = {b: k for k, group in enumerate(designs) for b in group}
         ids = survey.ids
@@ -171,16 +179,25 @@ class SurveyIndex:
         row_key = np.array([design_of[ids[b]] for b in row_beacon], dtype=np.int64) * n_edges + (
             row_edge - NODE_EDGES[0]
         )
-        ii, jj, dist = _pairs_within(row_xy, tolerance.max_pair_distance_m)
-        # Each pair once, its lower key first.
+        ii, jj, dist = _pairs_within(row_xy, min(reach_m, tolerance.max_pair_distance_m))
+        # Each pair once, its lower key first; a pair of one key both ways round.
         swap = row_key[ii] > row_key[jj]
         ii, jj = np.where(swap, jj, ii), np.where(swap, ii, jj)
+        one = row_key[ii] == row_key[jj]
+        ii, jj = np.concatenate([ii, jj[one]]), np.concatenate([jj, ii[one]])
+        dist = np.concatenate([dist, dist[one]])
         n_keys = max(len(designs) * n_edges, 1)
         code = row_key[ii] * n_keys + row_key[jj]
-        order = np.argsort(code, kind="stable")
+        # By key pair, then distance, then rows (stable sorts, last key first).
+        order = np.argsort(ii.astype(np.int64) * row_xy.shape[0] + jj, kind="stable")
+        order = order[np.argsort(dist[order], kind="stable")]
+        order = order[np.argsort(code[order], kind="stable")]
         code, ii, jj, dist = code[order], ii[order], jj[order], dist[order]
         uniq, starts = np.unique(code, return_index=True)
         starts = np.append(starts, code.size).astype(np.intp)
+        edges = np.array([b.edges for b in survey]).reshape(-1, 4, 2)
+        steps = np.diff(edges, axis=1)
+        panel_angle = np.arctan2(steps[..., 1], steps[..., 0])
         return cls(
             survey,
             tuple(tuple(g) for g in designs),
@@ -189,6 +206,7 @@ class SurveyIndex:
             row_xy,
             row_key,
             tuple(ids),
+            panel_angle,
             ii,
             jj,
             dist,
@@ -209,22 +227,71 @@ class SurveyIndex:
         return self.designs[self._design_of[beacon_id]]
 
     def _bucket(self, ka: int, kb: int) -> _Bucket | None:
-        """The pairs of keys ``ka <= kb``, sorted by distance on first use; None if none."""
+        """The pairs of keys ``ka <= kb``, by distance; None if none."""
         n_keys = max(len(self.designs) * len(NODE_EDGES), 1)
         code = ka * n_keys + kb
         at = int(np.searchsorted(self._codes, code))
         if at == self._codes.size or int(self._codes[at]) != code:
             return None
-        found = self._sorted_buckets.get(at)
-        if found is None:
-            lo, hi = int(self._starts[at]), int(self._starts[at + 1])
-            i, j, d = self._pair_i[lo:hi], self._pair_j[lo:hi], self._pair_d[lo:hi]
-            if ka == kb:  # one key: each pair is looked up either way round
-                i, j, d = np.concatenate([i, j]), np.concatenate([j, i]), np.concatenate([d, d])
-            order = np.lexsort((j, i, d))
-            found = _Bucket(d[order], i[order], j[order])
-            self._sorted_buckets[at] = found
-        return found
+        lo, hi = int(self._starts[at]), int(self._starts[at + 1])
+        return _Bucket(self._pair_d[lo:hi], self._pair_i[lo:hi], self._pair_j[lo:hi])
+
+    def node_key(self, beacon_id: str, edge: int) -> int:
+        """Key of a node edge (2 or 3) of a beacon of ``beacon_id``'s design."""
+        return self.design_of(beacon_id) * len(NODE_EDGES) + edge - NODE_EDGES[0]
+
+    def have_pairs(self, keys_a: NDArray[np.int64], keys_b: NDArray[np.int64]) -> NDArray[np.bool_]:
+        """Whether any surveyed edge pair within reach has each pair of keys (either order):
+        a scan's node pairs of designs never surveyed near each other need no look-up."""
+        n_keys = max(len(self.designs) * len(NODE_EDGES), 1)
+        code = np.minimum(keys_a, keys_b) * n_keys + np.maximum(keys_a, keys_b)
+        at = np.minimum(np.searchsorted(self._codes, code), max(self._codes.size - 1, 0))
+        if self._codes.size == 0:
+            return np.zeros(code.shape, dtype=bool)
+        return np.asarray(self._codes[at] == code)
+
+    def pair_rows(
+        self,
+        beacon_a: str,
+        edge_a: int,
+        beacon_b: str,
+        edge_b: int,
+        distance_m: float,
+        tolerance_m: float,
+    ) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+        """Rows (see :meth:`row_xy`) of the surveyed edge pairs of these designs and edges,
+        ``distance_m`` apart within ``tolerance_m``, in (distance, first row, second row)
+        order; the two edges of one beacon are among them."""
+        ka, kb = self.node_key(beacon_a, edge_a), self.node_key(beacon_b, edge_b)
+        flip = ka > kb
+        b = self._bucket(kb, ka) if flip else self._bucket(ka, kb)
+        if b is None:
+            empty = np.zeros(0, dtype=np.intp)
+            return empty, empty
+        lo = int(np.searchsorted(b.dist, distance_m - tolerance_m, side="left"))
+        hi = int(np.searchsorted(b.dist, distance_m + tolerance_m, side="right"))
+        if not flip:
+            return b.first[lo:hi], b.second[lo:hi]
+        # stored the other way round: swap, and restore the (distance, a, b) order
+        d, i, j = b.dist[lo:hi], b.second[lo:hi], b.first[lo:hi]
+        order = np.lexsort((j, i, d))
+        return i[order], j[order]
+
+    def row_xy(self, rows: NDArray[np.intp]) -> NDArray[np.float64]:
+        """(E, N) of the node edges at ``rows``."""
+        return self._row_xy[rows]
+
+    def row_beacon(self, rows: NDArray[np.intp]) -> NDArray[np.intp]:
+        """Survey position of the beacon of each of ``rows``."""
+        return self._row_beacon[rows]
+
+    def beacon_id(self, number: int) -> str:
+        """Id of the survey's ``number``-th beacon (from 0)."""
+        return self._ids[number]
+
+    def panel_angles(self, numbers: NDArray[np.intp]) -> NDArray[np.float64]:
+        """(k, 3) mine-frame angles of panels P1-P3 of the beacons at these survey positions."""
+        return self._panel_angle[numbers]
 
     def edge_pairs(
         self,
@@ -244,28 +311,10 @@ class SurveyIndex:
         beacon as well, when ``same_beacon``), nearest ``distance_m`` in
         distance order (ties by survey order).
         """
-        n_edges = len(NODE_EDGES)
-        ka = self.design_of(beacon_a) * n_edges + edge_a - NODE_EDGES[0]
-        kb = self.design_of(beacon_b) * n_edges + edge_b - NODE_EDGES[0]
-        flip = ka > kb
-        b = self._bucket(kb, ka) if flip else self._bucket(ka, kb)
-        out: list[tuple[str, str, NDArray[np.float64], NDArray[np.float64]]] = []
-        if b is None:
-            return out
-        lo = int(np.searchsorted(b.dist, distance_m - tolerance_m, side="left"))
-        hi = int(np.searchsorted(b.dist, distance_m + tolerance_m, side="right"))
-        rows = list(
-            zip(
-                b.dist[lo:hi].tolist(),
-                b.first[lo:hi].tolist(),
-                b.second[lo:hi].tolist(),
-                strict=True,
-            )
-        )
-        if flip:  # stored the other way round: swap, and restore the (distance, a, b) order
-            rows = sorted((d, j, i) for d, i, j in rows)
+        ra, rb = self.pair_rows(beacon_a, edge_a, beacon_b, edge_b, distance_m, tolerance_m)
         ids = self._ids
-        for _, i, j in rows:
+        out: list[tuple[str, str, NDArray[np.float64], NDArray[np.float64]]] = []
+        for i, j in zip(ra.tolist(), rb.tolist(), strict=True):
             ba, bb = ids[self._row_beacon[i]], ids[self._row_beacon[j]]
             if ba == bb and not same_beacon:
                 continue

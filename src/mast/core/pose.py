@@ -29,6 +29,7 @@ __all__ = [
     "normalize_azimuth",
     "parse_azimuth",
     "wrap_angle",
+    "wrap_angles",
 ]
 
 TWO_PI = 2.0 * math.pi
@@ -37,6 +38,11 @@ TWO_PI = 2.0 * math.pi
 def wrap_angle(angle_rad: float) -> float:
     """Wrap an angle to [-pi, pi)."""
     return (angle_rad + math.pi) % TWO_PI - math.pi
+
+
+def wrap_angles(angles_rad: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Wrap angles to [-pi, pi], element-wise (nearest multiple of 2 pi removed)."""
+    return np.asarray(angles_rad - TWO_PI * np.round(angles_rad / TWO_PI))
 
 
 def normalize_azimuth(azimuth_rad: float) -> float:

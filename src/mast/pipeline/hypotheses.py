@@ -19,16 +19,20 @@ from __future__ import annotations
 
 import itertools
 import math
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, replace
+from typing import Generic, TypeVar
 
 import numpy as np
 from numpy.typing import NDArray
 
 from mast.core.index import SurveyIndex
+from mast.core.pose import wrap_angles
 from mast.pipeline.alignment import Similarity, similarity_transform
 from mast.pipeline.identification import NodeMatch, PanelIdentification
 from mast.pipeline.segmentation import Segment, Segmentation
+
+T = TypeVar("T")
 
 __all__ = [
     "Hypothesis",
@@ -177,8 +181,7 @@ def _single_hypothesis(
     node: NodeMatch, beacon: str, seg: Segmentation, index: SurveyIndex
 ) -> Hypothesis | None:
     """The pose one node and its identified panels imply on their own."""
-    if node.beacon != beacon:
-        node = _rename(node, beacon)
+    node = _renamed(node, beacon)
     rots = _node_rotations(node, seg, index)
     if not rots:
         return None
@@ -194,9 +197,53 @@ def _single_hypothesis(
     return Hypothesis((node,), sim, 0.0, "single", spread)
 
 
-def _rename(node: NodeMatch, beacon: str) -> NodeMatch:
-    """The same identified node, taken for a beacon of the same design."""
-    return replace(node, beacon=beacon)
+def _renamed(node: NodeMatch, beacon: str) -> NodeMatch:
+    """The same identified node, taken for a beacon of the same design (itself if it is)."""
+    return node if node.beacon == beacon else replace(node, beacon=beacon)
+
+
+@dataclass(frozen=True, slots=True)
+class _PanelsSeen:
+    """A node's identified panels: their numbers (from 0), the direction of each
+    one's fitted line in the scanner frame and that direction's standard deviation."""
+
+    panel: NDArray[np.intp]
+    angle: NDArray[np.float64]
+    sigma: NDArray[np.float64]
+    turn: float  # pi when the scan meets the beacon from e4 to e1
+
+    @classmethod
+    def of(cls, node: NodeMatch, seg: Segmentation) -> _PanelsSeen:
+        kept = [
+            (panel - 1, seg.segments[s])
+            for s, panel, ok in zip(node.segments, node.panels, node.identified, strict=True)
+            if ok
+        ]
+        return cls(
+            np.array([p for p, _ in kept], dtype=np.intp),
+            np.array([math.atan2(s.direction[1], s.direction[0]) for _, s in kept]),
+            np.array([s.sigma_direction for _, s in kept]),
+            0.0 if node.forward else math.pi,
+        )
+
+    def rotations(self, index: SurveyIndex, beacons: NDArray[np.intp]) -> NDArray[np.float64]:
+        """(k, panels) rotation, mine vs scanner, each panel implies were the node on
+        each of ``beacons`` (survey positions): look-alikes may face any way."""
+        mine = index.panel_angles(beacons)[:, self.panel] + self.turn
+        return wrap_angles(mine - self.angle[None, :])
+
+
+class _Lazy(Generic[T]):
+    """``f(k)`` for each ``k`` asked for, computed once."""
+
+    def __init__(self, f: Callable[[int], T]) -> None:
+        self._f = f
+        self._done: dict[int, T] = {}
+
+    def __getitem__(self, k: int) -> T:
+        if k not in self._done:
+            self._done[k] = self._f(k)
+        return self._done[k]
 
 
 def pose_hypotheses(
@@ -206,7 +253,6 @@ def pose_hypotheses(
     config: HypothesisConfig = HypothesisConfig(),
     *,
     survey_sigma_m: float = 0.0,
-    max_range_m: float = math.inf,
 ) -> list[Hypothesis]:
     """Pose hypotheses from the identified nodes: consistent pairs first, then single nodes.
 
@@ -215,77 +261,91 @@ def pose_hypotheses(
     identification, segmentation
         Stages 1 and 2 of this scan.
     index : SurveyIndex
-        The survey's design and edge-pair index.
+        The survey's design and edge-pair index (edge pairs no scan can see
+        both of are not in it).
     config : HypothesisConfig
     survey_sigma_m : float
         Standard deviation of a surveyed edge coordinate.
-    max_range_m : float
-        Longest range of the scanner: surveyed edge pairs farther apart than
-        twice this cannot both be in one scan.
     """
     nodes = identification.nodes
-    cov = [node_covariance(n, segmentation) for n in nodes]
-    rots = [_node_rotations(n, segmentation, index) for n in nodes]
-    Found = tuple[NodeMatch, NodeMatch, NDArray[np.float64], NDArray[np.float64], float]
-    found: list[tuple[tuple[int, float], Found]] = []
-    for i in range(len(nodes)):
-        for j in range(i + 1, len(nodes)):
-            a, b = nodes[i], nodes[j]
-            if set(a.segments) & set(b.segments) and a.beacon != b.beacon:
-                continue
-            same_design = index.design_of(a.beacon) == index.design_of(b.beacon)
-            ds_vec = b.node_scanner - a.node_scanner
-            ds = float(np.hypot(*ds_vec))
-            if ds < config.min_node_separation_m:
-                continue
-            u = ds_vec / ds
-            s_d = math.sqrt(float(u @ (cov[i] + cov[j]) @ u) + 2 * survey_sigma_m**2)
-            tol_d = config.sigmas * s_d
-            for ba, bb, edge_a, edge_b in index.edge_pairs(
-                a.beacon, a.edge, b.beacon, b.edge, ds, tol_d, same_beacon=same_design
-            ):
-                if ba == bb and (a.edge == b.edge or a.forward != b.forward):
-                    continue
-                if ba != bb and set(a.segments) & set(b.segments):
-                    continue
-                dm_vec = edge_b - edge_a
-                dm = float(np.hypot(*dm_vec))
-                mis_d = abs(ds - dm) / tol_d
-                rot = _wrap(math.atan2(dm_vec[1], dm_vec[0]) - math.atan2(ds_vec[1], ds_vec[0]))
-                v_perp = np.array([-u[1], u[0]])
-                s_rot = math.sqrt(float(v_perp @ (cov[i] + cov[j]) @ v_perp)) / dm
-                na = a if ba == a.beacon else _rename(a, ba)
-                nb = b if bb == b.beacon else _rename(b, bb)
-                # Each surveyed beacon's own panel directions: look-alikes may face any way.
-                rots_ab = (rots[i] if na is a else _node_rotations(na, segmentation, index)) + (
-                    rots[j] if nb is b else _node_rotations(nb, segmentation, index)
-                )
-                mis_r = 0.0
-                for r_k, s_k in rots_ab:
-                    tol = max(config.min_rotation_tol_rad, config.sigmas * math.hypot(s_rot, s_k))
-                    mis_r = max(mis_r, abs(_wrap(r_k - rot)) / tol)
-                if mis_r > 1.0:
-                    continue
-                spread = major_sigma(cov[i]) + 2.0 * float(np.hypot(*a.node_scanner)) * min(
-                    s_rot, math.pi
-                )
-                misfit = max(mis_d, mis_r)
-                found.append(((na.option + nb.option, misfit), (na, nb, edge_a, edge_b, spread)))
-    # Prefer hypotheses whose nodes were identified with more panels (lower Table 1 option);
-    # only those kept are solved (a mine's look-alikes past the cap never are).
-    found.sort(key=lambda f: f[0])
-    pairs = [
-        Hypothesis(
-            (na, nb),
-            similarity_transform(
-                np.array([na.node_scanner, nb.node_scanner]), np.array([edge_a, edge_b])
-            ),
-            rank[1],
-            "pair",
-            spread,
+    # Covariances and panels of the nodes that are looked up (a survey of many designs
+    # identifies many nodes, few of them of designs surveyed near each other).
+    cov = _Lazy(lambda k: node_covariance(nodes[k], segmentation))
+    seen = _Lazy(lambda k: _PanelsSeen.of(nodes[k], segmentation))
+    # (node i, node j, beacon of i, beacon of j (survey positions), edge of i, edge of j, spread)
+    Found = tuple[int, int, int, int, NDArray[np.float64], NDArray[np.float64], float]
+    found: list[tuple[tuple[bool, int, float], Found]] = []
+    # Only node pairs whose designs and edges are surveyed within reach of each other.
+    keys = np.array([index.node_key(n.beacon, n.edge) for n in nodes], dtype=np.int64)
+    first, second = np.triu_indices(len(nodes), 1)
+    looked_up = index.have_pairs(keys[first], keys[second])
+    for i, j in zip(first[looked_up].tolist(), second[looked_up].tolist(), strict=True):
+        a, b = nodes[i], nodes[j]
+        shared = bool(set(a.segments) & set(b.segments))
+        if shared and a.beacon != b.beacon:
+            continue
+        same_design = index.design_of(a.beacon) == index.design_of(b.beacon)
+        ds_vec = b.node_scanner - a.node_scanner
+        ds = float(np.hypot(*ds_vec))
+        if ds < config.min_node_separation_m:
+            continue
+        u = ds_vec / ds
+        s_d = math.sqrt(float(u @ (cov[i] + cov[j]) @ u) + 2 * survey_sigma_m**2)
+        tol_d = config.sigmas * s_d
+        ra, rb = index.pair_rows(a.beacon, a.edge, b.beacon, b.edge, ds, tol_d)
+        ba, bb = index.row_beacon(ra), index.row_beacon(rb)
+        one = ba == bb
+        # One beacon's two edges: distinct edges met in one direction, and only when
+        # both nodes are of its design; two beacons: no segment shared.
+        twin = a.edge == b.edge or a.forward != b.forward
+        keep = ~one if not same_design else ~(one & twin)
+        if shared:
+            keep &= one
+        ra, rb, ba, bb, one = ra[keep], rb[keep], ba[keep], bb[keep], one[keep]
+        if ra.size == 0:
+            continue
+        edge_a, edge_b = index.row_xy(ra), index.row_xy(rb)
+        dm_vec = edge_b - edge_a
+        dm = np.hypot(dm_vec[:, 0], dm_vec[:, 1])
+        mis_d = np.abs(ds - dm) / tol_d
+        rot = np.arctan2(dm_vec[:, 1], dm_vec[:, 0]) - math.atan2(ds_vec[1], ds_vec[0])
+        rot = wrap_angles(rot)
+        v_perp = np.array([-u[1], u[0]])
+        s_rot = math.sqrt(float(v_perp @ (cov[i] + cov[j]) @ v_perp)) / dm
+        # Each surveyed beacon's own panel directions must agree with the pair's rotation.
+        r_k = np.concatenate([seen[i].rotations(index, ba), seen[j].rotations(index, bb)], 1)
+        s_k = np.concatenate([seen[i].sigma, seen[j].sigma])
+        tol = np.maximum(
+            config.min_rotation_tol_rad, config.sigmas * np.hypot(s_rot[:, None], s_k[None, :])
         )
-        for rank, (na, nb, edge_a, edge_b, spread) in found[: config.max_pair_hypotheses]
-    ]
+        mis_r = (np.abs(wrap_angles(r_k - rot[:, None])) / tol).max(axis=1, initial=0.0)
+        spread = major_sigma(cov[i]) + 2.0 * float(np.hypot(*a.node_scanner)) * np.minimum(
+            s_rot, math.pi
+        )
+        misfit = np.maximum(mis_d, mis_r)
+        options = a.option + b.option
+        for k in np.flatnonzero(mis_r <= 1.0).tolist():
+            found.append(
+                (
+                    (bool(one[k]), options, float(misfit[k])),
+                    (i, j, int(ba[k]), int(bb[k]), edge_a[k], edge_b[k], float(spread[k])),
+                )
+            )
+    # Prefer two beacons to one beacon's two edges (every look-alike of a beacon shows
+    # the same two edges; two beacons' relative place is the mine's own), then nodes
+    # identified with more panels (lower Table 1 option); only those kept are solved
+    # (a mine's look-alikes past the cap never are).
+    found.sort(key=lambda f: f[0])
+    pairs = []
+    for (_, _, misfit_k), (i, j, ka, kb, edge_a, edge_b, spread_k) in found[
+        : config.max_pair_hypotheses
+    ]:
+        na = _renamed(nodes[i], index.beacon_id(ka))
+        nb = _renamed(nodes[j], index.beacon_id(kb))
+        sim = similarity_transform(
+            np.array([na.node_scanner, nb.node_scanner]), np.array([edge_a, edge_b])
+        )
+        pairs.append(Hypothesis((na, nb), sim, misfit_k, "pair", spread_k))
 
     # Single nodes take turns (lowest Table 1 option first), so that one corner's
     # many look-alikes in a mine-wide survey cannot crowd out another corner's beacon.

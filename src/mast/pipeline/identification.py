@@ -32,6 +32,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from mast.core.beacon import Beacon
+from mast.core.pose import wrap_angles
 from mast.pipeline.segmentation import Corner, Segment, Segmentation
 
 __all__ = [
@@ -257,20 +258,35 @@ def identify_panels(
     segs = segmentation.segments
     nodes: list[NodeMatch] = []
     beacons = list(beacons)
+    if not beacons:
+        return PanelIdentification((), ())
+    lengths = np.array([b.template.panel_lengths for b in beacons]).reshape(-1, 3)
+    deflections = np.array([b.template.deflections for b in beacons]).reshape(-1, 2)
+    # Loosest deflection tolerance of each design (the survey's share of it is largest
+    # for its shortest panels): a corner is tested in full only against the designs it
+    # may match, so a survey of a thousand designs costs little more than one of three.
+    survey_theta = survey_sigma_m * math.sqrt(2.0) * math.hypot(1.0, 1.0) / lengths.min(axis=1)
     for corner in segmentation.corners:
         a, b = segs[corner.first], segs[corner.second]
         ext = _CornerExtent.of(corner, a, b, segmentation.noise_m, survey_sigma_m, config.sigmas)
         if ext.near_a < -ext.tol or ext.near_b < -ext.tol:
             continue  # the lines meet inside a segment: not a corner of two panels
-        for beacon in beacons:
-            nodes.extend(_test_corner(corner, a, b, beacon, ext, survey_sigma_m, config))
+        sig_theta = math.hypot(a.sigma_direction, b.sigma_direction)
+        loosest = np.maximum(
+            config.min_deflection_tol_rad, config.sigmas * np.hypot(sig_theta, survey_theta)
+        )
+        off = np.minimum(
+            np.abs(wrap_angles(corner.deflection - deflections)),
+            np.abs(wrap_angles(corner.deflection + deflections)),
+        ).min(axis=1)
+        for k in np.flatnonzero(off <= loosest * (1 + 1e-9) + 1e-12).tolist():
+            nodes.extend(_test_corner(corner, a, b, beacons[k], ext, survey_sigma_m, config))
     singles: list[SingleMatch] = []
     noise = segmentation.noise_m
+    tol = config.sigmas * (noise + survey_sigma_m)
     for seg in segs:
-        tol = config.sigmas * (noise + survey_sigma_m)
-        for beacon in beacons:
-            for k, length in enumerate(beacon.template.panel_lengths):
-                lo = length - seg.spacing_start - seg.spacing_end - tol
-                if lo <= seg.length <= length + tol:
-                    singles.append(SingleMatch(beacon.id, k + 1, seg.index))
+        lo = lengths - seg.spacing_start - seg.spacing_end - tol
+        fits = (lo <= seg.length) & (seg.length <= lengths + tol)
+        for k, panel in np.argwhere(fits).tolist():
+            singles.append(SingleMatch(beacons[k].id, panel + 1, seg.index))
     return PanelIdentification(tuple(nodes), tuple(singles))

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections import OrderedDict
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field, replace
 
@@ -200,17 +201,29 @@ class Fix:
         return 0 if self.chosen is None else self.chosen.icp.iterations
 
 
-_INDEX_CACHE: dict[int, tuple[Survey, SurveyIndex, PanelSet]] = {}
+#: Most survey indexes kept (least recently used dropped first).
+_INDEX_CACHE_SIZE = 8
+_INDEX_CACHE: OrderedDict[tuple[int, float], tuple[Survey, SurveyIndex, PanelSet]] = OrderedDict()
 
 
-def _survey_index(survey: Survey) -> tuple[SurveyIndex, PanelSet]:
-    """The survey's index and panels, built once per survey object (a run reuses them)."""
-    hit = _INDEX_CACHE.get(id(survey))
-    if hit is None or hit[0] is not survey:
-        if len(_INDEX_CACHE) > 8:
-            _INDEX_CACHE.clear()
-        hit = (survey, SurveyIndex.from_survey(survey), PanelSet.from_survey(survey))
-        _INDEX_CACHE[id(survey)] = hit
+def _survey_index(survey: Survey, range_max_m: float = math.inf) -> tuple[SurveyIndex, PanelSet]:
+    """The survey's index and panels for a scanner of this range, built once per survey
+    object and range (a run reuses them). Edge pairs farther apart than twice the
+    range are left out of the index: no scan sees both."""
+    key = (id(survey), float(range_max_m))
+    hit = _INDEX_CACHE.get(key)
+    if hit is not None and hit[0] is survey:
+        _INDEX_CACHE.move_to_end(key)
+    else:
+        while len(_INDEX_CACHE) >= _INDEX_CACHE_SIZE:
+            _INDEX_CACHE.popitem(last=False)
+        reach = 2.0 * range_max_m + 1.0
+        hit = (
+            survey,
+            SurveyIndex.from_survey(survey, reach_m=reach),
+            PanelSet.from_survey(survey),
+        )
+        _INDEX_CACHE[key] = hit
     return hit[1], hit[2]
 
 
@@ -265,6 +278,18 @@ def _choose(verified: list[Verified], cfg: LocatorConfig) -> tuple[Verified | No
     return best, "", ""
 
 
+def _settled(verified: list[Verified], cfg: LocatorConfig) -> bool:
+    """Whether poses on fewer than ``min_beacons`` beacons' returns can no longer change
+    what :func:`_choose` makes of ``verified``: it picks a best pose with ``min_beacons``
+    beacons each identified by its own corner. Then another pose competes only if it
+    has ``min_beacons`` supporting beacons, which those poses cannot have."""
+    if cfg.prior is not None:
+        margin = (cfg.prior_margin_m, cfg.prior_margin_rad)
+        verified = [v for v in verified if cfg.prior.admits(v.pose, *margin)]
+    best, _, _ = _choose(verified, cfg)
+    return best is not None and len(best.cornered) >= cfg.min_beacons
+
+
 def locate(scan: Scan, survey: Survey, *, config: LocatorConfig | None = None) -> Fix:
     """Fix the scanner's pose from one scan of surveyed beacons.
 
@@ -286,7 +311,7 @@ def locate(scan: Scan, survey: Survey, *, config: LocatorConfig | None = None) -
     cfg = config or LocatorConfig()
     noise = cfg.noise
     t0 = time.perf_counter()
-    index, panels = _survey_index(survey)
+    index, panels = _survey_index(survey, scan.range_max_m)
     found: dict[str, object] = {"config": cfg, "hypotheses": (), "verified": (), "chosen": None}
 
     def finish(
@@ -323,8 +348,7 @@ def locate(scan: Scan, survey: Survey, *, config: LocatorConfig | None = None) -
             seg, index.representatives, cfg.identification, survey_sigma_m=noise.survey_sigma_m
         )
         found["identification"] = ident
-        seen = sorted({b for n in ident.nodes for b in index.beacons_like(n.beacon)})
-        if not seen:
+        if not ident.nodes:
             return finish(
                 reason="no_beacon",
                 detail=f"{len(seg.segments)} segments, no beacon corner identified",
@@ -336,13 +360,25 @@ def locate(scan: Scan, survey: Survey, *, config: LocatorConfig | None = None) -
             hyps = [h for h in hyps if cfg.prior.admits(h.similarity.pose(), *margin)]
         if not hyps:
             where = "" if cfg.prior is None else f" within the prior {cfg.prior.pose}"
+            seen = sorted({b for n in ident.nodes for b in index.beacons_like(n.beacon)})
             return finish(
                 reason="inconsistent",
                 detail=f"no pose{where} from the corners of beacons {', '.join(seen[:6])}",
             )
     found["hypotheses"] = tuple(hyps)
     # Stage 4: ICP and every beam's verdict; the best pose by likelihood, unless ambiguous.
-    verified = verify(hyps, scan, panels, index, ident, seg, noise, cfg.verification)
+    verified = verify(
+        hyps,
+        scan,
+        panels,
+        index,
+        ident,
+        seg,
+        noise,
+        cfg.verification,
+        settled=lambda kept: _settled(kept, cfg),
+        min_beacons=cfg.min_beacons,
+    )
     if cfg.prior is not None:
         verified = [v for v in verified if cfg.prior.admits(v.pose, *margin)]
     found["verified"] = tuple(verified)

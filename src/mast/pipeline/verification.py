@@ -25,7 +25,8 @@ S. Thrun, W. Burgard and D. Fox, *Probabilistic Robotics*, 2005, sec. 6.3
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -585,6 +586,31 @@ class _Refined:
         return _same_pose(self.icp.pose, other, cfg)
 
 
+@dataclass(eq=False, slots=True)
+class _PoseList:
+    """Poses in arrays, so that finding one the same as a new pose (:func:`_same_pose`)
+    costs one vector comparison however many hypotheses a mine's look-alikes make."""
+
+    cfg: VerificationConfig
+    _enr: NDArray[np.float64] = field(default_factory=lambda: np.zeros((16, 3)))
+    size: int = 0
+
+    def add(self, pose: Pose2D) -> None:
+        if self.size == self._enr.shape[0]:
+            self._enr = np.concatenate([self._enr, np.zeros_like(self._enr)])
+        self._enr[self.size] = (pose.easting, pose.northing, pose.azimuth)
+        self.size += 1
+
+    def first_same(self, pose: Pose2D) -> int | None:
+        """Position of the first pose the same as ``pose``, or None."""
+        e = self._enr[: self.size]
+        d = np.hypot(e[:, 0] - pose.easting, e[:, 1] - pose.northing)
+        turn = e[:, 2] - pose.azimuth
+        da = np.abs(turn - 2 * math.pi * np.round(turn / (2 * math.pi)))
+        at = np.flatnonzero((d < self.cfg.duplicate_m) & (da < self.cfg.duplicate_rad))
+        return int(at[0]) if at.size else None
+
+
 def verify(
     hypotheses: list[Hypothesis],
     scan: Scan,
@@ -594,6 +620,9 @@ def verify(
     seg: Segmentation,
     noise: NoiseModel,
     cfg: VerificationConfig,
+    *,
+    settled: Callable[[list[Verified]], bool] | None = None,
+    min_beacons: int = 2,
 ) -> list[Verified]:
     """Refine every hypothesis by ICP and keep those the beams confirm, best first.
 
@@ -603,13 +632,23 @@ def verify(
     refined pose is judged by the beams (:func:`check_beams`, :func:`_support`)
     only when its returns leave the hypothesis' beacons a chance of support:
     otherwise the hypothesis could not be kept whatever the beams say.
+
+    With ``settled``, a refined pose whose returns leave fewer than
+    ``min_beacons`` beacons a chance of support is judged only if
+    ``settled(kept)`` is false once every other hypothesis has been: the
+    caller says when such poses (a mine's look-alikes of one beacon seen)
+    can no longer change its choice.
     """
     _, pts = scan.points()
     final_gate = cfg.gate_sigmas * noise.gate_sigma_m
     gates = (*cfg.coarse_gates_m, final_gate)
     reach = scan.range_max_m + 1.0
     out: list[Verified] = []
+    out_poses = _PoseList(cfg)
     done: list[_Refined] = []
+    done_poses = _PoseList(cfg)
+    sequence: dict[int, int] = {}  # id of a kept Verified -> its hypothesis' position
+    deferred: list[tuple[int, Hypothesis, _Refined, bool]] = []
 
     def judged(r: _Refined) -> Verified:
         """``r`` judged by the beams, under the hypothesis it was refined for."""
@@ -632,13 +671,29 @@ def verify(
             r.verified = Verified(h0, icp, r.counts, supported, checks, cornered, shaped)
         return r.verified
 
-    for h in hypotheses:
+    def keep(seq: int, h: Hypothesis, refined: _Refined, again: bool) -> None:
+        """Judge ``refined`` under ``h`` and keep it if its beacons support it."""
+        v = judged(refined)
+        if again:
+            v = replace(v, hypothesis=h)
+        supported, checks = v.supported, v.checks
+        if not set(h.beacons) <= set(supported):
+            return
+        unoccluded = sum(c.hit + c.through for c in checks.values())
+        if v.violations > max(cfg.min_violations, cfg.max_violation_fraction * unoccluded):
+            return
+        out.append(v)
+        out_poses.add(v.pose)
+        sequence[id(v)] = seq
+
+    for seq, h in enumerate(hypotheses):
         start = h.similarity.pose()
-        again = next((r for r in done if r.same_pose(start, cfg)), None)
+        at = done_poses.first_same(start)
+        again = None if at is None else done[at]
         if again is not None:
             # The same start refines to the same pose: judge it again under this
             # hypothesis' labels (another beacon's name may be the right one).
-            if any(o.same_pose(again.icp.pose, cfg) for o in out):
+            if out_poses.first_same(again.icp.pose) is not None:
                 continue
             refined = again
         else:
@@ -648,22 +703,26 @@ def verify(
             start_gate = min(cfg.max_start_gate_m, cfg.start_gate_sigmas * h.spread_m)
             wide = (start_gate,) if start_gate > gates[0] else ()
             icp = icp_point_to_line(pts, start, panels, gates_m=(*wide, *gates), subset=near)
-            if any(v.same_pose(icp.pose, cfg) for v in out):
+            if out_poses.first_same(icp.pose) is not None:
                 continue  # converged onto a pose already confirmed
             counts = _panel_counts(icp, panels)
             refined = _Refined(h, icp, counts, _may_support(counts, cfg), near)
             done.append(refined)
+            done_poses.add(icp.pose)
         if not set(h.beacons) <= refined.may_support:
             continue  # its beacons cannot support the pose: no beam need be checked
-        v = judged(refined)
-        if again is not None:
-            v = replace(v, hypothesis=h)
-        supported, checks = v.supported, v.checks
-        if not set(h.beacons) <= set(supported):
+        if settled is not None and len(refined.may_support) < min_beacons:
+            deferred.append((seq, h, refined, again is not None))
             continue
-        unoccluded = sum(c.hit + c.through for c in checks.values())
-        if v.violations > max(cfg.min_violations, cfg.max_violation_fraction * unoccluded):
-            continue
-        out.append(v)
-    out.sort(key=lambda v: (len(v.supported), v.log_likelihood), reverse=True)
-    return out
+        keep(seq, h, refined, again is not None)
+    if deferred and (settled is None or not settled(_ranked(out, sequence))):
+        for seq, h, refined, relabel in deferred:
+            if out_poses.first_same(refined.icp.pose) is None:
+                keep(seq, h, refined, relabel)
+    return _ranked(out, sequence)
+
+
+def _ranked(out: list[Verified], sequence: dict[int, int]) -> list[Verified]:
+    """Kept poses most supported first, then by likelihood, then in hypothesis order."""
+    in_order = sorted(out, key=lambda v: sequence[id(v)])
+    return sorted(in_order, key=lambda v: (len(v.supported), v.log_likelihood), reverse=True)

@@ -26,6 +26,7 @@ from mast.core.pose import Pose2D
 from mast.core.scan import Scan
 from mast.pipeline.locator import Fix, LocatorConfig, locate
 from mast.sim import ScannerModel, simulate_scan
+from mast.sim.design import random_design
 
 __all__ = ["MinewideScan", "MinewideSummary", "minewide_survey", "run_minewide"]
 
@@ -81,6 +82,8 @@ class MinewideSummary:
         Scans located, and copies added to each scene's survey.
     copies_first : bool
         Whether the copies come before the scene's beacons in the survey.
+    distinct : bool
+        Whether each added beacon is of a design of its own (not a copy).
     survey_beacons : tuple of int
         Fewest and most beacons in a mine-wide survey.
     min_copy_distance_m : float
@@ -108,6 +111,7 @@ class MinewideSummary:
     poses: int
     copies: int
     copies_first: bool
+    distinct: bool
     survey_beacons: tuple[int, int]
     min_copy_distance_m: float
     local_fixes: int
@@ -140,6 +144,7 @@ def minewide_survey(
     clearance_m: float,
     rng: np.random.Generator,
     copies_first: bool = False,
+    distinct: bool = False,
 ) -> Survey:
     """``survey`` plus ``copies`` copies of its beacons, out of sight of ``poses``.
 
@@ -150,7 +155,9 @@ def minewide_survey(
     size, so that no edge of a copy comes within ``clearance_m`` of a pose.
     Copies are named by :func:`copy_id`, and listed after the survey's own
     beacons (before them with ``copies_first``: then a copy, not the beacon
-    really seen, is the first of its design in the survey).
+    really seen, is the first of its design in the survey). With ``distinct``,
+    each added beacon is instead of a random design of its own (a mine of
+    many designs: identification has that many to tell apart).
     """
     originals = list(survey)
     xy = np.array([p.position for p in poses]).reshape(-1, 2)
@@ -160,12 +167,13 @@ def minewide_survey(
     added: list[Beacon] = []
     for k in range(copies):
         src = originals[k % len(originals)]
+        shape = random_design(rng).edges_local if distinct else src.edges - src.centroid
         turn = float(rng.uniform(0, 2 * math.pi))
         c, s = math.cos(turn), math.sin(turn)
         rot = np.array([[c, -s], [s, c]])
         drift, station = divmod(k, COPIES_PER_DRIFT)
         target = np.array([east0 + station * COPY_SPACING_M, north0 + drift * DRIFT_SPACING_M])
-        added.append(Beacon(copy_id(k), (src.edges - src.centroid) @ rot.T + target))
+        added.append(Beacon(copy_id(k), (shape - shape.mean(axis=0)) @ rot.T + target))
     ordered = [*added, *originals] if copies_first else [*originals, *added]
     return Survey(ordered, source=survey.source)
 
@@ -192,6 +200,7 @@ def run_minewide(
     seed: int = 0,
     model: ScannerModel = ACCURACY_CONFIGS[0],
     copies_first: bool = False,
+    distinct: bool = False,
     echo: Callable[[str], object] = print,
 ) -> MinewideSummary:
     """Locate owed scans against their scene's survey and a mine-wide one; compare.
@@ -209,6 +218,8 @@ def run_minewide(
         Scanner (default: 270 degrees, 0.5 degree beams, 12 mm noise).
     copies_first : bool
         List the copies before the scene's beacons in the mine-wide survey.
+    distinct : bool
+        Each added beacon of a random design of its own instead of a copy.
     echo : callable
         Receives the one-line summary.
     """
@@ -230,6 +241,7 @@ def run_minewide(
                 clearance_m=clearance,
                 rng=np.random.default_rng([seed, len(wide), 11]),
                 copies_first=copies_first,
+                distinct=distinct,
             )
             wide[scene.name] = big
             xy = np.array([p.position for p in shots])
@@ -270,7 +282,9 @@ def run_minewide(
                 minewide_beacons=mine.beacons,
             )
         )
-    summary = _summarise(model.name, copies, copies_first, scans, wide, min_dist, builds, t_start)
+    summary = _summarise(
+        model.name, copies, copies_first, distinct, scans, wide, min_dist, builds, t_start
+    )
     echo(_line(summary))
     return summary
 
@@ -279,6 +293,7 @@ def _summarise(
     config: str,
     copies: int,
     copies_first: bool,
+    distinct: bool,
     scans: list[MinewideScan],
     wide: dict[str, Survey],
     min_dist: float,
@@ -299,6 +314,7 @@ def _summarise(
         poses=len(scans),
         copies=copies,
         copies_first=copies_first,
+        distinct=distinct,
         survey_beacons=(min(sizes), max(sizes)),
         min_copy_distance_m=min_dist,
         local_fixes=sum(s.local_status == "fix" for s in scans),
@@ -325,8 +341,9 @@ def _summarise(
 def _line(s: MinewideSummary) -> str:
     lo, hi = s.survey_beacons
     order = "first" if s.copies_first else "last"
+    kind = "beacons of their own designs" if s.distinct else "copies"
     return (
-        f"{s.config}: {s.poses} scans, local vs mine-wide ({lo}-{hi} beacons, copies {order}, "
+        f"{s.config}: {s.poses} scans, local vs mine-wide ({lo}-{hi} beacons, {kind} {order}, "
         f">= {s.min_copy_distance_m:.0f} m away): fixes {s.local_fixes} vs {s.minewide_fixes}, "
         f"status differs {s.status_differ}, pose differs {s.pose_differ} "
         f'(max {1e3 * s.max_position_diff_m:.3g} mm, {s.max_azimuth_diff_arcsec:.3g}"), '

@@ -1,0 +1,78 @@
+"""A whole mine's look-alikes: poses on one beacon's returns are judged only when they
+could still change the choice, and leaving them unjudged never does."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from mast.apps.bench.accuracy import ACCURACY_CONFIGS, owed_poses
+from mast.apps.bench.minewide import minewide_survey
+from mast.pipeline import locator
+from mast.pipeline.hypotheses import pose_hypotheses
+from mast.pipeline.identification import identify_panels
+from mast.pipeline.locator import LocatorConfig, _choose, _settled, _survey_index
+from mast.pipeline.segmentation import segment_scan
+from mast.pipeline.verification import verify
+from mast.sim import simulate_scan
+
+MODEL = ACCURACY_CONFIGS[0]
+
+
+def test_leaving_one_beacon_poses_unjudged_never_changes_the_choice() -> None:
+    cfg = LocatorConfig(range_sigma_m=MODEL.range_sigma_m, survey_sigma_m=0.0)
+    noise = cfg.noise
+    wide = {}
+    deferred = compared = 0
+    for k, (scene, shot) in enumerate(owed_poses(MODEL, 12, 0)):
+        if scene.name not in wide:
+            wide[scene.name] = minewide_survey(
+                scene.survey,
+                [s.pose for s in scene.shots],
+                copies=300,
+                clearance_m=MODEL.range_max_m + 10.0,
+                rng=np.random.default_rng(k),
+            )
+        survey = wide[scene.name]
+        sim = simulate_scan(scene.world, shot.pose, MODEL, rng=np.random.default_rng([k, 7]))
+        index, panels = _survey_index(survey, sim.scan.range_max_m)
+        seg = segment_scan(sim.scan, cfg.segmentation)
+        ident = identify_panels(seg, index.representatives, cfg.identification)
+        hyps = pose_hypotheses(ident, seg, index, cfg.hypotheses)
+        args = (hyps, sim.scan, panels, index, ident, seg, noise, cfg.verification)
+        every = verify(*args)
+        lean = verify(*args, settled=lambda kept: _settled(kept, cfg), min_beacons=2)
+        best_every, reason_every, _ = _choose(every, cfg)
+        best_lean, reason_lean, _ = _choose(lean, cfg)
+        assert reason_lean == reason_every
+        assert (best_lean is None) == (best_every is None)
+        if best_every is not None and best_lean is not None:
+            assert best_lean.pose == best_every.pose
+            assert best_lean.supported == best_every.supported
+            compared += 1
+        # Kept: what judging every hypothesis keeps, less poses on one beacon's returns.
+        key = [(v.pose.easting, v.pose.northing, v.pose.azimuth, v.supported) for v in every]
+        kept = [(v.pose.easting, v.pose.northing, v.pose.azimuth, v.supported) for v in lean]
+        assert all(k in key for k in kept)
+        assert all(len(k[3]) < 2 for k in key if k not in kept)
+        deferred += len(every) - len(lean)
+    assert compared >= 8
+    assert deferred > 0  # look-alikes were left unjudged
+
+
+def test_locate_keeps_a_mine_wide_index_per_scanner_range() -> None:
+    scene, shot = next(iter(owed_poses(MODEL, 1, 0)))
+    sim = simulate_scan(scene.world, shot.pose, MODEL, rng=np.random.default_rng(0))
+    a, _ = _survey_index(scene.survey, 30.0)
+    b, _ = _survey_index(scene.survey, 80.0)
+    assert a is not b
+    assert _survey_index(scene.survey, 30.0)[0] is a  # kept, not rebuilt
+    for k in range(locator._INDEX_CACHE_SIZE + 2):  # least recently used dropped first
+        _survey_index(scene.survey, 100.0 + k)
+        _survey_index(scene.survey, 30.0)
+    assert _survey_index(scene.survey, 30.0)[0] is a
+    assert len(locator._INDEX_CACHE) <= locator._INDEX_CACHE_SIZE
+    assert locate_ok(sim.scan, scene.survey, cfg=LocatorConfig(range_sigma_m=0.012))
+
+
+def locate_ok(scan, survey, cfg) -> bool:  # type: ignore[no-untyped-def]
+    return locator.locate(scan, survey, config=cfg).ok
