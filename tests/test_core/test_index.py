@@ -6,6 +6,7 @@ import math
 
 import numpy as np
 import pytest
+from numpy.testing import assert_allclose
 
 from mast.core.beacon import Beacon, Survey
 from mast.core.index import NODE_EDGES, DesignTolerance, SurveyIndex, _same_design
@@ -81,6 +82,12 @@ def test_look_ups_match_a_walk_over_every_pair(designs: int, reach: float) -> No
         d = float(rng.uniform(0.2, 60.0))
         tol = float(rng.choice([0.05, 2.0, 10.0]))
         same = bool(rng.integers(2))
-        got = [(p[0], p[1]) for p in index.edge_pairs(a, ea, b, eb, d, tol, same_beacon=same)]
+        ra, rb = index.pair_rows(a, ea, b, eb, d, tol)
+        both = [
+            (index.beacon_id(int(i)), index.beacon_id(int(j)))
+            for i, j in zip(index.row_beacon(ra), index.row_beacon(rb), strict=True)
+        ]
+        assert_allclose(np.hypot(*(index.row_xy(rb) - index.row_xy(ra)).T), d, atol=tol)
+        got = [(x, y) for x, y in both if same or x != y]
         limit = min(reach, DesignTolerance().max_pair_distance_m)
         assert got == _pairs_by_walk(index, a, ea, b, eb, d, tol, same, limit)

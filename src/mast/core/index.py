@@ -128,7 +128,7 @@ class SurveyIndex:
     at most :attr:`DesignTolerance.max_pair_distance_m`) is kept once, under
     the ordered pair of its (design, edge) keys (both ways round when the keys
     are one), sorted by key pair, distance and rows: building the index costs
-    one k-d tree search and three sorts of the pairs, whatever the number of
+    one k-d tree search and two sorts of the pairs, whatever the number of
     designs, and a scan's look-up is a bisection.
 
     Attributes
@@ -188,10 +188,16 @@ class SurveyIndex:
         dist = np.concatenate([dist, dist[one]])
         n_keys = max(len(designs) * n_edges, 1)
         code = row_key[ii] * n_keys + row_key[jj]
-        # By key pair, then distance, then rows (stable sorts, last key first).
-        order = np.argsort(ii.astype(np.int64) * row_xy.shape[0] + jj, kind="stable")
-        order = order[np.argsort(dist[order], kind="stable")]
+        # By key pair, then distance, then rows: the rows sort only the pairs at one
+        # distance to the last bit (look-alikes' own two edges, symmetric layouts).
+        order = np.argsort(dist, kind="stable")
         order = order[np.argsort(code[order], kind="stable")]
+        c, d = code[order], dist[order]
+        same = (c[1:] == c[:-1]) & (d[1:] == d[:-1])
+        tied = np.flatnonzero(np.concatenate([same, [False]]) | np.concatenate([[False], same]))
+        if tied.size:
+            sub = order[tied]
+            order[tied] = sub[np.lexsort((jj[sub], ii[sub], dist[sub], code[sub]))]
         code, ii, jj, dist = code[order], ii[order], jj[order], dist[order]
         uniq, starts = np.unique(code, return_index=True)
         starts = np.append(starts, code.size).astype(np.intp)
@@ -292,31 +298,3 @@ class SurveyIndex:
     def panel_angles(self, numbers: NDArray[np.intp]) -> NDArray[np.float64]:
         """(k, 3) mine-frame angles of panels P1-P3 of the beacons at these survey positions."""
         return self._panel_angle[numbers]
-
-    def edge_pairs(
-        self,
-        beacon_a: str,
-        edge_a: int,
-        beacon_b: str,
-        edge_b: int,
-        distance_m: float,
-        tolerance_m: float,
-        *,
-        same_beacon: bool = True,
-    ) -> list[tuple[str, str, NDArray[np.float64], NDArray[np.float64]]]:
-        """Surveyed edge pairs of these designs and edges, ``distance_m`` apart (within tolerance).
-
-        Returns ``(beacon a, beacon b, edge a (E, N), edge b (E, N))`` for every
-        beacon of ``beacon_a``'s design and of ``beacon_b``'s (the two edges of one
-        beacon as well, when ``same_beacon``), nearest ``distance_m`` in
-        distance order (ties by survey order).
-        """
-        ra, rb = self.pair_rows(beacon_a, edge_a, beacon_b, edge_b, distance_m, tolerance_m)
-        ids = self._ids
-        out: list[tuple[str, str, NDArray[np.float64], NDArray[np.float64]]] = []
-        for i, j in zip(ra.tolist(), rb.tolist(), strict=True):
-            ba, bb = ids[self._row_beacon[i]], ids[self._row_beacon[j]]
-            if ba == bb and not same_beacon:
-                continue
-            out.append((ba, bb, self._row_xy[i], self._row_xy[j]))
-        return out
