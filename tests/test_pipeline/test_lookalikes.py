@@ -4,6 +4,7 @@ could still change the choice, and leaving them unjudged never does."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from mast.apps.bench.accuracy import ACCURACY_CONFIGS, owed_poses
 from mast.apps.bench.minewide import minewide_survey
@@ -76,3 +77,53 @@ def test_locate_keeps_a_mine_wide_index_per_scanner_range() -> None:
 
 def locate_ok(scan, survey, cfg) -> bool:  # type: ignore[no-untyped-def]
     return locator.locate(scan, survey, config=cfg).ok
+
+
+def test_a_later_pose_the_same_as_a_set_aside_one_is_skipped_if_that_one_is_kept(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """A pose set aside (one beacon's returns) and a later pose that refines to the same
+    place with two beacons' returns: as when every pose is judged in turn, the later one
+    is skipped when the earlier is kept, so setting aside never changes the choice."""
+    from dataclasses import replace
+
+    from mast.pipeline import verification
+
+    cfg = LocatorConfig(range_sigma_m=MODEL.range_sigma_m, survey_sigma_m=0.0)
+    scene, shot = next(iter(owed_poses(MODEL, 1, 0)))
+    sim = simulate_scan(scene.world, shot.pose, MODEL, rng=np.random.default_rng([0, 7]))
+    index, panels = _survey_index(scene.survey, sim.scan.range_max_m)
+    seg = segment_scan(sim.scan, cfg.segmentation)
+    ident = identify_panels(seg, index.representatives, cfg.identification)
+    hyps = pose_hypotheses(ident, seg, index, cfg.hypotheses)
+    first = hyps[0]
+    moved = replace(
+        first,
+        similarity=replace(
+            first.similarity, translation=first.similarity.translation + np.array([0.08, 0.0])
+        ),
+    )
+    start = first.similarity.pose()
+    b2 = panels.number["B2"]
+    real = verification.icp_point_to_line
+
+    def icp(pts, at, panel_set, gates_m, subset=None):  # type: ignore[no-untyped-def]
+        out = real(pts, at, panel_set, gates_m=gates_m, subset=subset)
+        if (at.easting, at.northing) == (start.easting, start.northing):
+            # the first start's returns reach only B2's panels: one beacon, set aside
+            mine = np.flatnonzero(panel_set.beacon == b2)
+            out = replace(out, panel=np.where(np.isin(out.panel, mine), out.panel, -1))
+        return out
+
+    monkeypatch.setattr(verification, "icp_point_to_line", icp)
+    args = ([first, hyps[1], hyps[2], moved], sim.scan, panels, index, ident, seg)
+    every = verify(*args, cfg.noise, cfg.verification)
+    lean = verify(
+        *args,
+        cfg.noise,
+        cfg.verification,
+        settled=lambda kept: _settled(kept, cfg),
+        min_beacons=2,
+    )
+    assert [(v.supported, v.pose) for v in lean] == [(v.supported, v.pose) for v in every]
+    assert _choose(lean, cfg)[1] == _choose(every, cfg)[1] == "one_beacon"

@@ -601,6 +601,10 @@ class _PoseList:
         self._enr[self.size] = (pose.easting, pose.northing, pose.azimuth)
         self.size += 1
 
+    def forget(self, k: int) -> None:
+        """Pose ``k`` no longer matches any pose."""
+        self._enr[k] = np.nan
+
     def first_same(self, pose: Pose2D) -> int | None:
         """Position of the first pose the same as ``pose``, or None."""
         e = self._enr[: self.size]
@@ -634,10 +638,13 @@ def verify(
     otherwise the hypothesis could not be kept whatever the beams say.
 
     With ``settled``, a refined pose whose returns leave fewer than
-    ``min_beacons`` beacons a chance of support is judged only if
-    ``settled(kept)`` is false once every other hypothesis has been: the
-    caller says when such poses (a mine's look-alikes of one beacon seen)
-    can no longer change its choice.
+    ``min_beacons`` beacons a chance of support is set aside, and judged only
+    if ``settled(kept)`` is false once every other hypothesis has been, or
+    when a later pose is the same as it (whether it is kept decides whether
+    the later one is skipped): the caller says when such poses (a mine's
+    look-alikes of one beacon seen) can no longer change its choice. What is
+    returned is then what judging every pose in turn returns, less set-aside
+    poses never judged.
     """
     _, pts = scan.points()
     final_gate = cfg.gate_sigmas * noise.gate_sigma_m
@@ -648,7 +655,6 @@ def verify(
     done: list[_Refined] = []
     done_poses = _PoseList(cfg)
     sequence: dict[int, int] = {}  # id of a kept Verified -> its hypothesis' position
-    deferred: list[tuple[int, Hypothesis, _Refined, bool]] = []
 
     def judged(r: _Refined) -> Verified:
         """``r`` judged by the beams, under the hypothesis it was refined for."""
@@ -686,6 +692,29 @@ def verify(
         out_poses.add(v.pose)
         sequence[id(v)] = seq
 
+    # Poses set aside for judging later (a mine's look-alikes on one beacon's returns),
+    # in hypothesis order. Whether one is kept matters before the end only when a later
+    # pose is the same as it (then, as when every pose was judged in turn, the later one
+    # is skipped if it was kept): it is judged then.
+    pending: list[tuple[int, Hypothesis, _Refined, bool] | None] = []
+    pending_poses = _PoseList(cfg)
+
+    def settle(k: int) -> None:
+        entry = pending[k]
+        if entry is not None:
+            pending[k] = None
+            pending_poses.forget(k)
+            keep(*entry)
+
+    def duplicate(pose: Pose2D) -> bool:
+        """Whether ``pose`` is the same as a kept one (judging set-aside ones it meets)."""
+        while out_poses.first_same(pose) is None:
+            k = pending_poses.first_same(pose)
+            if k is None:
+                return False
+            settle(k)
+        return True
+
     for seq, h in enumerate(hypotheses):
         start = h.similarity.pose()
         at = done_poses.first_same(start)
@@ -693,7 +722,7 @@ def verify(
         if again is not None:
             # The same start refines to the same pose: judge it again under this
             # hypothesis' labels (another beacon's name may be the right one).
-            if out_poses.first_same(again.icp.pose) is not None:
+            if duplicate(again.icp.pose):
                 continue
             refined = again
         else:
@@ -703,7 +732,7 @@ def verify(
             start_gate = min(cfg.max_start_gate_m, cfg.start_gate_sigmas * h.spread_m)
             wide = (start_gate,) if start_gate > gates[0] else ()
             icp = icp_point_to_line(pts, start, panels, gates_m=(*wide, *gates), subset=near)
-            if out_poses.first_same(icp.pose) is not None:
+            if duplicate(icp.pose):
                 continue  # converged onto a pose already confirmed
             counts = _panel_counts(icp, panels)
             refined = _Refined(h, icp, counts, _may_support(counts, cfg), near)
@@ -712,13 +741,13 @@ def verify(
         if not set(h.beacons) <= refined.may_support:
             continue  # its beacons cannot support the pose: no beam need be checked
         if settled is not None and len(refined.may_support) < min_beacons:
-            deferred.append((seq, h, refined, again is not None))
+            pending.append((seq, h, refined, again is not None))
+            pending_poses.add(refined.icp.pose)
             continue
         keep(seq, h, refined, again is not None)
-    if deferred and (settled is None or not settled(_ranked(out, sequence))):
-        for seq, h, refined, relabel in deferred:
-            if out_poses.first_same(refined.icp.pose) is None:
-                keep(seq, h, refined, relabel)
+    if any(pending) and (settled is None or not settled(_ranked(out, sequence))):
+        for k in range(len(pending)):
+            settle(k)
     return _ranked(out, sequence)
 
 
