@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -110,6 +111,11 @@ def _pairs_within(
     return ii[keep], jj[keep], d[keep]
 
 
+def _key_pair_code(ka: Any, kb: Any, designs: int) -> Any:
+    """One number for the ordered pair of (design, edge) keys ``(ka, kb)`` (ints or arrays)."""
+    return ka * max(designs * len(NODE_EDGES), 1) + kb
+
+
 @dataclass(frozen=True, slots=True)
 class _Bucket:
     """The surveyed edge pairs of one (design, edge) key pair, sorted by (distance,
@@ -145,6 +151,7 @@ class SurveyIndex:
     _row_xy: NDArray[np.float64] = field(repr=False)
     _row_key: NDArray[np.int64] = field(repr=False)
     _ids: tuple[str, ...] = field(repr=False)
+    _number: dict[str, int] = field(repr=False)
     #: Mine-frame angle of each beacon's panels P1-P3 (from the lower- to the higher-numbered edge).
     _panel_angle: NDArray[np.float64] = field(repr=False)
     #: Pairs sorted by key pair and distance: rows ``i`` (key <= key of ``j``), ``j``, distance.
@@ -186,8 +193,7 @@ class SurveyIndex:
         one = row_key[ii] == row_key[jj]
         ii, jj = np.concatenate([ii, jj[one]]), np.concatenate([jj, ii[one]])
         dist = np.concatenate([dist, dist[one]])
-        n_keys = max(len(designs) * n_edges, 1)
-        code = row_key[ii] * n_keys + row_key[jj]
+        code = _key_pair_code(row_key[ii], row_key[jj], len(designs))
         # By key pair, then distance, then rows: the rows sort only the pairs at one
         # distance to the last bit (look-alikes' own two edges, symmetric layouts).
         order = np.argsort(dist, kind="stable")
@@ -212,6 +218,7 @@ class SurveyIndex:
             row_xy,
             row_key,
             tuple(ids),
+            {bid: k for k, bid in enumerate(ids)},
             panel_angle,
             ii,
             jj,
@@ -234,8 +241,7 @@ class SurveyIndex:
 
     def _bucket(self, ka: int, kb: int) -> _Bucket | None:
         """The pairs of keys ``ka <= kb``, by distance; None if none."""
-        n_keys = max(len(self.designs) * len(NODE_EDGES), 1)
-        code = ka * n_keys + kb
+        code = int(_key_pair_code(ka, kb, len(self.designs)))
         at = int(np.searchsorted(self._codes, code))
         if at == self._codes.size or int(self._codes[at]) != code:
             return None
@@ -249,11 +255,12 @@ class SurveyIndex:
     def have_pairs(self, keys_a: NDArray[np.int64], keys_b: NDArray[np.int64]) -> NDArray[np.bool_]:
         """Whether any surveyed edge pair within reach has each pair of keys (either order):
         a scan's node pairs of designs never surveyed near each other need no look-up."""
-        n_keys = max(len(self.designs) * len(NODE_EDGES), 1)
-        code = np.minimum(keys_a, keys_b) * n_keys + np.maximum(keys_a, keys_b)
-        at = np.minimum(np.searchsorted(self._codes, code), max(self._codes.size - 1, 0))
+        code = _key_pair_code(
+            np.minimum(keys_a, keys_b), np.maximum(keys_a, keys_b), len(self.designs)
+        )
         if self._codes.size == 0:
             return np.zeros(code.shape, dtype=bool)
+        at = np.minimum(np.searchsorted(self._codes, code), self._codes.size - 1)
         return np.asarray(self._codes[at] == code)
 
     def pair_rows(
@@ -290,6 +297,10 @@ class SurveyIndex:
     def row_beacon(self, rows: NDArray[np.intp]) -> NDArray[np.intp]:
         """Survey position of the beacon of each of ``rows``."""
         return self._row_beacon[rows]
+
+    def number(self, beacon_id: str) -> int:
+        """Survey position (from 0) of the beacon ``beacon_id``."""
+        return self._number[beacon_id]
 
     def beacon_id(self, number: int) -> str:
         """Id of the survey's ``number``-th beacon (from 0)."""

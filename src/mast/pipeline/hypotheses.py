@@ -17,11 +17,11 @@ adjustment decide). Two kinds of hypothesis come out of here:
 
 from __future__ import annotations
 
+import functools
 import itertools
 import math
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from dataclasses import dataclass, replace
-from typing import Generic, TypeVar
 
 import numpy as np
 from numpy.typing import NDArray
@@ -31,8 +31,6 @@ from mast.core.pose import wrap_angles
 from mast.pipeline.alignment import Similarity, similarity_transform
 from mast.pipeline.identification import NodeMatch, PanelIdentification
 from mast.pipeline.segmentation import Segment, Segmentation
-
-T = TypeVar("T")
 
 __all__ = [
     "Hypothesis",
@@ -161,33 +159,18 @@ def major_sigma(cov: NDArray[np.float64]) -> float:
     return math.sqrt(max(0.5 * (a + c) + math.hypot(0.5 * (a - c), b), 0.0))
 
 
-def _node_rotations(
-    node: NodeMatch, seg: Segmentation, index: SurveyIndex
-) -> list[tuple[float, float]]:
-    """(rotation, sigma) implied by each identified panel of a node: mine dir vs scan dir."""
-    tpl = index.survey[node.beacon].template
-    out = []
-    for s_idx, panel, ok in zip(node.segments, node.panels, node.identified, strict=True):
-        if not ok:
-            continue
-        s = seg.segments[s_idx]
-        d_mine = tpl.directions[panel - 1] * (1.0 if node.forward else -1.0)
-        rot = math.atan2(d_mine[1], d_mine[0]) - math.atan2(s.direction[1], s.direction[0])
-        out.append((_wrap(rot), s.sigma_direction))
-    return out
-
-
 def _single_hypothesis(
-    node: NodeMatch, beacon: str, seg: Segmentation, index: SurveyIndex
+    node: NodeMatch, seen: _PanelsSeen, beacon: str, seg: Segmentation, index: SurveyIndex
 ) -> Hypothesis | None:
-    """The pose one node and its identified panels imply on their own."""
-    node = _renamed(node, beacon)
-    rots = _node_rotations(node, seg, index)
-    if not rots:
+    """The pose one node and its identified panels (``seen``) imply on their own, the
+    node taken for ``beacon``."""
+    if seen.panel.size == 0:
         return None
-    w = np.array([1.0 / max(s, 1e-9) ** 2 for _, s in rots])
-    ref = rots[0][0]
-    rot = ref + float(np.sum(w * np.array([_wrap(r - ref) for r, _ in rots])) / np.sum(w))
+    node = _renamed(node, beacon)
+    rots = seen.rotations(index, np.array([index.number(beacon)]))[0]
+    w = 1.0 / np.maximum(seen.sigma, 1e-9) ** 2
+    ref = float(rots[0])
+    rot = ref + float(np.sum(w * wrap_angles(rots - ref)) / np.sum(w))
     sigma_rot = 1.0 / math.sqrt(float(np.sum(w)))
     spread = node_sigma(node, seg) + 2.0 * float(np.hypot(*node.node_scanner)) * sigma_rot
     c, s = math.cos(rot), math.sin(rot)
@@ -233,19 +216,6 @@ class _PanelsSeen:
         return wrap_angles(mine - self.angle[None, :])
 
 
-class _Lazy(Generic[T]):
-    """``f(k)`` for each ``k`` asked for, computed once."""
-
-    def __init__(self, f: Callable[[int], T]) -> None:
-        self._f = f
-        self._done: dict[int, T] = {}
-
-    def __getitem__(self, k: int) -> T:
-        if k not in self._done:
-            self._done[k] = self._f(k)
-        return self._done[k]
-
-
 def pose_hypotheses(
     identification: PanelIdentification,
     segmentation: Segmentation,
@@ -270,8 +240,8 @@ def pose_hypotheses(
     nodes = identification.nodes
     # Covariances and panels of the nodes that are looked up (a survey of many designs
     # identifies many nodes, few of them of designs surveyed near each other).
-    cov = _Lazy(lambda k: node_covariance(nodes[k], segmentation))
-    seen = _Lazy(lambda k: _PanelsSeen.of(nodes[k], segmentation))
+    cov = functools.cache(lambda k: node_covariance(nodes[k], segmentation))
+    seen = functools.cache(lambda k: _PanelsSeen.of(nodes[k], segmentation))
     # (node i, node j, beacon of i, beacon of j (survey positions), edge of i, edge of j, spread)
     Found = tuple[int, int, int, int, NDArray[np.float64], NDArray[np.float64], float]
     found: list[tuple[tuple[bool, int, float], Found]] = []
@@ -290,7 +260,7 @@ def pose_hypotheses(
         if ds < config.min_node_separation_m:
             continue
         u = ds_vec / ds
-        s_d = math.sqrt(float(u @ (cov[i] + cov[j]) @ u) + 2 * survey_sigma_m**2)
+        s_d = math.sqrt(float(u @ (cov(i) + cov(j)) @ u) + 2 * survey_sigma_m**2)
         tol_d = config.sigmas * s_d
         ra, rb = index.pair_rows(a.beacon, a.edge, b.beacon, b.edge, ds, tol_d)
         ba, bb = index.row_beacon(ra), index.row_beacon(rb)
@@ -311,15 +281,15 @@ def pose_hypotheses(
         rot = np.arctan2(dm_vec[:, 1], dm_vec[:, 0]) - math.atan2(ds_vec[1], ds_vec[0])
         rot = wrap_angles(rot)
         v_perp = np.array([-u[1], u[0]])
-        s_rot = math.sqrt(float(v_perp @ (cov[i] + cov[j]) @ v_perp)) / dm
+        s_rot = math.sqrt(float(v_perp @ (cov(i) + cov(j)) @ v_perp)) / dm
         # Each surveyed beacon's own panel directions must agree with the pair's rotation.
-        r_k = np.concatenate([seen[i].rotations(index, ba), seen[j].rotations(index, bb)], 1)
-        s_k = np.concatenate([seen[i].sigma, seen[j].sigma])
+        r_k = np.concatenate([seen(i).rotations(index, ba), seen(j).rotations(index, bb)], 1)
+        s_k = np.concatenate([seen(i).sigma, seen(j).sigma])
         tol = np.maximum(
             config.min_rotation_tol_rad, config.sigmas * np.hypot(s_rot[:, None], s_k[None, :])
         )
         mis_r = (np.abs(wrap_angles(r_k - rot[:, None])) / tol).max(axis=1, initial=0.0)
-        spread = major_sigma(cov[i]) + 2.0 * float(np.hypot(*a.node_scanner)) * np.minimum(
+        spread = major_sigma(cov(i)) + 2.0 * float(np.hypot(*a.node_scanner)) * np.minimum(
             s_rot, math.pi
         )
         misfit = np.maximum(mis_d, mis_r)
@@ -350,13 +320,13 @@ def pose_hypotheses(
     # Single nodes take turns (lowest Table 1 option first), so that one corner's
     # many look-alikes in a mine-wide survey cannot crowd out another corner's beacon.
     # Made lazily: a whole mine's look-alikes past the cap are never computed.
-    def singles_of(n: NodeMatch) -> Iterator[Hypothesis]:
-        for b in index.beacons_like(n.beacon):
-            h = _single_hypothesis(n, b, segmentation, index)
+    def singles_of(k: int) -> Iterator[Hypothesis]:
+        for b in index.beacons_like(nodes[k].beacon):
+            h = _single_hypothesis(nodes[k], seen(k), b, segmentation, index)
             if h is not None:
                 yield h
 
-    per_node = [singles_of(n) for n in sorted(nodes, key=lambda n: n.option)]
+    per_node = [singles_of(k) for k in sorted(range(len(nodes)), key=lambda k: nodes[k].option)]
     turns = itertools.chain.from_iterable(itertools.zip_longest(*per_node))
     singles = itertools.islice((h for h in turns if h is not None), config.max_single_hypotheses)
     return pairs + list(singles)

@@ -283,11 +283,16 @@ def _settled(verified: list[Verified], cfg: LocatorConfig) -> bool:
     what :func:`_choose` makes of ``verified``: it picks a best pose with ``min_beacons``
     beacons each identified by its own corner. Then another pose competes only if it
     has ``min_beacons`` supporting beacons, which those poses cannot have."""
-    if cfg.prior is not None:
-        margin = (cfg.prior_margin_m, cfg.prior_margin_rad)
-        verified = [v for v in verified if cfg.prior.admits(v.pose, *margin)]
-    best, _, _ = _choose(verified, cfg)
+    best, _, _ = _choose(_admitted(verified, cfg), cfg)
     return best is not None and len(best.cornered) >= cfg.min_beacons
+
+
+def _admitted(verified: list[Verified], cfg: LocatorConfig) -> list[Verified]:
+    """The verified poses within the prior (with its margin), or all without one."""
+    if cfg.prior is None:
+        return verified
+    margin = (cfg.prior_margin_m, cfg.prior_margin_rad)
+    return [v for v in verified if cfg.prior.admits(v.pose, *margin)]
 
 
 def locate(scan: Scan, survey: Survey, *, config: LocatorConfig | None = None) -> Fix:
@@ -379,8 +384,7 @@ def locate(scan: Scan, survey: Survey, *, config: LocatorConfig | None = None) -
         settled=lambda kept: _settled(kept, cfg),
         min_beacons=cfg.min_beacons,
     )
-    if cfg.prior is not None:
-        verified = [v for v in verified if cfg.prior.admits(v.pose, *margin)]
+    verified = _admitted(verified, cfg)
     found["verified"] = tuple(verified)
     if not verified:
         return finish(reason="inconsistent", detail="no pose hypothesis is confirmed by the beams")

@@ -34,7 +34,7 @@ from numpy.typing import NDArray
 from mast.core.geometry import PanelSet, first_hits
 from mast.core.index import SurveyIndex
 from mast.core.noise import NoiseModel
-from mast.core.pose import Pose2D
+from mast.core.pose import Pose2D, wrap_angles
 from mast.core.quantiles import chi2_isf, chi2_sf
 from mast.core.scan import Scan
 from mast.pipeline.alignment import IcpResult, icp_point_to_line
@@ -582,9 +582,6 @@ class _Refined:
     near: NDArray[np.intp]  # the panels in reach of the start
     verified: Verified | None = None
 
-    def same_pose(self, other: Pose2D, cfg: VerificationConfig) -> bool:
-        return _same_pose(self.icp.pose, other, cfg)
-
 
 @dataclass(eq=False, slots=True)
 class _PoseList:
@@ -609,8 +606,7 @@ class _PoseList:
         """Position of the first pose the same as ``pose``, or None."""
         e = self._enr[: self.size]
         d = np.hypot(e[:, 0] - pose.easting, e[:, 1] - pose.northing)
-        turn = e[:, 2] - pose.azimuth
-        da = np.abs(turn - 2 * math.pi * np.round(turn / (2 * math.pi)))
+        da = np.abs(wrap_angles(e[:, 2] - pose.azimuth))
         at = np.flatnonzero((d < self.cfg.duplicate_m) & (da < self.cfg.duplicate_rad))
         return int(at[0]) if at.size else None
 
