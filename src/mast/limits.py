@@ -73,18 +73,6 @@ def size_text(n: float) -> str:
     return f"{int(n)} bytes"
 
 
-def _kind(mode: int) -> str:
-    if stat.S_ISFIFO(mode):
-        return "a pipe"
-    if stat.S_ISCHR(mode):
-        return "a character device"
-    if stat.S_ISBLK(mode):
-        return "a block device"
-    if stat.S_ISSOCK(mode):
-        return "a socket"
-    return "not a regular file"
-
-
 def _stat(path: Path) -> os.stat_result:
     try:
         return path.stat()
