@@ -263,6 +263,21 @@ SurveySigmaOption = Annotated[
     ),
 ]
 
+NearOption = Annotated[
+    str | None,
+    typer.Option(
+        "--near",
+        help="Prior position E,N[,AZ] (azimuth in degrees or D°M'S): narrows the search.",
+    ),
+]
+RadiusOption = Annotated[
+    float, typer.Option("--radius", help="Radius of the --near prior, metres.")
+]
+AzimuthToleranceOption = Annotated[
+    float,
+    typer.Option("--azimuth-tolerance", help="With an azimuth in --near: degrees allowed."),
+]
+
 
 @app.command()
 def locate(
@@ -293,20 +308,9 @@ def locate(
     topic: TopicOption = None,
     range_min: RangeMinOption = None,
     range_max: RangeMaxOption = None,
-    near: Annotated[
-        str | None,
-        typer.Option(
-            "--near",
-            help="Prior position E,N[,AZ] (azimuth in degrees or D°M'S): narrows the search.",
-        ),
-    ] = None,
-    radius: Annotated[
-        float, typer.Option("--radius", help="Radius of the --near prior, metres.")
-    ] = 10.0,
-    azimuth_tolerance: Annotated[
-        float,
-        typer.Option("--azimuth-tolerance", help="With an azimuth in --near: degrees allowed."),
-    ] = 30.0,
+    near: NearOption = None,
+    radius: RadiusOption = 10.0,
+    azimuth_tolerance: AzimuthToleranceOption = 30.0,
     survey_sigma: SurveySigmaOption = None,
 ) -> None:
     """Fix position and azimuth from one scan, several, or every scan of a bag.
@@ -490,6 +494,200 @@ def track(
         raise typer.Exit(130)
     if s.placed == 0:
         raise typer.Exit(EXIT_NO_FIX)
+
+
+@app.command()
+def live(
+    source: Annotated[
+        str,
+        typer.Argument(
+            metavar="SOURCE",
+            help="sick://HOST[:PORT] (CoLa-A, port 2111), hokuyo://HOST[:PORT] (SCIP 2.0, "
+            "port 10940) or replay://RUN[?rate=F] (a bag or a folder of scan CSVs).",
+        ),
+    ],
+    beacons: BeaconsOption,
+    range_sigma: RangeSigmaOption = None,
+    angle_sigma: AngleSigmaOption = None,
+    scanner: ScannerOption = None,
+    survey_sigma: SurveySigmaOption = None,
+    range_min: RangeMinOption = None,
+    range_max: RangeMaxOption = None,
+    near: NearOption = None,
+    radius: RadiusOption = 10.0,
+    azimuth_tolerance: AzimuthToleranceOption = 30.0,
+    record: Annotated[
+        Path | None,
+        typer.Option(
+            "--record",
+            help="Write the received scans and the poses to this ROS 2 MCAP file (.mcap).",
+        ),
+    ] = None,
+    view: Annotated[
+        bool, typer.Option("--view", help="Serve a live view for Foxglove (WebSocket).")
+    ] = False,
+    view_port: Annotated[
+        int, typer.Option("--view-port", min=0, max=65535, help="Port of the --view server.")
+    ] = 8765,
+    view_host: Annotated[
+        str, typer.Option("--view-host", help="Address the --view server listens on.")
+    ] = "127.0.0.1",
+    timeout: Annotated[
+        float,
+        typer.Option("--timeout", help="Seconds without a scan before reconnecting."),
+    ] = 2.0,
+    give_up: Annotated[
+        float,
+        typer.Option("--give-up", help="Seconds without a scan (or a connection) before ending."),
+    ] = 60.0,
+    max_scans: Annotated[
+        int | None,
+        typer.Option("--max-scans", min=1, help="End after this many scans received."),
+    ] = None,
+) -> None:
+    """Locate a scanner's stream as it arrives: one JSON record per located scan on standard
+    output, flushed as it is written; the newest scan is located first when locating falls
+    behind (the others counted as dropped).
+
+    Ends when the source ends (a replay), after --max-scans, when standard output is closed
+    (status 0), on Ctrl-C (status 130; a --record file is closed complete) or when the
+    scanner cannot be reached (status 2). Exit status 3 when no scan was fixed, 4 when an
+    output cannot be written.
+    """
+    import json
+
+    from mast.apps.report import ReportInputs
+    from mast.io import read_survey
+    from mast.live.session import Sink, run_live
+    from mast.live.sources import SourceOptions, open_source
+
+    cfg, defaults = _precisions(range_sigma, angle_sigma, scanner, survey_sigma)
+    if near is not None:
+        cfg = replace(cfg, prior=_parse_near(near, radius, azimuth_tolerance))
+    for name, value in (("--range-min", range_min), ("--range-max", range_max)):
+        if value is not None and not (math.isfinite(value) and value >= 0):
+            raise InputError(f"{name} must be a non-negative number, got {value}")
+    for name, value in (("--timeout", timeout), ("--give-up", give_up)):
+        if not (math.isfinite(value) and value > 0):
+            raise InputError(f"{name} must be a positive number of seconds, got {value}")
+    if record is not None:
+        check_output_file(record, suffixes=(".mcap",), option="--record")
+    survey = read_survey(beacons)
+    options = SourceOptions(
+        range_min_m=range_min, range_max_m=range_max, timeout_s=timeout, give_up_s=give_up
+    )
+    stream = open_source(source, options)
+    inputs = ReportInputs(
+        scan_file=source, survey_file=str(beacons), scanner=scanner, defaults=frozenset(defaults)
+    )
+
+    def warn(text: str) -> None:
+        typer.echo(f"mast: warning: {text}", err=True)
+
+    def emit(record_: dict[str, object]) -> None:
+        sys.stdout.write(json.dumps(record_) + "\n")
+        sys.stdout.flush()
+
+    from mast.apps.bench.warmup import compile_all
+
+    compile_all()  # the first scan is located as fast as the rest
+    sinks: list[Sink] = []
+    with contextlib.ExitStack() as stack:
+        if record is not None:
+            from mast.live.record import McapRecorder
+
+            recorder = McapRecorder(record)
+            stack.callback(recorder.close)
+            sinks.append(recorder)
+        if view:
+            from mast.live.view import LiveView
+
+            try:
+                viewer = LiveView(survey, host=view_host, port=view_port)
+            except Exception as err:  # foxglove raises its own kinds for a port in use
+                raise InputError(
+                    f"--view: cannot serve on {view_host}:{view_port}: {err}"
+                ) from None
+            stack.callback(viewer.close)
+            sinks.append(viewer)
+            warn(f"live view for Foxglove on ws://{view_host}:{viewer.port}")
+        summary = run_live(
+            stream,
+            survey,
+            emit=emit,
+            config=cfg,
+            inputs=inputs,
+            sinks=tuple(sinks),
+            max_scans=max_scans,
+            warn=warn,
+        )
+    typer.echo(
+        f"mast: {source}: {summary.received} scans received, {summary.located} located, "
+        f"{summary.fixed} fixed, {summary.dropped} dropped"
+        + (f", {summary.malformed} malformed skipped" if summary.malformed else "")
+        + (f", {summary.reconnects} reconnections" if summary.reconnects else "")
+        + f" in {summary.elapsed_s:.1f} s",
+        err=True,
+    )
+    if summary.pipe_closed:
+        _silence_stdout()
+        return
+    if summary.fixed == 0:
+        raise typer.Exit(EXIT_NO_FIX)
+
+
+@app.command()
+def emulate(
+    kind: Annotated[
+        str, typer.Argument(metavar="KIND", help="sick (CoLa-A) or hokuyo (SCIP 2.0).")
+    ],
+    run: Annotated[
+        Path,
+        typer.Option("--from", help="The run to serve: a bag, or a folder of scan CSVs."),
+    ],
+    port: Annotated[
+        int, typer.Option("--port", min=0, max=65535, help="TCP port (0: any free one).")
+    ] = 0,
+    host: Annotated[str, typer.Option("--host", help="Address to listen on.")] = "127.0.0.1",
+    hz: Annotated[
+        float | None,
+        typer.Option("--hz", help="Scans a second [default: the run's own spacing]."),
+    ] = None,
+    drop_after: Annotated[
+        int | None,
+        typer.Option("--drop-after", min=1, help="Fault: close the connection after N scans."),
+    ] = None,
+    stall_after: Annotated[
+        int | None,
+        typer.Option("--stall-after", min=1, help="Fault: stop sending after N scans."),
+    ] = None,
+    corrupt_every: Annotated[
+        int | None,
+        typer.Option("--corrupt-every", min=1, help="Fault: every N-th telegram malformed."),
+    ] = None,
+) -> None:
+    """Serve a recorded or simulated run as a SICK LMS1xx (CoLa-A) or Hokuyo UST (SCIP 2.0)
+    scanner on TCP, at the run's rate, for `mast live` (tests, demos, benchmarks).
+
+    Prints the address served on, then serves until every scan is sent. Exit status 0
+    when the run was served, 2 for bad input, 130 when interrupted.
+    """
+    from mast.live.emulate import Emulator, EmulatorFaults
+    from mast.live.sources import read_run
+
+    if hz is not None and not (math.isfinite(hz) and hz > 0):
+        raise InputError(f"--hz must be a positive number, got {hz}")
+    faults = EmulatorFaults(
+        drop_after=drop_after, stall_after=stall_after, corrupt_every=corrupt_every
+    )
+    emulator = Emulator(kind, read_run(run), host=host, port=port, hz=hz, faults=faults)
+    with emulator:
+        typer.echo(f"mast: serving {run} as a {kind} scanner on {host}:{emulator.port}", err=True)
+        while not emulator.wait(0.2):
+            pass
+    if emulator.error is not None:
+        raise emulator.error
+    typer.echo(f"mast: served {emulator.sent} scans", err=True)
 
 
 @contextmanager
@@ -689,6 +887,22 @@ def bench_tracking(
     from mast.apps.bench.tracking import run_tracking
 
     run_tracking(poses=poses, draws=draws, seed=seed, echo=typer.echo)
+
+
+@bench_app.command("live")
+def bench_live(
+    scans: Annotated[int, typer.Option("--scans", min=100, help="Scans per scanner.")] = 30_000,
+    seed: Annotated[int, typer.Option("--seed", help="Seed of the drive.")] = 0,
+    kind: Annotated[
+        list[str] | None, typer.Option("--kind", help="sick, hokuyo [default: both].")
+    ] = None,
+) -> None:
+    """Live: a simulated drive with beacon gaps served by the SICK (50 Hz) and Hokuyo (40 Hz)
+    emulators and located as it arrives (latency, drops, memory, CPU, owed scans fixed,
+    recovery from a wrong prior)."""
+    from mast.apps.bench.live import run_live_bench
+
+    run_live_bench(scans=scans, seed=seed, kinds=tuple(kind or ("sick", "hokuyo")), echo=typer.echo)
 
 
 @bench_app.command("dense")

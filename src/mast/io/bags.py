@@ -36,6 +36,7 @@ __all__ = [
 LASERSCAN = "sensor_msgs/msg/LaserScan"
 BagKind = Literal["rosbag1", "sqlite3", "mcap"]
 _ROS1_MAGIC = b"#ROSBAG V2.0"
+_MCAP_MAGIC = b"\x89MCAP0\r\n"
 #: Chunk size of the ROS 1 bags MAST writes (rosbag record's default, 768 KiB).
 ROS1_CHUNK_BYTES = 768 * 1024
 
@@ -63,9 +64,12 @@ def bag_kind(path: str | Path) -> Literal["rosbag1", "rosbag2"]:
         return "rosbag1"
     if p.suffix in {".db3", ".mcap"} and (p.parent / "metadata.yaml").is_file():
         return "rosbag2"
+    if p.suffix == ".mcap" and head.startswith(_MCAP_MAGIC):
+        return "rosbag2"  # a bare ROS 2 MCAP file (as ``mast live --record`` writes)
     if p.suffix in {".db3", ".mcap"}:
         raise InputError(
-            "a ROS 2 bag is a folder with metadata.yaml; this storage file has none beside it",
+            "a ROS 2 bag is a folder with metadata.yaml (or an MCAP file); this storage file "
+            "has none beside it",
             path=p,
         )
     raise InputError("not a ROS 1 bag (no '#ROSBAG V2.0' header) nor a ROS 2 bag folder", path=p)
@@ -97,9 +101,11 @@ def _open(path: Path) -> tuple[Any, Any, bool]:
             from rosbags.rosbag2 import Reader as Reader2
 
             folder = path if path.is_dir() else path.parent
-            check_metadata(folder)
+            bare = path.is_file() and not (folder / "metadata.yaml").is_file()
+            if not bare:
+                check_metadata(folder)
             _bound_mcap_chunks()
-            reader = Reader2(folder)
+            reader = Reader2(path if bare else folder)
             store = get_typestore(Stores.ROS2_HUMBLE)
             ros1 = False
             reader.open()
@@ -450,9 +456,6 @@ def _write_scans(
     compression: str = "none",
 ) -> int:
     """:func:`write_laserscans` into ``path`` (a temporary name its caller renames)."""
-    LaserScan = store.types[LASERSCAN]
-    Header = store.types["std_msgs/msg/Header"]
-    Time = store.types["builtin_interfaces/msg/Time"]
     if ros1:
         from rosbags.rosbag1 import Writer as Writer1
 
@@ -471,37 +474,38 @@ def _write_scans(
     with writer:
         conn = writer.add_connection(topic, LASERSCAN, typestore=store)
         for seq, scan in enumerate(scans):
-            if not scan.is_uniform:
-                raise InputError(f"scan {seq}: beams are not evenly spaced; a LaserScan needs that")
-            inc = scan.angle_increment if len(scan) > 1 else 0.0
-            sec, nsec = divmod(int(scan.stamp_ns), 1_000_000_000)
-            header_kw: dict[str, Any] = {
-                "stamp": Time(sec=sec, nanosec=nsec),
-                "frame_id": scan.frame_id,
-            }
-            if ros1:
-                header_kw["seq"] = seq
-            msg = LaserScan(
-                header=Header(**header_kw),
-                angle_min=float(scan.angles_rad[0]),
-                angle_max=float(scan.angles_rad[-1]),
-                angle_increment=float(inc),
-                time_increment=0.0,
-                scan_time=0.0,
-                range_min=float(scan.range_min_m),
-                range_max=float(scan.range_max_m),
-                ranges=np.asarray(scan.ranges_m, dtype=np.float32),
-                intensities=(
-                    np.asarray(scan.intensities, dtype=np.float32)
-                    if scan.intensities is not None
-                    else np.zeros(0, dtype=np.float32)
-                ),
-            )
-            raw = (
-                store.serialize_ros1(msg, LASERSCAN)
-                if ros1
-                else store.serialize_cdr(msg, LASERSCAN)
-            )
-            writer.write(conn, int(scan.stamp_ns), bytes(raw))
+            writer.write(conn, int(scan.stamp_ns), laserscan_bytes(store, scan, seq, ros1=ros1))
             n += 1
     return n
+
+
+def laserscan_bytes(store: Any, scan: Scan, seq: int, *, ros1: bool) -> bytes:
+    """``scan`` as a serialised ``LaserScan`` (ROS 1, or ROS 2 CDR) of ``store``'s types."""
+    if not scan.is_uniform:
+        raise InputError(f"scan {seq}: beams are not evenly spaced; a LaserScan needs that")
+    LaserScan = store.types[LASERSCAN]
+    Header = store.types["std_msgs/msg/Header"]
+    Time = store.types["builtin_interfaces/msg/Time"]
+    inc = scan.angle_increment if len(scan) > 1 else 0.0
+    sec, nsec = divmod(int(scan.stamp_ns), 1_000_000_000)
+    header_kw: dict[str, Any] = {"stamp": Time(sec=sec, nanosec=nsec), "frame_id": scan.frame_id}
+    if ros1:
+        header_kw["seq"] = seq
+    msg = LaserScan(
+        header=Header(**header_kw),
+        angle_min=float(scan.angles_rad[0]),
+        angle_max=float(scan.angles_rad[-1]),
+        angle_increment=float(inc),
+        time_increment=0.0,
+        scan_time=0.0,
+        range_min=float(scan.range_min_m),
+        range_max=float(scan.range_max_m),
+        ranges=np.asarray(scan.ranges_m, dtype=np.float32),
+        intensities=(
+            np.asarray(scan.intensities, dtype=np.float32)
+            if scan.intensities is not None
+            else np.zeros(0, dtype=np.float32)
+        ),
+    )
+    raw = store.serialize_ros1(msg, LASERSCAN) if ros1 else store.serialize_cdr(msg, LASERSCAN)
+    return bytes(raw)

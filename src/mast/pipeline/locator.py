@@ -65,6 +65,8 @@ __all__ = [
     "LocatorConfig",
     "Prior",
     "SequenceConfig",
+    "SequenceLocator",
+    "SequenceStep",
     "Verified",
     "locate",
     "locate_near",
@@ -432,6 +434,18 @@ def locate(scan: Scan, survey: Survey, *, config: LocatorConfig | None = None) -
             residuals=res,
         )
     obs, adj, excluded, more, tests = cleaned
+    kept = np.unique(obs.beacon)
+    if kept.size < cfg.min_beacons:
+        # The beams confirmed two beacons at the verified pose, but the adjustment's gate
+        # and data snooping kept the returns of fewer: one beacon's corner alone then
+        # steers the pose (found on a drive: 1.5 m off with a 5 cm sigma). No fix.
+        names = ", ".join(sorted(panels.ids[b] for b in kept)) or "none"
+        return finish(
+            reason="one_beacon",
+            detail=f"only beacon {names} kept returns in the adjustment (of "
+            f"{', '.join(best.supported)} confirmed at the verified pose)",
+            residuals=summary(obs, adj, tests),
+        )
     if adj.dof > 0 and chi2_sf(adj.reference_variance * adj.dof, adj.dof) < cfg.reject_alpha:
         return finish(
             reason="rejected",
@@ -490,12 +504,85 @@ def locate_near(
     a scan it cannot fix is located as if there were none, so a prediction can
     add fixes but never steer one. A prior in ``config`` takes precedence.
     """
-    cfg = config or LocatorConfig()
+    return _near(scan, survey, prior, config or LocatorConfig())[0]
+
+
+def _near(scan: Scan, survey: Survey, prior: Prior | None, cfg: LocatorConfig) -> tuple[Fix, bool]:
+    """:func:`locate_near`, and whether the prior was tried and gave no fix."""
     if cfg.prior is None and prior is not None:
         fix = locate(scan, survey, config=replace(cfg, prior=prior))
         if fix.ok:
-            return fix
-    return locate(scan, survey, config=cfg)
+            return fix, False
+        return locate(scan, survey, config=cfg), True
+    return locate(scan, survey, config=cfg), False
+
+
+@dataclass(frozen=True, slots=True)
+class SequenceStep:
+    """One scan of a sequence located: the fix and how it was found.
+
+    Attributes
+    ----------
+    fix : Fix
+    tracked : bool
+        The previous fix was close enough in time to be tried as the prior.
+    track_lost : bool
+        It was tried and gave no fix: the scan was located from scratch
+        (global identification) instead, fixed or not.
+    """
+
+    fix: Fix
+    tracked: bool
+    track_lost: bool
+
+
+class SequenceLocator:
+    """Locate the scans of a sequence one at a time, each near the previous fix.
+
+    A scan within ``max_gap_s`` of the last fixed one is first searched near that
+    fix (:func:`locate_near`); when that gives no fix, or the gap is longer, the
+    scan is located from scratch. A prior given in ``config`` applies to every
+    scan and is never replaced. This is the one tracking rule of ``mast locate``
+    on a bag and of ``mast live``.
+    """
+
+    def __init__(
+        self,
+        survey: Survey,
+        *,
+        config: LocatorConfig | None = None,
+        sequence: SequenceConfig = SequenceConfig(),
+    ) -> None:
+        self.survey = survey
+        self.config = config or LocatorConfig()
+        self.sequence = sequence
+        self._last: tuple[int, Pose2D] | None = None
+
+    @property
+    def last_pose(self) -> Pose2D | None:
+        """The last fixed pose, the next scan's prior when close in time."""
+        return None if self._last is None else self._last[1]
+
+    @property
+    def last_stamp_ns(self) -> int:
+        """Stamp of the last fixed scan (0 before the first fix)."""
+        return 0 if self._last is None else self._last[0]
+
+    def assume(self, pose: Pose2D | None, stamp_ns: int = 0) -> None:
+        """Take ``pose`` (at ``stamp_ns``) as the last fix, or forget it (None)."""
+        self._last = None if pose is None else (stamp_ns, pose)
+
+    def step(self, scan: Scan) -> SequenceStep:
+        """Locate ``scan`` and remember its pose when fixed."""
+        cfg, seq = self.config, self.sequence
+        prior = None
+        if self._last is not None and abs(scan.stamp_ns - self._last[0]) <= seq.max_gap_s * 1e9:
+            prior = Prior(self._last[1], seq.radius_m, seq.azimuth_tolerance_rad)
+        fix, lost = _near(scan, self.survey, prior, cfg)
+        tracked = cfg.prior is None and prior is not None
+        if fix.ok and fix.pose is not None:
+            self._last = (scan.stamp_ns, fix.pose)
+        return SequenceStep(fix, tracked, lost)
 
 
 def locate_sequence(
@@ -505,19 +592,8 @@ def locate_sequence(
     config: LocatorConfig | None = None,
     sequence: SequenceConfig = SequenceConfig(),
 ) -> Iterator[Fix]:
-    """Fix every scan of a sequence, each with the previous fix as its prior when close in time.
-
-    A scan within ``max_gap_s`` of a fixed one is first searched near that fix
-    (:func:`locate_near`). A prior given in ``config`` applies to every scan
-    and is never replaced.
-    """
-    cfg = config or LocatorConfig()
-    last: tuple[int, Pose2D] | None = None
+    """Fix every scan of a sequence, each with the previous fix as its prior when close in time
+    (:class:`SequenceLocator`)."""
+    tracker = SequenceLocator(survey, config=config, sequence=sequence)
     for scan in scans:
-        prior = None
-        if last is not None and abs(scan.stamp_ns - last[0]) <= sequence.max_gap_s * 1e9:
-            prior = Prior(last[1], sequence.radius_m, sequence.azimuth_tolerance_rad)
-        fix = locate_near(scan, survey, prior, config=cfg)
-        if fix.ok and fix.pose is not None:
-            last = (scan.stamp_ns, fix.pose)
-        yield fix
+        yield tracker.step(scan).fix

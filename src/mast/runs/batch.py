@@ -45,7 +45,7 @@ def expand_runs(paths: Sequence[Path]) -> list[Path]:
                 q
                 for q in p.iterdir()
                 if (q.is_dir() and (q / "metadata.yaml").is_file())
-                or (q.is_file() and q.suffix == ".bag")
+                or (q.is_file() and q.suffix in (".bag", ".mcap"))
             )
             if not inner:
                 bag_kind(p)  # the clear error for a folder that is no bag

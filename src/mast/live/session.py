@@ -1,0 +1,181 @@
+"""The live loop: scans from a source located as they arrive, the newest scan first.
+
+Two threads. The reader takes every scan off the source as it arrives (and
+into the recording, when there is one) and leaves it in a one-scan slot
+(:class:`LatestSlot`); a scan still there when the next arrives is replaced and
+counted as dropped, so that the queue never grows and a pose is never older
+than the scan being located. The locator takes the slot's scan, locates it
+with the previous fix as its prior (:class:`~mast.pipeline.locator.SequenceLocator`,
+the same rule as ``mast locate`` on a bag), and hands the record on.
+
+Each record is the ``locate`` record of a scan in a sequence (DESIGN.md, "A fix")
+with: ``source``; ``scan`` (the scan's number in the stream, counting dropped
+ones); ``stamp_ns`` (the scan's stamp); ``received_ns`` (host clock when its
+last byte arrived); ``latency_ms`` (from then to the record being written);
+``tracking`` (the previous fix was tried as the prior); ``track_lost`` (it was
+tried and gave no fix, so the scan was located from scratch); ``dropped``
+(scans replaced unlocated since the previous record); and ``gap_s`` on the first
+scan after the scanner was lost.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any, Protocol
+
+from mast.apps.report import ReportInputs, fix_record
+from mast.core.beacon import Survey
+from mast.core.scan import Scan
+from mast.live.sources import Received, Source
+from mast.pipeline.locator import Fix, LocatorConfig, SequenceConfig, SequenceLocator
+
+__all__ = ["LatestSlot", "LiveSummary", "Sink", "run_live"]
+
+
+class Sink(Protocol):
+    """Something that takes every received scan and every record (a recording, a view)."""
+
+    def scan(self, scan: Scan) -> None: ...
+
+    def fix(self, scan: Scan, fix: Fix, record: dict[str, Any]) -> None: ...
+
+
+class LatestSlot:
+    """A one-item hand-over between threads where the newest item wins."""
+
+    def __init__(self) -> None:
+        self._cond = threading.Condition()
+        self._item: tuple[int, Received] | None = None
+        self._closed = False
+        self.error: BaseException | None = None
+        self.dropped = 0
+
+    def put(self, index: int, item: Received) -> None:
+        with self._cond:
+            if self._item is not None:
+                self.dropped += 1
+            self._item = (index, item)
+            self._cond.notify()
+
+    def close(self, error: BaseException | None = None) -> None:
+        with self._cond:
+            self._closed = True
+            self.error = error
+            self._cond.notify()
+
+    def take(self) -> tuple[int, Received] | None:
+        """The newest item, waiting for one; None once closed and empty."""
+        with self._cond:
+            while self._item is None and not self._closed:
+                self._cond.wait(0.1)  # short waits: Ctrl-C is seen at once
+            item, self._item = self._item, None
+            return item
+
+
+@dataclass(slots=True)
+class LiveSummary:
+    """How a live run went."""
+
+    received: int = 0
+    located: int = 0
+    fixed: int = 0
+    dropped: int = 0
+    malformed: int = 0
+    reconnects: int = 0
+    gap_s: float = 0.0
+    track_lost: int = 0
+    elapsed_s: float = 0.0
+    pipe_closed: bool = False
+
+
+def run_live(
+    source: Source,
+    survey: Survey,
+    *,
+    emit: Callable[[dict[str, Any]], None],
+    config: LocatorConfig | None = None,
+    sequence: SequenceConfig | None = None,
+    inputs: ReportInputs | None = None,
+    sinks: tuple[Sink, ...] = (),
+    max_scans: int | None = None,
+    warn: Callable[[str], None] = lambda _text: None,
+    before_step: Callable[[int, SequenceLocator], None] | None = None,
+) -> LiveSummary:
+    """Locate ``source``'s scans as they arrive until it ends, ``max_scans`` have been
+    received, or ``emit`` finds its reader gone (``BrokenPipeError``).
+
+    ``emit`` gets each record (see the module); every sink gets every received
+    scan (from the reader thread) and every record. ``before_step`` is called
+    with each scan's number and the tracker before it is located (the benchmark
+    injects a wrong prior with it). An error of the source (a scanner that cannot
+    be reached) is raised here, after the thread has stopped.
+    """
+    summary = LiveSummary()
+    tracker = SequenceLocator(survey, config=config, sequence=sequence or SequenceConfig())
+    slot = LatestSlot()
+    stop = threading.Event()
+    inputs = inputs or ReportInputs()
+
+    def read() -> None:
+        error: BaseException | None = None
+        try:
+            for index, received in enumerate(source.scans(stop, warn)):
+                for sink in sinks:
+                    sink.scan(received.scan)
+                slot.put(index, received)
+                if max_scans is not None and index + 1 >= max_scans:
+                    break
+        except BaseException as err:  # handed to the locating thread
+            error = err
+        finally:
+            stop.set()
+            slot.close(error)
+
+    reader = threading.Thread(target=read, name="mast-live-reader", daemon=True)
+    t0 = time.perf_counter()
+    reader.start()
+    seen_dropped = 0
+    try:
+        while (item := slot.take()) is not None:
+            index, received = item
+            scan = received.scan
+            if before_step is not None:
+                before_step(index, tracker)
+            step = tracker.step(scan)
+            record = fix_record(step.fix, source=source.url, index=index, scan=scan, inputs=inputs)
+            dropped, seen_dropped = slot.dropped - seen_dropped, slot.dropped
+            record.update(
+                received_ns=received.received_ns,
+                tracking=step.tracked,
+                track_lost=step.track_lost,
+                dropped=dropped,
+            )
+            if received.gap_s is not None:
+                record["gap_s"] = round(received.gap_s, 3)
+            record["latency_ms"] = round((time.perf_counter() - received.received_s) * 1e3, 3)
+            summary.located += 1
+            summary.fixed += step.fix.ok
+            summary.track_lost += step.track_lost
+            try:
+                emit(record)
+            except BrokenPipeError:
+                summary.pipe_closed = True
+                break
+            for sink in sinks:
+                sink.fix(scan, step.fix, record)
+    finally:
+        stop.set()
+        reader.join(5.0)
+        stats = source.stats
+        summary.received = stats.scans
+        summary.dropped = slot.dropped
+        summary.malformed = stats.malformed
+        summary.reconnects = stats.reconnects
+        summary.gap_s = stats.gap_s
+        summary.elapsed_s = time.perf_counter() - t0
+    if slot.error is not None and not summary.pipe_closed:
+        raise slot.error
+    return summary
