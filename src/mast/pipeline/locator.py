@@ -439,10 +439,10 @@ def locate(scan: Scan, survey: Survey, *, config: LocatorConfig | None = None) -
         # The beams confirmed two beacons at the verified pose, but the adjustment's gate
         # and data snooping kept the returns of fewer: one beacon's corner alone then
         # steers the pose (found on a drive: 1.5 m off with a 5 cm sigma). No fix.
-        names = ", ".join(sorted(panels.ids[b] for b in kept)) or "none"
+        kept_names = ", ".join(sorted(panels.ids[b] for b in kept)) or "none"
         return finish(
             reason="one_beacon",
-            detail=f"only beacon {names} kept returns in the adjustment (of "
+            detail=f"only beacon {kept_names} kept returns in the adjustment (of "
             f"{', '.join(best.supported)} confirmed at the verified pose)",
             residuals=summary(obs, adj, tests),
         )
