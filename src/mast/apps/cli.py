@@ -632,6 +632,12 @@ def live(
     if summary.pipe_closed:
         _silence_stdout()
         return
+    if summary.interrupted:
+        typer.echo(
+            "mast: interrupted" + (f"; {record} holds the scans received" if record else ""),
+            err=True,
+        )
+        raise typer.Exit(130)
     if summary.fixed == 0:
         raise typer.Exit(EXIT_NO_FIX)
 

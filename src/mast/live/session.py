@@ -89,6 +89,7 @@ class LiveSummary:
     track_lost: int = 0
     elapsed_s: float = 0.0
     pipe_closed: bool = False
+    interrupted: bool = False
 
 
 def run_live(
@@ -105,7 +106,8 @@ def run_live(
     before_step: Callable[[int, SequenceLocator], None] | None = None,
 ) -> LiveSummary:
     """Locate ``source``'s scans as they arrive until it ends, ``max_scans`` have been
-    received, or ``emit`` finds its reader gone (``BrokenPipeError``).
+    received, ``emit`` finds its reader gone (``BrokenPipeError``, ``pipe_closed``) or
+    Ctrl-C is pressed (``interrupted``).
 
     ``emit`` gets each record (see the module); every sink gets every received
     scan (from the reader thread) and every record. ``before_step`` is called
@@ -166,6 +168,8 @@ def run_live(
                 break
             for sink in sinks:
                 sink.fix(scan, step.fix, record)
+    except KeyboardInterrupt:
+        summary.interrupted = True
     finally:
         stop.set()
         reader.join(5.0)
@@ -176,6 +180,6 @@ def run_live(
         summary.reconnects = stats.reconnects
         summary.gap_s = stats.gap_s
         summary.elapsed_s = time.perf_counter() - t0
-    if slot.error is not None and not summary.pipe_closed:
+    if slot.error is not None and not (summary.pipe_closed or summary.interrupted):
         raise slot.error
     return summary
