@@ -485,14 +485,31 @@ class SequenceConfig:
     max_gap_s : float
         Scans further apart in time than this get no prior from each other.
     radius_m : float
-        Radius of the prior around the previous fix.
+        Largest radius of the prior around the previous fix.
     azimuth_tolerance_rad : float
-        Azimuth window of the prior around the previous fix.
+        Largest azimuth window of the prior around the previous fix.
+    max_speed_mps, max_turn_rad_s : float
+        The fastest a vehicle underground drives and turns: the prior's window is
+        as wide as it can have moved since the previous fix, plus
+        ``min_radius_m`` and ``min_azimuth_rad``, up to the largest window.
+    min_radius_m, min_azimuth_rad : float
     """
 
     max_gap_s: float = 0.5
     radius_m: float = 0.5
     azimuth_tolerance_rad: float = math.radians(5.0)
+    max_speed_mps: float = 6.0
+    max_turn_rad_s: float = math.radians(90.0)
+    min_radius_m: float = 0.05
+    min_azimuth_rad: float = math.radians(1.0)
+
+    def prior(self, pose: Pose2D, elapsed_s: float) -> Prior:
+        """The window around ``pose``, ``elapsed_s`` after it was fixed."""
+        return Prior(
+            pose,
+            min(self.radius_m, self.min_radius_m + self.max_speed_mps * elapsed_s),
+            min(self.azimuth_tolerance_rad, self.min_azimuth_rad + self.max_turn_rad_s * elapsed_s),
+        )
 
 
 def locate_near(
@@ -577,7 +594,7 @@ class SequenceLocator:
         cfg, seq = self.config, self.sequence
         prior = None
         if self._last is not None and abs(scan.stamp_ns - self._last[0]) <= seq.max_gap_s * 1e9:
-            prior = Prior(self._last[1], seq.radius_m, seq.azimuth_tolerance_rad)
+            prior = seq.prior(self._last[1], abs(scan.stamp_ns - self._last[0]) / 1e9)
         fix, lost = _near(scan, self.survey, prior, cfg)
         tracked = cfg.prior is None and prior is not None
         if fix.ok and fix.pose is not None:
