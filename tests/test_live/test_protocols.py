@@ -182,3 +182,15 @@ def test_any_bytes_are_a_reply_or_an_input_error(data: bytes) -> None:
         for parse in (scip.parse_distance_reply, scip.parse_parameters):
             with contextlib.suppress(InputError):
                 parse(body)
+
+
+def test_a_signed_scale_factor_is_a_malformed_telegram_not_a_crash() -> None:
+    head = LMS1XX_HEAD.replace(b"DIST1 3F800000", b"DIST1 -1000000")
+    with pytest.raises(InputError, match=r"scale factor .* is not 8 hex digits"):
+        cola.parse_scandata(_telegram(head, [1000] * 541))
+
+
+def test_impossible_step_geometry_in_pp_is_refused() -> None:
+    p = scip.DeviceParameters("UST", 20, 30000, 0, 0, 1080, 540, 2400)
+    with pytest.raises(InputError, match="step geometry is impossible"):
+        scip.parse_parameters(scip.encode_parameters(p))

@@ -89,6 +89,18 @@ def test_the_device_clock_unwraps_and_keeps_the_smallest_delay() -> None:
     assert clock.stamp(0, host + 10_000_000_000) == host + 10_000_000_000
 
 
+def test_a_late_burst_keeps_the_scanners_spacing() -> None:
+    clock = DeviceClock(bits=32, tick_ns=1_000)  # SICK: microseconds
+    host = 10**12
+    stamps = []
+    for k in range(30):
+        arrival = host + 20_000_000 * k + 2_000_000
+        if 10 <= k <= 16:  # a 130 ms hiccup: seven scans arrive together
+            arrival = host + 20_000_000 * 16 + 2_000_000 + 100_000 * (k - 10)
+        stamps.append(clock.stamp(20_000 * k, arrival))
+    assert np.diff(stamps).tolist() == [20_000_000] * 29
+
+
 def test_the_slot_keeps_the_newest_scan_and_counts_the_rest() -> None:
     scan = Scan(np.array([0.0, 0.1]), np.array([1.0, 1.0]))
     slot = LatestSlot()
@@ -96,8 +108,12 @@ def test_the_slot_keeps_the_newest_scan_and_counts_the_rest() -> None:
         slot.put(k, Received(scan, k, float(k)))
     item = slot.take()
     assert item is not None
-    assert item[0] == 4
+    assert (item[0], item[2]) == (4, 4)  # the newest, and the four it replaced
     assert slot.dropped == 4
+    slot.put(5, Received(scan, 5, 5.0))
+    item = slot.take()
+    assert item is not None
+    assert (item[0], item[2]) == (5, 0)
     slot.close()
     assert slot.take() is None
 

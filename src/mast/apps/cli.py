@@ -12,8 +12,10 @@ import itertools
 import logging
 import math
 import os
+import signal
 import sys
 import tempfile
+import threading
 import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
@@ -550,16 +552,16 @@ def live(
     behind (the others counted as dropped).
 
     Ends when the source ends (a replay), after --max-scans, when standard output is closed
-    (status 0), on Ctrl-C (status 130; a --record file is closed complete) or when the
-    scanner cannot be reached (status 2). Exit status 3 when no scan was fixed, 4 when an
-    output cannot be written.
+    (status 0), on Ctrl-C or SIGTERM (status 130 or 143; a --record file is closed
+    complete) or when the scanner cannot be reached (status 2). Exit status 3 when no
+    scan was fixed, 4 when an output cannot be written.
     """
     import json
 
     from mast.apps.report import ReportInputs
     from mast.io import read_survey
     from mast.live.session import Sink, run_live
-    from mast.live.sources import SourceOptions, open_source
+    from mast.live.sources import ReplaySource, SourceOptions, open_source
 
     cfg, defaults = _precisions(range_sigma, angle_sigma, scanner, survey_sigma)
     if near is not None:
@@ -570,13 +572,16 @@ def live(
     for name, value in (("--timeout", timeout), ("--give-up", give_up)):
         if not (math.isfinite(value) and value > 0):
             raise InputError(f"{name} must be a positive number of seconds, got {value}")
-    if record is not None:
-        check_output_file(record, suffixes=(".mcap",), option="--record")
     survey = read_survey(beacons)
     options = SourceOptions(
         range_min_m=range_min, range_max_m=range_max, timeout_s=timeout, give_up_s=give_up
     )
     stream = open_source(source, options)
+    if record is not None:
+        if record.suffix != ".mcap":
+            raise InputError("--record: name the recording *.mcap (lower case)", path=record)
+        replayed = [stream.path] if isinstance(stream, ReplaySource) else []
+        check_output_file(record, suffixes=(".mcap",), option="--record", inputs=replayed)
     inputs = ReportInputs(
         scan_file=source, survey_file=str(beacons), scanner=scanner, defaults=frozenset(defaults)
     )
@@ -593,6 +598,18 @@ def live(
     compile_all()  # the first scan is located as fast as the rest
     sinks: list[Sink] = []
     with contextlib.ExitStack() as stack:
+        # Ctrl-C and SIGTERM (a vehicle's service manager) only ask the run to end between
+        # two scans: never in the middle of writing the recording, nor while closing it
+        # (the handlers are restored last, after the recording is closed).
+        interrupt = threading.Event()
+        caught: list[int] = []
+
+        def on_signal(signum: int, _frame: object) -> None:
+            caught.append(signum)
+            interrupt.set()
+
+        for signum in (signal.SIGINT, signal.SIGTERM):
+            stack.callback(signal.signal, signum, signal.signal(signum, on_signal))
         if record is not None:
             from mast.live.record import McapRecorder
 
@@ -620,6 +637,7 @@ def live(
             sinks=tuple(sinks),
             max_scans=max_scans,
             warn=warn,
+            interrupt=interrupt,
         )
     typer.echo(
         f"mast: {source}: {summary.received} scans received, {summary.located} located, "
@@ -637,7 +655,7 @@ def live(
             "mast: interrupted" + (f"; {record} holds the scans received" if record else ""),
             err=True,
         )
-        raise typer.Exit(130)
+        raise typer.Exit(128 + (caught[0] if caught else signal.SIGINT))
     if summary.fixed == 0:
         raise typer.Exit(EXIT_NO_FIX)
 

@@ -158,9 +158,13 @@ def _number(token: bytes, what: str) -> int:
 
 
 def _float32(token: bytes, what: str) -> float:
-    if len(token) != 8:
+    try:
+        bits = int(token, 16) if len(token) == 8 and token[:1] not in (b"+", b"-") else -1
+    except ValueError:
+        bits = -1
+    if bits < 0:
         raise InputError(f"LMDscandata: {what} {token[:20]!r} is not 8 hex digits")
-    value = struct.unpack(">f", struct.pack(">I", _number(token, what)))[0]
+    value = struct.unpack(">f", struct.pack(">I", bits))[0]
     if not math.isfinite(value):
         raise InputError(f"LMDscandata: {what} is not finite")
     return float(value)

@@ -111,7 +111,10 @@ class Emulator:
         self._params = hokuyo_parameters(self._next) if kind == "hokuyo" else None
         self.hz = hz
         self.faults = faults
-        self._server = socket.create_server((host, port))
+        try:
+            self._server = socket.create_server((host, port))
+        except OSError as err:
+            raise InputError(f"cannot serve on {host}:{port}: {err.strerror or err}") from None
         self._server.settimeout(0.1)
         self.port: int = self._server.getsockname()[1]
         self._stop = threading.Event()
@@ -161,11 +164,15 @@ class Emulator:
                 self.connections += 1
                 with conn:
                     conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+                    conn.settimeout(2.0)  # a client that stops reading is dropped, not waited on
                     self._serve(conn)
         except BaseException as err:  # pragma: no cover - reported to whoever waits
             self.error = err
         finally:
             self._server.close()
+            close = getattr(self._scans, "close", None)
+            if close is not None:
+                close()  # a bag reader, closed with its generator
             self._done.set()
 
     def _due(self, scan: Scan) -> float:

@@ -142,7 +142,7 @@ def parse_parameters(reply: bytes) -> DeviceParameters:
         name, _, value = line[:-2].decode("ascii", "replace").partition(":")
         fields[name] = value
     try:
-        return DeviceParameters(
+        p = DeviceParameters(
             model=fields.get("MODL", "?"),
             dmin_mm=int(fields["DMIN"]),
             dmax_mm=int(fields["DMAX"]),
@@ -156,6 +156,16 @@ def parse_parameters(reply: bytes) -> DeviceParameters:
         raise InputError(
             "SCIP: PP reply lacks a number among DMIN DMAX ARES AMIN AMAX AFRT SCAN"
         ) from None
+    if not (
+        0 < p.ares <= 1 << 20
+        and 0 <= p.amin <= p.amax < p.ares + p.amin
+        and 0 <= p.dmin_mm < p.dmax_mm
+    ):
+        raise InputError(
+            f"SCIP: PP reply's step geometry is impossible (ARES {p.ares}, AMIN {p.amin}, "
+            f"AMAX {p.amax}, DMIN {p.dmin_mm}, DMAX {p.dmax_mm})"
+        )
+    return p
 
 
 def encode_parameters(p: DeviceParameters) -> bytes:

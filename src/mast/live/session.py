@@ -23,7 +23,8 @@ from __future__ import annotations
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+from datetime import UTC, datetime
 from typing import Any, Protocol
 
 from mast.apps.report import ReportInputs, fix_record
@@ -50,6 +51,7 @@ class LatestSlot:
         self._cond = threading.Condition()
         self._item: tuple[int, Received] | None = None
         self._closed = False
+        self._dropped_since_take = 0
         self.error: BaseException | None = None
         self.dropped = 0
 
@@ -57,6 +59,7 @@ class LatestSlot:
         with self._cond:
             if self._item is not None:
                 self.dropped += 1
+                self._dropped_since_take += 1
             self._item = (index, item)
             self._cond.notify()
 
@@ -66,13 +69,19 @@ class LatestSlot:
             self.error = error
             self._cond.notify()
 
-    def take(self) -> tuple[int, Received] | None:
-        """The newest item, waiting for one; None once closed and empty."""
+    def take(self, stop: threading.Event | None = None) -> tuple[int, Received, int] | None:
+        """The newest item and how many were replaced since the last take, waiting for
+        one; None once closed and empty, or when ``stop`` is set."""
         with self._cond:
             while self._item is None and not self._closed:
-                self._cond.wait(0.1)  # short waits: Ctrl-C is seen at once
-            item, self._item = self._item, None
-            return item
+                if stop is not None and stop.is_set():
+                    return None
+                self._cond.wait(0.1)  # short waits: Ctrl-C and stop requests are seen at once
+            if self._item is None:
+                return None
+            (index, item), self._item = self._item, None
+            dropped, self._dropped_since_take = self._dropped_since_take, 0
+            return index, item, dropped
 
 
 @dataclass(slots=True)
@@ -104,6 +113,7 @@ def run_live(
     max_scans: int | None = None,
     warn: Callable[[str], None] = lambda _text: None,
     before_step: Callable[[int, SequenceLocator], None] | None = None,
+    interrupt: threading.Event | None = None,
 ) -> LiveSummary:
     """Locate ``source``'s scans as they arrive until it ends, ``max_scans`` have been
     received, ``emit`` finds its reader gone (``BrokenPipeError``, ``pipe_closed``) or
@@ -112,8 +122,9 @@ def run_live(
     ``emit`` gets each record (see the module); every sink gets every received
     scan (from the reader thread) and every record. ``before_step`` is called
     with each scan's number and the tracker before it is located (the benchmark
-    injects a wrong prior with it). An error of the source (a scanner that cannot
-    be reached) is raised here, after the thread has stopped.
+    injects a wrong prior with it). Setting ``interrupt`` (from a signal handler)
+    ends the run between two scans, as Ctrl-C does anywhere. An error of the source
+    (a scanner that cannot be reached) is raised here, after the thread has stopped.
     """
     summary = LiveSummary()
     tracker = SequenceLocator(survey, config=config, sequence=sequence or SequenceConfig())
@@ -139,16 +150,17 @@ def run_live(
     reader = threading.Thread(target=read, name="mast-live-reader", daemon=True)
     t0 = time.perf_counter()
     reader.start()
-    seen_dropped = 0
     try:
-        while (item := slot.take()) is not None:
-            index, received = item
+        while (item := slot.take(interrupt)) is not None:
+            if interrupt is not None and interrupt.is_set():
+                break
+            index, received, dropped = item
             scan = received.scan
             if before_step is not None:
                 before_step(index, tracker)
             step = tracker.step(scan)
-            record = fix_record(step.fix, source=source.url, index=index, scan=scan, inputs=inputs)
-            dropped, seen_dropped = slot.dropped - seen_dropped, slot.dropped
+            now = replace(inputs, computed_utc=datetime.now(UTC))
+            record = fix_record(step.fix, source=source.url, index=index, scan=scan, inputs=now)
             record.update(
                 received_ns=received.received_ns,
                 tracking=step.tracked,
@@ -171,6 +183,8 @@ def run_live(
     except KeyboardInterrupt:
         summary.interrupted = True
     finally:
+        if interrupt is not None and interrupt.is_set():
+            summary.interrupted = True
         stop.set()
         reader.join(5.0)
         stats = source.stats

@@ -8,10 +8,10 @@ A source is named by a URL (:func:`open_source`):
 * ``hokuyo://HOST[:PORT]``: UST / UTM, SCIP 2.0 on TCP (port 10940). ``PP`` gives the
   step geometry and range limits, then ``MD`` (continuous, every step, no
   clustering) streams the scans; ``QT`` stops them.
-* ``replay://RUN[?rate=F&hz=H]``: any run ``mast locate`` reads (ROS 1 bag, ROS 2
-  bag folder or ``.mcap`` file, or a folder of scan CSVs), sent at its recorded
-  rate times ``F``; a CSV folder has no stamps and plays at ``H`` scans a second
-  (default 25).
+* ``replay://RUN[?rate=F&hz=H&topic=T]``: any run ``mast locate`` reads (ROS 1 bag,
+  ROS 2 bag folder or ``.mcap`` file, or a folder of scan CSVs), sent at its
+  recorded rate times ``F``; a CSV folder has no stamps and plays at ``H`` scans a
+  second (default 25); ``T`` chooses a bag's LaserScan topic.
 
 :meth:`Source.scans` yields each scan as it is received (:class:`Received`) until
 told to stop. A TCP source survives what a vehicle meets: a connection dropped
@@ -29,14 +29,16 @@ scanner's spacing and lag the scan by no more than the network does.
 
 from __future__ import annotations
 
+import collections
 import contextlib
 import math
 import socket
+import struct
 import threading
 import time
 import urllib.parse
 from abc import ABC, abstractmethod
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Generator, Iterator
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -124,19 +126,22 @@ class DeviceClock:
     """A scanner's wrapping counter carried onto the host's clock.
 
     The counter is unwrapped (``bits`` wide, ``tick_ns`` a tick) and offset onto
-    the host clock by the smallest ``received - device`` difference seen: the
-    stamp with the least transport delay. An offset that has grown by more than
-    ``resync_ns`` (the two clocks drifting apart, or the device restarted) is
-    taken afresh.
+    the host clock by the smallest ``received - device`` difference over the last
+    ``window_ns`` of host time: the scan with the least transport delay. A late
+    burst (a network hiccup, a pause of the host) does not move the offset, as
+    earlier quick scans are still in the window; a drift between the two clocks
+    is followed as old minima leave it; a device restarted (its counter jumping)
+    gives a smaller difference, which is taken at once.
     """
 
-    def __init__(self, bits: int, tick_ns: int, resync_ns: int = 50_000_000) -> None:
+    def __init__(self, bits: int, tick_ns: int, window_ns: int = 5_000_000_000) -> None:
         self._mod = 1 << bits
         self._tick_ns = tick_ns
-        self._resync_ns = resync_ns
+        self._window_ns = window_ns
         self._last: int | None = None
         self._ticks = 0
-        self._offset: int | None = None
+        # (received_ns, difference), differences increasing: a sliding-window minimum
+        self._minima: collections.deque[tuple[int, int]] = collections.deque()
 
     def stamp(self, counter: int, received_ns: int) -> int:
         """The host-clock stamp of a scan the device stamped ``counter``."""
@@ -147,14 +152,14 @@ class DeviceClock:
             self._ticks += (counter - self._last) % self._mod
         self._last = counter
         device_ns = self._ticks * self._tick_ns
-        candidate = received_ns - device_ns
-        if (
-            self._offset is None
-            or candidate < self._offset
-            or candidate - self._offset > self._resync_ns
-        ):
-            self._offset = candidate
-        return device_ns + self._offset
+        difference = received_ns - device_ns
+        minima = self._minima
+        while minima and minima[-1][1] >= difference:
+            minima.pop()
+        minima.append((received_ns, difference))
+        while minima[0][0] < received_ns - self._window_ns:
+            minima.popleft()
+        return device_ns + minima[0][1]
 
 
 class Source(ABC):
@@ -213,20 +218,21 @@ class _TcpSource(Source):
 
     def _reconnect(self, stop: threading.Event, last_scan: float) -> socket.socket | None:
         """A new connection after the waits of the backoff (which grow with every attempt
-        of one outage); an InputError ``give_up_s`` after the last scan."""
-        while not stop.is_set():
-            lost_for = time.perf_counter() - last_scan
-            if lost_for + self._wait > self.options.give_up_s:
+        of one outage); an InputError once ``give_up_s`` have passed since the last scan."""
+        while True:
+            left = self.options.give_up_s - (time.perf_counter() - last_scan)
+            if left <= 0:
                 raise InputError(
-                    f"{self.url}: scanner lost; no scan for {lost_for:.0f} s ({self._why_lost})"
+                    f"{self.url}: scanner lost; no scan for {self.options.give_up_s:g} s "
+                    f"({self._why_lost})"
                 )
-            stop.wait(self._wait)
+            if stop.wait(min(self._wait, left)):
+                return None
             self._wait = min(2 * self._wait, self.options.backoff_s[1])
             try:
                 return self._connect()
             except OSError as err:
                 self._why_lost = f"cannot connect: {_why(err)}"
-        return None
 
     def scans(self, stop: threading.Event, warn: Callable[[str], None]) -> Iterator[Received]:
         try:
@@ -256,6 +262,11 @@ class _TcpSource(Source):
                     why = _why(err) if isinstance(err, OSError) else str(err)
                     if self.stats.scans == 0:
                         # Never a scan: not a scanner streaming there (or not this kind).
+                        if self.stats.malformed:
+                            why += (
+                                f"; {self.stats.malformed} malformed telegrams, the first: "
+                                f"{self.stats.first_malformed}"
+                            )
                         raise InputError(
                             f"{self.url}: connected, but no scan came ({why}); is it a "
                             f"{self.scheme} scanner?"
@@ -305,6 +316,10 @@ class _TcpSource(Source):
                         scan = self._handle(telegram, sock, received_ns)
                     except InputError as err:
                         self._malformed(err.problem, warn)
+                        continue
+                    except (ValueError, ArithmeticError, struct.error) as err:
+                        # a telegram no check foresaw: skipped like any malformed one
+                        self._malformed(f"{type(err).__name__}: {err}", warn)
                         continue
                     if scan is not None:
                         last_scan = now
@@ -420,10 +435,13 @@ class HokuyoSource(_TcpSource):
 # --------------------------------------------------------------------------- replay
 
 
-def read_run(path: Path, *, csv_hz: float = DEFAULT_CSV_HZ) -> Iterator[Scan]:
+def read_run(
+    path: Path, *, csv_hz: float = DEFAULT_CSV_HZ, topic: str | None = None
+) -> Generator[Scan, None, None]:
     """The scans of a recorded run, one at a time: a bag (ROS 1, ROS 2 folder or
-    ``.mcap`` file) or a folder of scan CSVs (every ``*.csv`` whose header starts with
-    ``angle_rad``, in name order, stamped ``1 / csv_hz`` apart from 0)."""
+    ``.mcap`` file; ``topic`` when it holds several LaserScan topics) or a folder of scan
+    CSVs (every ``*.csv`` whose header starts with ``angle_rad``, in name order, stamped
+    ``1 / csv_hz`` apart from 0)."""
     from mast.io import read_laserscans, read_scan_csv
     from mast.io.bags import bag_kind
 
@@ -438,7 +456,7 @@ def read_run(path: Path, *, csv_hz: float = DEFAULT_CSV_HZ) -> Iterator[Scan]:
             yield replace(read_scan_csv(f), stamp_ns=k * step_ns)
         return
     bag_kind(path)
-    yield from read_laserscans(path)
+    yield from read_laserscans(path, topic=topic)
 
 
 def _is_scan_csv(path: Path) -> bool:
@@ -453,24 +471,36 @@ class ReplaySource(Source):
     """A recorded run sent at its recorded rate (times ``rate``), stamps as recorded."""
 
     def __init__(
-        self, url: str, path: Path, rate: float, csv_hz: float, options: SourceOptions
+        self,
+        url: str,
+        path: Path,
+        rate: float,
+        csv_hz: float,
+        options: SourceOptions,
+        topic: str | None = None,
     ) -> None:
         super().__init__(url, options)
         self.path, self.rate, self.csv_hz = path, rate, csv_hz
         # Read the first scan now: a run that cannot be read is an error before the run.
-        self._scans = read_run(path, csv_hz=csv_hz)
+        self._scans = read_run(path, csv_hz=csv_hz, topic=topic)
         self._first = next(self._scans, None)
         if self._first is None:
             raise InputError("run holds no scan", path=path)
 
     def scans(self, stop: threading.Event, warn: Callable[[str], None]) -> Iterator[Received]:
         del warn
+        first = self._first
+        assert first is not None
+        try:
+            yield from self._paced(_chain(first, self._scans), stop)
+        finally:
+            self._scans.close()  # the bag reader, also when the run ends early
+
+    def _paced(self, scans: Iterator[Scan], stop: threading.Event) -> Iterator[Received]:
         o = self.options
         t0: float | None = None
         s0 = 0
-        first = self._first
-        assert first is not None
-        for scan in _chain(first, self._scans):
+        for scan in scans:
             if o.range_min_m is not None or o.range_max_m is not None:
                 scan = scan.with_range_limits(o.range_min_m, o.range_max_m)
             if t0 is None:
@@ -518,9 +548,9 @@ def _parse(text: str) -> _Url:
             q = dict(urllib.parse.parse_qsl(query, strict_parsing=bool(query)))
         except ValueError:
             raise InputError(f"source {text!r}: query {query!r} is not key=value&...") from None
-        unknown = sorted(set(q) - {"rate", "hz"})
+        unknown = sorted(set(q) - {"rate", "hz", "topic"})
         if unknown:
-            raise InputError(f"source {text!r}: unknown option {unknown[0]!r} (rate, hz)")
+            raise InputError(f"source {text!r}: unknown option {unknown[0]!r} (rate, hz, topic)")
         return _Url(scheme, path=path, query=q)
     parts = urllib.parse.urlsplit(text)
     try:
@@ -549,6 +579,7 @@ def open_source(text: str, options: SourceOptions | None = None) -> Source:
     if u.scheme == "replay":
         rate = _positive(u.query.get("rate", "1"), "rate", text)
         hz = _positive(u.query.get("hz", str(DEFAULT_CSV_HZ)), "hz", text)
-        return ReplaySource(text, Path(urllib.parse.unquote(u.path)), rate, hz, o)
+        path = Path(urllib.parse.unquote(u.path))
+        return ReplaySource(text, path, rate, hz, o, topic=u.query.get("topic"))
     cls: type[_TcpSource] = SickSource if u.scheme == "sick" else HokuyoSource
     return cls(f"{u.scheme}://{u.host}:{u.port}", u.host, u.port, o)

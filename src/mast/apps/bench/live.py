@@ -52,6 +52,7 @@ class LiveFigures:
     dropped: int
     late: int
     latency_ms: tuple[float, float, float]
+    locate_ms: tuple[float, float, float]
     rss_mb: tuple[float, float]
     cpu_share: float
     owed: int
@@ -72,6 +73,8 @@ class LiveFigures:
             f"one scan period",
             f"  latency receipt -> pose, ms: median {lat[0]:.2f}  p95 {lat[1]:.2f}  "
             f"max {lat[2]:.1f}",
+            f"  of which locating the scan and making its record, ms: median "
+            f"{self.locate_ms[0]:.2f}  p95 {self.locate_ms[1]:.2f}  max {self.locate_ms[2]:.1f}",
             f"  resident memory, MB: first 1000 scans {self.rss_mb[0]:.1f}, last 1000 "
             f"{self.rss_mb[1]:.1f}; CPU {100 * self.cpu_share:.0f} % of one core",
             f"  owed scans: {self.owed}, located {self.owed_located}, fixed {self.owed_fixed} "
@@ -79,6 +82,10 @@ class LiveFigures:
             f"{self.owed_tracking} ({tshare:.2f} %); fixes > 0.1 m from the truth: {self.wrong}",
             f"  wrong prior injected: {self.recovery}",
         ]
+
+
+def _spread(values: Any) -> tuple[float, float, float]:
+    return float(np.median(values)), float(np.percentile(values, 95)), float(np.max(values))
 
 
 def _rss_mb() -> float:
@@ -134,8 +141,11 @@ def _one(
         rss: list[float] = []
         inject_at = scans // 2
         injected: list[int] = []
+        locate_s: list[float] = []  # from before_step to emit: the step and its record
+        started = [0.0]
 
         def emit(rec: dict[str, Any]) -> None:
+            locate_s.append(time.perf_counter() - started[0])  # the step and its record
             ok = rec["status"] == "fix"
             records.append(
                 (
@@ -151,6 +161,7 @@ def _one(
             rss.append(_rss_mb())
 
         def before(index: int, tracker: SequenceLocator) -> None:
+            started[0] = time.perf_counter()
             if injected or index < inject_at or tracker.last_pose is None:
                 return
             p = tracker.last_pose
@@ -169,7 +180,12 @@ def _one(
         )
         cpu0, wall0 = time.process_time(), time.perf_counter()
         summary = run_live(
-            source, survey, emit=emit, config=config, max_scans=scans, before_step=before
+            source,
+            survey,
+            emit=emit,
+            config=config,
+            max_scans=scans,
+            before_step=before,
         )
         cpu = (time.process_time() - cpu0) / (time.perf_counter() - wall0)
     finally:
@@ -208,11 +224,8 @@ def _one(
         located=summary.located,
         dropped=summary.dropped,
         late=int(np.sum(lat > period_ms)),
-        latency_ms=(
-            float(np.median(lat)),
-            float(np.percentile(lat, 95)),
-            float(lat.max()),
-        ),
+        latency_ms=_spread(lat),
+        locate_ms=_spread(1e3 * np.array(locate_s)),
         rss_mb=(float(np.median(rss[:n1])), float(np.median(rss[-n1:]))),
         cpu_share=cpu,
         owed=owed,
