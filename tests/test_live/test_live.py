@@ -248,8 +248,9 @@ def test_a_closed_pipe_ends_the_run_cleanly(drive: Drive, tmp_path: Path) -> Non
 def test_a_slow_reader_costs_dropped_scans_not_memory_or_a_crash(drive: Drive) -> None:
     proc = _start_live(drive, f"replay://{drive.bag}")
     assert proc.stdout is not None
-    # a reader that takes nothing for a while: the pipe fills and writing blocks
-    threading.Event().wait(1.5)
+    # a reader that takes nothing until the replay (2.4 s after start-up) is over: the
+    # pipe fills after a few dozen records and writing blocks
+    threading.Event().wait(5.0)
     out, err = proc.communicate(timeout=60)
     assert proc.returncode == 0, err
     records = [json.loads(line) for line in out.splitlines()]
