@@ -220,6 +220,12 @@ def _parse_near(text: str, radius: float, az_tol_deg: float) -> Prior:
     )
 
 
+def _check_range_limits(range_min: float | None, range_max: float | None) -> None:
+    for name, value in (("--range-min", range_min), ("--range-max", range_max)):
+        if value is not None and not (math.isfinite(value) and value >= 0):
+            raise InputError(f"{name} must be a non-negative number, got {value}")
+
+
 def _default(value: float) -> str:
     return f"{value:g}"
 
@@ -426,9 +432,7 @@ def track(
     from mast.runs.track import TrackConfig
 
     cfg, defaults = _precisions(range_sigma, angle_sigma, scanner, survey_sigma)
-    for name, value in (("--range-min", range_min), ("--range-max", range_max)):
-        if value is not None and not (math.isfinite(value) and value >= 0):
-            raise InputError(f"{name} must be a non-negative number, got {value}")
+    _check_range_limits(range_min, range_max)
     for given in runs:
         if not given.exists():
             raise InputError("run not found", path=given)
@@ -566,9 +570,7 @@ def live(
     cfg, defaults = _precisions(range_sigma, angle_sigma, scanner, survey_sigma)
     if near is not None:
         cfg = replace(cfg, prior=_parse_near(near, radius, azimuth_tolerance))
-    for name, value in (("--range-min", range_min), ("--range-max", range_max)):
-        if value is not None and not (math.isfinite(value) and value >= 0):
-            raise InputError(f"{name} must be a non-negative number, got {value}")
+    _check_range_limits(range_min, range_max)
     for name, value in (("--timeout", timeout), ("--give-up", give_up)):
         if not (math.isfinite(value) and value > 0):
             raise InputError(f"{name} must be a positive number of seconds, got {value}")

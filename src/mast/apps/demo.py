@@ -144,19 +144,15 @@ def _live_demo(folder: Path, echo: Callable[[str], object]) -> None:
     """A simulated drive served by the SICK emulator and located as it streams in."""
     import statistics
 
-    from mast.io import write_survey
-    from mast.io.bags import write_laserscans
     from mast.live.emulate import Emulator
     from mast.live.session import run_live
     from mast.live.sources import open_source, read_run
     from mast.sim.drive import drive_scene
 
     scene = drive_scene(0, scans=LIVE_DEMO_SCANS, rate_hz=50.0)
-    folder.mkdir(parents=True, exist_ok=True)
-    beacons, bag = folder / "beacons.csv", folder / "drive_mcap"
-    write_survey(beacons, scene.survey)
-    if not bag.exists():
-        write_laserscans(bag, (s.scan for s in scene.iter_simulated()), kind="mcap")
+    beacons, bag = folder / scene.name / "beacons.csv", folder / scene.name / "scans_mcap"
+    if not bag.exists():  # `mast demo --out DIR` again: the drive is there already
+        write_scenario([scene], folder, fmt="mcap", scenario="drive")
     records: list[dict[str, object]] = []
     with Emulator("sick", read_run(bag)) as emulator:
         url = f"sick://127.0.0.1:{emulator.port}"

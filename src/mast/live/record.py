@@ -96,11 +96,8 @@ class McapRecorder:
         c = np.asarray(fix.adjustment.covariance, dtype=float)
         c = (c + c.T) / 2
         cov = np.zeros((6, 6))
-        index = (0, 1, 5)  # E -> x, N -> y, azimuth -> yaw (opposite sense)
-        sign = (1.0, 1.0, -1.0)
-        for i in range(3):
-            for j in range(3):
-                cov[index[i], index[j]] = sign[i] * sign[j] * c[i, j]
+        sign = np.array([1.0, 1.0, -1.0])  # E -> x, N -> y, azimuth -> yaw (opposite sense)
+        cov[np.ix_([0, 1, 5], [0, 1, 5])] = c * np.outer(sign, sign)
         return t[_POSE](
             header=t["std_msgs/msg/Header"](
                 stamp=t["builtin_interfaces/msg/Time"](sec=sec, nanosec=nsec), frame_id=MINE_FRAME

@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import collections
 import contextlib
+import itertools
 import math
 import socket
 import struct
@@ -492,7 +493,7 @@ class ReplaySource(Source):
         first = self._first
         assert first is not None
         try:
-            yield from self._paced(_chain(first, self._scans), stop)
+            yield from self._paced(itertools.chain([first], self._scans), stop)
         finally:
             self._scans.close()  # the bag reader, also when the run ends early
 
@@ -515,11 +516,6 @@ class ReplaySource(Source):
                 return
             self.stats.scans += 1
             yield Received(scan, time.time_ns(), time.perf_counter())
-
-
-def _chain(first: Scan, rest: Iterator[Scan]) -> Iterator[Scan]:
-    yield first
-    yield from rest
 
 
 # --------------------------------------------------------------------------- URLs
