@@ -1,0 +1,634 @@
+"""Find beacon panels in a 3D cloud: vertical, flat, of a panel's height, above the floor.
+
+Three passes over the cloud, each one chunk at a time (memory follows the
+cells and the candidate points, not the cloud):
+
+1. **Floor and roof.** The lowest and highest point of every 0.5 m plan cell.
+2. **Columns.** Of the points in the *band* (``clearance`` above the floor and
+   below the roof of their cell, or ``--band Z0,Z1`` in the cloud's frame),
+   every 2 cm plan cell keeps its lowest and highest z and which 5 cm height
+   bins hold points. A panel's cell holds one unbroken column that starts and
+   ends inside the band, at least a panel's height tall: rock walls run from
+   floor to roof, floors and roofs are left out by the band, pipes and ducts are
+   short columns, machines stand on the floor.
+3. **Candidates.** The points of those cells.
+
+The candidates are then reduced to plan: clusters of touching cells are
+ordered along their own spanning tree and split into straight pieces by
+binary segmentation (each cut must buy more than the BIC-like penalty of the
+2D segmentation); every piece is fitted with a vertical plane in 3D and kept
+only when it is vertical, flat to the noise and at least ``min_panel_height_m``
+tall; its top edge is found from where the point density along the height
+halves (the level whose count above equals the density times the height
+above a reference; unbiased for any symmetric noise). Neighbouring pieces whose
+lines meet near their ends form corners, and the corners go to the same panel
+identification as ``mast locate`` (:func:`mast.pipeline.identification.identify_panels`).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+from numpy.typing import NDArray
+
+from mast.cloud.grid import PlanGrid, cell_keys, key_ij, pack_ij
+from mast.cloud.io import Cloud
+from mast.errors import InputError
+from mast.pipeline.segmentation import Corner, Segment, Segmentation
+
+__all__ = ["Candidates", "DetectConfig", "Panel", "PlanPieces", "find_candidates", "plan_pieces"]
+
+Progress = Callable[[str, int, int], None]
+
+
+@dataclass(frozen=True, slots=True)
+class DetectConfig:
+    """Thresholds of the 3D search; lengths in metres.
+
+    Attributes
+    ----------
+    floor_cell_m : float
+        Plan cell of the floor and roof grid.
+    cell_m : float
+        Plan cell of the column test.
+    bin_m : float
+        Height bin of the column test (64 bins: the band's lowest 3.2 m at 5 cm).
+    clearance_m : float
+        A panel's points are at least this far above the floor and below the roof.
+    band : tuple of float, optional
+        ``(z0, z1)`` in the cloud's frame instead of the floor and roof.
+    min_panel_height_m, max_panel_height_m : float
+        Shortest and tallest column, and plane, that may be a panel.
+    max_tilt_deg : float
+        Largest tilt of a panel's plane from the vertical.
+    noise_m : float, optional
+        The cloud's noise (one coordinate's standard deviation); estimated if ``None``.
+    min_points : int
+        Fewest points of a piece.
+    chunk_points : int
+        Points read at once.
+    """
+
+    floor_cell_m: float = 0.5
+    cell_m: float = 0.05
+    bin_m: float = 0.05
+    clearance_m: float = 0.2
+    band: tuple[float, float] | None = None
+    min_panel_height_m: float = 0.25
+    max_panel_height_m: float = 1.5
+    max_tilt_deg: float = 3.0
+    noise_m: float | None = None
+    min_points: int = 12
+    chunk_points: int = 2_000_000
+
+
+@dataclass(frozen=True, eq=False)
+class Candidates:
+    """What the passes found: candidate points, the floor grid, the cloud's extent."""
+
+    xyz: NDArray[np.float64]
+    time: NDArray[np.float64] | None
+    floor: PlanGrid
+    cells: int
+    points_read: int
+    lower: NDArray[np.float64]
+    upper: NDArray[np.float64]
+
+
+def _band_limits(
+    floor: PlanGrid, xyz: NDArray[np.float64], cfg: DetectConfig
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    if cfg.band is not None:
+        n = xyz.shape[0]
+        return np.full(n, cfg.band[0]), np.full(n, cfg.band[1])
+    row, _ = floor.at(xyz[:, :2])
+    return floor.zmin[row] + cfg.clearance_m, floor.zmax[row] - cfg.clearance_m
+
+
+def find_candidates(
+    cloud: Cloud, cfg: DetectConfig = DetectConfig(), progress: Progress | None = None
+) -> Candidates:
+    """Passes 1-3 (module docstring): the points of panel-like columns."""
+    if cloud.count == 0:
+        raise InputError("holds no points", path=cloud.path)
+    floor: PlanGrid | None = None
+    lower = np.full(3, math.inf)
+    upper = np.full(3, -math.inf)
+    read = 0
+    for chunk in cloud.chunks(cfg.chunk_points):
+        if floor is None:
+            floor = PlanGrid(chunk.xyz[0, :2].copy(), cfg.floor_cell_m)
+        floor.add(chunk.xyz)
+        lower = np.minimum(lower, chunk.xyz.min(axis=0))
+        upper = np.maximum(upper, chunk.xyz.max(axis=0))
+        read += len(chunk.xyz)
+        if progress:
+            progress("floor and roof", read, cloud.count * 3)
+    assert floor is not None
+    columns = PlanGrid(floor.origin, cfg.cell_m)
+    done = 0
+    for chunk in cloud.chunks(cfg.chunk_points):
+        lo, hi = _band_limits(floor, chunk.xyz, cfg)
+        z = chunk.xyz[:, 2]
+        keep = (z >= lo) & (z <= hi)
+        k = np.clip(((z[keep] - lo[keep]) / cfg.bin_m).astype(np.int64), 0, 63)
+        columns.add(chunk.xyz[keep], np.left_shift(np.uint64(1), k.astype(np.uint64)))
+        done += len(z)
+        if progress:
+            progress("columns", read + done, cloud.count * 3)
+    panel_like, zlo, zhi = _panel_runs(columns, floor, cfg)
+    wanted = columns.keys[panel_like]
+    zlo, zhi = zlo[panel_like], zhi[panel_like]
+    xs: list[NDArray[np.float64]] = []
+    ts: list[NDArray[np.float64]] = []
+    done = 0
+    for chunk in cloud.chunks(cfg.chunk_points):
+        lo, hi = _band_limits(floor, chunk.xyz, cfg)
+        z = chunk.xyz[:, 2]
+        keys = cell_keys(chunk.xyz[:, :2], columns.origin, cfg.cell_m)
+        pos = np.minimum(np.searchsorted(wanted, keys), max(wanted.size - 1, 0))
+        keep = (z >= lo) & (z <= hi)
+        if wanted.size:
+            keep &= (wanted[pos] == keys) & (z >= zlo[pos]) & (z <= zhi[pos])
+        else:
+            keep[:] = False
+        xs.append(chunk.xyz[keep])
+        if chunk.time is not None:
+            ts.append(chunk.time[keep])
+        done += len(z)
+        if progress:
+            progress("candidates", 2 * read + done, cloud.count * 3)
+    xyz = np.concatenate(xs) if xs else np.zeros((0, 3))
+    time = np.concatenate(ts) if ts and cloud.time_field is not None else None
+    return Candidates(xyz, time, floor, int(wanted.size), read, lower, upper)
+
+
+def _panel_runs(
+    columns: PlanGrid, floor: PlanGrid, cfg: DetectConfig
+) -> tuple[NDArray[np.bool_], NDArray[np.float64], NDArray[np.float64]]:
+    """Cells holding a panel-like column, and its lowest and highest height.
+
+    A cell's height bins are closed over gaps of up to two bins (a sparse cloud
+    leaves bins of a panel empty); of the runs of bins, the tallest one between
+    ``min_panel_height_m`` and ``max_panel_height_m`` that touches neither end of
+    the band is the cell's column, so a pipe or a duct above a panel in the same
+    cell does not hide it, and a rock wall (floor to roof) is never one.
+    """
+    n = columns.keys.size
+    if n == 0:
+        return np.zeros(0, bool), np.zeros(0), np.zeros(0)
+    occupied = ((columns.bins[:, None] >> np.arange(64, dtype=np.uint64)) & np.uint64(1)) > 0
+    if cfg.band is not None:
+        lo = np.full(n, cfg.band[0])
+        hi = np.full(n, cfg.band[1])
+    else:
+        row, _ = floor.at(columns.centres())
+        lo = floor.zmin[row] + cfg.clearance_m
+        hi = floor.zmax[row] - cfg.clearance_m
+    top_bin = np.clip(np.floor((hi - lo) / cfg.bin_m).astype(np.int64), 0, 63)
+    grown = occupied.copy()
+    grown[:, 1:] |= occupied[:, :-1]
+    grown[:, :-1] |= occupied[:, 1:]
+    closed = grown.copy()
+    closed[:, 1:] &= grown[:, :-1]
+    closed[:, :-1] &= grown[:, 1:]
+    closed |= occupied
+    pad = np.zeros((n, 1), bool)
+    edges = np.diff(np.hstack([pad, closed, pad]).astype(np.int8), axis=1)
+    cell_s, start = np.nonzero(edges == 1)
+    cell_e, end = np.nonzero(edges == -1)  # exclusive, in the same order as the starts
+    del cell_e
+    height = (end - start) * cfg.bin_m
+    filled = (
+        np.array([occupied[c, a:b].sum() for c, a, b in zip(cell_s, start, end, strict=True)])
+        if cell_s.size
+        else np.zeros(0)
+    )
+    ok = (
+        (height >= cfg.min_panel_height_m)
+        & (height <= cfg.max_panel_height_m + 2 * cfg.bin_m)
+        & (start > 0)
+        & (end - 1 < top_bin[cell_s])
+        & (filled >= 0.5 * (end - start))
+    )
+    best = np.full(n, -1.0)
+    zlo = np.zeros(n)
+    zhi = np.zeros(n)
+    for c, a, b, h in zip(cell_s[ok], start[ok], end[ok], height[ok], strict=True):
+        if h > best[c]:
+            best[c] = h
+            zlo[c] = lo[c] + (a - 1) * cfg.bin_m
+            zhi[c] = lo[c] + (b + 1) * cfg.bin_m
+    found = best > 0
+    return found & _level_with_neighbours(columns.keys, found, zlo, zhi, cfg), zlo, zhi
+
+
+def _level_with_neighbours(
+    keys: NDArray[np.int64],
+    found: NDArray[np.bool_],
+    zlo: NDArray[np.float64],
+    zhi: NDArray[np.float64],
+    cfg: DetectConfig,
+) -> NDArray[np.bool_]:
+    """Columns with two or more neighbours (of the 8) whose columns start and end at the
+    same heights (within 3 bins): a panel's top and bottom are level along it, the
+    bits of rough rock that pass for a column in one cell are not."""
+    rows = np.flatnonzero(found)
+    k = keys[rows]
+    ij = key_ij(k)
+    agree = np.zeros(rows.size, np.int64)
+    tol = 3.0 * cfg.bin_m
+    for di in (-1, 0, 1):
+        for dj in (-1, 0, 1):
+            if di == 0 and dj == 0:
+                continue
+            nb = ij + np.array([di, dj])
+            nk = pack_ij(nb)
+            pos = np.minimum(np.searchsorted(k, nk), max(k.size - 1, 0))
+            hit = k[pos] == nk
+            same = (np.abs(zhi[rows[pos]] - zhi[rows]) <= tol) & (
+                np.abs(zlo[rows[pos]] - zlo[rows]) <= tol
+            )
+            agree += hit & same
+    out = np.zeros(found.size, bool)
+    out[rows] = agree >= 2
+    return out
+
+
+# --------------------------------------------------------------------------- plan pieces
+
+
+@dataclass(frozen=True, eq=False)
+class Panel:
+    """A vertical plane found in the cloud: its plan line (a :class:`Segment`), its
+    3D fit and its top edge.
+
+    Attributes
+    ----------
+    segment : Segment
+        The plan line; ``beams`` index the candidate points.
+    tilt_deg : float
+        Angle of the plane from the vertical.
+    plane_rms_m : float
+    height_m : float
+        Extent of its points in z (2nd to 98th percentile).
+    top_m, sigma_top_m : float
+        Height of the top edge and its standard deviation.
+    bottom_m : float
+    time_s : float or None
+        Median time of its points.
+    """
+
+    segment: Segment
+    tilt_deg: float
+    plane_rms_m: float
+    height_m: float
+    top_m: float
+    sigma_top_m: float
+    bottom_m: float
+    time_s: float | None
+
+
+@dataclass(frozen=True, eq=False)
+class PlanPieces:
+    """The candidates in plan: panels, the corners between them, rejected pieces."""
+
+    segmentation: Segmentation
+    panels: tuple[Panel, ...]
+    rejected: dict[str, int] = field(default_factory=dict)
+
+
+def estimate_noise(xy: NDArray[np.float64], k: int = 48) -> float:
+    """The plan noise from local line fits: median smallest spread of ``k`` neighbours."""
+    from scipy.spatial import cKDTree
+
+    if xy.shape[0] < k + 1:
+        return 0.0
+    tree = cKDTree(xy)
+    sample = xy[:: max(1, xy.shape[0] // 20000)]
+    _, idx = tree.query(sample, k=k)
+    nb = xy[idx]
+    c = nb - nb.mean(axis=1, keepdims=True)
+    cov = np.einsum("nki,nkj->nij", c, c) / (k - 1)
+    lam = np.linalg.eigvalsh(cov)[:, 0]
+    return float(math.sqrt(max(float(np.median(lam)), 0.0)))
+
+
+def _clusters(xy: NDArray[np.float64], cell_m: float) -> tuple[NDArray[np.intp], int]:
+    """Cluster label of every point: cells touching (8-neighbours) are one cluster."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    keys = cell_keys(xy, np.zeros(2), cell_m)
+    uniq, inv = np.unique(keys, return_inverse=True)
+    ij = key_ij(uniq)
+    rows, cols = [], []
+    for di in (-1, 0, 1):
+        for dj in (-1, 0, 1):
+            if di == 0 and dj == 0:
+                continue
+            nk = pack_ij(ij + np.array([di, dj]))
+            pos = np.minimum(np.searchsorted(uniq, nk), uniq.size - 1)
+            hit = uniq[pos] == nk
+            rows.append(np.flatnonzero(hit))
+            cols.append(pos[hit])
+    r = np.concatenate(rows) if rows else np.zeros(0, np.intp)
+    c = np.concatenate(cols) if cols else np.zeros(0, np.intp)
+    graph = coo_matrix((np.ones(r.size), (r, c)), shape=(uniq.size, uniq.size))
+    n, label = connected_components(graph, directed=False)
+    return np.asarray(label[inv], dtype=np.intp), int(n)
+
+
+def _lines_in(
+    xy: NDArray[np.float64], noise: float, min_points: int, gap_m: float, seed: int = 0
+) -> list[NDArray[np.intp]]:
+    """Straight pieces of one cluster by sequential RANSAC: the line through two points
+    with the most points within ``3 noise`` (a few hundred tries), refitted by total
+    least squares, cut at gaps wider than ``gap_m`` along it; its longest run is a
+    piece, taken out, and the search goes on while a piece of ``min_points`` is left.
+    Junk beside a panel (rock, a pipe) does not bend its line, as it would bend a
+    partition of the points in one order."""
+    rng = np.random.default_rng(seed)
+    left = np.arange(xy.shape[0])
+    out: list[NDArray[np.intp]] = []
+    band = 3.0 * noise
+    while left.size >= min_points:
+        p = xy[left]
+        tries = min(300, left.size * (left.size - 1) // 2)
+        i = rng.integers(0, left.size, tries)
+        j = rng.integers(0, left.size, tries)
+        d = p[j] - p[i]
+        length = np.hypot(d[:, 0], d[:, 1])
+        ok = length > 2.0 * band
+        if not np.any(ok):
+            break
+        i, d, length = i[ok], d[ok], length[ok]
+        nrm = np.column_stack([-d[:, 1], d[:, 0]]) / length[:, None]
+        dist = np.abs(np.einsum("tk,tnk->tn", nrm, p[None, :, :] - p[i][:, None, :]))
+        best = int(np.argmax((dist <= band).sum(axis=1)))
+        inl = np.flatnonzero(dist[best] <= band)
+        run = None
+        for _ in range(2):  # refit, gather again
+            if inl.size < 2:
+                break
+            c = p[inl].mean(axis=0)
+            _, _, vt = np.linalg.svd(p[inl] - c, full_matrices=False)
+            u, n = vt[0], vt[1]
+            near = np.flatnonzero(np.abs((p - c) @ n) <= band)
+            t = (p[near] - c) @ u
+            order = np.argsort(t)
+            cuts = np.flatnonzero(np.diff(t[order]) > gap_m) + 1
+            runs = np.split(order, cuts)
+            run = max(runs, key=len)
+            inl = near[run]
+        if inl.size < min_points:
+            break
+        out.append(left[inl])
+        left = np.delete(left, inl)
+    return out
+
+
+def _main_run(z: NDArray[np.float64], bin_m: float) -> NDArray[np.intp]:
+    """The points of a plan piece in its most populous run of heights (gaps of more than
+    three empty bins cut it): a pipe above a panel shares its plan line, not its heights."""
+    order = np.argsort(z)
+    cuts = np.flatnonzero(np.diff(z[order]) > 3.0 * bin_m) + 1
+    return np.asarray(max(np.split(order, cuts), key=len), dtype=np.intp)
+
+
+def _top_edge(z: NDArray[np.float64], noise: float) -> tuple[float, float, float]:
+    """Top edge of a panel from its points' heights, and its standard deviation; and
+    the bottom edge.
+
+    With points spread evenly over the height at ``lam`` per metre and symmetric
+    noise, the count above any level ``r`` well below the top is ``lam (top - r)``
+    exactly (noise moves as many points up across the edge as it loses), so
+    ``top = r + count / lam``; ``r`` is ``3 sigma`` below a first estimate.
+    """
+    lo, hi = np.quantile(z, [0.02, 0.98])
+    height = float(hi - lo)
+    mid = (z > lo + 0.25 * height) & (z < hi - 0.25 * height)
+    n_mid = int(mid.sum())
+    lam = n_mid / max(0.5 * height, 1e-9)
+    top = float(hi)
+    window = max(3.0 * noise, 0.01)
+    above = 0
+    for _ in range(3):
+        ref = top - window
+        above = int(np.count_nonzero(z > ref))
+        top = ref + above / max(lam, 1e-9)
+    rel = 1.0 / math.sqrt(max(n_mid, 1))
+    sigma = math.sqrt(above / max(lam, 1e-9) ** 2 + (window * rel) ** 2)
+    below = int(np.count_nonzero(z < float(lo) + window))
+    bottom = float(lo) + window - below / max(lam, 1e-9)
+    return top, sigma, bottom
+
+
+def _plane(points: NDArray[np.float64]) -> tuple[float, float]:
+    """Tilt from the vertical (degrees) and RMS of a plane fitted to 3D points."""
+    c = points - points.mean(axis=0)
+    _, s, vt = np.linalg.svd(c, full_matrices=False)
+    normal = vt[-1]
+    tilt = math.degrees(math.asin(min(1.0, abs(float(normal[2])))))
+    return tilt, float(s[-1] / math.sqrt(points.shape[0]))
+
+
+def _segment(
+    index: int,
+    cluster: int,
+    rows: NDArray[np.intp],
+    xy: NDArray[np.float64],
+    noise: float,
+    trim_m: float,
+) -> Segment:
+    """A plan :class:`Segment` of a piece (``rows``: its candidate points)."""
+    c = xy.mean(axis=0)
+    q = xy - c
+    _, _, vt = np.linalg.svd(q, full_matrices=False)
+    d = vt[0]
+    t = q @ d
+    if t[-1] < t[0]:
+        d, t = -d, -t
+    n = np.array([-d[1], d[0]])
+    order = np.argsort(t)
+    t_sorted = t[order]
+    spread = float(np.sum(t**2))
+    return Segment(
+        index=index,
+        run=cluster,
+        beams=rows[order],
+        points=xy[order],
+        centroid=c,
+        direction=d,
+        normal=n,
+        length=float(t_sorted[-1] - t_sorted[0]),
+        start=c + t_sorted[0] * d,
+        end=c + t_sorted[-1] * d,
+        rms=float(np.sqrt(np.mean((q @ n) ** 2))),
+        sigma_direction=noise / math.sqrt(spread) if spread > 0 else math.inf,
+        spacing_start=trim_m,
+        spacing_end=trim_m,
+    )
+
+
+def _reversed(seg: Segment, index: int) -> Segment:
+    return Segment(
+        index=index,
+        run=seg.run,
+        beams=seg.beams[::-1],
+        points=seg.points[::-1],
+        centroid=seg.centroid,
+        direction=-seg.direction,
+        normal=-seg.normal,
+        length=seg.length,
+        start=seg.end,
+        end=seg.start,
+        rms=seg.rms,
+        sigma_direction=seg.sigma_direction,
+        spacing_start=seg.spacing_end,
+        spacing_end=seg.spacing_start,
+    )
+
+
+def plan_pieces(cand: Candidates, cfg: DetectConfig = DetectConfig()) -> PlanPieces:
+    """Clusters, straight pieces, vertical panels and their corners (module docstring).
+
+    The segmentation's segments come in pairs: ``k`` and ``k + n`` are one piece in
+    both directions, so that every corner can be met with its first piece ending
+    at the node and its second starting there, as a scan meets them.
+    """
+    xyz = cand.xyz
+    rejected = {
+        "too_few_points": 0,
+        "not_vertical": 0,
+        "not_flat": 0,
+        "too_short": 0,
+        "too_tall": 0,
+    }
+    if xyz.shape[0] == 0:
+        return PlanPieces(Segmentation((), (), cfg.noise_m or 0.0), (), rejected)
+    xy = xyz[:, :2]
+    noise = cfg.noise_m if cfg.noise_m is not None else estimate_noise(xy)
+    noise = max(noise, 1e-4)
+    label, _ = _clusters(xy, cfg.cell_m)
+    by_cluster = np.argsort(label, kind="stable")
+    bounds = np.flatnonzero(np.diff(label[by_cluster])) + 1
+    pieces: list[tuple[int, NDArray[np.intp]]] = []
+    for group in np.split(by_cluster, bounds):
+        if group.size < cfg.min_points:
+            rejected["too_few_points"] += 1
+            continue
+        for rows in _lines_in(xy[group], noise, cfg.min_points, 2.0 * cfg.cell_m):
+            rows = group[rows]
+            pieces.append((int(label[group[0]]), rows[_main_run(xyz[rows, 2], cfg.bin_m)]))
+    kept: list[tuple[int, NDArray[np.intp], float, float]] = []
+    for cluster, rows in pieces:
+        if rows.size < cfg.min_points:
+            rejected["too_few_points"] += 1
+            continue
+        tilt, rms = _plane(xyz[rows])
+        if tilt > cfg.max_tilt_deg:
+            rejected["not_vertical"] += 1
+            continue
+        if rms > 3.0 * noise:
+            rejected["not_flat"] += 1
+            continue
+        kept.append((cluster, rows, tilt, rms))
+    if cfg.noise_m is None and kept:
+        # the panels' own plane fits say the noise best (flat by construction)
+        fits = [rms * math.sqrt(r.size / (r.size - 3)) for _, r, _, rms in kept if r.size >= 30]
+        if fits:
+            noise = max(float(np.median(fits)), 1e-4)
+    panels: list[Panel] = []
+    for cluster, rows, tilt, rms in kept:
+        top, sigma_top, bottom = _top_edge(xyz[rows, 2], noise)
+        if top - bottom < cfg.min_panel_height_m:
+            rejected["too_short"] += 1
+            continue
+        if top - bottom > cfg.max_panel_height_m:
+            rejected["too_tall"] += 1
+            continue
+        # a free end may lose a cell or two where it meets the wall (the column test)
+        seg = _segment(len(panels), cluster, rows, xy[rows], noise, 2.0 * cfg.cell_m)
+        t = None if cand.time is None else float(np.median(cand.time[rows]))
+        panels.append(Panel(seg, tilt, rms, top - bottom, top, sigma_top, bottom, t))
+    segs = [p.segment for p in panels]
+    corners = _corners(segs, noise)
+    segs = _trimmed(segs, corners, xy, noise, 2.0 * cfg.cell_m)
+    panels = [replace(p, segment=sg) for p, sg in zip(panels, segs, strict=True)]
+    corners = _corners(segs, noise)
+    n = len(segs)
+    both = segs + [_reversed(s, n + k) for k, s in enumerate(segs)]
+    return PlanPieces(Segmentation(tuple(both), tuple(corners), noise), tuple(panels), rejected)
+
+
+def _trimmed(
+    segs: list[Segment], corners: list[Corner], xy: NDArray[np.float64], noise: float, trim: float
+) -> list[Segment]:
+    """Pieces refitted without their points near a corner.
+
+    Within ``3 noise / sin(deflection) + 3 noise`` of where two lines meet, a point
+    may belong to either: which line took it depends on its noise across them,
+    and that choice bends both lines towards each other (a shallow corner's node
+    then slides along them by centimetres). Leaving out, from both, every point
+    within that distance of the node along its own line (which the noise across
+    it hardly moves) keeps the fits unbiased.
+    """
+    n = len(segs)
+    drop: dict[int, NDArray[np.bool_]] = {}
+    for c in corners:
+        reach = 3.0 * noise / max(abs(math.sin(c.deflection)), 0.05) + 3.0 * noise
+        for k in (c.first, c.second):
+            sg = segs[k % n]
+            t = (sg.points - c.node) @ sg.direction
+            near = np.abs(t) < reach
+            drop[k % n] = drop.get(k % n, np.zeros(len(sg), bool)) | near
+    out = []
+    for k, sg in enumerate(segs):
+        gone = drop.get(k)
+        if gone is None or (~gone).sum() < 3:
+            out.append(sg)
+            continue
+        rows = sg.beams[~gone]
+        out.append(_segment(k, sg.run, rows, xy[rows], noise, trim))
+    return out
+
+
+def _corners(segs: list[Segment], noise: float) -> list[Corner]:
+    """Corners between pieces of one cluster whose lines meet near an end of each.
+
+    The first piece is taken in the direction that ends at the node and the
+    second in the one that starts there (index ``k + n`` is piece ``k`` reversed).
+    """
+    n = len(segs)
+    reach = 0.10 + 4.0 * noise
+    out: list[Corner] = []
+    by_run: dict[int, list[Segment]] = {}
+    for s in segs:
+        by_run.setdefault(s.run, []).append(s)
+    for group in by_run.values():
+        for ai in range(len(group)):
+            for bi in range(ai + 1, len(group)):
+                a, b = group[ai], group[bi]
+                cross = a.direction[0] * b.direction[1] - a.direction[1] * b.direction[0]
+                if abs(cross) < 1e-6:
+                    continue
+                w = b.centroid - a.centroid
+                s = (w[0] * b.direction[1] - w[1] * b.direction[0]) / cross
+                node = a.centroid + s * a.direction
+                da_end = float(np.hypot(*(a.end - node)))
+                da_start = float(np.hypot(*(a.start - node)))
+                db_end = float(np.hypot(*(b.end - node)))
+                db_start = float(np.hypot(*(b.start - node)))
+                if min(da_end, da_start) > reach or min(db_end, db_start) > reach:
+                    continue
+                first = a.index if da_end <= da_start else a.index + n
+                second = b.index if db_start <= db_end else b.index + n
+                d1 = a.direction if first == a.index else -a.direction
+                d2 = b.direction if second == b.index else -b.direction
+                defl = math.atan2(d1[0] * d2[1] - d1[1] * d2[0], float(d1 @ d2))
+                out.append(Corner(first, second, defl, node))
+    return out

@@ -1,0 +1,295 @@
+"""Georeference a 3D cloud from the beacons it shows: the one pipeline ``mast georef`` runs.
+
+1. :func:`mast.cloud.detect.find_candidates` and :func:`~mast.cloud.detect.plan_pieces`:
+   vertical panels in 3D, reduced to plan lines and corners;
+2. :func:`mast.pipeline.identification.identify_panels`: the Table 1 tests of
+   ``mast locate``;
+3. :func:`mast.cloud.match.detect_beacons` and :func:`~mast.cloud.match.match_beacons`:
+   which surveyed beacon each one is;
+4. :func:`mast.cloud.adjust.adjust_transformation`: the transformation with its
+   tests, check beacons after it;
+5. with a trajectory, :func:`mast.cloud.drift.correct_drift`: a pose graph that
+   bends the cloud onto the beacons along the run.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from mast.cloud.adjust import (
+    AdjustmentError,
+    BeaconObs,
+    CheckResult,
+    Solution,
+    adjust_transformation,
+    check_beacons,
+    rigid_solution,
+)
+from mast.cloud.detect import (
+    Candidates,
+    DetectConfig,
+    PlanPieces,
+    Progress,
+    find_candidates,
+    plan_pieces,
+)
+from mast.cloud.drift import DriftCorrection, Trajectory, correct_drift
+from mast.cloud.io import Cloud
+from mast.cloud.match import Detection, Match, MatchConfig, detect_beacons, match_beacons
+from mast.core.beacon import Survey
+from mast.core.index import SurveyIndex
+from mast.core.noise import DEFAULT_SURVEY_SIGMA_M
+from mast.errors import InputError
+from mast.pipeline.identification import identify_panels
+
+__all__ = ["FoundBeacon", "Georef", "GeorefConfig", "georeference"]
+
+MODELS = ("4", "helmert7")
+
+
+@dataclass(frozen=True, slots=True)
+class GeorefConfig:
+    """What ``mast georef`` is asked to do.
+
+    Attributes
+    ----------
+    model : str
+        ``"4"`` or ``"helmert7"``.
+    checks : tuple of str
+        Beacons kept out of the solution, reported as the independent check.
+    survey_sigma_m : float
+        A surveyed coordinate's standard deviation.
+    detect, match : the stages' settings.
+    drift : float
+        The drift model of the pose graph with a trajectory: standard deviation of
+        the SLAM's relative motion as a fraction of the distance.
+    """
+
+    model: str = "4"
+    checks: tuple[str, ...] = ()
+    survey_sigma_m: float = DEFAULT_SURVEY_SIGMA_M
+    detect: DetectConfig = field(default_factory=DetectConfig)
+    match: MatchConfig = field(default_factory=MatchConfig)
+    drift: float = 0.01
+
+
+@dataclass(frozen=True, eq=False)
+class FoundBeacon:
+    """A surveyed beacon and what became of it.
+
+    ``role``: ``control``, ``check``, ``excluded`` (an outlier left out) or
+    ``not_found``; ``why`` says why a beacon is not used.
+    """
+
+    beacon: str
+    role: str
+    obs: BeaconObs | None = None
+    why: str = ""
+
+
+@dataclass(frozen=True, eq=False)
+class Georef:
+    """Everything one run found, for the outputs and the report."""
+
+    cloud: Cloud
+    survey: Survey
+    config: GeorefConfig
+    candidates: Candidates
+    pieces: PlanPieces
+    detections: list[Detection]
+    match: Match
+    beacons: list[FoundBeacon]
+    solution: Solution | None
+    checks: list[CheckResult]
+    heights: bool
+    refusal: AdjustmentError | None = None
+    drift: DriftCorrection | None = None
+
+    @property
+    def controls(self) -> list[BeaconObs]:
+        return [b.obs for b in self.beacons if b.role == "control" and b.obs is not None]
+
+
+def _observation(
+    det: Detection, beacon: str, pieces: PlanPieces, survey: Survey, heights: bool
+) -> BeaconObs:
+    edges = tuple(sorted(det.nodes))
+    panels = [pieces.panels[k] for k in det.panels.values()]
+    w = np.array([1.0 / max(p.sigma_top_m, 1e-6) ** 2 for p in panels])
+    tops = np.array([p.top_m for p in panels])
+    top = float(np.sum(w * tops) / np.sum(w))
+    sigma_top = float(1.0 / math.sqrt(float(np.sum(w))))
+    b = survey[beacon]
+    grid_top = (
+        float(np.mean([b.elevations[e - 1] for e in edges]))
+        if heights and b.elevations is not None
+        else math.nan
+    )
+    times = [p.time_s for p in panels if p.time_s is not None]
+    return BeaconObs(
+        beacon,
+        edges,
+        np.array([det.nodes[e] for e in edges]),
+        np.array([det.covariances[e] for e in edges]),
+        top,
+        sigma_top,
+        np.array([b.edges[e - 1] for e in edges]),
+        grid_top,
+        float(np.median(times)) if times else None,
+        int(sum(len(p.segment) for p in panels)),
+    )
+
+
+def georeference(
+    cloud: Cloud,
+    survey: Survey,
+    config: GeorefConfig = GeorefConfig(),
+    *,
+    trajectory: Trajectory | None = None,
+    progress: Progress | None = None,
+) -> Georef:
+    """Find the beacons in ``cloud`` and adjust the transformation to the grid.
+
+    A refusal (too few beacons, an ambiguous match, inconsistent beacons) is
+    not an exception: :attr:`Georef.refusal` says why and the rest of the
+    result says what was found, for the report.
+    """
+    if config.model not in MODELS:
+        raise InputError(f"unknown model {config.model!r}; known: {', '.join(MODELS)}")
+    unknown = [c for c in config.checks if c not in survey]
+    if unknown:
+        raise InputError(f"--check names beacon(s) not in the survey: {', '.join(unknown)}")
+    heights = all(b.elevations is not None and np.all(np.isfinite(b.elevations)) for b in survey)
+    cand = find_candidates(cloud, config.detect, progress)
+    pieces = plan_pieces(cand, config.detect)
+    index = SurveyIndex.from_survey(survey, reach_m=5.0)
+    ident = identify_panels(
+        pieces.segmentation, index.representatives, survey_sigma_m=config.survey_sigma_m
+    )
+    dets = detect_beacons(pieces, ident, index)
+    match = match_beacons(dets, survey, index, config.match)
+    found: dict[str, BeaconObs] = {
+        b: _observation(dets[d], b, pieces, survey, heights) for d, b in match.assigned.items()
+    }
+    controls = [o for b, o in found.items() if b not in config.checks]
+    checks_obs = [o for b, o in found.items() if b in config.checks]
+    refusal: AdjustmentError | None = None
+    solution: Solution | None = None
+    checks: list[CheckResult] = []
+    if match.reason == "ambiguous":
+        refusal = AdjustmentError(
+            "ambiguous",
+            f"the detections fit the survey in more than one way ({match.score} beacons "
+            f"either way); the survey repeats itself within the matching tolerance",
+        )
+    else:
+        try:
+            solution = adjust_transformation(
+                controls,
+                model=config.model,
+                survey_sigma_m=config.survey_sigma_m,
+                heights=heights,
+            )
+        except AdjustmentError as err:
+            refusal = err
+            if trajectory is not None and err.reason == "inconsistent":
+                # a drifting cloud fits no one transformation: the rigid least-squares
+                # solution is only where the pose graph starts ("before" in the report)
+                solution = rigid_solution(controls, config.model, config.survey_sigma_m, heights)
+                refusal = None
+    drift = None
+    if solution is not None:
+        checks = check_beacons(solution, checks_obs, survey_sigma_m=config.survey_sigma_m)
+        if trajectory is not None:
+            if cand.time is None:
+                raise InputError(
+                    "the points have no time (gps_time, or name one with --time-field): "
+                    "the drift correction needs it",
+                    path=cloud.path,
+                )
+            used = [o for o in controls if o.beacon not in solution.excluded]
+            drift = correct_drift(
+                trajectory,
+                used,
+                solution.transformation,
+                drift=config.drift,
+                survey_sigma_m=config.survey_sigma_m,
+                heights=heights,
+            )
+    beacons = _fates(survey, found, config, solution, match, dets)
+    return Georef(
+        cloud,
+        survey,
+        config,
+        cand,
+        pieces,
+        dets,
+        match,
+        beacons,
+        solution,
+        checks,
+        heights,
+        refusal,
+        drift,
+    )
+
+
+def _fates(
+    survey: Survey,
+    found: dict[str, BeaconObs],
+    config: GeorefConfig,
+    solution: Solution | None,
+    match: Match,
+    dets: Sequence[Detection],
+) -> list[FoundBeacon]:
+    excluded = set(solution.excluded) if solution is not None else set()
+    out = []
+    for b in survey:
+        obs = found.get(b.id)
+        if obs is None:
+            out.append(FoundBeacon(b.id, "not_found", None, "not found in the cloud"))
+        elif b.id in config.checks:
+            out.append(FoundBeacon(b.id, "check", obs))
+        elif b.id in excluded:
+            out.append(
+                FoundBeacon(b.id, "excluded", obs, "outlier: its removal alone makes the rest fit")
+            )
+        else:
+            out.append(FoundBeacon(b.id, "control", obs))
+    return out
+
+
+def explain_missing(result: Georef) -> list[FoundBeacon]:
+    """Why each beacon not found was not: outside the cloud, or in it but not seen."""
+    sol = result.solution
+    if sol is None:
+        return result.beacons
+    inv = np.linalg.inv(sol.transformation.matrix())
+    floor = result.candidates.floor
+    out = []
+    for fb in result.beacons:
+        if fb.role != "not_found":
+            out.append(fb)
+            continue
+        b = result.survey[fb.beacon]
+        xy = np.column_stack([b.edges, np.zeros(4), np.ones(4)]) @ inv.T
+        _, inside = floor.at(np.asarray(xy[:, :2], dtype=float))
+        why = (
+            "in the cloud, but no beacon found there (occluded, too few points, or not identified)"
+            if bool(np.any(inside))
+            else "outside the cloud"
+        )
+        out.append(FoundBeacon(fb.beacon, fb.role, None, why))
+    return out
+
+
+def grid_origin(result: Georef) -> NDArray[np.float64]:
+    """A grid point near the cloud (for the LAS offsets)."""
+    if result.solution is None:
+        return np.zeros(3)
+    return np.asarray(result.solution.transformation.translation, dtype=float)
