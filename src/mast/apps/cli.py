@@ -1105,6 +1105,34 @@ def bench_live(
     run_live_bench(scans=scans, seed=seed, kinds=tuple(kind or ("sick", "hokuyo")), echo=typer.echo)
 
 
+@bench_app.command("georef")
+def bench_georef(
+    clouds: Annotated[int, typer.Option("--clouds", min=0, help="Clouds without drift.")] = 20,
+    drift_clouds: Annotated[
+        int, typer.Option("--drift-clouds", min=0, help="Clouds with 1 % drift.")
+    ] = 6,
+    large_points: Annotated[
+        int, typer.Option("--large-points", min=0, help="Points of the large cloud (0: none).")
+    ] = 50_000_000,
+    density: Annotated[
+        float, typer.Option("--density", min=100.0, help="Points per square metre.")
+    ] = 1000.0,
+    out: Annotated[Path | None, typer.Option("--out", help="CSV of every cloud.")] = None,
+) -> None:
+    """Simulated SLAM clouds through mast georef: beacons found, check misclosures, honest
+    bounds, drift corrected, and a large LAZ's time and memory."""
+    from mast.apps.bench.georef import run_georef_bench
+
+    run_georef_bench(
+        clouds=clouds,
+        drift_clouds=drift_clouds,
+        large_points=large_points,
+        density=density,
+        out=out,
+        echo=typer.echo,
+    )
+
+
 @bench_app.command("dense")
 def bench_dense(
     beams: Annotated[

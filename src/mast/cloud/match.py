@@ -137,8 +137,9 @@ def detect_beacons(
     corners = list(groups.values())
 
     def designs(members: list[list[NodeMatch]]) -> frozenset[int]:
-        sets = [{index.design_of(m.beacon) for m in g} for g in members]
-        return frozenset(set.intersection(*sets))
+        # the union: beacons of one shape whose surveys differ by their noise fall into
+        # neighbouring designs, and either corner may fit only some of them
+        return frozenset(index.design_of(m.beacon) for g in members for m in g)
 
     def detection(members: list[list[NodeMatch]]) -> Detection:
         panels: dict[int, int] = {}
@@ -289,13 +290,16 @@ def _grow(
     left = set(usable) - {seed}
     # a detection's panels may be another's too: the first assigned keeps them
     panels_used = set(dets[seed].panels.values())
-    while left:
+    # a detection tried too early (its neighbours not yet matched, the tolerance from
+    # far ones too loose to be unique) is tried again once they are: until no change
+    tried: set[int] = set()
+    while left - tried:
         have = np.array(sorted(assigned))
-        rest = np.array(sorted(left))
+        rest = np.array(sorted(left - tried))
         dist = np.hypot(*(centres[rest][:, None, :] - centres[have][None, :, :]).transpose(2, 0, 1))
         k = int(np.argmin(dist.min(axis=1)))
         d = int(rest[k])
-        left.discard(d)
+        tried.add(d)
         near = have[np.argsort(dist[k])[:3]]
         reach = float(dist[k].min())
         src = np.concatenate([_points_of(dets[i]) for i in near])
@@ -331,6 +335,8 @@ def _grow(
             assigned[d] = found[0]
             taken.add(found[0])
             panels_used |= set(det.panels.values())
+            left.discard(d)
+            tried.clear()
     return assigned
 
 
