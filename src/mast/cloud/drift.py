@@ -5,11 +5,12 @@ the cloud's frame over time. Keyframes are taken every ``step_m`` of travel;
 consecutive keyframes are joined by the SLAM's own relative pose as a GTSAM
 between factor whose standard deviation is the stated drift model (see
 :data:`HEADING_PER_ROOT_M`): ``drift`` of each step in position, and a
-heading random walk of a tenth of ``drift`` per square root of a metre. Every control beacon pins the keyframe
-nearest the time it was seen: its edges, in that keyframe's body frame, must
-land on the surveyed edges (a custom factor, the edges' covariance rotated
-into the grid plus the survey's). Heights are a separate 1D chain of offsets
-with the same drift per metre, pinned by the beacons' tops.
+heading random walk of a tenth of ``drift`` per square root of a metre. Every
+control beacon pins the keyframe at the time it was seen: its edges, in that
+keyframe's body frame, must land on the surveyed edges (a custom factor, the
+edges' covariance rotated into the grid plus the survey's). Heights are a
+separate 1D chain of offsets with the same drift per metre, pinned by the
+beacons' tops.
 
 Every point is then moved by the correction of the trajectory at its time,
 ``C(t) = X(t) X_slam(t)^-1``, interpolated between keyframes; the rigid
