@@ -87,10 +87,12 @@ class DetectConfig:
 
 @dataclass(frozen=True, eq=False)
 class Candidates:
-    """What the passes found: candidate points, the floor grid, the cloud's extent."""
+    """What the passes found: candidate points (``core``: in a panel cell itself, not in
+    a neighbour of one), the floor grid, the cloud's extent."""
 
     xyz: NDArray[np.float64]
     time: NDArray[np.float64] | None
+    core: NDArray[np.bool_]
     floor: PlanGrid
     cells: int
     points_read: int
@@ -140,8 +142,9 @@ def find_candidates(
         if progress:
             progress("columns", read + done, cloud.count * 3)
     panel_like, zlo, zhi = _panel_runs(columns, floor, cfg)
-    wanted = columns.keys[panel_like]
-    zlo, zhi = zlo[panel_like], zhi[panel_like]
+    own = columns.keys[panel_like]
+    wanted, zlo, zhi = _dilated(own, zlo[panel_like], zhi[panel_like])
+    cores: list[NDArray[np.bool_]] = []
     xs: list[NDArray[np.float64]] = []
     ts: list[NDArray[np.float64]] = []
     done = 0
@@ -156,6 +159,9 @@ def find_candidates(
         else:
             keep[:] = False
         xs.append(chunk.xyz[keep])
+        kk = keys[keep]
+        cpos = np.minimum(np.searchsorted(own, kk), max(own.size - 1, 0))
+        cores.append(own[cpos] == kk if own.size else np.zeros(kk.size, bool))
         if chunk.time is not None:
             ts.append(chunk.time[keep])
         done += len(z)
@@ -163,7 +169,8 @@ def find_candidates(
             progress("candidates", 2 * read + done, cloud.count * 3)
     xyz = np.concatenate(xs) if xs else np.zeros((0, 3))
     time = np.concatenate(ts) if ts and cloud.time_field is not None else None
-    return Candidates(xyz, time, floor, int(wanted.size), read, lower, upper)
+    core = np.concatenate(cores) if cores else np.zeros(0, bool)
+    return Candidates(xyz, time, core, floor, int(own.size), read, lower, upper)
 
 
 def _panel_runs(
@@ -224,6 +231,36 @@ def _panel_runs(
             zhi[c] = lo[c] + (b + 1) * cfg.bin_m
     found = best > 0
     return found & _level_with_neighbours(columns.keys, found, zlo, zhi, cfg), zlo, zhi
+
+
+def _dilated(
+    keys: NDArray[np.int64], zlo: NDArray[np.float64], zhi: NDArray[np.float64]
+) -> tuple[NDArray[np.int64], NDArray[np.float64], NDArray[np.float64]]:
+    """The panel cells and their eight neighbours, each with the heights of the panel
+    columns beside it (the widest span).
+
+    A panel's noisy points spread a few centimetres either side of it; a cell beside
+    the panel holding only that tail is too sparse to pass as a column. Left out, it
+    would cut the tail on one side only, wherever the grid happens to fall, and pull
+    the fitted line off by a fraction of the noise (the line fits' errors were half as
+    large again as their standard deviations); taken in, the line fit's own band
+    decides.
+    """
+    if keys.size == 0:
+        return keys, zlo, zhi
+    ij = key_ij(keys)
+    offs = [(di, dj) for di in (-1, 0, 1) for dj in (-1, 0, 1)]
+    allk = np.concatenate([pack_ij(ij + np.array(o)) for o in offs])
+    lo = np.tile(zlo, len(offs))
+    hi = np.tile(zhi, len(offs))
+    order = np.argsort(allk, kind="stable")
+    allk = allk[order]
+    starts = np.flatnonzero(np.concatenate([[True], allk[1:] != allk[:-1]]))
+    return (
+        allk[starts],
+        np.minimum.reduceat(lo[order], starts),
+        np.maximum.reduceat(hi[order], starts),
+    )
 
 
 def _level_with_neighbours(
@@ -510,11 +547,17 @@ def plan_pieces(cand: Candidates, cfg: DetectConfig = DetectConfig()) -> PlanPie
     }
     if xyz.shape[0] == 0:
         return PlanPieces(Segmentation((), (), cfg.noise_m or 0.0), (), rejected)
+    from scipy.spatial import cKDTree
+
     xy = xyz[:, :2]
-    noise = cfg.noise_m if cfg.noise_m is not None else estimate_noise(xy)
+    core = np.flatnonzero(cand.core)
+    noise = cfg.noise_m if cfg.noise_m is not None else estimate_noise(xy[core])
     noise = max(noise, 1e-4)
-    label, _ = _clusters(xy, cfg.cell_m)
-    by_cluster = np.argsort(label, kind="stable")
+    tree = cKDTree(xy)
+    core_label, _ = _clusters(xy[core], cfg.cell_m)
+    label = np.full(xy.shape[0], -1, dtype=np.intp)
+    label[core] = core_label
+    by_cluster = core[np.argsort(core_label, kind="stable")]
     bounds = np.flatnonzero(np.diff(label[by_cluster])) + 1
     pieces: list[tuple[int, NDArray[np.intp]]] = []
     for group in np.split(by_cluster, bounds):
@@ -538,12 +581,11 @@ def plan_pieces(cand: Candidates, cfg: DetectConfig = DetectConfig()) -> PlanPie
             continue
         kept.append((cluster, rows, tilt, rms))
     if cfg.noise_m is None and kept:
-        # the panels' own plane fits say the noise best (flat by construction)
-        fits = [rms * math.sqrt(r.size / (r.size - 3)) for _, r, _, rms in kept if r.size >= 30]
-        if fits:
-            noise = max(float(np.median(fits)), 1e-4)
+        noise = _panel_noise(kept, xyz, tree, noise)
     panels: list[Panel] = []
     for cluster, rows, tilt, rms in kept:
+        # the piece's points found again among all candidates, its noise's tails with them
+        rows = _near_line(rows, xyz, tree, 3.0 * noise, 1.0)
         top, sigma_top, bottom = _top_edge(xyz[rows, 2], noise)
         if top - bottom < cfg.min_panel_height_m:
             rejected["too_short"] += 1
@@ -565,6 +607,81 @@ def plan_pieces(cand: Candidates, cfg: DetectConfig = DetectConfig()) -> PlanPie
     return PlanPieces(Segmentation(tuple(both), tuple(corners), noise), tuple(panels), rejected)
 
 
+def _near_line(
+    rows: NDArray[np.intp],
+    xyz: NDArray[np.float64],
+    tree: object,
+    band: float,
+    middle: float,
+) -> NDArray[np.intp]:
+    """The candidates within ``band`` of a piece's plan line, along the middle
+    ``middle`` share of its extent and within its heights (and 3 bands beyond)."""
+    p = xyz[rows, :2]
+    c = p.mean(axis=0)
+    _, _, vt = np.linalg.svd(p - c, full_matrices=False)
+    t = (p - c) @ vt[0]
+    a0, a1 = float(t.min()), float(t.max())
+    cut = 0.5 * (1.0 - middle) * (a1 - a0)
+    a0, a1 = a0 + cut, a1 - cut
+    reach = max(abs(a0), abs(a1)) + band
+    found = np.asarray(tree.query_ball_point(c, reach), dtype=np.intp)  # type: ignore[attr-defined]
+    q = xyz[found, :2] - c
+    along, across = q @ vt[0], q @ vt[1]
+    z = xyz[found, 2]
+    z0, z1 = float(xyz[rows, 2].min()), float(xyz[rows, 2].max())
+    near = (
+        (along >= a0)
+        & (along <= a1)
+        & (np.abs(across) <= band)
+        & (z >= z0 - 3.0 * band)
+        & (z <= z1 + 3.0 * band)
+    )
+    return np.sort(found[near])
+
+
+def _panel_noise(
+    kept: list[tuple[int, NDArray[np.intp], float, float]],
+    xyz: NDArray[np.float64],
+    tree: object,
+    noise: float,
+) -> float:
+    """The noise across the panels: the median, over the flattest pieces, of each
+    piece's own RMS about its line.
+
+    A piece holds only points within 3 noise of the first estimate, which cuts its
+    tails; so each piece's RMS is found again from the candidates within 4 of its own
+    RMS of its line, along the middle half of its extent (clear of the corners), six
+    times over (a band of 4 sigma keeps all but 0.006 % of the points, and the RMS
+    within it is 0.999 sigma). Panels are the flattest surfaces that pass: rock and
+    clutter that pass too only have larger RMS, and may be most of the pieces, so
+    the estimate is the median of the flattest group (the pieces within 1.25 times the
+    lowest decile).
+    """
+    rms = []
+    for _cluster, rows, _tilt, plane_rms in kept:
+        # a short piece's line takes up part of its noise: long ones only
+        p = xyz[rows, :2]
+        if rows.size < 100 or float(np.max(np.ptp(p, axis=0))) < 0.15:
+            continue
+        own: float | None = max(plane_rms, noise, 1e-4)
+        for _ in range(6):
+            assert own is not None
+            near = _near_line(rows, xyz, tree, 4.0 * own, 0.5)
+            if near.size < 15:
+                own = None  # too short to say: left out
+                break
+            p = xyz[near, :2]
+            _, sv, _ = np.linalg.svd(p - p.mean(axis=0), full_matrices=False)
+            own = max(float(sv[-1] / math.sqrt(near.size)), 1e-4)
+        if own is not None:
+            rms.append(own)
+    if not rms:
+        return noise
+    r = np.array(rms)
+    flat = r[r <= 1.25 * np.quantile(r, 0.1)]
+    return float(np.median(flat))
+
+
 def _trimmed(
     segs: list[Segment], corners: list[Corner], xy: NDArray[np.float64], noise: float, trim: float
 ) -> list[Segment]:
@@ -575,7 +692,7 @@ def _trimmed(
     and that choice bends both lines towards each other (a shallow corner's node
     then slides along them by centimetres). Leaving out, from both, every point
     within that distance of the node along its own line (which the noise across
-    it hardly moves) keeps the fits unbiased.
+    it hardly moves) keeps the fits unbiased. Points past the node are left out too.
     """
     n = len(segs)
     drop: dict[int, NDArray[np.bool_]] = {}
@@ -584,7 +701,10 @@ def _trimmed(
         for k in (c.first, c.second):
             sg = segs[k % n]
             t = (sg.points - c.node) @ sg.direction
-            near = np.abs(t) < reach
+            # and every point past the node: a panel ends at its corner (what lies
+            # beyond, within the line's band, is the neighbour or the wall)
+            side = 1.0 if float(np.median(t)) >= 0 else -1.0
+            near = (np.abs(t) < reach) | (side * t < 0)
             drop[k % n] = drop.get(k % n, np.zeros(len(sg), bool)) | near
     out = []
     for k, sg in enumerate(segs):

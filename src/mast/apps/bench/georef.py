@@ -7,7 +7,9 @@ Three parts, each printed as a table (and written as CSV with ``--out``):
   fourth beacon, inner ones only, is a check. Per cloud: beacons with enough
   points (every panel 50 or more) found and correctly identified (each
   detected edge within 5 cm of the truth of the beacon it was taken for), wrong
-  identifications, the largest check-beacon misclosure (horizontal and
+  identifications (a detection taken for a beacon it is not, or not at a beacon
+  at all), right beacons with an edge more than 5 cm off, the largest
+  check-beacon misclosure (horizontal and
   vertical), and whether the true transformation lies inside the estimate's
   own 95 % region (chi-square with 4 degrees of freedom on the parameters at
   the estimate's centre point).
@@ -52,6 +54,7 @@ class CloudFigures:
     eligible: int
     found_correct: int
     wrong: int
+    edge_off: int
     status: str
     check_h: float
     check_v: float
@@ -99,15 +102,20 @@ def one_cloud(
     seconds = time.perf_counter() - start
     true_local = {b["id"]: np.array(b["edges_local"]) for b in truth["beacons"]}
     eligible = {b["id"] for b in truth["beacons"] if min(b["panel_points"]) >= ENOUGH_PANEL_POINTS}
-    found_correct = wrong = 0
+    found_correct = wrong = off = 0
+    centres = {b: v[1:3, :2].mean(axis=0) for b, v in true_local.items()}
     for fb in result.beacons:
         if fb.obs is None:
             continue
+        here = fb.obs.cloud_xy.mean(axis=0)
+        nearest = min(centres, key=lambda b: float(np.hypot(*(centres[b] - here))))
         e = true_local[fb.beacon][[k - 1 for k in fb.obs.edges], :2]
-        if float(np.max(np.hypot(*(fb.obs.cloud_xy - e).T))) <= WRONG_ID_M:
-            found_correct += fb.beacon in eligible
+        if nearest != fb.beacon or float(np.hypot(*(centres[nearest] - here))) > 0.5:
+            wrong += 1  # taken for another beacon, or not at a beacon at all
+        elif float(np.max(np.hypot(*(fb.obs.cloud_xy - e).T))) > WRONG_ID_M:
+            off += 1  # the right beacon, an edge found more than 5 cm off
         else:
-            wrong += 1
+            found_correct += fb.beacon in eligible
     status = "georeferenced" if result.refusal is None else result.refusal.reason
     check_h = check_v = before_h = math.nan
     inside: bool | None = None
@@ -162,6 +170,7 @@ def one_cloud(
         len(eligible),
         found_correct,
         wrong,
+        off,
         status,
         check_h,
         check_v,
@@ -222,6 +231,7 @@ def run_georef_bench(
             echo(
                 f"{k:3d} {length:6.0f} m {fig.beacons:3d} beacons drift {100 * drift:.0f} %: "
                 f"{fig.status}, {fig.found_correct}/{fig.eligible} found, {fig.wrong} wrong, "
+                f"{fig.edge_off} edges > 5 cm off, "
                 f"check {fig.check_h:.1f} mm h (before {fig.check_h_before_mm:.1f}), "
                 f"{fig.check_v:.1f} mm v, inside 95 %: {fig.inside_95}, {fig.seconds:.0f} s"
             )
