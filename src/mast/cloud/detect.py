@@ -724,7 +724,7 @@ def _corners(segs: list[Segment], noise: float) -> list[Corner]:
     second in the one that starts there (index ``k + n`` is piece ``k`` reversed).
     """
     n = len(segs)
-    reach = 0.10 + 4.0 * noise
+    reach = 0.20 + 4.0 * noise
     out: list[Corner] = []
     by_run: dict[int, list[Segment]] = {}
     for s in segs:
