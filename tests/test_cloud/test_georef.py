@@ -7,6 +7,7 @@ import csv
 import json
 import math
 from pathlib import Path
+from subprocess import CompletedProcess
 from typing import Any
 
 import numpy as np
@@ -36,12 +37,15 @@ def truth(scene: CloudScenario) -> dict[str, Any]:
 @pytest.fixture(scope="module")
 def georef(scene: CloudScenario, tmp_path_factory: pytest.TempPathFactory) -> Path:
     out = tmp_path_factory.mktemp("georef")
-    done = run_mast_text(
-        "georef", str(scene.cloud), "-b", str(scene.survey), "--out", str(out), "--check", "B03"
-    )
+    done = _georef(scene.cloud, scene.survey, out, "--check", "B03")
     assert done.returncode == 0, done.stderr
     assert "check B03" in done.stdout
     return out
+
+
+def _georef(cloud: Path, survey: Path, out: Path, *args: str) -> CompletedProcess[str]:
+    """``mast georef CLOUD -b SURVEY --out OUT ARGS`` in its own process."""
+    return run_mast_text("georef", str(cloud), "-b", str(survey), "--out", str(out), *args)
 
 
 def _to_grid(truth: dict[str, Any], xyz: np.ndarray) -> np.ndarray:
@@ -154,16 +158,7 @@ def test_the_report_renders_in_chromium(georef: Path, tmp_path: Path) -> None:
 
 
 def test_too_few_beacons_is_refused_with_its_reason(scene: CloudScenario, tmp_path: Path) -> None:
-    done = run_mast_text(
-        "georef",
-        str(scene.cloud),
-        "-b",
-        str(scene.survey),
-        "--out",
-        str(tmp_path),
-        "--check",
-        "B01,B02,B03,B04",
-    )
+    done = _georef(scene.cloud, scene.survey, tmp_path, "--check", "B01,B02,B03,B04")
     assert done.returncode == 3, done.stderr
     assert "too_few" in done.stderr
     assert "1 control beacon" in done.stderr
@@ -172,16 +167,7 @@ def test_too_few_beacons_is_refused_with_its_reason(scene: CloudScenario, tmp_pa
 
 
 def test_helmert7_needs_three_and_finds_a_unit_scale(scene: CloudScenario, tmp_path: Path) -> None:
-    done = run_mast_text(
-        "georef",
-        str(scene.cloud),
-        "-b",
-        str(scene.survey),
-        "--out",
-        str(tmp_path),
-        "--model",
-        "helmert7",
-    )
+    done = _georef(scene.cloud, scene.survey, tmp_path, "--model", "helmert7")
     assert done.returncode == 0, done.stderr
     record = json.loads((tmp_path / "transform.json").read_text())
     assert record["model"] == "helmert7"
@@ -229,9 +215,7 @@ def test_ply_and_e57_give_the_same_transformation(
     cloud = tmp_path / f"cloud{suffix}"
     _copy_as(scene, cloud)
     out = tmp_path / "out"
-    done = run_mast_text(
-        "georef", str(cloud), "-b", str(scene.survey), "--out", str(out), "--check", "B03"
-    )
+    done = _georef(cloud, scene.survey, out, "--check", "B03")
     assert done.returncode == 0, done.stderr
     a = np.array(json.loads((georef / "transform.json").read_text())["matrix"])
     b = np.array(json.loads((out / "transform.json").read_text())["matrix"])
@@ -248,17 +232,8 @@ def test_drift_is_corrected_along_the_trajectory(tmp_path: Path) -> None:
         CloudOptions(length_m=160.0, beacons=7, density=1500.0, drift=0.01),
     )
     out = tmp_path / "out"
-    done = run_mast_text(
-        "georef",
-        str(scene.cloud),
-        "-b",
-        str(scene.survey),
-        "--out",
-        str(out),
-        "--check",
-        "B04",
-        "--trajectory",
-        str(scene.trajectory),
+    done = _georef(
+        scene.cloud, scene.survey, out, "--check", "B04", "--trajectory", str(scene.trajectory)
     )
     assert done.returncode == 0, done.stderr
     with (out / "beacons_found.csv").open() as fh:
@@ -276,9 +251,7 @@ def test_drift_is_corrected_along_the_trajectory(tmp_path: Path) -> None:
     record = json.loads((out / "transform.json").read_text())
     assert record["drift_correction"]["keyframes"] > 100
     # without the trajectory the same cloud fits no one transformation: refused
-    rigid = run_mast_text(
-        "georef", str(scene.cloud), "-b", str(scene.survey), "--out", str(tmp_path / "rigid")
-    )
+    rigid = _georef(scene.cloud, scene.survey, tmp_path / "rigid")
     assert rigid.returncode == 3
     assert "--trajectory" in rigid.stderr
 
@@ -295,9 +268,7 @@ def test_drift_is_corrected_along_the_trajectory(tmp_path: Path) -> None:
 def test_bad_options_are_one_line_errors(
     scene: CloudScenario, tmp_path: Path, args: list[str], message: str
 ) -> None:
-    done = run_mast_text(
-        "georef", str(scene.cloud), "-b", str(scene.survey), "--out", str(tmp_path), *args
-    )
+    done = _georef(scene.cloud, scene.survey, tmp_path, *args)
     assert done.returncode == 2
     assert message in done.stderr
     assert len(done.stderr.strip().splitlines()) == 1
@@ -306,28 +277,17 @@ def test_bad_options_are_one_line_errors(
 def test_bad_files_are_one_line_errors_naming_them(scene: CloudScenario, tmp_path: Path) -> None:
     txt = tmp_path / "cloud.xyz"
     txt.write_text("1 2 3\n")
-    done = run_mast_text("georef", str(txt), "-b", str(scene.survey), "--out", str(tmp_path / "o"))
+    done = _georef(txt, scene.survey, tmp_path / "o")
     assert done.returncode == 2
     assert "cloud.xyz" in done.stderr
     broken = tmp_path / "broken.laz"
     broken.write_bytes(scene.cloud.read_bytes()[:5000])
-    done = run_mast_text(
-        "georef", str(broken), "-b", str(scene.survey), "--out", str(tmp_path / "o")
-    )
+    done = _georef(broken, scene.survey, tmp_path / "o")
     assert done.returncode == 2, done.stderr
     assert "broken.laz" in done.stderr
     assert len(done.stderr.strip().splitlines()) == 1
     traj = tmp_path / "t.tum"
     traj.write_text("# t x y z qx qy qz qw\n1 2 3\n")
-    done = run_mast_text(
-        "georef",
-        str(scene.cloud),
-        "-b",
-        str(scene.survey),
-        "--out",
-        str(tmp_path / "o"),
-        "--trajectory",
-        str(traj),
-    )
+    done = _georef(scene.cloud, scene.survey, tmp_path / "o", "--trajectory", str(traj))
     assert done.returncode == 2
     assert "t.tum, line 2" in done.stderr

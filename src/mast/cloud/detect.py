@@ -34,7 +34,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from numpy.typing import NDArray
 
-from mast.cloud.grid import PlanGrid, cell_keys, key_ij, pack_ij
+from mast.cloud.grid import EIGHT, PlanGrid, cell_keys, key_ij, neighbours, pack_ij
 from mast.cloud.io import Cloud
 from mast.errors import InputError
 from mast.pipeline.segmentation import Corner, Segment, Segmentation
@@ -249,7 +249,7 @@ def _dilated(
     if keys.size == 0:
         return keys, zlo, zhi
     ij = key_ij(keys)
-    offs = [(di, dj) for di in (-1, 0, 1) for dj in (-1, 0, 1)]
+    offs = [(0, 0), *EIGHT]
     allk = np.concatenate([pack_ij(ij + np.array(o)) for o in offs])
     lo = np.tile(zlo, len(offs))
     hi = np.tile(zhi, len(offs))
@@ -275,21 +275,13 @@ def _level_with_neighbours(
     bits of rough rock that pass for a column in one cell are not."""
     rows = np.flatnonzero(found)
     k = keys[rows]
-    ij = key_ij(k)
     agree = np.zeros(rows.size, np.int64)
     tol = 3.0 * cfg.bin_m
-    for di in (-1, 0, 1):
-        for dj in (-1, 0, 1):
-            if di == 0 and dj == 0:
-                continue
-            nb = ij + np.array([di, dj])
-            nk = pack_ij(nb)
-            pos = np.minimum(np.searchsorted(k, nk), max(k.size - 1, 0))
-            hit = k[pos] == nk
-            same = (np.abs(zhi[rows[pos]] - zhi[rows]) <= tol) & (
-                np.abs(zlo[rows[pos]] - zlo[rows]) <= tol
-            )
-            agree += hit & same
+    for hit, pos in neighbours(k):
+        same = (np.abs(zhi[rows[pos]] - zhi[rows]) <= tol) & (
+            np.abs(zlo[rows[pos]] - zlo[rows]) <= tol
+        )
+        agree += hit & same
     out = np.zeros(found.size, bool)
     out[rows] = agree >= 2
     return out
@@ -361,17 +353,10 @@ def _clusters(xy: NDArray[np.float64], cell_m: float) -> tuple[NDArray[np.intp],
 
     keys = cell_keys(xy, np.zeros(2), cell_m)
     uniq, inv = np.unique(keys, return_inverse=True)
-    ij = key_ij(uniq)
     rows, cols = [], []
-    for di in (-1, 0, 1):
-        for dj in (-1, 0, 1):
-            if di == 0 and dj == 0:
-                continue
-            nk = pack_ij(ij + np.array([di, dj]))
-            pos = np.minimum(np.searchsorted(uniq, nk), uniq.size - 1)
-            hit = uniq[pos] == nk
-            rows.append(np.flatnonzero(hit))
-            cols.append(pos[hit])
+    for hit, pos in neighbours(uniq):
+        rows.append(np.flatnonzero(hit))
+        cols.append(pos[hit])
     r = np.concatenate(rows) if rows else np.zeros(0, np.intp)
     c = np.concatenate(cols) if cols else np.zeros(0, np.intp)
     graph = coo_matrix((np.ones(r.size), (r, c)), shape=(uniq.size, uniq.size))

@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["PlanGrid", "cell_keys", "key_ij", "pack_ij"]
+__all__ = ["EIGHT", "PlanGrid", "cell_keys", "key_ij", "neighbours", "pack_ij"]
 
 _SHIFT = np.int64(1 << 30)  # keys stay positive: (i + 2^30) << 32 < 2^63
 
@@ -28,6 +28,27 @@ def pack_ij(ij: NDArray[np.int64]) -> NDArray[np.int64]:
     """Packed keys of integer columns and rows ``(n, 2)`` (the inverse of :func:`key_ij`)."""
     ij = np.asarray(ij, dtype=np.int64) + _SHIFT
     return np.asarray((ij[:, 0] << np.int64(32)) | ij[:, 1], dtype=np.int64)
+
+
+#: The offsets of a cell's eight neighbours.
+EIGHT: tuple[tuple[int, int], ...] = tuple(
+    (di, dj) for di in (-1, 0, 1) for dj in (-1, 0, 1) if (di, dj) != (0, 0)
+)
+
+
+def neighbours(
+    keys: NDArray[np.int64],
+) -> list[tuple[NDArray[np.bool_], NDArray[np.intp]]]:
+    """For each of the eight neighbours in turn: whether each of the (sorted) ``keys``
+    has that neighbour among them, and where it is."""
+    ij = key_ij(keys)
+    out = []
+    for off in EIGHT:
+        nk = pack_ij(ij + np.array(off))
+        pos = np.minimum(np.searchsorted(keys, nk), max(keys.size - 1, 0)).astype(np.intp)
+        hit = (keys[pos] == nk) if keys.size else np.zeros(0, bool)
+        out.append((hit, pos))
+    return out
 
 
 def key_ij(keys: NDArray[np.int64]) -> NDArray[np.int64]:
