@@ -15,7 +15,6 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -115,10 +114,34 @@ class Georef:
         return [b.obs for b in self.beacons if b.role == "control" and b.obs is not None]
 
 
+#: An inner edge is used only when the outer panel it rests on (P1 for e2, P3 for e3)
+#: keeps this share of its surveyed length after the trims near its corners and the
+#: wall: a few centimetres of panel give a line whose direction the noise decides, and
+#: the node slides along P2 by centimetres (on simulated clouds 3-5 cm of P3 put e3
+#: 3-15 cm off, far beyond its covariance).
+MIN_OUTER_SHARE = 0.4
+
+
+def _usable_edges(det: Detection, beacon: str, pieces: PlanPieces, survey: Survey) -> list[int]:
+    """The detected inner edges whose outer panel is long enough to place them."""
+    lengths = survey[beacon].template.panel_lengths
+    out = []
+    for e in sorted(det.nodes):
+        outer = 1 if e == 2 else 3
+        k = det.panels.get(outer)
+        if k is None:
+            continue
+        if pieces.panels[k].segment.length >= MIN_OUTER_SHARE * float(lengths[outer - 1]):
+            out.append(e)
+    return out
+
+
 def _observation(
     det: Detection, beacon: str, pieces: PlanPieces, survey: Survey, heights: bool
-) -> BeaconObs:
-    edges = tuple(sorted(det.nodes))
+) -> BeaconObs | None:
+    edges = tuple(_usable_edges(det, beacon, pieces, survey))
+    if not edges:
+        return None
     panels = [pieces.panels[k] for k in det.panels.values()]
     w = np.array([1.0 / max(p.sigma_top_m, 1e-6) ** 2 for p in panels])
     tops = np.array([p.top_m for p in panels])
@@ -173,9 +196,11 @@ def georeference(
     )
     dets = detect_beacons(pieces, ident, index)
     match = match_beacons(dets, survey, index, config.match)
-    found: dict[str, BeaconObs] = {
+    observed = {
         b: _observation(dets[d], b, pieces, survey, heights) for d, b in match.assigned.items()
     }
+    found = {b: o for b, o in observed.items() if o is not None}
+    short = {b for b, o in observed.items() if o is None}
     controls = [o for b, o in found.items() if b not in config.checks]
     checks_obs = [o for b, o in found.items() if b in config.checks]
     refusal: AdjustmentError | None = None
@@ -221,7 +246,7 @@ def georeference(
                 survey_sigma_m=config.survey_sigma_m,
                 heights=heights,
             )
-    beacons = _fates(survey, found, config, solution, match, dets)
+    beacons = _fates(survey, found, config, solution, short)
     return Georef(
         cloud,
         survey,
@@ -244,14 +269,22 @@ def _fates(
     found: dict[str, BeaconObs],
     config: GeorefConfig,
     solution: Solution | None,
-    match: Match,
-    dets: Sequence[Detection],
+    short: set[str],
 ) -> list[FoundBeacon]:
     excluded = set(solution.excluded) if solution is not None else set()
     out = []
     for b in survey:
         obs = found.get(b.id)
-        if obs is None:
+        if b.id in short:
+            out.append(
+                FoundBeacon(
+                    b.id,
+                    "not_found",
+                    None,
+                    "found, but its outer panels too short in the cloud to place an edge",
+                )
+            )
+        elif obs is None:
             out.append(FoundBeacon(b.id, "not_found", None, "not found in the cloud"))
         elif b.id in config.checks:
             out.append(FoundBeacon(b.id, "check", obs))
@@ -273,7 +306,7 @@ def explain_missing(result: Georef) -> list[FoundBeacon]:
     floor = result.candidates.floor
     out = []
     for fb in result.beacons:
-        if fb.role != "not_found":
+        if fb.role != "not_found" or fb.why != "not found in the cloud":
             out.append(fb)
             continue
         b = result.survey[fb.beacon]
