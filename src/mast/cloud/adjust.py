@@ -186,6 +186,11 @@ class Solution:
         ``pass``, ``too_small`` or ``too_large``.
     chi2_bounds : tuple of float
         The test's acceptance interval for the reference variance.
+    w_critical : float
+        Critical value of the w-tests.
+    scaled : bool
+        The global test failed (too large) with no beacon to blame: the
+        transformation's covariance is scaled by the reference variance.
     """
 
     transformation: Transformation
@@ -199,6 +204,7 @@ class Solution:
     chi2_test: str
     chi2_bounds: tuple[float, float]
     w_critical: float = field(default=0.0)
+    scaled: bool = False
 
 
 class AdjustmentError(Exception):
@@ -459,14 +465,14 @@ def adjust_transformation(
         )
     sol = _solve(obs, model, heights, survey_sigma_m)
     excluded: list[str] = []
-    while any(t.failed for t in sol.tests) or sol.chi2_test == "too_large":
+    while any(t.failed for t in sol.tests):
         culprits = []
         for b in sol.used:
             rest = [o for o in sol.used if o.beacon != b.beacon]
             if len(rest) < need:
                 continue
             alt = _solve(rest, model, heights, survey_sigma_m)
-            if not any(t.failed for t in alt.tests) and alt.chi2_test != "too_large":
+            if not any(t.failed for t in alt.tests):
                 culprits.append(b.beacon)
         if len(culprits) != 1:
             suspects = culprits or [t.beacon for t in sol.tests if t.failed]
@@ -480,6 +486,16 @@ def adjust_transformation(
         excluded.append(culprits[0])
         sol = _solve(
             [o for o in sol.used if o.beacon != culprits[0]], model, heights, survey_sigma_m
+        )
+    if sol.chi2_test == "too_large":
+        # No beacon stands out, yet together they scatter more than their precisions
+        # say: the precisions were optimistic. As mast locate does, the covariance is
+        # scaled by the reference variance, and the report says so.
+        t = sol.transformation
+        sol = replace(
+            sol,
+            transformation=replace(t, covariance=t.covariance * sol.reference_variance),
+            scaled=True,
         )
     return replace(sol, excluded=excluded)
 

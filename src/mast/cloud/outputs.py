@@ -181,6 +181,7 @@ def transform_record(
         "dof": sol.dof,
         "chi2_test": sol.chi2_test,
         "chi2_bounds": list(sol.chi2_bounds),
+        "sigmas_scaled": sol.scaled,
         "survey_sigma_m": result.config.survey_sigma_m,
         "beacons": roles,
         "checks": [
@@ -392,6 +393,11 @@ def report_text(
         f"  reference variance {sol.reference_variance:.3f} on {sol.dof} degrees of freedom; "
         f"global test (5 %, accept {lo:.3f}..{hi:.3f}): {sol.chi2_test.upper()}"
     )
+    if sol.scaled:
+        add(
+            "  the beacons scatter more than their precisions say, and no beacon is to "
+            "blame: standard deviations scaled by the reference variance"
+        )
     if sol.excluded:
         add(f"  left out as outliers: {', '.join(sol.excluded)}")
     add("")
