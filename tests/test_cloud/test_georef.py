@@ -158,11 +158,15 @@ def test_the_report_renders_in_chromium(georef: Path, tmp_path: Path) -> None:
 
 
 def test_too_few_beacons_is_refused_with_its_reason(scene: CloudScenario, tmp_path: Path) -> None:
+    # an earlier run's result in the folder must not outlive the refusal
+    for stale in ("georeferenced.laz", "transform.json", "plan.png"):
+        (tmp_path / stale).write_bytes(b"old")
     done = _georef(scene.cloud, scene.survey, tmp_path, "--check", "B01,B02,B03,B04")
     assert done.returncode == 3, done.stderr
     assert "too_few" in done.stderr
     assert "1 control beacon" in done.stderr
-    assert not (tmp_path / "georeferenced.laz").exists()
+    for stale in ("georeferenced.laz", "transform.json", "plan.png"):
+        assert not (tmp_path / stale).exists(), stale
     assert "NO GEOREFERENCE" in (tmp_path / "report.txt").read_text()
 
 
@@ -187,9 +191,20 @@ def _copy_as(scene: CloudScenario, path: Path) -> None:
 
         v = np.empty(
             x.size,
-            dtype=[("x", "f8"), ("y", "f8"), ("z", "f8"), ("intensity", "u2"), ("time", "f8")],
+            dtype=[
+                ("x", "f8"),
+                ("y", "f8"),
+                ("z", "f8"),
+                ("intensity", "u2"),
+                ("time", "f8"),
+                ("red", "u1"),
+                ("green", "u1"),
+                ("blue", "u1"),
+                ("classification", "u1"),  # a LAS name, not LAS's meaning: kept apart
+            ],
         )
         v["x"], v["y"], v["z"], v["intensity"], v["time"] = x, y, z, inten, t
+        v["red"], v["green"], v["blue"], v["classification"] = 255, 128, 0, 7
         PlyData([PlyElement.describe(v, "vertex")]).write(str(path))
     else:
         import pye57
@@ -223,6 +238,19 @@ def test_ply_and_e57_give_the_same_transformation(
     las = laspy.read(out / "georeferenced.laz")
     assert "intensity" in las.point_format.dimension_names
     assert float(np.min(las.y)) > 1e6
+    if suffix == ".ply":
+        assert int(np.max(las.red)) == 255 * 257  # 8-bit colour in LAS's 16 bits
+        assert np.all(np.asarray(las["ply_classification"]) == 7)
+        assert np.all(np.asarray(las.classification) == 0)
+
+
+def test_e57_point_times_are_a_clear_error(scene: CloudScenario, tmp_path: Path) -> None:
+    cloud = tmp_path / "cloud.e57"
+    _copy_as(scene, cloud)
+    done = _georef(cloud, scene.survey, tmp_path / "o", "--time-field", "timeStamp")
+    assert done.returncode == 2
+    assert "cloud.e57" in done.stderr
+    assert "gps_time" in done.stderr
 
 
 def test_drift_is_corrected_along_the_trajectory(tmp_path: Path) -> None:
@@ -261,6 +289,7 @@ def test_drift_is_corrected_along_the_trajectory(tmp_path: Path) -> None:
     [
         (["--band", "2,1"], "Z0 must be below Z1"),
         (["--band", "x"], "two heights"),
+        (["--band", "0,inf"], "finite"),
         (["--check", "B99"], "not in the survey"),
         (["--model", "helmert6"], "--model must be one of"),
     ],

@@ -813,7 +813,8 @@ def georef(
             min=1e-5,
             max=0.5,
             help="Drift model with --trajectory: standard deviation of the SLAM's motion "
-            "as a fraction of distance (and per 10 m in heading).",
+            "as a fraction of each step in position; the heading walks a tenth of it "
+            "per root metre.",
         ),
     ] = 0.01,
     max_drift: Annotated[
@@ -866,6 +867,11 @@ def georef(
     )
     if trajectory is not None and not trajectory.is_file():
         raise InputError("no such file", path=trajectory)
+    if trajectory is not None and model == "helmert7":
+        raise InputError(
+            "--trajectory corrects drift in plan and height with the 4-parameter model; "
+            "--model helmert7's tilt and scale would not be carried by the pose graph"
+        )
     check_output_folder(out)
     run = run_georef(cloud, beacons, out, config, trajectory_path=trajectory, time_field=time_field)
     r = run.result

@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -41,6 +42,8 @@ def parse_band(text: str | None) -> tuple[float, float] | None:
         z0, z1 = (float(p) for p in parts)
     except ValueError:
         raise InputError(f"--band must be two heights Z0,Z1 in metres, got {text!r}") from None
+    if not (math.isfinite(z0) and math.isfinite(z1)):
+        raise InputError(f"--band: heights must be finite numbers, got {text!r}")
     if not z0 < z1:
         raise InputError(f"--band: Z0 must be below Z1, got {text!r}")
     return z0, z1

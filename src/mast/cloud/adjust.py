@@ -463,7 +463,23 @@ def adjust_transformation(
         raise AdjustmentError(
             "too_few", f"{len(obs)} control beacon(s) found; the {_label(model)} needs {need}"
         )
-    sol = _solve(obs, model, heights, survey_sigma_m)
+    try:
+        sol = _solve(obs, model, heights, survey_sigma_m)
+    except np.linalg.LinAlgError:
+        raise AdjustmentError(
+            "weak_geometry",
+            f"the {len(obs)} beacons do not fix the {_label(model)} (all in a line?)",
+        ) from None
+    if not np.all(np.isfinite(sol.transformation.covariance)) or (
+        np.linalg.cond(
+            sol.transformation.covariance[np.ix_(_free(model, heights), _free(model, heights))]
+        )
+        > 1e14
+    ):
+        raise AdjustmentError(
+            "weak_geometry",
+            f"the {len(obs)} beacons barely fix the {_label(model)} (all in a line?)",
+        )
     excluded: list[str] = []
     while any(t.failed for t in sol.tests):
         culprits = []

@@ -6,7 +6,7 @@ cells and the candidate points, not the cloud):
 1. **Floor and roof.** The lowest and highest point of every 0.5 m plan cell.
 2. **Columns.** Of the points in the *band* (``clearance`` above the floor and
    below the roof of their cell, or ``--band Z0,Z1`` in the cloud's frame),
-   every 2 cm plan cell keeps its lowest and highest z and which 5 cm height
+   every 5 cm plan cell keeps its lowest and highest z and which 5 cm height
    bins hold points. A panel's cell holds one unbroken column that starts and
    ends inside the band, at least a panel's height tall: rock walls run from
    floor to roof, floors and roofs are left out by the band, pipes and ducts are

@@ -160,11 +160,12 @@ def _observation(
     panels = [pieces.panels[k] for k in det.panels.values()]
     top, sigma_top = _beacon_top(panels)
     b = survey[beacon]
-    grid_top = (
-        float(np.mean([b.elevations[e - 1] for e in edges]))
-        if heights and b.elevations is not None
-        else math.nan
-    )
+    grid_top = math.nan
+    if heights and b.elevations is not None:
+        z = np.array([b.elevations[e - 1] for e in edges])
+        # the observed edges' tops, or the beacon's others where those are blank
+        z = z[np.isfinite(z)] if np.any(np.isfinite(z)) else b.elevations[np.isfinite(b.elevations)]
+        grid_top = float(np.mean(z))
     times = [p.time_s for p in panels if p.time_s is not None]
     return BeaconObs(
         beacon,
@@ -199,7 +200,10 @@ def georeference(
     unknown = [c for c in config.checks if c not in survey]
     if unknown:
         raise InputError(f"--check names beacon(s) not in the survey: {', '.join(unknown)}")
-    heights = all(b.elevations is not None and np.all(np.isfinite(b.elevations)) for b in survey)
+    # a beacon's panels are level: one surveyed edge top is enough for its height
+    heights = all(
+        b.elevations is not None and bool(np.any(np.isfinite(b.elevations))) for b in survey
+    )
     cand = find_candidates(cloud, config.detect, progress)
     pieces = plan_pieces(cand, config.detect)
     index = SurveyIndex.from_survey(survey, reach_m=5.0)

@@ -201,7 +201,8 @@ def _keeps(vlr: Any) -> bool:
     record = int(getattr(vlr, "record_id", 0))
     if user == "LASF_Projection":
         return False
-    return not ((user == "LASF_Spec" and record in (100,)) or record in (2111, 2112))
+    # the extra-bytes description (LASF_Spec 4) is written again by laspy from the format
+    return not ((user == "LASF_Spec" and record in (4, 100)) or record in (2111, 2112))
 
 
 def _compress(out: Path) -> bool:
@@ -317,7 +318,11 @@ class _PlyCloud(_ColumnCloud):
         if missing:
             raise InputError(f"the vertices have no {', '.join(missing)}", path=path)
         self.count = int(vertex.count)
+        for prop in vertex.properties:
+            if not hasattr(prop, "val_dtype"):
+                raise InputError(f"vertex property {prop.name!r} is a list", path=path)
         self._names = names
+        self._dtypes = {p.name: np.dtype(p.val_dtype) for p in vertex.properties}
         self.time_field = _pick_time(path, names, time_field, _PLY_TIMES)
         self._las_names = {"intensity": "intensity", "red": "red", "green": "green"}
         self._las_names |= {"blue": "blue"}
@@ -329,7 +334,19 @@ class _PlyCloud(_ColumnCloud):
 
     def _columns(self) -> Iterator[dict[str, NDArray[Any]]]:
         data = self._ply["vertex"].data
-        yield {name: data[name] for name in self._names}
+        cols: dict[str, NDArray[Any]] = {}
+        for name in self._names:
+            v = data[name]
+            if name in ("red", "green", "blue") and self._dtypes[name] == np.uint8:
+                v = np.asarray(v, dtype=np.uint16) * 257  # 8 bits to LAS's 16
+            elif name == "intensity" and np.issubdtype(self._dtypes[name], np.floating):
+                top = float(np.max(v)) if len(v) else 1.0
+                v = np.asarray(v, dtype=float) * (65535.0 if top <= 1.0 else 1.0)
+            elif name not in ("x", "y", "z") and name not in self._las_names:
+                cols[_extra_name(name)] = v
+                continue
+            cols[name] = v
+        yield cols
 
 
 class _E57Cloud(_ColumnCloud):
@@ -341,7 +358,6 @@ class _E57Cloud(_ColumnCloud):
         "colorRed": "red",
         "colorGreen": "green",
         "colorBlue": "blue",
-        "timeStamp": "timeStamp",
     }
 
     def __init__(self, path: Path, time_field: str | None) -> None:
@@ -363,7 +379,14 @@ class _E57Cloud(_ColumnCloud):
             raise InputError("its scans have no cartesian coordinates", path=path)
         self._names = [k for k in self._FIELDS if k in names]
         mapped = [self._FIELDS[k] for k in self._names]
-        self.time_field = _pick_time(path, mapped, time_field, ("timeStamp",))
+        if time_field is not None:
+            # pye57 reads no per-point time stamps (timeStamp is not among its fields)
+            raise InputError(
+                "E57 point times cannot be read (pye57 has no timeStamp); export the cloud "
+                "as LAS/LAZ with gps_time for --time-field or --trajectory",
+                path=path,
+            )
+        self.time_field = None
         self._las_names = {"intensity": "intensity"}
         if all(k in mapped for k in ("red", "green", "blue")):
             self._las_names |= {"red": "red", "green": "green", "blue": "blue"}
@@ -397,6 +420,45 @@ class _E57Cloud(_ColumnCloud):
                 yield cols
         finally:
             e57.close()
+
+
+#: LAS point format 7's own dimensions: a PLY property of one of these names (not mapped
+#: to it) is kept as an extra dimension under another name.
+_LAS_DIMS = frozenset(
+    [
+        "X",
+        "Y",
+        "Z",
+        "x",
+        "y",
+        "z",
+        "intensity",
+        "return_number",
+        "number_of_returns",
+        "synthetic",
+        "key_point",
+        "withheld",
+        "overlap",
+        "scanner_channel",
+        "scan_direction_flag",
+        "edge_of_flight_line",
+        "classification",
+        "user_data",
+        "scan_angle",
+        "point_source_id",
+        "gps_time",
+        "red",
+        "green",
+        "blue",
+    ]
+)
+
+
+def _extra_name(name: str) -> str:
+    """A PLY property's name as a LAS extra dimension: prefixed when LAS has the name
+    already, cut to the 32 bytes an extra-bytes name may have."""
+    out = f"ply_{name}" if name in _LAS_DIMS else name
+    return out[:32]
 
 
 def _pick_time(

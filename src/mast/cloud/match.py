@@ -382,6 +382,9 @@ def match_beacons(
                 return True
         return False
 
+    if best[0] < 2:
+        # one beacon alone cannot say which of its look-alikes it is, nor place a cloud
+        return Match({}, best[0], 0, "too_few")
     rival = max((r[0] for r in results[1:] if conflicts(r[3])), default=0)
     if best[0] <= rival:
         return Match({}, best[0], rival, "ambiguous")

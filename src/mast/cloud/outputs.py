@@ -110,6 +110,9 @@ def write_outputs(
     res = _before_after(result, drift)
     sample: list[NDArray[np.float64]] = []
     cloud_path = transform_path = plan_path = None
+    for stale in ("georeferenced.laz", "transform.json", "plan.png"):
+        # a refusal must not leave an earlier run's result beside its report
+        (out / stale).unlink(missing_ok=True)
     written = 0
     if result.solution is not None:
         trans = result.solution.transformation
@@ -296,11 +299,13 @@ def _class_line(result: Georef, res: dict[str, dict[str, Any]], key: str) -> str
         return "no check beacon: the class is not tested (give --check)"
     worst: str | None = "3A"
     names = [n for n, _ in ACCURACY_CLASSES]
+    evaluated = 0
     for fb in checks:
         assert fb.obs is not None
         r = res.get(fb.beacon, {}).get(key)
         if r is None:
             continue
+        evaluated += 1
         mis = float(np.max(np.hypot(r[:, 0], r[:, 1])))
         c = fb.obs.grid_xy.mean(axis=0)
         d = min(float(np.hypot(*(o.grid_xy.mean(axis=0) - c))) for o in controls)
@@ -309,6 +314,8 @@ def _class_line(result: Georef, res: dict[str, dict[str, Any]], key: str) -> str
             worst = None
         elif names.index(cls) > names.index(worst):
             worst = cls
+    if evaluated == 0:
+        return "no check beacon could be compared: the class is not tested"
     if worst is None:
         return "below ICSM SP1 class E (a check misclosure is beyond 100 mm x (d + 0.2 km))"
     return (
