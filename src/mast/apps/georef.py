@@ -8,7 +8,6 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
-from mast.cloud.detect import DetectConfig
 from mast.cloud.georef import Georef, GeorefConfig, georeference
 from mast.cloud.io import open_cloud
 from mast.cloud.outputs import Outputs, write_outputs
@@ -75,7 +74,3 @@ def run_georef(
     result = georeference(cloud, survey, config, trajectory=trajectory, progress=progress)
     outputs = write_outputs(result, out, progress=progress, survey_file=str(survey_path))
     return GeorefRun(result, outputs)
-
-
-def default_detect(band: tuple[float, float] | None, noise: float | None) -> DetectConfig:
-    return DetectConfig(band=band, noise_m=noise)

@@ -131,6 +131,12 @@ class _LasCloud(Cloud):
         else:
             self.time_field = time_field
 
+    def _xyz_time(self, pts: Any) -> tuple[NDArray[np.float64], NDArray[np.float64] | None]:
+        """Coordinates ``(n, 3)`` and times of a chunk laspy read."""
+        xyz = np.column_stack([np.asarray(pts.x), np.asarray(pts.y), np.asarray(pts.z)])
+        t = None if self.time_field is None else np.asarray(pts[self.time_field], dtype=float)
+        return xyz.astype(float, copy=False), t
+
     def chunks(self, size: int = 2_000_000) -> Iterator[Chunk]:
         import laspy
 
@@ -138,15 +144,8 @@ class _LasCloud(Cloud):
         try:
             with laspy.open(self.path) as reader:
                 for pts in reader.chunk_iterator(size):
-                    xyz = np.column_stack(
-                        [np.asarray(pts.x), np.asarray(pts.y), np.asarray(pts.z)]
-                    ).astype(float, copy=False)
+                    xyz, t = self._xyz_time(pts)
                     _finite(self, xyz, f"point {done + 1}")
-                    t = (
-                        None
-                        if self.time_field is None
-                        else np.asarray(pts[self.time_field], dtype=float)
-                    )
                     done += len(xyz)
                     yield Chunk(xyz, t)
         except InputError:
@@ -179,13 +178,7 @@ class _LasCloud(Cloud):
                     header.vlrs.append(vlr)
             with laspy.open(tmp, mode="w", header=header, do_compress=_compress(out)) as writer:
                 for pts in reader.chunk_iterator(size):
-                    xyz = np.column_stack([np.asarray(pts.x), np.asarray(pts.y), np.asarray(pts.z)])
-                    t = (
-                        None
-                        if self.time_field is None
-                        else np.asarray(pts[self.time_field], dtype=float)
-                    )
-                    grid = transform(xyz.astype(float, copy=False), t)
+                    grid = transform(*self._xyz_time(pts))
                     rec = laspy.ScaleAwarePointRecord(
                         pts.array.copy(), header.point_format, header.scales, header.offsets
                     )
@@ -226,7 +219,9 @@ class _ColumnCloud(Cloud):
     #: column name -> LAS dimension, where LAS has one
     _las_names: dict[str, str]
 
-    def chunks(self, size: int = 2_000_000) -> Iterator[Chunk]:
+    def _slices(self, size: int) -> Iterator[tuple[dict[str, NDArray[Any]], int, int, Chunk]]:
+        """Every run of at most ``size`` points: its columns, where it starts and ends in
+        them, and its coordinates and times."""
         done = 0
         for cols in self._columns():
             n = len(cols["x"])
@@ -235,8 +230,12 @@ class _ColumnCloud(Cloud):
                 xyz = np.column_stack([cols[k][lo:hi] for k in ("x", "y", "z")]).astype(float)
                 _finite(self, xyz, f"point {done + lo + 1}")
                 t = None if self.time_field is None else cols[self.time_field][lo:hi]
-                yield Chunk(xyz, None if t is None else np.asarray(t, dtype=float))
+                yield cols, lo, hi, Chunk(xyz, None if t is None else np.asarray(t, dtype=float))
             done += n
+
+    def chunks(self, size: int = 2_000_000) -> Iterator[Chunk]:
+        for *_, chunk in self._slices(size):
+            yield chunk
 
     def write_georeferenced(
         self, out: Path, transform: Transform, origin: NDArray[np.float64], size: int = 2_000_000
@@ -248,29 +247,21 @@ class _ColumnCloud(Cloud):
         with atomic_path(out) as tmp:
             writer: Any = None
             try:
-                for cols in self._columns():
+                for cols, lo, hi, chunk in self._slices(size):
                     if header is None:
                         header = self._header(cols, origin)
                         writer = laspy.open(
                             tmp, mode="w", header=header, do_compress=_compress(out)
                         )
-                    n = len(cols["x"])
-                    for lo in range(0, n, size):
-                        hi = min(n, lo + size)
-                        xyz = np.column_stack([cols[k][lo:hi] for k in ("x", "y", "z")])
-                        t = None if self.time_field is None else cols[self.time_field][lo:hi]
-                        grid = transform(
-                            xyz.astype(float), None if t is None else np.asarray(t, dtype=float)
-                        )
-                        rec = laspy.ScaleAwarePointRecord.zeros(hi - lo, header=header)
-                        _set_xyz(rec, grid, out)
-                        for name, values in cols.items():
-                            if name in ("x", "y", "z"):
-                                continue
-                            dim = self._las_names.get(name, name)
-                            rec[dim] = _fit_dtype(values[lo:hi], rec[dim].dtype)
-                        writer.write_points(rec)
-                        written += hi - lo
+                    rec = laspy.ScaleAwarePointRecord.zeros(hi - lo, header=header)
+                    _set_xyz(rec, transform(chunk.xyz, chunk.time), out)
+                    for name, values in cols.items():
+                        if name in ("x", "y", "z"):
+                            continue
+                        dim = self._las_names.get(name, name)
+                        rec[dim] = _fit_dtype(values[lo:hi], rec[dim].dtype)
+                    writer.write_points(rec)
+                    written += hi - lo
             finally:
                 if writer is not None:
                     writer.close()

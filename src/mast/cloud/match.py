@@ -69,8 +69,6 @@ class Detection:
     ----------
     designs : frozenset of int
         Design numbers of the survey index its shape fits.
-    forward : bool
-        Whether its corners were met e1 to e4 in the order of their pieces.
     nodes : dict[int, ndarray]
         Edge number (2, 3) -> the edge in the cloud's plan.
     covariances : dict[int, ndarray]
@@ -89,7 +87,6 @@ class Detection:
     """
 
     designs: frozenset[int]
-    forward: bool
     nodes: dict[int, NDArray[np.float64]]
     covariances: dict[int, NDArray[np.float64]]
     panels: dict[int, int]
@@ -161,7 +158,6 @@ def detect_beacons(
                     best = (sg.sigma_direction, panel, along + (0.0 if m.forward else math.pi))
         return Detection(
             designs(members),
-            members[0][0].forward,
             nodes_xy,
             covs,
             panels,

@@ -110,6 +110,7 @@ def write_outputs(
     res = _before_after(result, drift)
     sample: list[NDArray[np.float64]] = []
     cloud_path = transform_path = plan_path = None
+    svg: str | None = None
     for stale in ("georeferenced.laz", "transform.json", "plan.png"):
         # a refusal must not leave an earlier run's result beside its report
         (out / stale).unlink(missing_ok=True)
@@ -141,17 +142,15 @@ def write_outputs(
         )
         plan_path = out / "plan.png"
         pts = np.concatenate(sample) if sample else np.zeros((0, 2))
-        _plan_figure(result, beacons, res, pts, drift).savefig(plan_path, dpi=130)
+        plan = _plan_figure(result, beacons, res, pts, drift)
+        plan.savefig(plan_path, dpi=130)
+        svg = _svg_of(plan)
     beacons_path = out / "beacons_found.csv"
     _write_beacons(beacons_path, result, beacons, res)
     text = report_text(result, beacons, res, drift, survey_file=survey_file)
     txt_path = out / "report.txt"
     write_atomic(txt_path, text.encode("utf-8"))
     html_path = out / "report.html"
-    svg = None
-    if result.solution is not None:
-        pts = np.concatenate(sample) if sample else np.zeros((0, 2))
-        svg = _svg_of(_plan_figure(result, beacons, res, pts, drift))
     write_atomic(html_path, report_html(text, svg, result).encode("utf-8"))
     return Outputs(
         cloud_path, transform_path, beacons_path, txt_path, html_path, plan_path, written

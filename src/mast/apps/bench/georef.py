@@ -26,6 +26,7 @@ from __future__ import annotations
 import csv
 import json
 import math
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -235,8 +236,6 @@ def run_georef_bench(
                 f"check {fig.check_h:.1f} mm h (before {fig.check_h_before_mm:.1f}), "
                 f"{fig.check_v:.1f} mm v, inside 95 %: {fig.inside_95}, {fig.seconds:.0f} s"
             )
-            import shutil
-
             shutil.rmtree(Path(tmp) / f"c{k}", ignore_errors=True)
         large = _large(Path(tmp) / "large", large_points, echo) if large_points else None
     _summary(rows, large, echo)
