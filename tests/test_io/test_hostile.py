@@ -352,6 +352,41 @@ def test_the_fuzzing_campaign_finds_nothing(tmp_path: Path) -> None:
     assert not (tmp_path / "kept").exists()
 
 
+def test_a_fuzz_case_is_charged_only_its_own_memory(tmp_path: Path) -> None:
+    """A case runs in a child forked from a warmed-up process (late in the test suite, a
+    large one): its peak is what it took itself, not the parent's pages it was forked
+    with, and a case that does take memory is charged it."""
+    from mast.apps.bench.fuzz import FuzzCase, _run, _vm_size
+
+    ballast = np.ones(400 * 2**20 // 8)  # a parent holding 400 MiB, touched
+    limit = _vm_size() + (2 << 30)
+    status, _, peak, inherited, out, _ = _run(
+        FuzzCase("t", "help", ("--help",), None), tmp_path / "a", limit, 60.0
+    )
+    assert status == 0
+    assert "locate" in out
+    assert inherited > 400 * 2**20 > 4 * peak
+    del ballast
+    # A case that does take memory is charged it: a 200 000-beam scan (a room seen at
+    # 0.0018 deg), whose points, segments and hypotheses take tens of MiB.
+    sim = tmp_path / "sim"
+    status, *_ = _run(FuzzCase("t", "sim", ("simulate", "--out", str(sim)), None),
+                      tmp_path / "b", limit, 60.0)  # fmt: skip
+    assert status == 0
+    n = 200_000
+    scan = tmp_path / "dense.csv"
+    angles = np.linspace(-np.pi, np.pi, n, endpoint=False)
+    np.savetxt(scan, np.c_[angles, np.full(n, 5.0)], delimiter=",", fmt="%.7f",
+               header="angle_rad,range_m", comments="")  # fmt: skip
+    survey = next(sim.rglob("beacons.csv"))
+    status, _, peak, _, _, _ = _run(
+        FuzzCase("t", "dense", ("locate", str(scan), "-b", str(survey)), None),
+        tmp_path / "c", limit, 60.0,
+    )  # fmt: skip
+    assert status == 3  # a round room: no beacon, an honest no-fix
+    assert peak > 20 * 2**20, peak  # 45 MiB with every import done before the fork
+
+
 def test_no_file_content_is_evaluated() -> None:
     """No pickle, eval, exec or unsafe YAML loader anywhere in MAST's source."""
     root = Path(__file__).resolve().parents[2] / "src" / "mast"

@@ -12,12 +12,15 @@ Each case runs the real command line (:func:`mast.apps.cli.main`) in a
 forked child of one warmed-up process, under an address-space limit and a
 file-size limit (the disk that fills), with a time limit. Per case it
 records the exit status, the standard error, the child's peak resident
-memory (``wait4``) and its time; and it counts as failures:
+memory above what it inherited at the fork (``wait4``'s peak less the
+resident size the child starts with, so a warmed-up parent of any size, a
+test runner's included, does not count) and its time; and it counts as
+failures:
 
 * a traceback or an undocumented exit status (anything but 0, 2, 3, 4; an
   internal error, 70, is a bug), or an error that is not one ``mast:`` line;
-* a peak above 1 GiB or twice the undamaged run's, whichever is larger, or a
-  run stopped by the address-space limit;
+* a peak of its own above 1 GiB or twice the undamaged run's, whichever is
+  larger, or a run stopped by the address-space limit;
 * a run taking more than ten times the undamaged file's processor time (and a
   second), or stopped by its time limit;
 * a fix from a damaged file that differs from the undamaged file's fix of
@@ -102,7 +105,8 @@ class FuzzSummary:
     wrong_fixes: int = 0
     half_written: int = 0
     unexpected_status: int = 0
-    peak_bytes: int = 0
+    peak_bytes: int = 0  # a case's own peak, above what it inherited
+    inherited_bytes: int = 0  # the resident memory a child starts with (the largest)
     worst_time_ratio: float = 0.0
     seconds: float = 0.0
     failures: list[FuzzResult] = field(default_factory=list)
@@ -121,7 +125,8 @@ class FuzzSummary:
             f"{self.over_memory}, over time {self.over_time}, fixes differing {self.wrong_fixes}, "
             f"half-written outputs {self.half_written}, unexpected status "
             f"{self.unexpected_status}); exit statuses {{{statuses}}}; peak memory "
-            f"{self.peak_bytes / 2**20:.0f} MiB; worst time {self.worst_time_ratio:.1f}x undamaged"
+            f"{self.peak_bytes / 2**20:.0f} MiB above the {self.inherited_bytes / 2**20:.0f} MiB "
+            f"a child inherits; worst time {self.worst_time_ratio:.1f}x undamaged"
         )
 
 
@@ -566,10 +571,21 @@ def _vm_size() -> int:
     return 0  # pragma: no cover - Linux only
 
 
+def _vm_rss() -> int:
+    with open("/proc/self/status", encoding="ascii") as fh:
+        for line in fh:
+            if line.startswith("VmRSS:"):
+                return int(line.split()[1]) * 1024
+    return 0  # pragma: no cover - Linux only
+
+
 def _child(case: FuzzCase, out: Path, err: Path, as_limit: int) -> None:
-    """In the forked child: limits, redirections, then ``mast`` itself; never returns."""
+    """In the forked child: limits, redirections, then ``mast`` itself; never returns.
+    First of all it writes the resident size it starts with (what it holds of the
+    parent's pages) to ``.rss0`` beside ``out``, which the parent subtracts."""
     status = 70
     try:
+        (out.parent / ".rss0").write_text(str(_vm_rss()), encoding="ascii")
         os.setsid()
         resource.setrlimit(resource.RLIMIT_AS, (as_limit, as_limit))
         if case.file_limit is not None:
@@ -623,8 +639,22 @@ class _Child:
     killed: bool = False
 
 
+def _trim_heap() -> None:
+    """Give the C heap's free pages back to the system (glibc ``malloc_trim``) before a
+    fork: a page the parent freed but still holds is resident in the child from the
+    start, so the child's allocations reuse it without its peak growing; trimmed, what
+    a case allocates shows in its peak. A no-op without glibc."""
+    import ctypes
+    import ctypes.util
+
+    name = ctypes.util.find_library("c")
+    with contextlib.suppress(OSError, AttributeError):
+        ctypes.CDLL(name).malloc_trim(0)
+
+
 def _start(case: FuzzCase, folder: Path, as_limit: int, timeout_s: float) -> _Child:
     folder.mkdir(parents=True, exist_ok=True)
+    _trim_heap()
     t0 = time.perf_counter()
     pid = os.fork()
     if pid == 0:  # pragma: no cover - runs in the child
@@ -632,9 +662,9 @@ def _start(case: FuzzCase, folder: Path, as_limit: int, timeout_s: float) -> _Ch
     return _Child(pid, case, folder, t0, timeout_s)
 
 
-def _poll(child: _Child) -> tuple[int, float, int, str, str] | None:
-    """The child's (status, seconds, peak bytes, stdout, stderr) once it has ended, else
-    None; past its time limit it is killed (status -9)."""
+def _poll(child: _Child) -> tuple[int, float, int, int, str, str] | None:
+    """The child's (status, seconds, peak bytes of its own, bytes inherited, stdout,
+    stderr) once it has ended, else None; past its time limit it is killed (status -9)."""
     done, wstatus, usage = os.wait4(child.pid, os.WNOHANG)
     now = time.perf_counter()
     if not done:
@@ -651,12 +681,19 @@ def _poll(child: _Child) -> tuple[int, float, int, str, str] | None:
     text_err = err.read_text(encoding="utf-8", errors="replace") if err.exists() else ""
     # Processor time, not wall time: what the run cost, whatever else the machine did.
     cpu = float(usage.ru_utime + usage.ru_stime)
-    return status, cpu, int(usage.ru_maxrss) * 1024, text_out, text_err
+    # ru_maxrss counts the parent's pages the child was forked with; what the case itself
+    # took is the peak less that. No record (the child died at once): the whole peak.
+    rss0 = child.folder / ".rss0"
+    inherited = 0
+    with contextlib.suppress(OSError, ValueError):
+        inherited = int(rss0.read_text(encoding="ascii"))
+    peak = int(usage.ru_maxrss) * 1024
+    return status, cpu, max(peak - inherited, 0), inherited, text_out, text_err
 
 
 def _run(
     case: FuzzCase, folder: Path, as_limit: int, timeout_s: float
-) -> tuple[int, float, int, str, str]:
+) -> tuple[int, float, int, int, str, str]:
     """One case, waited for."""
     child = _start(case, folder, as_limit, timeout_s)
     while (got := _poll(child)) is None:
@@ -820,7 +857,7 @@ def run_fuzz(
             runs = [_run(undamaged, tmp / f"base-{key}-{r}", as_limit, 120.0) for r in range(3)]
             status = runs[0][0]
             if status not in (0, 3):  # a fix, or an honest no-fix
-                raise RuntimeError(f"the undamaged {key} fails (exit {status}): {runs[0][4]}")
+                raise RuntimeError(f"the undamaged {key} fails (exit {status}): {runs[0][5]}")
             truth = (
                 list(seeds.truth)
                 if key.startswith(("bag", "ros2"))
@@ -829,7 +866,7 @@ def run_fuzz(
             base[key] = (
                 statistics.median(r[1] for r in runs),
                 max(r[2] for r in runs),
-                _fixes(runs[0][3]),
+                _fixes(runs[0][4]),
                 truth,
             )
         work = tmp / "cases"
@@ -868,14 +905,15 @@ def run_fuzz(
 
 def _finish(
     child: _Child,
-    got: tuple[int, float, int, str, str],
+    got: tuple[int, float, int, int, str, str],
     base: dict[str, _Base],
     summary: FuzzSummary,
     keep_failures: Path | None,
 ) -> None:
     """Judge an ended case, count it, keep it if it failed, and remove its files."""
     case = child.case
-    status, seconds, peak, out, err = got
+    status, seconds, peak, inherited, out, err = got
+    summary.inherited_bytes = max(summary.inherited_bytes, inherited)
     problems = _judge(case, status, seconds, peak, out, err, base)
     left = next(child.folder.glob("**/.*.part"), None)
     if left is not None:
