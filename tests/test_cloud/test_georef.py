@@ -276,8 +276,19 @@ def test_drift_is_corrected_along_the_trajectory(tmp_path: Path) -> None:
     # of the drift, comes within 5 cm; the 3 cm target is the benchmark's, on 300-1000 m.
     assert after < 0.05
     assert after < before / 3
+    import jsonschema
+
     record = json.loads((out / "transform.json").read_text())
-    assert record["drift_correction"]["keyframes"] > 100
+    jsonschema.validate(record, json.loads((DOCS / "transform.schema.json").read_text()))
+    dc = record["drift_correction"]
+    assert dc["keyframes"] > 100
+    # every control beacon tested against the graph without it, the check against the graph
+    tested = {t["beacon"]: t for t in dc["beacon_tests"]}
+    assert tested["B04"]["role"] == "check"
+    assert set(record["beacons"]["control"]) <= set(tested)
+    assert all(t["passed"] and t["dof"] in (3, 5) for t in tested.values())
+    assert dc["excluded"] == []
+    assert "against the graph solved without it" in (out / "report.txt").read_text()
     # without the trajectory the same cloud fits no one transformation: refused
     rigid = _georef(scene.cloud, scene.survey, tmp_path / "rigid")
     assert rigid.returncode == 3

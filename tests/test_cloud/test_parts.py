@@ -3,12 +3,21 @@
 from __future__ import annotations
 
 import math
+from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import pytest
 
-from mast.cloud.adjust import AdjustmentError, BeaconObs, adjust_transformation
+from mast.cloud.adjust import (
+    AdjustmentError,
+    BeaconObs,
+    adjust_transformation,
+    check_beacons,
+    rigid_solution,
+)
 from mast.cloud.detect import _top_edge
+from mast.cloud.drift import DriftCorrection, Trajectory, correct_drift
 from mast.cloud.grid import PlanGrid, cell_keys, key_ij, pack_ij
 from mast.cloud.outputs import accuracy_class
 
@@ -114,3 +123,81 @@ def test_icsm_classes_follow_c_times_d_plus_0_2() -> None:
     assert accuracy_class(0.005, 20.0) == "C"
     assert accuracy_class(0.010, 20.0) == "D"
     assert accuracy_class(0.5, 20.0) is None
+
+
+def _drifting_run(rng: np.random.Generator, drift: float) -> tuple[Trajectory, list[BeaconObs]]:
+    """A 240 m straight run whose SLAM drifts (heading 0.5 mrad per 10 m, scale ``drift``,
+    a lateral wander), with a beacon on alternate walls every 20 m: each seen in the
+    cloud where the SLAM put it and surveyed where it is."""
+    t = np.arange(0.0, 241.0)  # one metre a second
+    slam_xyz = np.column_stack([t, np.zeros_like(t), np.zeros_like(t)])
+    true_yaw = 0.00005 * t
+    true_xy = np.column_stack([(1 + drift) * t, 0.3 * np.sin(t / 50.0)])
+    traj = Trajectory(t, slam_xyz, np.zeros_like(t), Path("run.tum"))
+    grid0 = np.array([452000.0, 7101000.0])
+    out = []
+    for k, tb in enumerate(range(10, 240, 20)):
+        q = np.array([[0.0, 3.0], [0.4, 3.2]]) * (1 if k % 2 else -1)  # in the body frame
+        c, s = math.cos(true_yaw[tb]), math.sin(true_yaw[tb])
+        grid = q @ np.array([[c, -s], [s, c]]).T + true_xy[tb] + grid0
+        sigma = 0.002
+        out.append(
+            BeaconObs(
+                f"B{k:02d}",
+                (2, 3),
+                q + slam_xyz[tb, :2] + rng.normal(0, sigma, q.shape),
+                np.array([np.eye(2) * sigma**2] * 2),
+                1.0,
+                0.002,
+                grid + rng.normal(0, 0.003, grid.shape),
+                -850.0,
+                float(tb),
+            )
+        )
+    return traj, out
+
+
+def test_the_drift_correction_tests_each_beacon_and_leaves_a_moved_one_out() -> None:
+    """Each control beacon is tested against the pose graph solved without it: on a
+    consistent run none fails and the checks pass; a beacon moved 0.3 m after its survey
+    fails and is left out (the graph would otherwise bend the cloud onto it); a drift
+    model far tighter than the SLAM's drift fails so many that the run is refused."""
+    rng = np.random.default_rng(5)
+    traj, obs = _drifting_run(rng, 0.004)
+    controls, checks = [o for o in obs if o.beacon != "B05"], [o for o in obs if o.beacon == "B05"]
+    rigid = rigid_solution(controls, "4", 0.003, False).transformation
+
+    def run(cs: list[BeaconObs], drift: float = 0.01) -> DriftCorrection:
+        return correct_drift(
+            traj, cs, rigid, drift=drift, survey_sigma_m=0.003, heights=False, checks=checks
+        )
+
+    clean = run(controls)
+    assert clean.excluded == ()
+    assert [t.beacon for t in clean.tests if t.role == "check"] == ["B05"]
+    assert not any(t.failed for t in clean.tests)
+    # the check, 20 m from its neighbours, within half of its rigid misclosure (0.19 m)
+    rigid_check = check_beacons(rigid_solution(controls, "4", 0.003, False), checks,
+                                survey_sigma_m=0.003)[0]  # fmt: skip
+    after = max(np.hypot(*clean.residuals["B05"][:, :2].T))
+    assert after < 0.5 * rigid_check.horizontal_m
+    moved = [
+        o if o.beacon != "B07" else replace(o, grid_xy=o.grid_xy + np.array([0.0, 0.3]))
+        for o in controls
+    ]
+    bent = run(moved)
+    assert bent.excluded == ("B07",)
+    assert next(t for t in bent.tests if t.beacon == "B07").failed
+    assert not any(t.failed for t in bent.tests if t.beacon != "B07")
+    # left out, the moved beacon stays 0.3 m off rather than the cloud bending onto it
+    assert 0.25 < max(np.hypot(*bent.residuals["B07"][:, :2].T)) < 0.35
+    with pytest.raises(AdjustmentError, match="inconsistent"):
+        run(controls, drift=0.00002)
+    # heights: the top against the height chain solved without it, one more dof
+    level = correct_drift(traj, controls, rigid, drift=0.01, survey_sigma_m=0.003, heights=True)
+    assert level.excluded == ()
+    assert {t.dof for t in level.tests} == {5}
+    raised = [o if o.beacon != "B03" else replace(o, grid_top=o.grid_top + 0.3) for o in controls]
+    high = correct_drift(traj, raised, rigid, drift=0.01, survey_sigma_m=0.003, heights=True)
+    assert high.excluded == ("B03",)
+    assert abs(float(high.residuals["B03"][0, 2]) + 0.3) < 0.05  # left out: 0.3 m low

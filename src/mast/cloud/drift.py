@@ -15,6 +15,20 @@ beacons' tops.
 Every point is then moved by the correction of the trajectory at its time,
 ``C(t) = X(t) X_slam(t)^-1``, interpolated between keyframes; the rigid
 transformation is where the graph starts.
+
+The graph bends the cloud onto its control beacons, so a beacon that moved
+after its survey would bend the cloud locally and leave no residual to show
+it. Each control beacon is therefore tested against the graph solved without
+it: where the rest of the beacons and the drift model put its edges (with
+the covariance of that prediction from the graph's marginals, plus its own
+edges' and the survey's) against where it was surveyed, a chi-square test of
+its plan coordinates at the w-tests' significance (Bonferroni over the
+beacons). While some fail, the worst is left out and the rest tested again
+(iterated data snooping); when more than a third would have to go, the drift
+model or the beacons are wrong and the correction is refused. Check beacons
+are never in the graph: each is tested the same way against the final one.
+With heights, the beacon's top against the height chain solved without it
+adds one degree of freedom to the same test.
 """
 
 from __future__ import annotations
@@ -28,10 +42,11 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from mast.cloud.adjust import BeaconObs, Transformation
+from mast.cloud.adjust import W_ALPHA, AdjustmentError, BeaconObs, Transformation
+from mast.core.quantiles import chi2_isf
 from mast.errors import InputError
 
-__all__ = ["DriftCorrection", "Trajectory", "correct_drift", "read_trajectory"]
+__all__ = ["DriftCorrection", "DriftTest", "Trajectory", "correct_drift", "read_trajectory"]
 
 #: The drift model of the between factors, per step of ``s`` metres: position
 #: ``SCALE_SHARE * drift * s`` in each axis, heading ``HEADING_PER_ROOT_M * drift *
@@ -43,6 +58,8 @@ __all__ = ["DriftCorrection", "Trajectory", "correct_drift", "read_trajectory"]
 #: model cannot absorb.
 HEADING_PER_ROOT_M = 0.1
 SCALE_SHARE = 1.0
+#: At most this share of the control beacons may be left out as outliers.
+MAX_EXCLUDED_SHARE = 1.0 / 3.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -120,10 +137,31 @@ def _read_track_csv(p: Path, lines: list[str]) -> Trajectory:
     return _trajectory(p, np.array(rows).reshape(-1, 8))
 
 
+@dataclass(frozen=True, slots=True)
+class DriftTest:
+    """A beacon against the pose graph solved without it (module docstring).
+
+    ``statistic`` is the squared Mahalanobis distance of its surveyed plan edges
+    (and top, with heights) from where the graph puts them, on ``dof`` (two per
+    edge, one for the top) degrees of freedom; ``critical`` its bound. ``role``: ``control`` (left out to be
+    tested) or ``check`` (never in the graph)."""
+
+    beacon: str
+    role: str
+    statistic: float
+    dof: int
+    critical: float
+
+    @property
+    def failed(self) -> bool:
+        return self.statistic > self.critical
+
+
 @dataclass(frozen=True, eq=False)
 class DriftCorrection:
     """The correction ``C(t)`` at the keyframes: rotation, translation (grid = R p + t) and
-    height offset; with the residuals at the beacons after it."""
+    height offset; with the residuals at the beacons after it, each beacon's test, and the
+    control beacons left out by them."""
 
     time: NDArray[np.float64]
     rotation: NDArray[np.float64]
@@ -133,6 +171,8 @@ class DriftCorrection:
     step_m: float
     residuals: dict[str, NDArray[np.float64]]
     heights: bool
+    tests: tuple[DriftTest, ...] = ()
+    excluded: tuple[str, ...] = ()
 
     def apply(self, xyz: NDArray[np.float64], time: NDArray[np.float64]) -> NDArray[np.float64]:
         """Points moved by the correction at their times (held at the ends outside)."""
@@ -174,8 +214,17 @@ def correct_drift(
     survey_sigma_m: float,
     heights: bool,
     step_m: float = 1.0,
+    checks: Sequence[BeaconObs] = (),
 ) -> DriftCorrection:
-    """Solve the pose graph (module docstring) and the correction at every keyframe."""
+    """Solve the pose graph (module docstring), test its beacons, and the correction at
+    every keyframe.
+
+    Raises
+    ------
+    AdjustmentError
+        ``inconsistent`` when more than :data:`MAX_EXCLUDED_SHARE` of the control
+        beacons (or all but two) fail their tests.
+    """
     import gtsam
 
     timed = [o for o in controls if o.time is not None]
@@ -185,6 +234,7 @@ def correct_drift(
             "(the cloud's points need a time)",
             path=traj.path,
         )
+    timed_checks = [o for o in checks if o.time is not None]
     # keyframes every step_m of travel, plus each beacon's time
     d = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(traj.xyz[:, :2], axis=0).T))])
     marks = np.arange(0.0, d[-1] + step_m, step_m)
@@ -197,7 +247,8 @@ def correct_drift(
             "is it the trajectory of this cloud, in the same time base?",
             path=traj.path,
         )
-    t_key = np.unique(np.concatenate([t_key, np.clip(t_beacons, traj.time[0], traj.time[-1])]))
+    t_seen = np.array([o.time for o in [*timed, *timed_checks]], dtype=float)
+    t_key = np.unique(np.concatenate([t_key, np.clip(t_seen, traj.time[0], traj.time[-1])]))
     slam = _pose_at(traj, t_key)
     dist = np.interp(t_key, traj.time, d)
     rot0 = math.radians(rigid.rotation_deg)
@@ -205,12 +256,12 @@ def correct_drift(
     r0 = np.array([[c0, -s0], [s0, c0]])
     t0 = rigid.translation[:2] - r0 @ rigid.centre[:2]
 
-    graph = gtsam.NonlinearFactorGraph()
-    values = gtsam.Values()
+    chain = gtsam.NonlinearFactorGraph()
+    start = gtsam.Values()
     poses = [gtsam.Pose2(*p) for p in slam]
     for k, p in enumerate(slam):
         xy = r0 @ p[:2] + t0
-        values.insert(k, gtsam.Pose2(float(xy[0]), float(xy[1]), float(p[2] + rot0)))
+        start.insert(k, gtsam.Pose2(float(xy[0]), float(xy[1]), float(p[2] + rot0)))
     for k in range(len(poses) - 1):
         step = max(float(dist[k + 1] - dist[k]), 1e-3)
         sig = np.array(
@@ -220,7 +271,7 @@ def correct_drift(
                 HEADING_PER_ROOT_M * drift * math.sqrt(step) + 1e-6,
             ]
         )
-        graph.add(
+        chain.add(
             gtsam.BetweenFactorPose2(
                 k,
                 k + 1,
@@ -230,26 +281,58 @@ def correct_drift(
         )
     key_of = {float(t): k for k, t in enumerate(t_key)}
     s2 = survey_sigma_m**2
-    for o in timed:
-        tb = float(np.clip(o.time, traj.time[0], traj.time[-1]))  # type: ignore[arg-type]
-        k = key_of[tb]
-        body = poses[k]
-        for i in range(len(o.edges)):
-            q = body.transformTo(np.asarray(o.cloud_xy[i], dtype=float))
-            cov = o.cloud_cov[i]
-            rb = np.array(
-                [
-                    [math.cos(body.theta()), -math.sin(body.theta())],
-                    [math.sin(body.theta()), math.cos(body.theta())],
-                ]
+    seen = {o.beacon: _Seen(o, poses, key_of, traj) for o in [*timed, *timed_checks]}
+
+    def solve(active: Sequence[BeaconObs], init: Any) -> tuple[Any, Any]:
+        graph = gtsam.NonlinearFactorGraph()
+        graph.push_back(chain)
+        for o in active:
+            for f in seen[o.beacon].factors(s2):
+                graph.add(f)
+        params = gtsam.LevenbergMarquardtParams()
+        params.setRelativeErrorTol(1e-10)
+        params.setAbsoluteErrorTol(1e-12)
+        params.setMaxIterations(100)
+        values = gtsam.LevenbergMarquardtOptimizer(graph, init, params).optimize()
+        return graph, values
+
+    def test(o: BeaconObs, role: str, others: Sequence[BeaconObs], n: int) -> DriftTest:
+        """``o`` against the graph of ``others`` (a control's is solved without it)."""
+        graph, values = solve(others, result) if role == "control" else (final, result)
+        stat, dof = seen[o.beacon].statistic(graph, values, s2)
+        if heights and math.isfinite(o.top) and math.isfinite(o.grid_top):
+            k = seen[o.beacon].key
+            dz, var = _height_chain(t_key, dist, others, drift, s2, at=k)
+            r = o.top + float(dz[k]) - o.grid_top
+            stat += r * r / (var + o.sigma_top**2 + s2)
+            dof += 1
+        return DriftTest(o.beacon, role, stat, dof, chi2_isf(W_ALPHA / max(n, 1), dof))
+
+    active = list(timed)
+    final, result = solve(active, start)
+    excluded: list[DriftTest] = []  # each as it failed when it was left out
+    while True:
+        tests = [test(o, "control", [a for a in active if a is not o], len(active)) for o in active]
+        failing = [t for t in tests if t.failed]
+        if not failing:
+            break
+        worst = max(failing, key=lambda t: t.statistic / t.critical)
+        if len(excluded) + 1 > MAX_EXCLUDED_SHARE * len(timed) or len(active) <= 2:
+            names = ", ".join(t.beacon for t in failing)
+            raise AdjustmentError(
+                "inconsistent",
+                f"with the drift correction, beacon(s) {names} do not fit where the rest "
+                f"and the drift model ({100 * drift:g} % of distance) put them, and too many "
+                "to leave out: a beacon moved, or the SLAM drifts more than the model "
+                "(--drift)",
+                [t.beacon for t in failing],
             )
-            cov_body = rb.T @ cov @ rb
-            graph.add(_edge_factor(k, np.asarray(q, dtype=float), o.grid_xy[i], cov_body, s2))
-    params = gtsam.LevenbergMarquardtParams()
-    params.setRelativeErrorTol(1e-10)
-    params.setAbsoluteErrorTol(1e-12)
-    params.setMaxIterations(100)
-    result = gtsam.LevenbergMarquardtOptimizer(graph, values, params).optimize()
+        excluded.append(worst)
+        active = [o for o in active if o.beacon != worst.beacon]
+        final, result = solve(active, result)
+    tests += excluded
+    tests += [test(o, "check", active, len(timed_checks)) for o in timed_checks]
+
     rot = np.empty(len(poses))
     trans = np.empty((len(poses), 2))
     for k, p in enumerate(poses):
@@ -258,15 +341,70 @@ def correct_drift(
         rot[k] = corr.theta()
         trans[k] = [corr.x(), corr.y()]
     rot = np.unwrap(rot)
-    dz = _height_chain(t_key, dist, timed, drift, s2, rigid) if heights else np.zeros(len(t_key))
+    dz = _height_chain(t_key, dist, active, drift, s2)[0] if heights else np.zeros(len(t_key))
     corr_ = DriftCorrection(t_key, rot, trans, dz, drift, step_m, {}, heights)
     res = {}
-    for o in controls:
+    for o in [*controls, *checks]:
         g = corr_.at_beacon(o)
         res[o.beacon] = g - np.column_stack(
             [o.grid_xy, np.full(len(o.edges), o.grid_top if heights else g[0, 2])]
         )
-    return DriftCorrection(t_key, rot, trans, dz, drift, step_m, res, heights)
+    return DriftCorrection(
+        t_key,
+        rot,
+        trans,
+        dz,
+        drift,
+        step_m,
+        res,
+        heights,
+        tuple(sorted(tests, key=lambda t: (t.role != "control", t.beacon))),
+        tuple(t.beacon for t in excluded),
+    )
+
+
+class _Seen:
+    """A beacon as the pose graph sees it: its edges in the body frame of the keyframe at
+    the time it was seen, with their covariances there."""
+
+    def __init__(
+        self, o: BeaconObs, poses: Sequence[Any], key_of: dict[float, int], traj: Trajectory
+    ) -> None:
+        tb = float(np.clip(o.time, traj.time[0], traj.time[-1]))  # type: ignore[arg-type]
+        self.obs = o
+        self.key = key_of[tb]
+        body = poses[self.key]
+        c, s = math.cos(body.theta()), math.sin(body.theta())
+        rb = np.array([[c, -s], [s, c]])
+        self.q = [np.asarray(body.transformTo(np.asarray(p, dtype=float))) for p in o.cloud_xy]
+        self.cov = [rb.T @ cov @ rb for cov in o.cloud_cov]
+
+    def factors(self, s2: float) -> list[Any]:
+        return [
+            _edge_factor(self.key, q, g, cov, s2)
+            for q, g, cov in zip(self.q, self.obs.grid_xy, self.cov, strict=True)
+        ]
+
+    def statistic(self, graph: Any, values: Any, s2: float) -> tuple[float, int]:
+        """Squared Mahalanobis distance of the surveyed edges from where the graph (solved
+        without this beacon) puts them, and its degrees of freedom."""
+        import gtsam
+
+        x = values.atPose2(self.key)
+        pose_cov = gtsam.Marginals(graph, values).marginalCovariance(self.key)
+        c, s = math.cos(x.theta()), math.sin(x.theta())
+        r = np.array([[c, -s], [s, c]])
+        k = len(self.q)
+        v = np.empty(2 * k)
+        jac = np.empty((2 * k, 3))
+        cov = np.zeros((2 * k, 2 * k))
+        for i, (q, g, cq) in enumerate(zip(self.q, self.obs.grid_xy, self.cov, strict=True)):
+            v[2 * i : 2 * i + 2] = r @ q + np.array([x.x(), x.y()]) - g
+            # a perturbation of the pose in its own frame (GTSAM's retraction)
+            jac[2 * i : 2 * i + 2] = np.column_stack([r, r @ np.array([-q[1], q[0]])])
+            cov[2 * i : 2 * i + 2, 2 * i : 2 * i + 2] = r @ cq @ r.T + s2 * np.eye(2)
+        total = cov + jac @ pose_cov @ jac.T
+        return float(v @ np.linalg.solve(total, v)), 2 * k
 
 
 def _edge_factor(
@@ -298,12 +436,14 @@ def _height_chain(
     timed: Sequence[BeaconObs],
     drift: float,
     s2: float,
-    rigid: Transformation,
-) -> NDArray[np.float64]:
+    *,
+    at: int | None = None,
+) -> tuple[NDArray[np.float64], float]:
     """Height offsets at the keyframes: a random walk of ``drift`` per metre pinned by
-    the beacons' tops (sparse least squares)."""
+    the beacons' tops (sparse least squares); and the variance of the offset at
+    keyframe ``at`` (nan without one)."""
     from scipy.sparse import coo_matrix
-    from scipy.sparse.linalg import spsolve
+    from scipy.sparse.linalg import splu
 
     n = t_key.size
     rows: list[int] = []
@@ -331,5 +471,10 @@ def _height_chain(
     wv = np.array(w)
     a = coo_matrix((np.array(vals) * wv[rows], (rows, cols)), shape=(len(rhs), n)).tocsr()
     b = np.array(rhs) * wv
-    out: NDArray[np.float64] = np.asarray(spsolve((a.T @ a).tocsc(), a.T @ b), dtype=float)
-    return out
+    normal = splu((a.T @ a).tocsc())
+    out: NDArray[np.float64] = np.asarray(normal.solve(a.T @ b), dtype=float)
+    if at is None:
+        return out, math.nan
+    unit = np.zeros(n)
+    unit[at] = 1.0
+    return out, float(normal.solve(unit)[at])

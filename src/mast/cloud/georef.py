@@ -254,15 +254,22 @@ def georeference(
                     path=cloud.path,
                 )
             used = [o for o in controls if o.beacon not in solution.excluded]
-            drift = correct_drift(
-                trajectory,
-                used,
-                solution.transformation,
-                drift=config.drift,
-                survey_sigma_m=config.survey_sigma_m,
-                heights=heights,
-            )
-    beacons = _fates(survey, found, config, solution, short)
+            try:
+                drift = correct_drift(
+                    trajectory,
+                    used,
+                    solution.transformation,
+                    drift=config.drift,
+                    survey_sigma_m=config.survey_sigma_m,
+                    heights=heights,
+                    checks=checks_obs,
+                )
+            except AdjustmentError as err:
+                refusal = err
+    excluded = set(solution.excluded) if solution is not None else set()
+    if drift is not None:
+        excluded |= set(drift.excluded)
+    beacons = _fates(survey, found, config, excluded, short)
     return Georef(
         cloud,
         survey,
@@ -284,10 +291,9 @@ def _fates(
     survey: Survey,
     found: dict[str, BeaconObs],
     config: GeorefConfig,
-    solution: Solution | None,
+    excluded: set[str],
     short: set[str],
 ) -> list[FoundBeacon]:
-    excluded = set(solution.excluded) if solution is not None else set()
     out = []
     for b in survey:
         obs = found.get(b.id)

@@ -115,7 +115,7 @@ def write_outputs(
         # a refusal must not leave an earlier run's result beside its report
         (out / stale).unlink(missing_ok=True)
     written = 0
-    if result.solution is not None:
+    if result.solution is not None and result.refusal is None:
         trans = result.solution.transformation
         stride = max(1, result.cloud.count // PLAN_POINTS)
 
@@ -215,6 +215,18 @@ def transform_record(
             "keyframe_step_m": drift.step_m,
             "keyframes": int(drift.time.size),
             "check_horizontal_after_m": after,
+            "beacon_tests": [
+                {
+                    "beacon": t.beacon,
+                    "role": t.role,
+                    "statistic": t.statistic,
+                    "dof": t.dof,
+                    "critical": t.critical,
+                    "passed": not t.failed,
+                }
+                for t in drift.tests
+            ],
+            "excluded": list(drift.excluded),
         }
     return rec
 
@@ -425,6 +437,19 @@ def report_text(
             f"  pose graph over {drift.time.size} keyframes every {drift.step_m:g} m, "
             f"drift model {100 * drift.drift:g} % of distance"
         )
+        add(
+            "  each control beacon against the graph solved without it, each check against "
+            "the final graph"
+        )
+        add("  (chi-square of its plan edges, and its top with heights):")
+        for dt in drift.tests:
+            verdict = "pass" if not dt.failed else "FAIL"
+            add(
+                f"  {dt.beacon:<10} {dt.role:<8} {dt.statistic:8.2f} on {dt.dof} dof, "
+                f"bound {dt.critical:6.2f}  {verdict}"
+            )
+        if drift.excluded:
+            add(f"  left out of the graph as outliers: {', '.join(drift.excluded)}")
         add("")
     add("Accuracy")
     add("--------")
