@@ -356,10 +356,10 @@ def test_a_fuzz_case_is_charged_only_its_own_memory(tmp_path: Path) -> None:
     """A case runs in a child forked from a warmed-up process (late in the test suite, a
     large one): its peak is what it took itself, not the parent's pages it was forked
     with, and a case that does take memory is charged it."""
-    from mast.apps.bench.fuzz import FuzzCase, _run, _vm_size
+    from mast.apps.bench.fuzz import FuzzCase, _run, _vm
 
     ballast = np.ones(400 * 2**20 // 8)  # a parent holding 400 MiB, touched
-    limit = _vm_size() + (2 << 30)
+    limit = _vm("VmSize") + (2 << 30)
     status, _, peak, inherited, out, _ = _run(
         FuzzCase("t", "help", ("--help",), None), tmp_path / "a", limit, 60.0
     )

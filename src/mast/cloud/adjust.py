@@ -35,6 +35,7 @@ from mast.core.quantiles import chi2_isf, norm_ppf
 
 __all__ = [
     "BeaconObs",
+    "BeaconTest",
     "CheckResult",
     "Solution",
     "Transformation",
@@ -153,10 +154,16 @@ def _rotation(model: str, p: NDArray[np.float64]) -> NDArray[np.float64]:
 
 @dataclass(frozen=True, eq=False)
 class BeaconTest:
+    """A beacon left out and tested against the solution of the rest: ``statistic`` (a
+    squared Mahalanobis distance) on ``dof`` degrees of freedom, ``critical`` its bound.
+    ``role``: ``control`` (left out to be tested) or ``check`` (never in the solution;
+    the drift correction's tests)."""
+
     beacon: str
     statistic: float
     dof: int
     critical: float
+    role: str = "control"
 
     @property
     def failed(self) -> bool:

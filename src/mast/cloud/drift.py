@@ -42,11 +42,11 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from mast.cloud.adjust import W_ALPHA, AdjustmentError, BeaconObs, Transformation
+from mast.cloud.adjust import W_ALPHA, AdjustmentError, BeaconObs, BeaconTest, Transformation
 from mast.core.quantiles import chi2_isf
 from mast.errors import InputError
 
-__all__ = ["DriftCorrection", "DriftTest", "Trajectory", "correct_drift", "read_trajectory"]
+__all__ = ["DriftCorrection", "Trajectory", "correct_drift", "read_trajectory"]
 
 #: The drift model of the between factors, per step of ``s`` metres: position
 #: ``SCALE_SHARE * drift * s`` in each axis, heading ``HEADING_PER_ROOT_M * drift *
@@ -137,26 +137,6 @@ def _read_track_csv(p: Path, lines: list[str]) -> Trajectory:
     return _trajectory(p, np.array(rows).reshape(-1, 8))
 
 
-@dataclass(frozen=True, slots=True)
-class DriftTest:
-    """A beacon against the pose graph solved without it (module docstring).
-
-    ``statistic`` is the squared Mahalanobis distance of its surveyed plan edges
-    (and top, with heights) from where the graph puts them, on ``dof`` (two per
-    edge, one for the top) degrees of freedom; ``critical`` its bound. ``role``: ``control`` (left out to be
-    tested) or ``check`` (never in the graph)."""
-
-    beacon: str
-    role: str
-    statistic: float
-    dof: int
-    critical: float
-
-    @property
-    def failed(self) -> bool:
-        return self.statistic > self.critical
-
-
 @dataclass(frozen=True, eq=False)
 class DriftCorrection:
     """The correction ``C(t)`` at the keyframes: rotation, translation (grid = R p + t) and
@@ -171,7 +151,11 @@ class DriftCorrection:
     step_m: float
     residuals: dict[str, NDArray[np.float64]]
     heights: bool
-    tests: tuple[DriftTest, ...] = ()
+    #: each control beacon against the graph solved without it, each check against the
+    #: final graph (module docstring); the squared Mahalanobis distance of its surveyed
+    #: plan edges (and top, with heights), on two degrees of freedom per edge (one more
+    #: for the top)
+    tests: tuple[BeaconTest, ...] = ()
     excluded: tuple[str, ...] = ()
 
     def apply(self, xyz: NDArray[np.float64], time: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -296,7 +280,7 @@ def correct_drift(
         values = gtsam.LevenbergMarquardtOptimizer(graph, init, params).optimize()
         return graph, values
 
-    def test(o: BeaconObs, role: str, others: Sequence[BeaconObs], n: int) -> DriftTest:
+    def test(o: BeaconObs, role: str, others: Sequence[BeaconObs], n: int) -> BeaconTest:
         """``o`` against the graph of ``others`` (a control's is solved without it)."""
         graph, values = solve(others, result) if role == "control" else (final, result)
         stat, dof = seen[o.beacon].statistic(graph, values, s2)
@@ -306,11 +290,11 @@ def correct_drift(
             r = o.top + float(dz[k]) - o.grid_top
             stat += r * r / (var + o.sigma_top**2 + s2)
             dof += 1
-        return DriftTest(o.beacon, role, stat, dof, chi2_isf(W_ALPHA / max(n, 1), dof))
+        return BeaconTest(o.beacon, stat, dof, chi2_isf(W_ALPHA / max(n, 1), dof), role)
 
     active = list(timed)
     final, result = solve(active, start)
-    excluded: list[DriftTest] = []  # each as it failed when it was left out
+    excluded: list[BeaconTest] = []  # each as it failed when it was left out
     while True:
         tests = [test(o, "control", [a for a in active if a is not o], len(active)) for o in active]
         failing = [t for t in tests if t.failed]

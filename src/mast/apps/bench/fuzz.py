@@ -563,18 +563,11 @@ def _disk_full_case(seeds: _Seeds, d: Path, rng: np.random.Generator) -> FuzzCas
 # --------------------------------------------------------------------------- running
 
 
-def _vm_size() -> int:
+def _vm(field: str) -> int:
+    """This process's ``VmSize`` or ``VmRSS`` (``/proc/self/status``), bytes."""
     with open("/proc/self/status", encoding="ascii") as fh:
         for line in fh:
-            if line.startswith("VmSize:"):
-                return int(line.split()[1]) * 1024
-    return 0  # pragma: no cover - Linux only
-
-
-def _vm_rss() -> int:
-    with open("/proc/self/status", encoding="ascii") as fh:
-        for line in fh:
-            if line.startswith("VmRSS:"):
+            if line.startswith(f"{field}:"):
                 return int(line.split()[1]) * 1024
     return 0  # pragma: no cover - Linux only
 
@@ -585,7 +578,7 @@ def _child(case: FuzzCase, out: Path, err: Path, as_limit: int) -> None:
     parent's pages) to ``.rss0`` beside ``out``, which the parent subtracts."""
     status = 70
     try:
-        (out.parent / ".rss0").write_text(str(_vm_rss()), encoding="ascii")
+        (out.parent / ".rss0").write_text(str(_vm("VmRSS")), encoding="ascii")
         os.setsid()
         resource.setrlimit(resource.RLIMIT_AS, (as_limit, as_limit))
         if case.file_limit is not None:
@@ -838,7 +831,7 @@ def run_fuzz(
         import mast.apps.plot
         import mast.runs.run  # noqa: F401
 
-        as_limit = _vm_size() + MEMORY_BOUND_BYTES + (256 << 20)
+        as_limit = _vm("VmSize") + MEMORY_BOUND_BYTES + (256 << 20)
         # The undamaged runs: time, peak memory and fixes each damaged one is judged by.
         survey_s = str(seeds.survey)
         base_argv = {
