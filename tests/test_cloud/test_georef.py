@@ -289,6 +289,21 @@ def test_drift_is_corrected_along_the_trajectory(tmp_path: Path) -> None:
     assert all(t["passed"] and t["dof"] in (3, 5) for t in tested.values())
     assert dc["excluded"] == []
     assert "against the graph solved without it" in (out / "report.txt").read_text()
+    # a drift model far tighter than the SLAM's: too many beacons fail their tests, the
+    # run is refused and writes no cloud, transformation or plan (nor fitted coordinates)
+    tight = tmp_path / "tight"
+    refused = _georef(
+        scene.cloud, scene.survey, tight, "--trajectory", str(scene.trajectory),
+        "--drift", "0.00002",
+    )  # fmt: skip
+    assert refused.returncode == 3, refused.stderr
+    assert "inconsistent" in refused.stderr
+    assert "--drift" in refused.stderr
+    for gone in ("georeferenced.laz", "transform.json", "plan.png"):
+        assert not (tight / gone).exists()
+    assert "NO GEOREFERENCE" in (tight / "report.txt").read_text()
+    with (tight / "beacons_found.csv").open() as fh:
+        assert not any(r["fitted_easting"] for r in csv.DictReader(fh))
     # without the trajectory the same cloud fits no one transformation: refused
     rigid = _georef(scene.cloud, scene.survey, tmp_path / "rigid")
     assert rigid.returncode == 3

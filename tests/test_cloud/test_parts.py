@@ -187,7 +187,9 @@ def test_the_drift_correction_tests_each_beacon_and_leaves_a_moved_one_out() -> 
     ]
     bent = run(moved)
     assert bent.excluded == ("B07",)
-    assert next(t for t in bent.tests if t.beacon == "B07").failed
+    left_out = next(t for t in bent.tests if t.beacon == "B07")
+    assert left_out.role == "excluded"  # and tested against the final graph
+    assert left_out.failed
     assert not any(t.failed for t in bent.tests if t.beacon != "B07")
     # left out, the moved beacon stays 0.3 m off rather than the cloud bending onto it
     assert 0.25 < max(np.hypot(*bent.residuals["B07"][:, :2].T)) < 0.35
@@ -201,3 +203,21 @@ def test_the_drift_correction_tests_each_beacon_and_leaves_a_moved_one_out() -> 
     high = correct_drift(traj, raised, rigid, drift=0.01, survey_sigma_m=0.003, heights=True)
     assert high.excluded == ("B03",)
     assert abs(float(high.residuals["B03"][0, 2]) + 0.3) < 0.05  # left out: 0.3 m low
+
+
+def test_a_beacon_the_rest_cannot_place_is_not_tested() -> None:
+    """Two controls of one edge each: either left out leaves one point, about which the
+    graph may turn freely, so neither is tested (as the adjustment does with a beacon
+    whose removal leaves no redundancy), and the correction is still made."""
+    rng = np.random.default_rng(6)
+    traj, obs = _drifting_run(rng, 0.004)
+    ends = [
+        replace(o, edges=(2,), cloud_xy=o.cloud_xy[:1], cloud_cov=o.cloud_cov[:1],
+                grid_xy=o.grid_xy[:1])
+        for o in (obs[0], obs[-1])
+    ]  # fmt: skip
+    rigid = rigid_solution(ends, "4", 0.003, False).transformation
+    done = correct_drift(traj, ends, rigid, drift=0.01, survey_sigma_m=0.003, heights=False)
+    assert done.tests == ()
+    assert done.excluded == ()
+    assert max(np.hypot(*done.residuals["B00"][:, :2].T)) < 0.01

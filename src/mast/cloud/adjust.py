@@ -156,8 +156,9 @@ def _rotation(model: str, p: NDArray[np.float64]) -> NDArray[np.float64]:
 class BeaconTest:
     """A beacon left out and tested against the solution of the rest: ``statistic`` (a
     squared Mahalanobis distance) on ``dof`` degrees of freedom, ``critical`` its bound.
-    ``role``: ``control`` (left out to be tested) or ``check`` (never in the solution;
-    the drift correction's tests)."""
+    ``role``: ``control`` (left out to be tested), or, in the drift correction's
+    tests, ``excluded`` (left out as an outlier) or ``check`` (never in the solution),
+    each against the final solution."""
 
     beacon: str
     statistic: float

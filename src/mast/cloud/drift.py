@@ -60,6 +60,8 @@ HEADING_PER_ROOT_M = 0.1
 SCALE_SHARE = 1.0
 #: At most this share of the control beacons may be left out as outliers.
 MAX_EXCLUDED_SHARE = 1.0 / 3.0
+#: The beacons' tests in the order they are reported.
+ROLES = ("control", "excluded", "check")
 
 
 @dataclass(frozen=True, eq=False)
@@ -207,7 +209,7 @@ def correct_drift(
     ------
     AdjustmentError
         ``inconsistent`` when more than :data:`MAX_EXCLUDED_SHARE` of the control
-        beacons (or all but two) fail their tests.
+        beacons would have to be left out (two always remain).
     """
     import gtsam
 
@@ -223,7 +225,7 @@ def correct_drift(
     d = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(traj.xyz[:, :2], axis=0).T))])
     marks = np.arange(0.0, d[-1] + step_m, step_m)
     t_key = np.interp(marks, d, traj.time)
-    t_beacons = np.array([o.time for o in timed], dtype=float)
+    t_beacons = np.array([o.time for o in [*timed, *timed_checks]], dtype=float)
     if t_beacons.min() < traj.time[0] - 1.0 or t_beacons.max() > traj.time[-1] + 1.0:
         raise InputError(
             f"the trajectory's times ({traj.time[0]:.3f} to {traj.time[-1]:.3f} s) do not "
@@ -231,8 +233,10 @@ def correct_drift(
             "is it the trajectory of this cloud, in the same time base?",
             path=traj.path,
         )
-    t_seen = np.array([o.time for o in [*timed, *timed_checks]], dtype=float)
-    t_key = np.unique(np.concatenate([t_key, np.clip(t_seen, traj.time[0], traj.time[-1])]))
+    # a keyframe at each control's time (a check is placed from its nearest keyframe, so
+    # the graph is the same whichever beacons are checks)
+    t_control = np.array([o.time for o in timed], dtype=float)
+    t_key = np.unique(np.concatenate([t_key, np.clip(t_control, traj.time[0], traj.time[-1])]))
     slam = _pose_at(traj, t_key)
     dist = np.interp(t_key, traj.time, d)
     rot0 = math.radians(rigid.rotation_deg)
@@ -263,9 +267,8 @@ def correct_drift(
                 gtsam.noiseModel.Diagonal.Sigmas(sig),
             )
         )
-    key_of = {float(t): k for k, t in enumerate(t_key)}
     s2 = survey_sigma_m**2
-    seen = {o.beacon: _Seen(o, poses, key_of, traj) for o in [*timed, *timed_checks]}
+    seen = {o.beacon: _Seen(o, poses, t_key, r0) for o in [*timed, *timed_checks]}
 
     def solve(active: Sequence[BeaconObs], init: Any) -> tuple[Any, Any]:
         graph = gtsam.NonlinearFactorGraph()
@@ -280,10 +283,20 @@ def correct_drift(
         values = gtsam.LevenbergMarquardtOptimizer(graph, init, params).optimize()
         return graph, values
 
-    def test(o: BeaconObs, role: str, others: Sequence[BeaconObs], n: int) -> BeaconTest:
-        """``o`` against the graph of ``others`` (a control's is solved without it)."""
-        graph, values = solve(others, result) if role == "control" else (final, result)
-        stat, dof = seen[o.beacon].statistic(graph, values, s2)
+    def test(o: BeaconObs, role: str, others: Sequence[BeaconObs], n: int) -> BeaconTest | None:
+        """``o`` against the graph of ``others`` (a control's is solved without it); None
+        when they cannot place the graph (fewer than two edges: a rotation left free)."""
+        if sum(len(a.edges) for a in others) < 2:
+            return None
+        try:
+            if role == "control":
+                graph, values = solve(others, result)
+                marginals = gtsam.Marginals(graph, values)
+            else:  # a check, or a control left out: against the final graph
+                values, marginals = result, final_marginals()
+            stat, dof = seen[o.beacon].statistic(values, marginals, s2)
+        except RuntimeError:  # GTSAM: an indeterminant system (too weak to place)
+            return None
         if heights and math.isfinite(o.top) and math.isfinite(o.grid_top):
             k = seen[o.beacon].key
             dz, var = _height_chain(t_key, dist, others, drift, s2, at=k)
@@ -292,15 +305,23 @@ def correct_drift(
             dof += 1
         return BeaconTest(o.beacon, stat, dof, chi2_isf(W_ALPHA / max(n, 1), dof), role)
 
+    def final_marginals() -> Any:
+        if not cache or cache[0] is not result:
+            cache[:] = [result, gtsam.Marginals(final, result)]
+        return cache[1]
+
+    cache: list[Any] = []
     active = list(timed)
     final, result = solve(active, start)
-    excluded: list[BeaconTest] = []  # each as it failed when it was left out
+    excluded: list[BeaconTest] = []
     while True:
-        tests = [test(o, "control", [a for a in active if a is not o], len(active)) for o in active]
+        tried = [test(o, "control", [a for a in active if a is not o], len(active)) for o in active]
+        tests = [t for t in tried if t is not None]
         failing = [t for t in tests if t.failed]
         if not failing:
             break
         worst = max(failing, key=lambda t: t.statistic / t.critical)
+        # (the share alone keeps two: at most one of three, and one of two never)
         if len(excluded) + 1 > MAX_EXCLUDED_SHARE * len(timed) or len(active) <= 2:
             names = ", ".join(t.beacon for t in failing)
             raise AdjustmentError(
@@ -314,8 +335,10 @@ def correct_drift(
         excluded.append(worst)
         active = [o for o in active if o.beacon != worst.beacon]
         final, result = solve(active, result)
-    tests += excluded
-    tests += [test(o, "check", active, len(timed_checks)) for o in timed_checks]
+    # the left out and the checks, each against the final graph
+    out = [o for o in timed if o.beacon in {t.beacon for t in excluded}]
+    tests += [t for o in out if (t := test(o, "excluded", active, len(out)))]
+    tests += [t for o in timed_checks if (t := test(o, "check", active, len(timed_checks)))]
 
     rot = np.empty(len(poses))
     trans = np.empty((len(poses), 2))
@@ -342,26 +365,28 @@ def correct_drift(
         step_m,
         res,
         heights,
-        tuple(sorted(tests, key=lambda t: (t.role != "control", t.beacon))),
+        tuple(sorted(tests, key=lambda t: (ROLES.index(t.role), t.beacon))),
         tuple(t.beacon for t in excluded),
     )
 
 
 class _Seen:
-    """A beacon as the pose graph sees it: its edges in the body frame of the keyframe at
-    the time it was seen, with their covariances there."""
+    """A beacon as the pose graph sees it: its edges in the body frame of the keyframe
+    nearest the time it was seen (a control's own), their covariance in the grid (the
+    cloud's, turned by the rigid rotation ``r0``: the factors' errors are in the grid)."""
 
     def __init__(
-        self, o: BeaconObs, poses: Sequence[Any], key_of: dict[float, int], traj: Trajectory
+        self,
+        o: BeaconObs,
+        poses: Sequence[Any],
+        t_key: NDArray[np.float64],
+        r0: NDArray[np.float64],
     ) -> None:
-        tb = float(np.clip(o.time, traj.time[0], traj.time[-1]))  # type: ignore[arg-type]
         self.obs = o
-        self.key = key_of[tb]
+        self.key = int(np.argmin(np.abs(t_key - float(o.time))))  # type: ignore[arg-type]
         body = poses[self.key]
-        c, s = math.cos(body.theta()), math.sin(body.theta())
-        rb = np.array([[c, -s], [s, c]])
         self.q = [np.asarray(body.transformTo(np.asarray(p, dtype=float))) for p in o.cloud_xy]
-        self.cov = [rb.T @ cov @ rb for cov in o.cloud_cov]
+        self.cov = [r0 @ cov @ r0.T for cov in o.cloud_cov]
 
     def factors(self, s2: float) -> list[Any]:
         return [
@@ -369,24 +394,23 @@ class _Seen:
             for q, g, cov in zip(self.q, self.obs.grid_xy, self.cov, strict=True)
         ]
 
-    def statistic(self, graph: Any, values: Any, s2: float) -> tuple[float, int]:
-        """Squared Mahalanobis distance of the surveyed edges from where the graph (solved
-        without this beacon) puts them, and its degrees of freedom."""
-        import gtsam
-
+    def statistic(self, values: Any, marginals: Any, s2: float) -> tuple[float, int]:
+        """Squared Mahalanobis distance of the surveyed edges from where a graph solved
+        without this beacon (``values``, ``marginals``) puts them, and its degrees of
+        freedom."""
         x = values.atPose2(self.key)
-        pose_cov = gtsam.Marginals(graph, values).marginalCovariance(self.key)
+        pose_cov = marginals.marginalCovariance(self.key)
         c, s = math.cos(x.theta()), math.sin(x.theta())
         r = np.array([[c, -s], [s, c]])
         k = len(self.q)
         v = np.empty(2 * k)
         jac = np.empty((2 * k, 3))
         cov = np.zeros((2 * k, 2 * k))
-        for i, (q, g, cq) in enumerate(zip(self.q, self.obs.grid_xy, self.cov, strict=True)):
+        for i, (q, g, cg) in enumerate(zip(self.q, self.obs.grid_xy, self.cov, strict=True)):
             v[2 * i : 2 * i + 2] = r @ q + np.array([x.x(), x.y()]) - g
             # a perturbation of the pose in its own frame (GTSAM's retraction)
             jac[2 * i : 2 * i + 2] = np.column_stack([r, r @ np.array([-q[1], q[0]])])
-            cov[2 * i : 2 * i + 2, 2 * i : 2 * i + 2] = r @ cq @ r.T + s2 * np.eye(2)
+            cov[2 * i : 2 * i + 2, 2 * i : 2 * i + 2] = cg + s2 * np.eye(2)
         total = cov + jac @ pose_cov @ jac.T
         return float(v @ np.linalg.solve(total, v)), 2 * k
 
@@ -395,7 +419,7 @@ def _edge_factor(
     key: int, q: NDArray[np.float64], g: NDArray[np.float64], cov: NDArray[np.float64], s2: float
 ) -> Any:
     """``X(key) * q = g``: an edge seen at ``q`` in the keyframe's body frame is surveyed
-    at ``g``."""
+    at ``g``; ``cov`` is the edge's covariance in the grid, where the error is."""
     import gtsam
 
     noise = gtsam.noiseModel.Gaussian.Covariance(cov + s2 * np.eye(2))

@@ -253,11 +253,12 @@ def georeference(
                     "the drift correction needs it",
                     path=cloud.path,
                 )
-            used = [o for o in controls if o.beacon not in solution.excluded]
             try:
+                # every control: in a drifting cloud the rigid fit's outlier test means
+                # little; the pose graph's own tests decide
                 drift = correct_drift(
                     trajectory,
-                    used,
+                    controls,
                     solution.transformation,
                     drift=config.drift,
                     survey_sigma_m=config.survey_sigma_m,
@@ -266,9 +267,14 @@ def georeference(
                 )
             except AdjustmentError as err:
                 refusal = err
-    excluded = set(solution.excluded) if solution is not None else set()
-    if drift is not None:
-        excluded |= set(drift.excluded)
+    excluded = (
+        dict.fromkeys(drift.excluded, "outlier: fails its test against the drift-corrected rest")
+        if drift is not None
+        else dict.fromkeys(
+            solution.excluded if solution is not None else [],
+            "outlier: its removal alone makes the rest fit",
+        )
+    )
     beacons = _fates(survey, found, config, excluded, short)
     return Georef(
         cloud,
@@ -291,7 +297,7 @@ def _fates(
     survey: Survey,
     found: dict[str, BeaconObs],
     config: GeorefConfig,
-    excluded: set[str],
+    excluded: dict[str, str],
     short: set[str],
 ) -> list[FoundBeacon]:
     out = []
@@ -311,9 +317,7 @@ def _fates(
         elif b.id in config.checks:
             out.append(FoundBeacon(b.id, "check", obs))
         elif b.id in excluded:
-            out.append(
-                FoundBeacon(b.id, "excluded", obs, "outlier: its removal alone makes the rest fit")
-            )
+            out.append(FoundBeacon(b.id, "excluded", obs, excluded[b.id]))
         else:
             out.append(FoundBeacon(b.id, "control", obs))
     return out

@@ -107,7 +107,8 @@ def write_outputs(
     """Write everything into ``out``; a refusal writes only the beacons and the reports."""
     drift = result.drift
     beacons = explain_missing(result)
-    res = _before_after(result, drift)
+    # refused: no fitted coordinates or residuals from a solution that is not given
+    res = _before_after(result, drift) if result.refusal is None else {}
     sample: list[NDArray[np.float64]] = []
     cloud_path = transform_path = plan_path = None
     svg: str | None = None
@@ -416,8 +417,13 @@ def report_text(
             "  the beacons scatter more than their precisions say, and no beacon is to "
             "blame: standard deviations scaled by the reference variance"
         )
-    if sol.excluded:
+    if sol.excluded and drift is None:
         add(f"  left out as outliers: {', '.join(sol.excluded)}")
+    elif sol.excluded:
+        add(
+            f"  the rigid start left out {', '.join(sol.excluded)}; the drift correction "
+            "tests every beacon again (below)"
+        )
     add("")
     add("Residuals at control beacons (transformed minus surveyed, mm)")
     add("--------------------------------------------------------------")
@@ -438,8 +444,8 @@ def report_text(
             f"drift model {100 * drift.drift:g} % of distance"
         )
         add(
-            "  each control beacon against the graph solved without it, each check against "
-            "the final graph"
+            "  each control beacon against the graph solved without it; the left out and "
+            "the checks against the final graph"
         )
         add("  (chi-square of its plan edges, and its top with heights):")
         for dt in drift.tests:
