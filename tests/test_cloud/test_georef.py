@@ -289,6 +289,29 @@ def test_drift_is_corrected_along_the_trajectory(tmp_path: Path) -> None:
     assert all(t["passed"] and t["dof"] in (3, 5) for t in tested.values())
     assert dc["excluded"] == []
     assert "against the graph solved without it" in (out / "report.txt").read_text()
+    # B03 moved 0.3 m after its survey: it fails its test against the rest and is left
+    # out, rather than the graph bending the cloud onto it
+    with scene.survey.open() as fh:
+        rows = list(csv.DictReader(fh))
+    for r in rows:
+        if r["beacon"] == "B03":
+            r["easting"] = f"{float(r['easting']) + 0.3:.4f}"
+    moved = tmp_path / "moved.csv"
+    with moved.open("w", newline="") as fh:
+        writer = csv.DictWriter(fh, fieldnames=list(rows[0]))
+        writer.writeheader()
+        writer.writerows(rows)
+    bent = _georef(
+        scene.cloud, moved, tmp_path / "bent", "--check", "B04", "--trajectory",
+        str(scene.trajectory),
+    )  # fmt: skip
+    assert bent.returncode == 0, bent.stderr
+    record = json.loads((tmp_path / "bent" / "transform.json").read_text())
+    assert record["drift_correction"]["excluded"] == ["B03"]
+    assert record["beacons"]["excluded"] == ["B03"]
+    assert all(
+        t["passed"] for t in record["drift_correction"]["beacon_tests"] if t["beacon"] != "B03"
+    )
     # a drift model far tighter than the SLAM's: too many beacons fail their tests, the
     # run is refused and writes no cloud, transformation or plan (nor fitted coordinates)
     tight = tmp_path / "tight"

@@ -443,11 +443,9 @@ def report_text(
             f"  pose graph over {drift.time.size} keyframes every {drift.step_m:g} m, "
             f"drift model {100 * drift.drift:g} % of distance"
         )
-        add(
-            "  each control beacon against the graph solved without it; the left out and "
-            "the checks against the final graph"
-        )
-        add("  (chi-square of its plan edges, and its top with heights):")
+        add("  each control beacon against the graph solved without it; the left out")
+        add("  and the checks against the final graph (chi-square of the plan edges,")
+        add("  and of the top with heights):")
         for dt in drift.tests:
             verdict = "pass" if not dt.failed else "FAIL"
             add(
