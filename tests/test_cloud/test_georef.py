@@ -289,6 +289,7 @@ def test_drift_is_corrected_along_the_trajectory(tmp_path: Path) -> None:
     assert all(t["passed"] and t["dof"] in (3, 5) for t in tested.values())
     assert dc["excluded"] == []
     assert "against the graph solved without it" in (out / "report.txt").read_text()
+    assert dc["statistic_per_dof"] > 0
     # B03 moved 0.3 m after its survey: it fails its test against the rest and is left
     # out, rather than the graph bending the cloud onto it
     with scene.survey.open() as fh:

@@ -174,6 +174,8 @@ def test_the_drift_correction_tests_each_beacon_and_leaves_a_moved_one_out() -> 
 
     clean = run(controls)
     assert clean.excluded == ()
+    # how well the drift model fits (1.2 here): ten times looser, statistics far smaller
+    assert 0.0 < 2 * run(controls, drift=0.1).statistic_per_dof < clean.statistic_per_dof
     assert [t.beacon for t in clean.tests if t.role == "check"] == ["B05"]
     assert not any(t.failed for t in clean.tests)
     # the check, 20 m from its neighbours, within half of its rigid misclosure (0.19 m)

@@ -160,6 +160,16 @@ class DriftCorrection:
     tests: tuple[BeaconTest, ...] = ()
     excluded: tuple[str, ...] = ()
 
+    @property
+    def statistic_per_dof(self) -> float:
+        """The control beacons' test statistics over their degrees of freedom (nan when
+        none was tested): about 1 when the drift model fits the SLAM; well below, the
+        SLAM drifts less than the model says and only moves well beyond its misclosures
+        are caught; above, it drifts more."""
+        tests = [t for t in self.tests if t.role == "control"]
+        dof = sum(t.dof for t in tests)
+        return sum(t.statistic for t in tests) / dof if dof else math.nan
+
     def apply(self, xyz: NDArray[np.float64], time: NDArray[np.float64]) -> NDArray[np.float64]:
         """Points moved by the correction at their times (held at the ends outside)."""
         rot = np.interp(time, self.time, self.rotation)

@@ -228,6 +228,9 @@ def transform_record(
                 for t in drift.tests
             ],
             "excluded": list(drift.excluded),
+            "statistic_per_dof": drift.statistic_per_dof
+            if math.isfinite(drift.statistic_per_dof)
+            else None,
         }
     return rec
 
@@ -454,6 +457,18 @@ def report_text(
             )
         if drift.excluded:
             add(f"  left out of the graph as outliers: {', '.join(drift.excluded)}")
+        ratio = drift.statistic_per_dof
+        if math.isfinite(ratio):
+            how = (
+                "the model fits"
+                if 0.5 <= ratio <= 2.0
+                else "the SLAM drifts less than the model: only moves well beyond the "
+                "misclosures are caught"
+                if ratio < 0.5
+                else "the SLAM drifts more than the model (--drift)"
+            )
+            add(f"  control statistics per degree of freedom {ratio:.2f} (1 if the model fits):")
+            add(f"  {how}")
         add("")
     add("Accuracy")
     add("--------")
