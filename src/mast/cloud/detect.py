@@ -187,7 +187,6 @@ def _panel_runs(
     n = columns.keys.size
     if n == 0:
         return np.zeros(0, bool), np.zeros(0), np.zeros(0)
-    occupied = ((columns.bins[:, None] >> np.arange(64, dtype=np.uint64)) & np.uint64(1)) > 0
     if cfg.band is not None:
         lo = np.full(n, cfg.band[0])
         hi = np.full(n, cfg.band[1])
@@ -196,6 +195,31 @@ def _panel_runs(
         lo = floor.zmin[row] + cfg.clearance_m
         hi = floor.zmax[row] - cfg.clearance_m
     top_bin = np.clip(np.floor((hi - lo) / cfg.bin_m).astype(np.int64), 0, 63)
+    zlo = np.zeros(n)
+    zhi = np.zeros(n)
+    found = np.zeros(n, bool)
+    # in blocks of cells: the bins unpacked are 64 booleans (and a few copies) a cell,
+    # which over a mine's whole plan would be gigabytes at once
+    for a in range(0, n, RUN_BLOCK_CELLS):
+        b = min(a + RUN_BLOCK_CELLS, n)
+        found[a:b], zlo[a:b], zhi[a:b] = _column_runs(columns.bins[a:b], lo[a:b], top_bin[a:b], cfg)
+    return found & _level_with_neighbours(columns.keys, found, zlo, zhi, cfg), zlo, zhi
+
+
+#: Cells whose height bins :func:`_panel_runs` unpacks at a time (about 50 MB).
+RUN_BLOCK_CELLS = 1 << 17
+
+
+def _column_runs(
+    bits: NDArray[np.uint64],
+    lo: NDArray[np.float64],
+    top_bin: NDArray[np.int64],
+    cfg: DetectConfig,
+) -> tuple[NDArray[np.bool_], NDArray[np.float64], NDArray[np.float64]]:
+    """:func:`_panel_runs` for a block of cells, before the level test: whether each has
+    a panel-like column, and its lowest and highest height."""
+    n = bits.size
+    occupied = ((bits[:, None] >> np.arange(64, dtype=np.uint64)) & np.uint64(1)) > 0
     grown = occupied.copy()
     grown[:, 1:] |= occupied[:, :-1]
     grown[:, :-1] |= occupied[:, 1:]
@@ -209,11 +233,10 @@ def _panel_runs(
     cell_e, end = np.nonzero(edges == -1)  # exclusive, in the same order as the starts
     del cell_e
     height = (end - start) * cfg.bin_m
-    filled = (
-        np.array([occupied[c, a:b].sum() for c, a, b in zip(cell_s, start, end, strict=True)])
-        if cell_s.size
-        else np.zeros(0)
-    )
+    # occupied bins of each run, from the cells' running counts
+    counts = np.zeros((n, 65), np.int32)
+    np.cumsum(occupied, axis=1, out=counts[:, 1:])
+    filled = counts[cell_s, end] - counts[cell_s, start]
     ok = (
         (height >= cfg.min_panel_height_m)
         & (height <= cfg.max_panel_height_m + 2 * cfg.bin_m)
@@ -221,16 +244,18 @@ def _panel_runs(
         & (end - 1 < top_bin[cell_s])
         & (filled >= 0.5 * (end - start))
     )
-    best = np.full(n, -1.0)
+    # each cell's tallest run (the lowest of equals)
+    run = np.flatnonzero(ok)
+    run = run[np.lexsort((start[run], -height[run], cell_s[run]))]
+    run = run[np.r_[True, cell_s[run][1:] != cell_s[run][:-1]]] if run.size else run
+    cell = cell_s[run]
+    found = np.zeros(n, bool)
     zlo = np.zeros(n)
     zhi = np.zeros(n)
-    for c, a, b, h in zip(cell_s[ok], start[ok], end[ok], height[ok], strict=True):
-        if h > best[c]:
-            best[c] = h
-            zlo[c] = lo[c] + (a - 1) * cfg.bin_m
-            zhi[c] = lo[c] + (b + 1) * cfg.bin_m
-    found = best > 0
-    return found & _level_with_neighbours(columns.keys, found, zlo, zhi, cfg), zlo, zhi
+    found[cell] = True
+    zlo[cell] = lo[cell] + (start[run] - 1) * cfg.bin_m
+    zhi[cell] = lo[cell] + (end[run] + 1) * cfg.bin_m
+    return found, zlo, zhi
 
 
 def _dilated(
@@ -364,6 +389,10 @@ def _clusters(xy: NDArray[np.float64], cell_m: float) -> tuple[NDArray[np.intp],
     return np.asarray(label[inv], dtype=np.intp), int(n)
 
 
+#: Points whose distances to every RANSAC try :func:`_lines_in` takes at a time.
+RANSAC_BLOCK_POINTS = 1 << 14
+
+
 def _lines_in(
     xy: NDArray[np.float64], noise: float, min_points: int, gap_m: float, seed: int = 0
 ) -> list[NDArray[np.intp]]:
@@ -389,9 +418,15 @@ def _lines_in(
             break
         i, d, length = i[ok], d[ok], length[ok]
         nrm = np.column_stack([-d[:, 1], d[:, 0]]) / length[:, None]
-        dist = np.abs(np.einsum("tk,tnk->tn", nrm, p[None, :, :] - p[i][:, None, :]))
-        best = int(np.argmax((dist <= band).sum(axis=1)))
-        inl = np.flatnonzero(dist[best] <= band)
+        off = np.einsum("tk,tk->t", nrm, p[i])
+        # inliers of every try, counted in blocks of points (a dense cluster holds
+        # hundreds of thousands: all at once would be a tries x points matrix)
+        counts = np.zeros(i.size, np.int64)
+        for a in range(0, p.shape[0], RANSAC_BLOCK_POINTS):
+            blk = p[a : a + RANSAC_BLOCK_POINTS]
+            counts += (np.abs(blk @ nrm.T - off) <= band).sum(axis=0)
+        best = int(np.argmax(counts))
+        inl = np.flatnonzero(np.abs(p @ nrm[best] - off[best]) <= band)
         run = None
         for _ in range(2):  # refit, gather again
             if inl.size < 2:
