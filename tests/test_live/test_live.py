@@ -70,15 +70,30 @@ def _assert_agree_with_locate(records: list[dict[str, Any]], recording: Path, dr
     )  # fmt: skip
     assert done.returncode == 0, done.stderr
     located = {r["stamp_ns"]: r for r in map(json.loads, done.stdout.splitlines())}
-    both = 0
+    both = same = 0
     for live in records:
         other = located[live["stamp_ns"]]  # every located scan was recorded, with its stamp
         if live["status"] == other["status"] == "fix":
             both += 1
+            # The live loop drops scans while it locates (which ones depends on the machine's
+            # load), so a scan's prior, the previous fix, may differ from locate's on the
+            # recording; the two fixes then agree within their uncertainty (the fuzzing
+            # harness's rule: 5 combined sigma), and are identical when the priors were.
+            for key, sig in AGREE:
+                sigma = math.hypot(live[sig], other[sig])
+                assert abs(live[key] - other[key]) <= 5 * sigma, (key, live, other)
             d = math.hypot(live["easting"] - other["easting"], live["northing"] - other["northing"])
-            assert d < 1e-4
-            assert abs(live["azimuth_deg"] - other["azimuth_deg"]) * 3600 < 1.0
+            same += d < 1e-4 and abs(live["azimuth_deg"] - other["azimuth_deg"]) * 3600 < 1.0
     assert both >= len(records) // 2
+    assert same >= 0.8 * both  # most priors were alike: those fixes are the same to 0.1 mm
+
+
+#: A fix's values and their standard deviations, compared between live and locate.
+AGREE = (
+    ("easting", "sigma_easting_m"),
+    ("northing", "sigma_northing_m"),
+    ("azimuth_deg", "sigma_azimuth_deg"),
+)
 
 
 @pytest.mark.parametrize("kind", ["sick", "hokuyo"])
