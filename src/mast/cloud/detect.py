@@ -206,7 +206,7 @@ def _panel_runs(
     return found & _level_with_neighbours(columns.keys, found, zlo, zhi, cfg), zlo, zhi
 
 
-#: Cells whose height bins :func:`_panel_runs` unpacks at a time (about 50 MB).
+#: Cells whose height bins :func:`_panel_runs` unpacks at a time (some 80 MB of arrays).
 RUN_BLOCK_CELLS = 1 << 17
 
 
