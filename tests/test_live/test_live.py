@@ -70,30 +70,15 @@ def _assert_agree_with_locate(records: list[dict[str, Any]], recording: Path, dr
     )  # fmt: skip
     assert done.returncode == 0, done.stderr
     located = {r["stamp_ns"]: r for r in map(json.loads, done.stdout.splitlines())}
-    both = same = 0
+    both = 0
     for live in records:
         other = located[live["stamp_ns"]]  # every located scan was recorded, with its stamp
         if live["status"] == other["status"] == "fix":
             both += 1
-            # The live loop drops scans while it locates (which ones depends on the machine's
-            # load), so a scan's prior, the previous fix, may differ from locate's on the
-            # recording; the two fixes then agree within their uncertainty (the fuzzing
-            # harness's rule: 5 combined sigma), and are identical when the priors were.
-            for key, sig in AGREE:
-                sigma = math.hypot(live[sig], other[sig])
-                assert abs(live[key] - other[key]) <= 5 * sigma, (key, live, other)
             d = math.hypot(live["easting"] - other["easting"], live["northing"] - other["northing"])
-            same += d < 1e-4 and abs(live["azimuth_deg"] - other["azimuth_deg"]) * 3600 < 1.0
+            assert d < 1e-4
+            assert abs(live["azimuth_deg"] - other["azimuth_deg"]) * 3600 < 1.0
     assert both >= len(records) // 2
-    assert same >= 0.8 * both  # most priors were alike: those fixes are the same to 0.1 mm
-
-
-#: A fix's values and their standard deviations, compared between live and locate.
-AGREE = (
-    ("easting", "sigma_easting_m"),
-    ("northing", "sigma_northing_m"),
-    ("azimuth_deg", "sigma_azimuth_deg"),
-)
 
 
 @pytest.mark.parametrize("kind", ["sick", "hokuyo"])
@@ -344,3 +329,33 @@ def test_an_emulator_on_a_port_in_use_is_bad_input(drive: Drive) -> None:
             Emulator("sick", read_run(drive.bag), port=first.port)
     finally:
         first.stop()
+
+
+@pytest.mark.parametrize("kind", ["sick", "hokuyo"])
+def test_an_emulator_stamps_a_scan_when_it_was_due_not_when_sent(kind: str, drive: Drive) -> None:
+    """A scanner stamps a scan when it measures it. An emulator on a loaded host may send
+    two late scans in one millisecond; stamped on sending, they had one stamp, and the
+    comparison with locate above (by stamp) took one scan for the next: the likely cause
+    of a failure seen once, fixes 34 mm apart, one scan's travel at the drive's 1.7 m/s
+    and 50 Hz. Offline, neither half the scans dropped (4 drives, 3 draws each) nor a
+    float32 recording (671 fixes) moved any fix by 0.1 mm. Stamped when due, the scans
+    keep the run's spacing."""
+    from mast.live import cola, scip
+
+    scan = next(read_run(drive.bag))
+    with Emulator(kind, read_run(drive.bag)) as emulator:
+        t0 = emulator._t0
+        late = [emulator._telegram(scan, at=t0 + s) for s in (0.040, 0.060)]
+    if kind == "sick":
+        stamps = [
+            cola.parse_scandata(cola.split_telegrams(bytearray(t))[0]).time_since_startup_us
+            for t in late
+        ]
+        tick = 1e-6
+    else:
+        stamps = [scip.parse_distance_reply(scip.split_replies(bytearray(t))[0]).timestamp_ms
+                  for t in late]  # fmt: skip
+        tick = 1e-3
+    # a device counter counts whole ticks: within one of when each was due
+    assert abs(stamps[0] * tick - 0.040) < 1.5 * tick
+    assert abs(stamps[1] * tick - 0.060) < 1.5 * tick

@@ -215,7 +215,9 @@ class Emulator:
             if not self._stalled and f.stall_after is not None and self._sent >= f.stall_after:
                 self._stalled = stalled = True
                 continue
-            telegram = self._telegram(self._next)
+            # stamped when it was due (acquired), not when sent: a loaded host sending two
+            # late scans in one millisecond must not give them one stamp
+            telegram = self._telegram(self._next, at=due)
             if f.corrupt_every and (self._sent + 1) % f.corrupt_every == 0:
                 telegram = self._corrupt(telegram)
             if not _send(conn, telegram):
@@ -260,20 +262,20 @@ class Emulator:
             return b"QT\n00P\n\n", False
         return request + b"\n0Ee\n\n", streaming
 
-    def _device_ms(self) -> int:
-        return int((time.perf_counter() - self._t0) * 1000)
-
-    def _telegram(self, scan: Scan) -> bytes:
+    def _telegram(self, scan: Scan, *, at: float | None = None) -> bytes:
+        """``scan`` as the scanner sends it, stamped by the device clock at ``at``
+        (perf_counter; now when not given)."""
+        since_s = (time.perf_counter() if at is None else at) - self._t0
         if self.kind == "sick":
             return cola.encode_scandata(
                 scan,
                 scan_counter=self._sent,
-                time_since_startup_us=int((time.perf_counter() - self._t0) * 1e6),
+                time_since_startup_us=int(since_s * 1e6),
                 scan_frequency_hz=self.hz or 25.0,
             )
         assert self._params is not None
         mm = np.where(scan.valid, np.rint(scan.ranges_m * 1000.0), _NO_ECHO).astype(np.int64)
-        return scip.encode_distance_reply(mm, first_step=0, timestamp_ms=self._device_ms())
+        return scip.encode_distance_reply(mm, first_step=0, timestamp_ms=int(since_s * 1000))
 
     def _corrupt(self, telegram: bytes) -> bytes:
         if self.kind == "sick":
