@@ -290,6 +290,7 @@ def test_drift_is_corrected_along_the_trajectory(tmp_path: Path) -> None:
     assert dc["excluded"] == []
     assert "against the graph solved without it" in (out / "report.txt").read_text()
     assert dc["statistic_per_dof"] > 0
+    assert "control statistics per degree of freedom" in (out / "report.txt").read_text()
     # B03 moved 0.3 m after its survey: it fails its test against the rest and is left
     # out, rather than the graph bending the cloud onto it
     with scene.survey.open() as fh:

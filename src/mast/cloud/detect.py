@@ -206,7 +206,7 @@ def _panel_runs(
     return found & _level_with_neighbours(columns.keys, found, zlo, zhi, cfg), zlo, zhi
 
 
-#: Cells whose height bins :func:`_panel_runs` unpacks at a time (some 80 MB of arrays).
+#: Cells whose height bins :func:`_panel_runs` unpacks at a time (tens of MB of arrays).
 RUN_BLOCK_CELLS = 1 << 17
 
 
@@ -219,7 +219,12 @@ def _column_runs(
     """:func:`_panel_runs` for a block of cells, before the level test: whether each has
     a panel-like column, and its lowest and highest height."""
     n = bits.size
-    occupied = ((bits[:, None] >> np.arange(64, dtype=np.uint64)) & np.uint64(1)) > 0
+    # bit k of each cell's word as column k (a byte a bin, not eight)
+    occupied = np.unpackbits(
+        np.ascontiguousarray(bits, dtype="<u8").view(np.uint8).reshape(-1, 8),
+        axis=1,
+        bitorder="little",
+    ).view(bool)
     grown = occupied.copy()
     grown[:, 1:] |= occupied[:, :-1]
     grown[:, :-1] |= occupied[:, 1:]

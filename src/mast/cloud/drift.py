@@ -163,12 +163,18 @@ class DriftCorrection:
     @property
     def statistic_per_dof(self) -> float:
         """The control beacons' test statistics over their degrees of freedom (nan when
-        none was tested): about 1 when the drift model fits the SLAM; well below, the
+        none was tested): about 1 when the drift model fits the SLAM (the report judges
+        it against the chi-square's 5 % bounds on :attr:`control_dof`); well below, the
         SLAM drifts less than the model says and only moves well beyond its misclosures
-        are caught; above, it drifts more."""
+        are caught; above, it drifts more. Beacons left out are not counted."""
         tests = [t for t in self.tests if t.role == "control"]
-        dof = sum(t.dof for t in tests)
+        dof = self.control_dof
         return sum(t.statistic for t in tests) / dof if dof else math.nan
+
+    @property
+    def control_dof(self) -> int:
+        """Degrees of freedom of the control beacons' tests, together."""
+        return sum(t.dof for t in self.tests if t.role == "control")
 
     def apply(self, xyz: NDArray[np.float64], time: NDArray[np.float64]) -> NDArray[np.float64]:
         """Points moved by the correction at their times (held at the ends outside)."""

@@ -22,6 +22,7 @@ from numpy.typing import NDArray
 from mast import __version__
 from mast.cloud.drift import DriftCorrection
 from mast.cloud.georef import FoundBeacon, Georef, explain_missing, grid_origin
+from mast.core.quantiles import chi2_isf
 from mast.io.atomic import atomic_open, write_atomic
 
 __all__ = ["ACCURACY_CLASSES", "Outputs", "accuracy_class", "write_outputs"]
@@ -457,18 +458,19 @@ def report_text(
             )
         if drift.excluded:
             add(f"  left out of the graph as outliers: {', '.join(drift.excluded)}")
-        ratio = drift.statistic_per_dof
+        ratio, dof = drift.statistic_per_dof, drift.control_dof
         if math.isfinite(ratio):
-            how = (
-                "the model fits"
-                if 0.5 <= ratio <= 2.0
-                else "the SLAM drifts less than the model: only moves well beyond the "
-                "misclosures are caught"
-                if ratio < 0.5
-                else "the SLAM drifts more than the model (--drift)"
+            # two-sided 5 % bounds of a chi-square over its degrees of freedom
+            lo, hi = chi2_isf(0.975, dof) / dof, chi2_isf(0.025, dof) / dof
+            add(
+                f"  control statistics per degree of freedom: {ratio:.2f} on {dof} dof "
+                f"(the drift model fits within {lo:.2f}..{hi:.2f})"
             )
-            add(f"  control statistics per degree of freedom {ratio:.2f} (1 if the model fits):")
-            add(f"  {how}")
+            if ratio < lo:
+                add("  the SLAM drifts less than the model: only moves well beyond the")
+                add("  misclosures are caught")
+            elif ratio > hi:
+                add("  the SLAM drifts more than the model says (--drift)")
         add("")
     add("Accuracy")
     add("--------")

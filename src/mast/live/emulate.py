@@ -122,6 +122,7 @@ class Emulator:
         self._thread = threading.Thread(target=self._run, name=f"mast-emulate-{kind}", daemon=True)
         self._t0 = time.perf_counter()
         self._sent = 0
+        self._last_at = -math.inf  # the device time of the last telegram (perf_counter)
         self._first_stamp = self._next.stamp_ns
         self._clock_start: float | None = None
         self._sent_at_start = 0
@@ -264,8 +265,12 @@ class Emulator:
 
     def _telegram(self, scan: Scan, *, at: float | None = None) -> bytes:
         """``scan`` as the scanner sends it, stamped by the device clock at ``at``
-        (perf_counter; now when not given)."""
-        since_s = (time.perf_counter() if at is None else at) - self._t0
+        (perf_counter; now when not given), one tick after the last telegram at least: a
+        device's counter only goes forward, even where a recording repeats a stamp."""
+        tick = 1e-6 if self.kind == "sick" else 1e-3
+        at = max(time.perf_counter() if at is None else at, self._last_at + tick)
+        self._last_at = at
+        since_s = at - self._t0
         if self.kind == "sick":
             return cola.encode_scandata(
                 scan,
