@@ -42,6 +42,7 @@ __all__ = [
     "adjust_transformation",
     "check_beacons",
     "rigid_solution",
+    "variance_bounds",
 ]
 
 #: Two-sided significance of the global test; of the w-tests and beacon tests (Bonferroni).
@@ -380,8 +381,7 @@ def _solve(
     omega = float(v @ pinv @ v)
     dof = v.size - int(free.sum())
     s0 = omega / dof if dof > 0 else math.nan
-    lo = chi2_isf(1 - GLOBAL_ALPHA / 2, dof) / dof if dof > 0 else 0.0
-    hi = chi2_isf(GLOBAL_ALPHA / 2, dof) / dof if dof > 0 else math.inf
+    lo, hi = variance_bounds(dof)
     test = "pass" if lo <= s0 <= hi or dof == 0 else ("too_small" if s0 < lo else "too_large")
     qvv = cov - jac @ qxx @ jac.T
     pv = pinv @ v
@@ -418,6 +418,14 @@ def _solve(
         (lo, hi),
         norm_ppf(1 - W_ALPHA / 2 / max(v.size, 1)),
     )
+
+
+def variance_bounds(dof: int) -> tuple[float, float]:
+    """The global test's acceptance interval for a reference variance (a chi-square over
+    its ``dof``, two-sided at :data:`GLOBAL_ALPHA`); (0, inf) without redundancy."""
+    if dof <= 0:
+        return 0.0, math.inf
+    return chi2_isf(1 - GLOBAL_ALPHA / 2, dof) / dof, chi2_isf(GLOBAL_ALPHA / 2, dof) / dof
 
 
 def _per_edge(v: NDArray[np.float64], model: str, heights: bool, k: int) -> NDArray[np.float64]:
@@ -478,11 +486,9 @@ def adjust_transformation(
             "weak_geometry",
             f"the {len(obs)} beacons do not fix the {_label(model)} (all in a line?)",
         ) from None
+    free = _free(model, heights)
     if not np.all(np.isfinite(sol.transformation.covariance)) or (
-        np.linalg.cond(
-            sol.transformation.covariance[np.ix_(_free(model, heights), _free(model, heights))]
-        )
-        > 1e14
+        np.linalg.cond(sol.transformation.covariance[np.ix_(free, free)]) > 1e14
     ):
         raise AdjustmentError(
             "weak_geometry",

@@ -416,16 +416,12 @@ class _Seen:
         freedom."""
         x = values.atPose2(self.key)
         pose_cov = marginals.marginalCovariance(self.key)
-        c, s = math.cos(x.theta()), math.sin(x.theta())
-        r = np.array([[c, -s], [s, c]])
         k = len(self.q)
         v = np.empty(2 * k)
         jac = np.empty((2 * k, 3))
         cov = np.zeros((2 * k, 2 * k))
         for i, (q, g, cg) in enumerate(zip(self.q, self.obs.grid_xy, self.cov, strict=True)):
-            v[2 * i : 2 * i + 2] = r @ q + np.array([x.x(), x.y()]) - g
-            # a perturbation of the pose in its own frame (GTSAM's retraction)
-            jac[2 * i : 2 * i + 2] = np.column_stack([r, r @ np.array([-q[1], q[0]])])
+            v[2 * i : 2 * i + 2], jac[2 * i : 2 * i + 2] = _edge_error(x, q, g)
             cov[2 * i : 2 * i + 2, 2 * i : 2 * i + 2] = cg + s2 * np.eye(2)
         total = cov + jac @ pose_cov @ jac.T
         return float(v @ np.linalg.solve(total, v)), 2 * k
@@ -443,15 +439,23 @@ def _edge_factor(
     def error(
         this: object, v: object, jac: list[NDArray[np.float64]] | None
     ) -> NDArray[np.float64]:
-        x = v.atPose2(this.keys()[0])  # type: ignore[attr-defined]
-        c, s = math.cos(x.theta()), math.sin(x.theta())
-        r = np.array([[c, -s], [s, c]])
-        e: NDArray[np.float64] = r @ q + np.array([x.x(), x.y()]) - g
+        e, d = _edge_error(v.atPose2(this.keys()[0]), q, g)  # type: ignore[attr-defined]
         if jac is not None:
-            jac[0] = np.column_stack([r, r @ np.array([-q[1], q[0]])])
+            jac[0] = d
         return e
 
     return gtsam.CustomFactor(noise, [key], error)
+
+
+def _edge_error(
+    x: Any, q: NDArray[np.float64], g: NDArray[np.float64]
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """``X * q - g`` for a pose ``X`` (a ``gtsam.Pose2``), and its 2x3 Jacobian for a
+    perturbation of the pose in its own frame (GTSAM's retraction)."""
+    c, s = math.cos(x.theta()), math.sin(x.theta())
+    r = np.array([[c, -s], [s, c]])
+    e: NDArray[np.float64] = r @ q + np.array([x.x(), x.y()]) - g
+    return e, np.column_stack([r, r @ np.array([-q[1], q[0]])])
 
 
 def _height_chain(

@@ -51,6 +51,9 @@ from mast.pipeline.identification import identify_panels
 __all__ = ["FoundBeacon", "Georef", "GeorefConfig", "georeference"]
 
 MODELS = ("4", "helmert7")
+#: Why a beacon matched to no detection is not used (until :func:`explain_missing` says
+#: whether it lies outside the cloud or in it unseen).
+NOT_FOUND = "not found in the cloud"
 
 
 @dataclass(frozen=True, slots=True)
@@ -313,7 +316,7 @@ def _fates(
                 )
             )
         elif obs is None:
-            out.append(FoundBeacon(b.id, "not_found", None, "not found in the cloud"))
+            out.append(FoundBeacon(b.id, "not_found", None, NOT_FOUND))
         elif b.id in config.checks:
             out.append(FoundBeacon(b.id, "check", obs))
         elif b.id in excluded:
@@ -332,7 +335,7 @@ def explain_missing(result: Georef) -> list[FoundBeacon]:
     floor = result.candidates.floor
     out = []
     for fb in result.beacons:
-        if fb.role != "not_found" or fb.why != "not found in the cloud":
+        if fb.role != "not_found" or fb.why != NOT_FOUND:
             out.append(fb)
             continue
         b = result.survey[fb.beacon]

@@ -20,6 +20,7 @@ Times: ``gps_time`` of LAS, ``timeStamp`` of E57, ``time``, ``timestamp``,
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -413,42 +414,20 @@ class _E57Cloud(_ColumnCloud):
             e57.close()
 
 
-#: LAS point format 7's own dimensions: a PLY property of one of these names (not mapped
-#: to it) is kept as an extra dimension under another name.
-_LAS_DIMS = frozenset(
-    [
-        "X",
-        "Y",
-        "Z",
-        "x",
-        "y",
-        "z",
-        "intensity",
-        "return_number",
-        "number_of_returns",
-        "synthetic",
-        "key_point",
-        "withheld",
-        "overlap",
-        "scanner_channel",
-        "scan_direction_flag",
-        "edge_of_flight_line",
-        "classification",
-        "user_data",
-        "scan_angle",
-        "point_source_id",
-        "gps_time",
-        "red",
-        "green",
-        "blue",
-    ]
-)
+@functools.cache
+def _las_dims() -> frozenset[str]:
+    """LAS point format 7's own dimensions (laspy's list, and the x, y, z it reads them
+    as): a PLY property of one of these names (not mapped to it) is kept as an extra
+    dimension under another name."""
+    import laspy
+
+    return frozenset(laspy.PointFormat(7).dimension_names) | {"x", "y", "z"}
 
 
 def _extra_name(name: str) -> str:
     """A PLY property's name as a LAS extra dimension: prefixed when LAS has the name
     already, cut to the 32 bytes an extra-bytes name may have."""
-    out = f"ply_{name}" if name in _LAS_DIMS else name
+    out = f"ply_{name}" if name in _las_dims() else name
     return out[:32]
 
 

@@ -20,9 +20,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from mast import __version__
+from mast.cloud.adjust import variance_bounds
 from mast.cloud.drift import DriftCorrection
 from mast.cloud.georef import FoundBeacon, Georef, explain_missing, grid_origin
-from mast.core.quantiles import chi2_isf
 from mast.io.atomic import atomic_open, write_atomic
 
 __all__ = ["ACCURACY_CLASSES", "Outputs", "accuracy_class", "write_outputs"]
@@ -460,8 +460,7 @@ def report_text(
             add(f"  left out of the graph as outliers: {', '.join(drift.excluded)}")
         ratio, dof = drift.statistic_per_dof, drift.control_dof
         if math.isfinite(ratio):
-            # two-sided 5 % bounds of a chi-square over its degrees of freedom
-            lo, hi = chi2_isf(0.975, dof) / dof, chi2_isf(0.025, dof) / dof
+            lo, hi = variance_bounds(dof)  # as the global test's, two-sided at 5 %
             add(
                 f"  control statistics per degree of freedom: {ratio:.2f} on {dof} dof "
                 f"(the drift model fits within {lo:.2f}..{hi:.2f})"
