@@ -98,7 +98,10 @@ def test_live_from_an_emulator_fixes_as_locate_does(
     assert summary.received == drive.scans
     assert summary.located == len(records) == drive.scans - summary.dropped
     assert sum(r["dropped"] for r in records) == summary.dropped
-    assert summary.fixed >= drive.scans // 2
+    # how many scans a loaded host drops is the machine's business, not the test's: every
+    # scan located is counted, and most of those located are fixed
+    assert summary.located >= 2
+    assert summary.fixed >= summary.located // 2
     first = records[0]
     assert first["source"] == f"{kind}://127.0.0.1:{emulator.port}"
     assert first["tracking"] is False
@@ -383,9 +386,33 @@ def test_an_emulators_device_clock_only_goes_forward(drive: Drive) -> None:
 
     scan = next(read_run(drive.bag))
     with Emulator("hokuyo", read_run(drive.bag)) as emulator:
-        t0 = emulator._t0
-        same = [emulator._telegram(scan, at=t0 + 0.040) for _ in range(3)]
+        t0 = emulator._t0_ns
+        same = [emulator._telegram(scan, at_ns=t0 + 40_000_000) for _ in range(3)]
     stamps = [scip.parse_distance_reply(scip.split_replies(bytearray(t))[0]).timestamp_ms
               for t in same]  # fmt: skip
-    assert stamps[1] - stamps[0] >= 1
-    assert stamps[2] - stamps[1] >= 1
+    assert stamps == [40, 41, 42]  # integer ticks: the same at any uptime
+
+
+@pytest.mark.parametrize("uptime_h", [0.01, 9.5, 36.2, 73.0, 20 * 24 + 0.3])
+def test_an_emulators_device_stamps_do_not_depend_on_the_hosts_uptime(
+    drive: Drive, monkeypatch: pytest.MonkeyPatch, uptime_h: float
+) -> None:
+    """The host's clock is taken in integer nanoseconds whatever its uptime: telegrams
+    due 20 ms apart carry device times exactly 20 000 us (SICK) and 20 ms (SCIP) apart."""
+    from mast.live import cola, emulate, scip
+
+    now = [int(uptime_h * 3600e9) + 123_456_789]
+    monkeypatch.setattr(emulate.time, "perf_counter_ns", lambda: now[0])
+    scan = next(read_run(drive.bag))
+    for kind in ("sick", "hokuyo"):
+        with Emulator(kind, read_run(drive.bag)) as emulator:
+            t0 = emulator._t0_ns
+            telegrams = [emulator._telegram(scan, at_ns=t0 + k * 20_000_000) for k in range(6)]
+        if kind == "sick":
+            stamps = [cola.parse_scandata(cola.split_telegrams(bytearray(t))[0]).time_since_startup_us
+                      for t in telegrams]  # fmt: skip
+            assert [b - a for a, b in pairwise(stamps)] == [20_000] * 5
+        else:
+            ms = [scip.parse_distance_reply(scip.split_replies(bytearray(t))[0]).timestamp_ms
+                  for t in telegrams]  # fmt: skip
+            assert [b - a for a, b in pairwise(ms)] == [20] * 5

@@ -6,7 +6,11 @@ from __future__ import annotations
 import csv
 import json
 import math
+import signal
 import subprocess
+import sys
+import threading
+import time
 from pathlib import Path
 from typing import Any
 
@@ -158,6 +162,64 @@ def test_an_interrupted_run_leaves_valid_files_for_the_scans_done(
     assert int(np.max(las.scan_index)) < 40
     assert not ezdxf.readfile(tmp_path / "map.dxf").audit().has_errors
     assert "</html>" in (tmp_path / "report.html").read_text()
+
+
+def test_an_interrupt_flag_ends_the_run_between_two_scans(tmp_path: Path, drive: Path) -> None:
+    interrupt = threading.Event()
+
+    def stop_after_40(scans: int, fixes: int) -> None:
+        if scans == 40:
+            interrupt.set()
+
+    result = track_run(
+        drive / "scans.bag",
+        read_survey(drive / "beacons.csv"),
+        tmp_path,
+        config=CONFIG,
+        progress=stop_after_40,
+        interrupt=interrupt,
+    )
+    assert result.interrupted
+    assert result.summary.scans == 40
+    assert len((tmp_path / "fixes.jsonl").read_text().splitlines()) == 40
+
+
+@pytest.mark.parametrize("after_bytes", [1, 40_000, 120_000])
+def test_ctrl_c_during_mast_track_always_leaves_every_file(
+    tmp_path: Path, drive: Path, after_bytes: int
+) -> None:
+    """Ctrl-C sets a flag checked between scans (it once landed inside a compiled kernel:
+    exit 70 and an empty --out). Sent once the run has written ``after_bytes`` of records
+    (a condition, not a sleep), it always ends with 130 and every file complete."""
+    out = tmp_path / "run"
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "mast", "track", str(drive / "scans.bag"), "-b",
+         str(drive / "beacons.csv"), "--out", str(out), "--range-sigma", "0.012"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+    )  # fmt: skip
+    try:
+        while proc.poll() is None:
+            parts = list(out.glob(".fixes.jsonl.*.part")) if out.exists() else []
+            if parts and parts[0].exists() and parts[0].stat().st_size >= after_bytes:
+                break
+            time.sleep(0.01)
+        if proc.poll() is not None:
+            pytest.skip("the run ended before it could be interrupted")
+        proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 130, err.decode()
+    assert "interrupted; the files hold the scans read until then" in err.decode()
+    assert "internal error" not in err.decode()
+    for name in RUN_FILES:
+        assert (out / name).exists(), name
+    lines = (out / "fixes.jsonl").read_text().splitlines()
+    assert 0 < len(lines) < 250
+    json.loads(lines[-1])
+    assert not list(out.glob(".*.part"))
 
 
 def test_several_runs_on_a_dask_local_cluster(tmp_path: Path) -> None:

@@ -526,7 +526,7 @@ def track(
     def warn(text: str) -> None:
         typer.echo(f"mast: warning: {shorten(text, 80)}", err=True)
 
-    with _progress(f"tracking {run.name}") as progress:
+    with _signals_as_flag() as (interrupt, caught), _progress(f"tracking {run.name}") as progress:
         result = track_run(
             run,
             survey,
@@ -537,6 +537,7 @@ def track(
             range_limits=(range_min, range_max),
             warn=warn,
             progress=progress,
+            interrupt=interrupt,
         )
     s = result.summary
     typer.echo(
@@ -548,7 +549,7 @@ def track(
     )
     if result.interrupted:
         typer.echo("mast: interrupted; the files hold the scans read until then", err=True)
-        raise typer.Exit(130)
+        raise typer.Exit(128 + (caught[0] if caught else signal.SIGINT))
     if s.placed == 0:
         raise typer.Exit(EXIT_NO_FIX)
 
@@ -654,15 +655,7 @@ def live(
         # Ctrl-C and SIGTERM (a vehicle's service manager) only ask the run to end between
         # two scans: never in the middle of writing the recording, nor while closing it
         # (the handlers are restored last, after the recording is closed).
-        interrupt = threading.Event()
-        caught: list[int] = []
-
-        def on_signal(signum: int, _frame: object) -> None:
-            caught.append(signum)
-            interrupt.set()
-
-        for signum in (signal.SIGINT, signal.SIGTERM):
-            stack.callback(signal.signal, signum, signal.signal(signum, on_signal))
+        interrupt, caught = stack.enter_context(_signals_as_flag())
         if record is not None:
             from mast.live.record import McapRecorder
 
@@ -919,6 +912,29 @@ def _progress(label: str) -> Iterator[Callable[[int, int], None] | None]:
             bar.update(task, completed=scans, fixes=fixes, rate=f"{rate:.0f} scans/s")
 
         yield update
+
+
+@contextmanager
+def _signals_as_flag() -> Iterator[tuple[threading.Event, list[int]]]:
+    """Ctrl-C and SIGTERM (a vehicle's service manager) only set a flag while inside:
+    the run checks it between two scans, so a signal never lands inside a compiled
+    kernel or a half-written file. Yields the flag and the signals caught; the
+    handlers before it are restored on leaving."""
+    interrupt = threading.Event()
+    caught: list[int] = []
+
+    def on_signal(signum: int, _frame: object) -> None:
+        caught.append(signum)
+        interrupt.set()
+
+    before = {
+        signum: signal.signal(signum, on_signal) for signum in (signal.SIGINT, signal.SIGTERM)
+    }
+    try:
+        yield interrupt, caught
+    finally:
+        for signum, handler in before.items():
+            signal.signal(signum, handler)
 
 
 def _precisions(

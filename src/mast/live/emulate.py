@@ -120,11 +120,15 @@ class Emulator:
         self._stop = threading.Event()
         self._done = threading.Event()
         self._thread = threading.Thread(target=self._run, name=f"mast-emulate-{kind}", daemon=True)
-        self._t0 = time.perf_counter()
+        # The device clock in integer ticks of the protocol (SICK: 1 us, SCIP: 1 ms),
+        # counted from the host's perf_counter_ns: float seconds since boot truncated to
+        # ticks gave 40, 40, 41 for three telegrams a tick apart at some uptimes.
+        self._tick_ns = 1_000 if kind == "sick" else 1_000_000
+        self._t0_ns = time.perf_counter_ns()
         self._sent = 0
-        self._last_at = -math.inf  # the device time of the last telegram (perf_counter)
+        self._last_tick = -1  # the device time of the last telegram, in ticks
         self._first_stamp = self._next.stamp_ns
-        self._clock_start: float | None = None
+        self._clock_start_ns: int | None = None
         self._sent_at_start = 0
         self._dropped = self._stalled = False
         self.connections = 0
@@ -176,21 +180,21 @@ class Emulator:
                 close()  # a bag reader, closed with its generator
             self._done.set()
 
-    def _due(self, scan: Scan) -> float:
-        """When ``scan`` is to be sent (perf_counter)."""
-        if self._clock_start is None:
-            self._clock_start = time.perf_counter()
+    def _due_ns(self, scan: Scan) -> int:
+        """When ``scan`` is to be sent (perf_counter_ns)."""
+        if self._clock_start_ns is None:
+            self._clock_start_ns = time.perf_counter_ns()
         if self.hz is not None:
-            return self._clock_start + (self._sent - self._sent_at_start) / self.hz
-        return self._clock_start + (scan.stamp_ns - self._first_stamp) / 1e9
+            return self._clock_start_ns + round((self._sent - self._sent_at_start) * 1e9 / self.hz)
+        return self._clock_start_ns + (scan.stamp_ns - self._first_stamp)
 
     def _serve(self, conn: socket.socket) -> None:
         inbox = bytearray()
         streaming = False
         stalled = False
         while not self._stop.is_set() and self._next is not None:
-            due = self._due(self._next) if streaming and not stalled else math.inf
-            wait = min(max(due - time.perf_counter(), 0.0), 0.05)
+            due = self._due_ns(self._next) if streaming and not stalled else None
+            wait = 0.05 if due is None else min(max(due - time.perf_counter_ns(), 0) / 1e9, 0.05)
             readable, _, _ = select.select([conn], [], [], wait)
             if readable:
                 try:
@@ -205,12 +209,12 @@ class Emulator:
                     if answer and not _send(conn, answer):
                         return
                     if streaming_now and not streaming:
-                        self._clock_start = None  # pace from now on
+                        self._clock_start_ns = None  # pace from now on
                         self._first_stamp = self._next.stamp_ns
                         self._sent_at_start = self._sent
                     streaming = streaming_now
                 continue
-            if not streaming or stalled or time.perf_counter() < due:
+            if due is None or time.perf_counter_ns() < due:
                 continue
             f = self.faults
             if not self._stalled and f.stall_after is not None and self._sent >= f.stall_after:
@@ -218,7 +222,7 @@ class Emulator:
                 continue
             # stamped when it was due (acquired), not when sent: a loaded host sending two
             # late scans in one millisecond must not give them one stamp
-            telegram = self._telegram(self._next, at=due)
+            telegram = self._telegram(self._next, at_ns=due)
             if f.corrupt_every and (self._sent + 1) % f.corrupt_every == 0:
                 telegram = self._corrupt(telegram)
             if not _send(conn, telegram):
@@ -263,24 +267,23 @@ class Emulator:
             return b"QT\n00P\n\n", False
         return request + b"\n0Ee\n\n", streaming
 
-    def _telegram(self, scan: Scan, *, at: float | None = None) -> bytes:
-        """``scan`` as the scanner sends it, stamped by the device clock at ``at``
-        (perf_counter; now when not given), one tick after the last telegram at least: a
-        device's counter only goes forward, even where a recording repeats a stamp."""
-        tick = 1e-6 if self.kind == "sick" else 1e-3
-        at = max(time.perf_counter() if at is None else at, self._last_at + tick)
-        self._last_at = at
-        since_s = at - self._t0
+    def _telegram(self, scan: Scan, *, at_ns: int | None = None) -> bytes:
+        """``scan`` as the scanner sends it, stamped by the device clock at ``at_ns``
+        (perf_counter_ns; now when not given), one tick after the last telegram at least:
+        a device's counter only goes forward, even where a recording repeats a stamp."""
+        at = time.perf_counter_ns() if at_ns is None else at_ns
+        ticks = max((at - self._t0_ns) // self._tick_ns, self._last_tick + 1)
+        self._last_tick = ticks
         if self.kind == "sick":
             return cola.encode_scandata(
                 scan,
                 scan_counter=self._sent,
-                time_since_startup_us=int(since_s * 1e6),
+                time_since_startup_us=ticks,
                 scan_frequency_hz=self.hz or 25.0,
             )
         assert self._params is not None
         mm = np.where(scan.valid, np.rint(scan.ranges_m * 1000.0), _NO_ECHO).astype(np.int64)
-        return scip.encode_distance_reply(mm, first_step=0, timestamp_ms=int(since_s * 1000))
+        return scip.encode_distance_reply(mm, first_step=0, timestamp_ms=ticks)
 
     def _corrupt(self, telegram: bytes) -> bytes:
         if self.kind == "sick":

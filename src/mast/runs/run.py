@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import math
+import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
@@ -92,6 +93,7 @@ def track_run(
     range_limits: tuple[float | None, float | None] = (None, None),
     warn: Callable[[str], object] = print,
     progress: Callable[[int, int], object] | None = None,
+    interrupt: threading.Event | None = None,
 ) -> RunResult:
     """Track every LaserScan of ``bag`` and write the run's files into ``out``.
 
@@ -113,6 +115,9 @@ def track_run(
         Told about every message skipped and where a damaged bag stopped.
     progress : callable, optional
         Called with (scans so far, fixes so far) after each scan.
+    interrupt : threading.Event, optional
+        Set (by a signal handler) to end the reading between two scans: a signal then
+        never lands inside a compiled kernel or a half-written record.
 
     Returns
     -------
@@ -156,6 +161,9 @@ def track_run(
         with atomic_open(out / "fixes.jsonl", "w", encoding="utf-8") as fh:
             try:
                 for i, scan in enumerate(scans(skipped)):
+                    if interrupt is not None and interrupt.is_set():
+                        result.interrupted = True
+                        break
                     step = tracker.step(i, scan)
                     rec = fix_record(step.fix, source=str(bag), index=i, scan=scan, inputs=inputs)
                     fh.write(json.dumps(rec) + "\n")
@@ -187,7 +195,7 @@ def track_run(
                         last_wall = pose.position
                     if progress is not None:
                         progress(summary.scans, summary.fixes)
-            except KeyboardInterrupt:
+            except KeyboardInterrupt:  # a caller that left Ctrl-C to Python
                 result.interrupted = True
     except OSError as err:
         raise OutputError(
