@@ -409,8 +409,8 @@ def test_an_emulators_device_stamps_do_not_depend_on_the_hosts_uptime(
             t0 = emulator._t0_ns
             telegrams = [emulator._telegram(scan, at_ns=t0 + k * 20_000_000) for k in range(6)]
         if kind == "sick":
-            stamps = [cola.parse_scandata(cola.split_telegrams(bytearray(t))[0]).time_since_startup_us
-                      for t in telegrams]  # fmt: skip
+            bodies = [cola.split_telegrams(bytearray(t))[0] for t in telegrams]
+            stamps = [cola.parse_scandata(b).time_since_startup_us for b in bodies]
             assert [b - a for a, b in pairwise(stamps)] == [20_000] * 5
         else:
             ms = [scip.parse_distance_reply(scip.split_replies(bytearray(t))[0]).timestamp_ms
