@@ -300,6 +300,13 @@ def _admitted(verified: list[Verified], cfg: LocatorConfig) -> list[Verified]:
 def locate(scan: Scan, survey: Survey, *, config: LocatorConfig | None = None) -> Fix:
     """Fix the scanner's pose from one scan of surveyed beacons.
 
+    With a prior (``config.prior``) the poses its window holds are searched
+    first, directly (:func:`~mast.pipeline.tracking.prior_hypotheses`); when
+    that gives no fix, the global search runs as without a prior, its verified
+    poses kept only inside the window. A prior thus only adds fixes: a pose the
+    global search fixes inside the window is fixed with the prior too, and no
+    pose outside it ever is.
+
     Parameters
     ----------
     scan : Scan
@@ -316,8 +323,19 @@ def locate(scan: Scan, survey: Survey, *, config: LocatorConfig | None = None) -
         never raises for what a scan contains.
     """
     cfg = config or LocatorConfig()
-    noise = cfg.noise
     t0 = time.perf_counter()
+    if cfg.prior is None:
+        return _locate(scan, survey, cfg, t0, tracked=False)
+    fix = _locate(scan, survey, cfg, t0, tracked=True)
+    if fix.ok:
+        return fix
+    return _locate(scan, survey, cfg, t0, tracked=False)
+
+
+def _locate(scan: Scan, survey: Survey, cfg: LocatorConfig, t0: float, *, tracked: bool) -> Fix:
+    """:func:`locate` from the prior's own hypotheses (``tracked``) or from the global
+    ones (kept inside the prior's window, if there is one); ``t0`` is when it began."""
+    noise = cfg.noise
     index, panels = _survey_index(survey, scan.range_max_m)
     found: dict[str, object] = {"config": cfg, "hypotheses": (), "verified": (), "chosen": None}
 
@@ -342,15 +360,18 @@ def locate(scan: Scan, survey: Survey, *, config: LocatorConfig | None = None) -
         return Fix(**fields)  # type: ignore[arg-type]
 
     # Stages 1-3: segments, identified panels, pose hypotheses.
-    margin = (cfg.prior_margin_m, cfg.prior_margin_rad)
     seg = segment_scan(scan, cfg.segmentation)
     found["segmentation"] = seg
     ident = PanelIdentification((), ())
     found["identification"] = ident
-    hyps: list[Hypothesis] = []
-    if cfg.prior is not None:
+    if tracked:
+        assert cfg.prior is not None
         hyps = prior_hypotheses(scan.points()[1], panels, cfg.prior, scan.range_max_m, cfg.tracking)
-    if not hyps:
+        if not hyps:
+            return finish(
+                reason="inconsistent", detail=f"no panel returns within the prior {cfg.prior.pose}"
+            )
+    else:
         ident = identify_panels(
             seg, index.representatives, cfg.identification, survey_sigma_m=noise.survey_sigma_m
         )
@@ -360,17 +381,16 @@ def locate(scan: Scan, survey: Survey, *, config: LocatorConfig | None = None) -
                 reason="no_beacon",
                 detail=f"{len(seg.segments)} segments, no beacon corner identified",
             )
+        # Not narrowed by the prior here: ICP may carry a start from outside the window
+        # into it, and a pose the global search finds inside must not be lost.
         hyps = pose_hypotheses(
             ident, seg, index, cfg.hypotheses, survey_sigma_m=noise.survey_sigma_m
         )
-        if cfg.prior is not None:
-            hyps = [h for h in hyps if cfg.prior.admits(h.similarity.pose(), *margin)]
         if not hyps:
-            where = "" if cfg.prior is None else f" within the prior {cfg.prior.pose}"
             seen = sorted({b for n in ident.nodes for b in index.beacons_like(n.beacon)})
             return finish(
                 reason="inconsistent",
-                detail=f"no pose{where} from the corners of beacons {', '.join(seen[:6])}",
+                detail=f"no pose from the corners of beacons {', '.join(seen[:6])}",
             )
     found["hypotheses"] = tuple(hyps)
     # Stage 4: ICP and every beam's verdict; the best pose by likelihood, unless ambiguous.
@@ -389,7 +409,10 @@ def locate(scan: Scan, survey: Survey, *, config: LocatorConfig | None = None) -
     verified = _admitted(verified, cfg)
     found["verified"] = tuple(verified)
     if not verified:
-        return finish(reason="inconsistent", detail="no pose hypothesis is confirmed by the beams")
+        where = "" if cfg.prior is None else f" within the prior {cfg.prior.pose}"
+        return finish(
+            reason="inconsistent", detail=f"no pose hypothesis{where} is confirmed by the beams"
+        )
     best, reason, detail = _choose(verified, cfg)
     found["chosen"] = best or verified[0]
     if best is None:
@@ -527,7 +550,8 @@ def locate_near(
 def _near(scan: Scan, survey: Survey, prior: Prior | None, cfg: LocatorConfig) -> tuple[Fix, bool]:
     """:func:`locate_near`, and whether the prior was tried and gave no fix."""
     if cfg.prior is None and prior is not None:
-        fix = locate(scan, survey, config=replace(cfg, prior=prior))
+        # The prior's own search only: the global one below is not narrowed by it.
+        fix = _locate(scan, survey, replace(cfg, prior=prior), time.perf_counter(), tracked=True)
         if fix.ok:
             return fix, False
         return locate(scan, survey, config=cfg), True

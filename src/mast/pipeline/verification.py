@@ -308,7 +308,12 @@ def _overrun(
     angle) is not a continuation: the returns past each end count only when
     the line through them keeps the panel's direction (their lateral drift
     along the reach is within ``overrun_slope_sigmas`` standard deviations of
-    none).
+    none). Nor is anything past the beacon's own extent along the line: a
+    return there lies beyond the free end of the panels that turn away, where
+    the rock the beacon is mounted on may stand out as far as the panel's line
+    (a short outer panel of a beacon mounted askew on rough rock left the
+    wall beyond it in the middle panel's line, and a beacon in plain view
+    refused).
     """
     # Only returns within a gate of a panel's line, and at most the reach past its
     # ends, can count: the others are left out before any (returns x panels) array.
@@ -323,14 +328,19 @@ def _overrun(
     out: dict[int, int] = {}
     numbers = panels.panel[beacon_panels]
     first, last = int(numbers.min()), int(numbers.max())
+    # The beacon's extent along each panel's line: its edges projected on it.
+    edges = np.vstack([panels.a[beacon_panels], panels.b[beacon_panels]])
+    along, _ = panels.project(edges, beacon_panels)
     for col, k in enumerate(beacon_panels.tolist()):
         count = 0
         tk, sk, lk = t[:, col], s[:, col], float(length[0, col])
+        hi = min(lk + cfg.overrun_reach_m, float(along[:, col].max()))
+        lo = max(-cfg.overrun_reach_m, float(along[:, col].min()))
         ends_checked = []
         if int(panels.panel[k]) != last:
-            ends_checked.append((tk > lk) & (tk < lk + cfg.overrun_reach_m))
+            ends_checked.append((tk > lk) & (tk < hi))
         if int(panels.panel[k]) != first:
-            ends_checked.append((tk < 0) & (tk > -cfg.overrun_reach_m))
+            ends_checked.append((tk < 0) & (tk > lo))
         for beyond in ends_checked:
             ends = band[:, col] & beyond
             past = ends & ((tk > lk + margin) | (tk < -margin))
@@ -371,8 +381,9 @@ def _straight_and_fitted(
     to_panels_m: NDArray[np.float64],
     origin: NDArray[np.float64],
     noise: NoiseModel,
-) -> tuple[float, float]:
-    """Chi-squares of a beacon's returns about one straight line and about its panels.
+) -> tuple[float, float, NDArray[np.float64]]:
+    """Chi-squares of a beacon's returns about one straight line and about its panels,
+    and each return's share of the latter.
 
     Each offset is weighed by the noise a return really has across the line:
     the range noise projected on the line's normal (``sigma_r * |n . u|`` for
@@ -392,8 +403,8 @@ def _straight_and_fitted(
     var = (noise.range_sigma_m * cos_n) ** 2 + (rho * noise.angle_sigma_rad) ** 2 * (1 - cos_n**2)
     var = np.maximum(var, (0.1 * noise.range_sigma_m) ** 2)
     chi_line = float(np.sum((q @ normal) ** 2 / var))
-    chi_beacon = float(np.sum(to_panels_m**2 / (var + noise.survey_sigma_m**2)))
-    return chi_line, chi_beacon
+    each = to_panels_m**2 / (var + noise.survey_sigma_m**2)
+    return chi_line, float(np.sum(each)), each
 
 
 def _shows_a_bend(chi_line: float, chi_beacon: float, alpha: float) -> bool:
@@ -420,6 +431,8 @@ def _stray_corner(
     gate_m: float,
     noise: NoiseModel,
     cfg: VerificationConfig,
+    returns_scanner: NDArray[np.float64] | None = None,
+    returns_chi: NDArray[np.float64] | None = None,
 ) -> bool:
     """Whether a corner of the scan lands beside one of a beacon's node edges, not on an edge.
 
@@ -433,6 +446,13 @@ def _stray_corner(
     beacon's own. Everything is compared in the scanner frame, where the
     corners and their covariances are (``edges_scanner``: the beacon's
     surveyed edges mapped there by the pose).
+
+    A corner is two fitted lines meeting, and a line fitted across a short
+    panel and the rock beside it meets its neighbour where no surface bends.
+    So a corner beside an edge counts only when the beacon's own returns about
+    it (``returns_scanner``, each with its chi-square about the surveyed
+    panels, ``returns_chi``) do not fit the panels there: where they do, the
+    surveyed shape explains the returns the corner was drawn from.
     """
     if not seg.corners:
         return False
@@ -446,9 +466,28 @@ def _stray_corner(
         inv = np.linalg.inv(cov + extra * np.eye(2))
         off = edges_scanner - c.node
         maha = np.einsum("ij,jk,ik->i", off, inv, off)
-        if np.all(maha > cfg.gate_sigmas**2):
+        if np.all(maha > cfg.gate_sigmas**2) and not _explained(
+            c.node, returns_scanner, returns_chi, cfg
+        ):
             return True
     return False
+
+
+def _explained(
+    node: NDArray[np.float64],
+    returns_scanner: NDArray[np.float64] | None,
+    returns_chi: NDArray[np.float64] | None,
+    cfg: VerificationConfig,
+) -> bool:
+    """Whether a beacon's returns within ``corner_reach_m`` of ``node`` (``min_panel_points``
+    of them at least) fit its surveyed panels (their chi-square passes at ``straight_alpha``)."""
+    if returns_scanner is None or returns_chi is None:
+        return False
+    about = np.hypot(*(returns_scanner - node).T) <= cfg.corner_reach_m
+    n = int(about.sum())
+    return n >= cfg.min_panel_points and _fits_in_place(
+        float(returns_chi[about].sum()), n, cfg.straight_alpha
+    )
 
 
 def _panel_counts(icp: IcpResult, panels: PanelSet) -> dict[tuple[str, int], int]:
@@ -546,12 +585,15 @@ def _support(
         n_on = int(on.sum())
         if n_on < 4:
             continue
-        edges_scanner = icp.pose.mine_to_scanner(index.survey[b].edges)
-        if not tracked and _stray_corner(edges_scanner, seg, gate_node, noise, cfg):
-            continue
-        chi_line, chi_beacon = _straight_and_fitted(
+        chi_line, chi_beacon, each = _straight_and_fitted(
             points_mine[on], icp.residual_m[on], icp.pose.position, noise
         )
+        edges_scanner = icp.pose.mine_to_scanner(index.survey[b].edges)
+        returns_scanner = icp.pose.mine_to_scanner(points_mine[on])
+        if not tracked and _stray_corner(
+            edges_scanner, seg, gate_node, noise, cfg, returns_scanner, each
+        ):
+            continue
         bent = _shows_a_bend(chi_line, chi_beacon, cfg.straight_alpha)
         if not (bent or (tracked and _fits_in_place(chi_beacon, n_on, cfg.straight_alpha))):
             continue
