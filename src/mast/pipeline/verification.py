@@ -381,9 +381,8 @@ def _straight_and_fitted(
     to_panels_m: NDArray[np.float64],
     origin: NDArray[np.float64],
     noise: NoiseModel,
-) -> tuple[float, float, NDArray[np.float64]]:
-    """Chi-squares of a beacon's returns about one straight line and about its panels,
-    and each return's share of the latter.
+) -> tuple[float, float]:
+    """Chi-squares of a beacon's returns about one straight line and about its panels.
 
     Each offset is weighed by the noise a return really has across the line:
     the range noise projected on the line's normal (``sigma_r * |n . u|`` for
@@ -403,8 +402,8 @@ def _straight_and_fitted(
     var = (noise.range_sigma_m * cos_n) ** 2 + (rho * noise.angle_sigma_rad) ** 2 * (1 - cos_n**2)
     var = np.maximum(var, (0.1 * noise.range_sigma_m) ** 2)
     chi_line = float(np.sum((q @ normal) ** 2 / var))
-    each = to_panels_m**2 / (var + noise.survey_sigma_m**2)
-    return chi_line, float(np.sum(each)), each
+    chi_beacon = float(np.sum(to_panels_m**2 / (var + noise.survey_sigma_m**2)))
+    return chi_line, chi_beacon
 
 
 def _shows_a_bend(chi_line: float, chi_beacon: float, alpha: float) -> bool:
@@ -431,8 +430,6 @@ def _stray_corner(
     gate_m: float,
     noise: NoiseModel,
     cfg: VerificationConfig,
-    returns_scanner: NDArray[np.float64] | None = None,
-    returns_chi: NDArray[np.float64] | None = None,
 ) -> bool:
     """Whether a corner of the scan lands beside one of a beacon's node edges, not on an edge.
 
@@ -446,13 +443,6 @@ def _stray_corner(
     beacon's own. Everything is compared in the scanner frame, where the
     corners and their covariances are (``edges_scanner``: the beacon's
     surveyed edges mapped there by the pose).
-
-    A corner is two fitted lines meeting, and a line fitted across a short
-    panel and the rock beside it meets its neighbour where no surface bends.
-    So a corner beside an edge counts only when the beacon's own returns about
-    it (``returns_scanner``, each with its chi-square about the surveyed
-    panels, ``returns_chi``) do not fit the panels there: where they do, the
-    surveyed shape explains the returns the corner was drawn from.
     """
     if not seg.corners:
         return False
@@ -466,28 +456,9 @@ def _stray_corner(
         inv = np.linalg.inv(cov + extra * np.eye(2))
         off = edges_scanner - c.node
         maha = np.einsum("ij,jk,ik->i", off, inv, off)
-        if np.all(maha > cfg.gate_sigmas**2) and not _explained(
-            c.node, returns_scanner, returns_chi, cfg
-        ):
+        if np.all(maha > cfg.gate_sigmas**2):
             return True
     return False
-
-
-def _explained(
-    node: NDArray[np.float64],
-    returns_scanner: NDArray[np.float64] | None,
-    returns_chi: NDArray[np.float64] | None,
-    cfg: VerificationConfig,
-) -> bool:
-    """Whether a beacon's returns within ``corner_reach_m`` of ``node`` (``min_panel_points``
-    of them at least) fit its surveyed panels (their chi-square passes at ``straight_alpha``)."""
-    if returns_scanner is None or returns_chi is None:
-        return False
-    about = np.hypot(*(returns_scanner - node).T) <= cfg.corner_reach_m
-    n = int(about.sum())
-    return n >= cfg.min_panel_points and _fits_in_place(
-        float(returns_chi[about].sum()), n, cfg.straight_alpha
-    )
 
 
 def _panel_counts(icp: IcpResult, panels: PanelSet) -> dict[tuple[str, int], int]:
@@ -585,15 +556,12 @@ def _support(
         n_on = int(on.sum())
         if n_on < 4:
             continue
-        chi_line, chi_beacon, each = _straight_and_fitted(
+        edges_scanner = icp.pose.mine_to_scanner(index.survey[b].edges)
+        if not tracked and _stray_corner(edges_scanner, seg, gate_node, noise, cfg):
+            continue
+        chi_line, chi_beacon = _straight_and_fitted(
             points_mine[on], icp.residual_m[on], icp.pose.position, noise
         )
-        edges_scanner = icp.pose.mine_to_scanner(index.survey[b].edges)
-        returns_scanner = icp.pose.mine_to_scanner(points_mine[on])
-        if not tracked and _stray_corner(
-            edges_scanner, seg, gate_node, noise, cfg, returns_scanner, each
-        ):
-            continue
         bent = _shows_a_bend(chi_line, chi_beacon, cfg.straight_alpha)
         if not (bent or (tracked and _fits_in_place(chi_beacon, n_on, cfg.straight_alpha))):
             continue
