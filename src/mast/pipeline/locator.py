@@ -261,9 +261,14 @@ def _choose(verified: list[Verified], cfg: LocatorConfig) -> tuple[Verified | No
     margin = cfg.ambiguity_log_ratio * cfg.likelihood_tempering
     doubtful = len(best.cornered) < cfg.min_beacons
     proven = min(len(best.cornered), cfg.min_beacons)
+    share = cfg.verification.same_reading_share
     for other in verified:
-        if other is best or other.same_pose(best.pose, cfg.verification):
-            continue
+        if (
+            other is best
+            or other.same_pose(best.pose, cfg.verification)
+            or other.reads_alike(best, share)
+        ):
+            continue  # the same reading of the scan: not a second place
         if len(other.shaped) >= cfg.min_beacons and len(other.cornered) >= proven:
             slack = margin
         elif (other.cornered and doubtful) or len(other.supported) >= cfg.min_beacons:

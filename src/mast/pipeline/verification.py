@@ -100,6 +100,16 @@ class VerificationConfig:
     duplicate_m, duplicate_rad : float
         A hypothesis starting this close to an already verified pose is not
         verified again.
+    placed_support : bool
+        A beacon without a node of its own may support a pose on which
+        another beacon's identified corner lands on its surveyed edge when
+        its returns lie on its panels within their noise and fit its shape
+        better than one straight line, though not by the margin of
+        ``straight_alpha`` (a small beacon's bend inside the noise).
+    same_reading_share : float
+        Two verified poses that put at least this share of their returns on
+        the same panels read the scan alike (:meth:`Verified.reads_alike`):
+        they do not compete as two places the scan could have been taken.
     """
 
     min_panel_points: int = 3
@@ -120,6 +130,8 @@ class VerificationConfig:
     straight_alpha: float = 1e-3
     duplicate_m: float = 0.05
     duplicate_rad: float = math.radians(0.5)
+    placed_support: bool = True
+    same_reading_share: float = 0.8
 
 
 @dataclass(frozen=True, slots=True)
@@ -287,6 +299,17 @@ class Verified:
 
     def same_pose(self, other: Pose2D, cfg: VerificationConfig) -> bool:
         return _same_pose(self.icp.pose, other, cfg)
+
+    def reads_alike(self, other: Verified, share: float) -> bool:
+        """Whether ``other`` puts the same returns on the same surveyed panels (at least
+        ``share`` of the returns either puts on a panel): the same reading of the scan,
+        two ICP optima apart, not another place the scan could have been taken."""
+        mine, theirs = self.icp.panel, other.icp.panel
+        if mine.shape != theirs.shape:
+            return False
+        either = (mine >= 0) | (theirs >= 0)
+        n = int(either.sum())
+        return n > 0 and int(np.sum((mine == theirs) & either)) >= share * n
 
 
 def _overrun(
@@ -509,7 +532,9 @@ def _support(
     its returns are the beacon's and not clutter's: a corner of the scan
     identified as one of its edges lands on that edge, or two panels carry
     ``min_panel_points`` returns each, no panel's returns run on past its
-    nodes, they show a bend one straight line cannot explain, and no corner
+    nodes, they show a bend one straight line cannot explain (or, when another
+    beacon's identified corner lands on its edge, they lie on the panels within
+    their noise and fit them better than a line: ``placed_support``), and no corner
     of the scan lands beside one of its node edges (:func:`_stray_corner`). When
     ``tracked`` (a prior already says which beacon is where) no node is
     identified and two panels with returns suffice, but the returns must
@@ -563,7 +588,13 @@ def _support(
             points_mine[on], icp.residual_m[on], icp.pose.position, noise
         )
         bent = _shows_a_bend(chi_line, chi_beacon, cfg.straight_alpha)
-        if not (bent or (tracked and _fits_in_place(chi_beacon, n_on, cfg.straight_alpha))):
+        in_place = _fits_in_place(chi_beacon, n_on, cfg.straight_alpha)
+        # Where another beacon's identified corner already lands on its surveyed edge,
+        # the pose is fixed to millimetres by it: this beacon need only lie where the
+        # pose puts it, its returns on its panels within their noise and no straighter
+        # than its shape (a small beacon's bend can be inside the noise).
+        placed = cfg.placed_support and bool(node_ok) and in_place and chi_line > chi_beacon
+        if not (bent or placed or (tracked and in_place)):
             continue
         over = _overrun(points_mine, panels, mine, gate, noise.gate_sigma_m, cfg)
         clean = all(

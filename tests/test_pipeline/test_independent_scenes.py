@@ -1,0 +1,118 @@
+"""Issue 31 on the shared independent scenes (``../shared/data/independent-scenes``):
+scans drawn by a simulator that shares no code with MAST, each with its truth.
+
+Each test names the kind of miss it pins, with the cases that showed it; a change that
+brings a miss back fails here, and a wrong fix on any of them fails too.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from mast.core.pose import Pose2D
+from mast.io import read_scan_csv, read_survey
+from mast.pipeline.locator import Fix, LocatorConfig, locate
+from mast.pipeline.tracking import Prior
+from tests._paths import SHARED_DATA
+
+SCENES = SHARED_DATA / "independent-scenes"
+
+pytestmark = pytest.mark.skipif(not SCENES.is_dir(), reason="no shared independent scenes")
+
+
+def _case(name: str) -> tuple[dict[str, Any], Fix, Any, Any, LocatorConfig]:
+    """The case ``family/caseNNNN`` located as the scoring tool does: the scanner's true
+    range noise, an exact survey for the noisy family."""
+    folder: Path = SCENES / name
+    truth = json.loads((folder / "truth.json").read_text())
+    scan = read_scan_csv(folder / "scan.csv")
+    survey = read_survey(folder / "beacons.csv")
+    cfg = LocatorConfig(range_sigma_m=truth["sigma_r"])
+    if name.startswith("noisy/"):
+        cfg = replace(cfg, survey_sigma_m=0.0)
+    return truth, locate(scan, survey, config=cfg), scan, survey, cfg
+
+
+def _right(truth: dict[str, Any], fix: Fix) -> bool:
+    """A fix within 5 cm and 0.25 degrees of the truth (the scoring tool's 'not wrong')."""
+    assert fix.pose is not None
+    d = math.hypot(fix.pose.easting - truth["easting"], fix.pose.northing - truth["northing"])
+    da = (math.degrees(fix.pose.azimuth) - truth["azimuth_deg"] + 180.0) % 360.0 - 180.0
+    return d < 0.05 and abs(da) < 0.25
+
+
+def _prior(name: str, truth: dict[str, Any], radius_m: float, azimuth_deg: float) -> Prior:
+    """A prior centred off the truth by ``radius_m`` and ``azimuth_deg``, its window twice
+    that (as ``independent-scenes --prior`` draws them), in a direction fixed per case."""
+    turn = (sum(map(ord, name)) % 360) * math.pi / 180.0
+    centre = Pose2D(
+        truth["easting"] + radius_m * math.cos(turn),
+        truth["northing"] + radius_m * math.sin(turn),
+        math.radians(truth["azimuth_deg"] + azimuth_deg),
+    )
+    return Prior(centre, 2.0 * radius_m, math.radians(2.0 * abs(azimuth_deg)))
+
+
+#: Fixed without a prior and lost with a good one before the prior's search was made to
+#: add to the global one instead of replacing it.
+LOST_TO_A_PRIOR = [
+    "noisy/case0002",
+    "noisy/case0016",
+    "noisy/case0032",
+    "noisy/case0055",
+    "hostile/case0042",
+    "hostile/case0063",
+]
+
+
+@pytest.mark.parametrize("name", LOST_TO_A_PRIOR)
+def test_a_good_prior_never_loses_a_fix_the_global_search_gives(name: str) -> None:
+    truth, alone, scan, survey, cfg = _case(name)
+    assert alone.ok, alone.detail
+    assert _right(truth, alone)
+    for radius_m, azimuth_deg in ((0.4, 4.0), (0.5, -5.0)):
+        prior = _prior(name, truth, radius_m, azimuth_deg)
+        near = locate(scan, survey, config=replace(cfg, prior=prior))
+        assert near.ok, near.detail
+        assert _right(truth, near)
+
+
+@pytest.mark.parametrize("name", ["noisy/case0002", "hostile/case0042"])
+def test_a_wrong_prior_still_gives_no_fix(name: str) -> None:
+    """The global search a failed prior falls back on keeps only poses inside its window."""
+    truth, alone, scan, survey, cfg = _case(name)
+    assert alone.ok
+    for radius_m, azimuth_deg in ((2.0, 3.0), (3.0, 20.0)):
+        turn = _prior(name, truth, radius_m, azimuth_deg)
+        wrong = Prior(turn.pose, 1.0, math.radians(10.0))
+        fix = locate(scan, survey, config=replace(cfg, prior=wrong))
+        assert not fix.ok
+        assert "within the prior" in fix.detail
+
+
+#: A beacon in plain view refused because the returns past its middle panel's end ran on
+#: in its line: they lay beyond the short outer panel, on the rock the beacon is mounted
+#: on (askew, on rough rock), not on a longer surface through the beacon.
+OVERRUN_BEYOND_THE_FREE_END = ["noisy/case0011", "noisy/case0126", "noisy/case0139"]
+
+
+@pytest.mark.parametrize("name", OVERRUN_BEYOND_THE_FREE_END)
+def test_rock_beyond_a_short_outer_panel_does_not_refuse_its_beacon(name: str) -> None:
+    truth, fix, *_ = _case(name)
+    assert fix.ok, fix.detail
+    assert _right(truth, fix)
+    assert set(fix.beacons) == set(truth["visible"])
+
+
+def test_two_icp_optima_of_one_reading_are_not_two_places() -> None:
+    """Two verified poses 0.12 m and 1 degree apart put 88 % of their returns on the same
+    panels of the same two beacons: one reading of the scan, not an ambiguity."""
+    truth, fix, *_ = _case("hostile/case0059")
+    assert fix.ok, fix.detail
+    assert _right(truth, fix)
