@@ -116,3 +116,14 @@ def test_two_icp_optima_of_one_reading_are_not_two_places() -> None:
     truth, fix, *_ = _case("hostile/case0059")
     assert fix.ok, fix.detail
     assert _right(truth, fix)
+
+
+def test_no_beacon_confirmed_is_said_so_not_with_an_empty_name() -> None:
+    """A record once read 'only beacon  confirmed by the beams' with no name in it."""
+    from mast.pipeline.locator import _choose
+
+    assert _choose([], LocatorConfig()) == (
+        None,
+        "one_beacon",
+        "no beacon is confirmed by the beams",
+    )

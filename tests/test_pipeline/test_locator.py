@@ -258,14 +258,22 @@ def _accuracy_draw(config: int, pose: int, draw: int = 0):  # type: ignore[no-un
 def test_a_prior_confirms_a_second_beacon_whose_bend_is_inside_the_noise() -> None:
     # The accuracy benchmark's 22nd owed pose at 270/0.25 deg, 12 mm: one beacon
     # shows 45 returns on one panel and 3 on the next, a bend no likelihood-ratio
-    # test can see. From scratch that is one beacon; with a prior the first
-    # beacon fixes the pose and the second lies where it puts it.
+    # test can see. With a prior the first beacon fixes the pose and the second
+    # lies where it puts it; from scratch too (issue 31), since the first beacon's
+    # identified corner lands on its surveyed edge: the second is placed, not shaped.
     from mast.pipeline.tracking import Prior
 
     scene, shot, sim, cfg, alone = _accuracy_draw(1, 21)
     truth = shot.pose
-    assert not alone.ok
-    assert alone.reason == "one_beacon"
+    assert alone.ok, alone.detail
+    assert alone.chosen is not None
+    assert len(alone.chosen.cornered) == 1
+    assert len(alone.chosen.shaped) == 1
+    assert _errors(alone, truth)[0] < 0.02
+    without = replace(cfg, verification=replace(cfg.verification, placed_support=False))
+    refused = locate(sim.scan, scene.survey, config=without)
+    assert not refused.ok
+    assert refused.reason == "one_beacon"
     start = Pose2D(truth.easting + 0.2, truth.northing - 0.25, truth.azimuth + math.radians(3))
     fix = locate(sim.scan, scene.survey, config=replace(cfg, prior=Prior(start, 0.5, 0.1)))
     assert fix.ok, fix.detail

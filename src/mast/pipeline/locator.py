@@ -243,6 +243,8 @@ def _choose(verified: list[Verified], cfg: LocatorConfig) -> tuple[Verified | No
     if not full:
         best = verified[0] if verified else None
         names = ", ".join(best.supported) if best else ""
+        if not names:
+            return None, "one_beacon", "no beacon is confirmed by the beams"
         return None, "one_beacon", f"only beacon {names} confirmed by the beams"
     full.sort(key=lambda v: v.log_likelihood, reverse=True)
     best = full[0]
