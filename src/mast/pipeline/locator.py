@@ -120,9 +120,11 @@ class LocatorConfig:
         Significance of the global test beyond which a fix is refused: its
         returns do not fit the surveyed beacons (clutter taken for them).
     prior : Prior, optional
-        Where the scanner is believed to be. Hypotheses outside its window are
-        not considered; a narrow one (see :class:`TrackingConfig`) is searched
-        directly, without identification.
+        Where the scanner is believed to be. No pose outside its window is
+        fixed; a narrow one (see :class:`TrackingConfig`) is searched directly
+        first, without identification, and when that gives no fix the global
+        search runs as without a prior, its verified poses kept inside the
+        window (a prior only adds fixes).
     prior_margin_m, prior_margin_rad : float
         How far outside the prior's window a pose may be estimated and still
         count as inside: a true pose on the rim is estimated a few millimetres
