@@ -333,17 +333,26 @@ def locate(scan: Scan, survey: Survey, *, config: LocatorConfig | None = None) -
     """
     cfg = config or LocatorConfig()
     t0 = time.perf_counter()
-    if cfg.prior is None:
-        return _locate(scan, survey, cfg, t0, tracked=False)
-    fix = _locate(scan, survey, cfg, t0, tracked=True)
-    if fix.ok:
-        return fix
-    return _locate(scan, survey, cfg, t0, tracked=False)
+    seg = segment_scan(scan, cfg.segmentation)
+    if cfg.prior is not None:
+        fix = _locate(scan, survey, cfg, t0, seg, tracked=True)
+        if fix.ok:
+            return fix
+    return _locate(scan, survey, cfg, t0, seg, tracked=False)
 
 
-def _locate(scan: Scan, survey: Survey, cfg: LocatorConfig, t0: float, *, tracked: bool) -> Fix:
+def _locate(
+    scan: Scan,
+    survey: Survey,
+    cfg: LocatorConfig,
+    t0: float,
+    seg: Segmentation,
+    *,
+    tracked: bool,
+) -> Fix:
     """:func:`locate` from the prior's own hypotheses (``tracked``) or from the global
-    ones (kept inside the prior's window, if there is one); ``t0`` is when it began."""
+    ones (kept inside the prior's window, if there is one), on the scan's segmentation
+    ``seg`` (made once for both); ``t0`` is when it began."""
     noise = cfg.noise
     index, panels = _survey_index(survey, scan.range_max_m)
     found: dict[str, object] = {"config": cfg, "hypotheses": (), "verified": (), "chosen": None}
@@ -368,8 +377,7 @@ def _locate(scan: Scan, survey: Survey, cfg: LocatorConfig, t0: float, *, tracke
         }
         return Fix(**fields)  # type: ignore[arg-type]
 
-    # Stages 1-3: segments, identified panels, pose hypotheses.
-    seg = segment_scan(scan, cfg.segmentation)
+    # Stages 1-3: segments (given), identified panels, pose hypotheses.
     found["segmentation"] = seg
     ident = PanelIdentification((), ())
     found["identification"] = ident
@@ -559,11 +567,14 @@ def locate_near(
 def _near(scan: Scan, survey: Survey, prior: Prior | None, cfg: LocatorConfig) -> tuple[Fix, bool]:
     """:func:`locate_near`, and whether the prior was tried and gave no fix."""
     if cfg.prior is None and prior is not None:
-        # The prior's own search only: the global one below is not narrowed by it.
-        fix = _locate(scan, survey, replace(cfg, prior=prior), time.perf_counter(), tracked=True)
+        # The prior's own search, then the global one not narrowed by it, on one
+        # segmentation of the scan.
+        t0 = time.perf_counter()
+        seg = segment_scan(scan, cfg.segmentation)
+        fix = _locate(scan, survey, replace(cfg, prior=prior), t0, seg, tracked=True)
         if fix.ok:
             return fix, False
-        return locate(scan, survey, config=cfg), True
+        return _locate(scan, survey, cfg, t0, seg, tracked=False), True
     return locate(scan, survey, config=cfg), False
 
 
