@@ -118,6 +118,24 @@ def test_the_slot_keeps_the_newest_scan_and_counts_the_rest() -> None:
     assert slot.take() is None
 
 
+def test_a_gap_reported_on_a_dropped_scan_goes_on_with_the_scan_that_replaced_it() -> None:
+    """A locator busy when the stream came back must still report the outage (the live
+    reconnection test lost its gap record whenever the host was loaded)."""
+    scan = Scan(np.array([0.0, 0.1]), np.array([1.0, 1.0]))
+    slot = LatestSlot()
+    slot.put(0, Received(scan, 0, 0.0, gap_s=0.25))
+    slot.put(1, Received(scan, 1, 1.0))
+    slot.put(2, Received(scan, 2, 2.0, gap_s=0.5))
+    item = slot.take()
+    assert item is not None
+    assert item[0] == 2
+    assert item[1].gap_s == pytest.approx(0.75)  # both outages, charged to the one record
+    slot.put(3, Received(scan, 3, 3.0))
+    item = slot.take()
+    assert item is not None
+    assert item[1].gap_s is None  # reported once
+
+
 def test_hokuyo_parameters_put_the_forward_beam_on_the_front_step(drive: Drive) -> None:
     scan = next(read_run(drive.bag))
     p = hokuyo_parameters(scan)

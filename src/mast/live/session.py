@@ -56,10 +56,16 @@ class LatestSlot:
         self.dropped = 0
 
     def put(self, index: int, item: Received) -> None:
+        """Hand over ``item``, replacing one not taken yet: that one is counted as dropped,
+        and a gap it reported goes on with the item that replaced it (the first record
+        after an outage says so even when a busy locator never saw its first scan)."""
         with self._cond:
             if self._item is not None:
                 self.dropped += 1
                 self._dropped_since_take += 1
+                gap = self._item[1].gap_s
+                if gap is not None:
+                    item = replace(item, gap_s=gap + (item.gap_s or 0.0))
             self._item = (index, item)
             self._cond.notify()
 
