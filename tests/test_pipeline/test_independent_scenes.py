@@ -96,20 +96,6 @@ def test_a_wrong_prior_still_gives_no_fix(name: str) -> None:
         assert "within the prior" in fix.detail
 
 
-#: A beacon in plain view refused because the returns past its middle panel's end ran on
-#: in its line: they lay beyond the short outer panel, on the rock the beacon is mounted
-#: on (askew, on rough rock), not on a longer surface through the beacon.
-OVERRUN_BEYOND_THE_FREE_END = ["noisy/case0011", "noisy/case0126", "noisy/case0139"]
-
-
-@pytest.mark.parametrize("name", OVERRUN_BEYOND_THE_FREE_END)
-def test_rock_beyond_a_short_outer_panel_does_not_refuse_its_beacon(name: str) -> None:
-    truth, fix, *_ = _case(name)
-    assert fix.ok, fix.detail
-    assert _right(truth, fix)
-    assert set(fix.beacons) == set(truth["visible"])
-
-
 def test_two_icp_optima_of_one_reading_are_not_two_places() -> None:
     """Two verified poses 0.12 m and 1 degree apart put 88 % of their returns on the same
     panels of the same two beacons: one reading of the scan, not an ambiguity."""

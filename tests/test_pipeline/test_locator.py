@@ -283,6 +283,21 @@ def test_a_prior_confirms_a_second_beacon_whose_bend_is_inside_the_noise() -> No
     assert d < 0.02
 
 
+@pytest.mark.parametrize("draw", [16, 24])
+def test_a_surface_running_on_past_a_short_panel_refuses_a_turned_round_pose(draw: int) -> None:
+    # The accuracy benchmark's 15th owed pose at 360/0.2 deg, 20 mm: turned 180 degrees
+    # and 2.5 m away, both beacons confirm by their bends, but at that pose a surface
+    # runs on along the middle panel of B2 past its node and past the free end of its
+    # short (0.16 m) outer panel. Stopping the overrun search at the beacon's own end
+    # (issue 31, tried for rock standing out beyond a short panel) let this pose become a
+    # fix 2.5 m off with 5 mm sigmas; the search reaches overrun_reach_m past the node.
+    _, shot, _, _, fix = _accuracy_draw(3, 14, draw)
+    if fix.ok:
+        assert _errors(fix, shot.pose)[0] < 0.05
+    else:
+        assert fix.reason == "one_beacon"
+
+
 def test_a_corner_beside_an_edge_is_judged_by_its_own_uncertainty() -> None:
     # The accuracy benchmark's first owed pose at 270/0.5 deg, 12 mm, first draw:
     # the second beacon shows 4, 9 and 4 returns, and its shallow corners with

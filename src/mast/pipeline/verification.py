@@ -331,12 +331,7 @@ def _overrun(
     angle) is not a continuation: the returns past each end count only when
     the line through them keeps the panel's direction (their lateral drift
     along the reach is within ``overrun_slope_sigmas`` standard deviations of
-    none). Nor is anything past the beacon's own extent along the line: a
-    return there lies beyond the free end of the panels that turn away, where
-    the rock the beacon is mounted on may stand out as far as the panel's line
-    (a short outer panel of a beacon mounted askew on rough rock left the
-    wall beyond it in the middle panel's line, and a beacon in plain view
-    refused).
+    none).
     """
     # Only returns within a gate of a panel's line, and at most the reach past its
     # ends, can count: the others are left out before any (returns x panels) array.
@@ -351,19 +346,14 @@ def _overrun(
     out: dict[int, int] = {}
     numbers = panels.panel[beacon_panels]
     first, last = int(numbers.min()), int(numbers.max())
-    # The beacon's extent along each panel's line: its edges projected on it.
-    edges = np.vstack([panels.a[beacon_panels], panels.b[beacon_panels]])
-    along, _ = panels.project(edges, beacon_panels)
     for col, k in enumerate(beacon_panels.tolist()):
         count = 0
         tk, sk, lk = t[:, col], s[:, col], float(length[0, col])
-        hi = min(lk + cfg.overrun_reach_m, float(along[:, col].max()))
-        lo = max(-cfg.overrun_reach_m, float(along[:, col].min()))
         ends_checked = []
         if int(panels.panel[k]) != last:
-            ends_checked.append((tk > lk) & (tk < hi))
+            ends_checked.append((tk > lk) & (tk < lk + cfg.overrun_reach_m))
         if int(panels.panel[k]) != first:
-            ends_checked.append((tk < 0) & (tk > lo))
+            ends_checked.append((tk < 0) & (tk > -cfg.overrun_reach_m))
         for beyond in ends_checked:
             ends = band[:, col] & beyond
             past = ends & ((tk > lk + margin) | (tk < -margin))
