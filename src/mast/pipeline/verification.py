@@ -474,6 +474,18 @@ def _stray_corner(
     return False
 
 
+def _beams_favour(check: BeamCheck, cfg: VerificationConfig) -> bool:
+    """Whether the beams predicted onto a beacon prove it against clutter.
+
+    At least ``min_coverage`` of the unoccluded beams must land on it, and
+    their log-likelihood ratio against returns from anywhere in the
+    scanner's range must be positive: a few hits at the edge of their gate
+    and as many beams through the panels are what rock near a look-alike
+    gives, not what a beacon does.
+    """
+    return check.coverage >= cfg.min_coverage and check.log_likelihood > 0.0
+
+
 def _panel_counts(icp: IcpResult, panels: PanelSet) -> dict[tuple[str, int], int]:
     """Returns matched to each (beacon, panel) at the refined pose."""
     counts: dict[tuple[str, int], int] = {}
@@ -538,7 +550,7 @@ def _support(
     candidates = {
         b
         for b in _may_support(counts, cfg)
-        if checks.get(b, BeamCheck()).coverage >= cfg.min_coverage
+        if _beams_favour(checks.get(b, BeamCheck()), cfg)
         and _seen_from_front(index.survey[b].edges, icp.pose.position)
     }
     gate = cfg.gate_sigmas * noise.gate_sigma_m
