@@ -165,3 +165,36 @@ def test_tracking_bench_good_prior_fixes_wrong_prior_refuses() -> None:
     assert s.wrong == 0
     assert s.wrong_prior_fixes == 0
     assert "good prior: fixed 4/4" in lines[0]
+
+
+def test_longdrive_sends_each_scan_through_its_protocol() -> None:
+    from mast.apps.bench.longdrive import as_sent
+    from mast.sim.drive import drive_scene
+
+    sim = next(drive_scene(3, scans=2, rate_hz=40.0).iter_simulated())
+    scan = sim.scan
+    for kind in ("sick", "hokuyo"):
+        sent = as_sent(kind, scan, counter=7)
+        assert sent.stamp_ns == scan.stamp_ns
+        assert_allclose(sent.angles_rad, scan.angles_rad, atol=1e-9)
+        both = sent.valid & scan.valid
+        assert both.sum() == scan.valid.sum()
+        # whole millimetres, as both protocols send ranges
+        assert_allclose(sent.ranges_m[both] * 1000.0, np.rint(scan.ranges_m[both] * 1000.0))
+        assert np.any(sent.ranges_m[both] != scan.ranges_m[both])
+
+
+def test_longdrive_counts_owed_fixes_and_flags_none_wrong_on_a_short_drive() -> None:
+    from mast.apps.bench.longdrive import run_longdrive
+
+    lines: list[str] = []
+    figures = run_longdrive(scans=150, seeds=1, workers=1, echo=lines.append)
+    assert [(f.kind, f.rate_hz) for f in figures] == [("sick", 50.0), ("hokuyo", 40.0)]
+    for f in figures:
+        assert f.scans == 150
+        assert 0 < f.owed <= f.scans
+        assert f.owed_fixed == f.owed
+        assert not f.wrong
+        assert f.owed_fixed <= f.fixes
+        assert f.tracked_fixes < f.fixes
+    assert lines[-1].startswith("all: 300 scans")

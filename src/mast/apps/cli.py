@@ -1127,6 +1127,20 @@ def bench_live(
     run_live_bench(scans=scans, seed=seed, kinds=tuple(kind or ("sick", "hokuyo")), echo=typer.echo)
 
 
+@bench_app.command("longdrive")
+def bench_longdrive(
+    scans: Annotated[int, typer.Option("--scans", min=100, help="Scans per drive.")] = 10_000,
+    seeds: Annotated[int, typer.Option("--seeds", min=1, help="Drives per scanner.")] = 5,
+    workers: Annotated[int, typer.Option("--workers", min=1, help="Processes.")] = 2,
+) -> None:
+    """Long drives: SICK (50 Hz) and Hokuyo (40 Hz) drives sent through their protocols and
+    located in sequence as `mast locate RUN` and `mast live` do (owed scans fixed, wrong
+    fixes listed, fixes outside their own 99 % ellipse)."""
+    from mast.apps.bench.longdrive import run_longdrive
+
+    run_longdrive(scans=scans, seeds=seeds, workers=workers, echo=typer.echo)
+
+
 @bench_app.command("georef")
 def bench_georef(
     clouds: Annotated[int, typer.Option("--clouds", min=0, help="Clouds without drift.")] = 20,
