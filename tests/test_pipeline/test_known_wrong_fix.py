@@ -15,8 +15,12 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
+import pytest
+
+from mast.core.pose import Pose2D
+from mast.core.scan import Scan
 from mast.io import read_scan_csv, read_survey
-from mast.pipeline.locator import LocatorConfig, locate
+from mast.pipeline.locator import LocatorConfig, SequenceLocator, locate
 
 DATA = Path(__file__).resolve().parents[1] / "data" / "regressions"
 TRUTH_E, TRUTH_N = 7798.6825, 6452.7610
@@ -42,3 +46,78 @@ def test_beams_that_favour_clutter_do_not_support_a_beacon() -> None:
     assert not _beams_favour(BeamCheck(hit=3, occluded=2, through=3, log_likelihood=-8.95), cfg)
     assert _beams_favour(BeamCheck(hit=3, occluded=2, through=3, log_likelihood=4.0), cfg)
     assert not _beams_favour(BeamCheck(hit=2, through=3, log_likelihood=20.0), cfg)
+
+
+# Wrong fixes found by `mast bench longdrive` (issue 31), each scan sent as its
+# protocol sends it (whole millimetres). Scenes: drive_scene(seed, scans=10000,
+# rate_hz=...), 0.5 deg, 12 mm; located with lms1xx-0.5's precisions.
+LONG_CONFIG = LocatorConfig(range_sigma_m=0.012, angle_sigma_rad=0.0)
+
+
+def _long_scan(name: str, range_max_m: float = 30.0) -> Scan:
+    return read_scan_csv(DATA / name, range_min_m=0.05, range_max_m=range_max_m)
+
+
+@pytest.mark.parametrize(
+    "scan",
+    [
+        # one panel of D022 in view: fixed 292 m away on D001 and D002
+        "drive40s2_scan5907_mm.csv",
+        # D023 in view: fixed 82 m away on its look-alike D019, rock read as D018
+        "drive40s2_scan7086_mm.csv",
+        # D026 in view: fixed 117 m away on its look-alike D018, rock read as D019
+        "drive40s2_scan7715_mm.csv",
+    ],
+)
+def test_a_look_alike_pair_read_into_one_beacon_and_rock_is_no_fix(scan: str) -> None:
+    """The wrong pose rested on one identified corner and a second beacon confirmed by
+    a few returns of rock; the true reading, one beacon identified by its corner,
+    explained the scan within the ambiguity margin (7-27 log-units behind)."""
+    fix = locate(_long_scan(scan), read_survey(DATA / "drive40s2_beacons.csv"), config=LONG_CONFIG)
+    assert not fix.ok, (fix.pose, fix.beacons)
+
+
+def test_a_corner_of_rock_beside_one_panel_does_not_name_a_beacon() -> None:
+    """Seed 0 at 50 Hz, scan 6276 (CoLa-A: no range limit sent), D015 in view: fixed
+    64 m away on its look-alike D019 and 'D020', whose 'corner' was rock beside one
+    panel (returns 4, 1 and 1 on its three panels)."""
+    fix = locate(
+        _long_scan("drive50s0_scan6276_mm.csv", math.inf),
+        read_survey(DATA / "drive50s0_beacons.csv"),
+        config=LONG_CONFIG,
+    )
+    assert not fix.ok, (fix.pose, fix.beacons)
+
+
+@pytest.mark.parametrize(
+    ("scan", "last", "gap_ns", "truth"),
+    [
+        # one panel of D003 in view (and a return on the next): tracked 8 cm off
+        (
+            "drive40s0_scan458_mm.csv",
+            Pose2D(7284.6742131524925, 6857.803587518528, 1.0496267049244044),
+            125_000_000,
+            Pose2D(7284.827731661166, 6857.890379850511, 1.042576755146484),
+        ),
+        # D006 in view: tracked 10 cm and 1.3 deg off, rock read as D005's middle panel
+        (
+            "drive40s0_scan1689_mm.csv",
+            Pose2D(7343.198279158187, 6887.080150616394, 1.34544388711025),
+            75_000_000,
+            Pose2D(7343.336293237513, 6887.115657741955, 1.3445703705593242),
+        ),
+    ],
+)
+def test_a_tracked_pose_proves_its_second_beacon(
+    scan: str, last: Pose2D, gap_ns: int, truth: Pose2D
+) -> None:
+    """Tracked from the previous fix, as `mast locate RUN` and `mast live` do: no fix
+    is owed (one beacon shows two panels at most), and none may be 3 cm off or more."""
+    tracker = SequenceLocator(read_survey(DATA / "drive40s0_beacons.csv"), config=LONG_CONFIG)
+    s = _long_scan(scan)
+    tracker.assume(last, s.stamp_ns - gap_ns)
+    step = tracker.step(s)
+    assert step.tracked
+    if step.fix.ok:
+        assert step.fix.pose is not None
+        assert math.dist(step.fix.pose.position, truth.position) < 0.03

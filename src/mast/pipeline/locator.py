@@ -254,17 +254,22 @@ def _choose(verified: list[Verified], cfg: LocatorConfig) -> tuple[Verified | No
     # unless it has fewer beacons identified by their own corners than the best
     # (up to two): then an identified corner that lands on its surveyed edge at
     # the best pose lands nowhere at the other, and the other must explain the
-    # scan better to compete. A pose one shaped beacon short of a fix competes too
-    # when it explains the scan better than the best confirmed one and either
-    # its beacon is identified by a corner while the best one rests on a
-    # single identified corner (then the beacon confirmed by its returns alone
-    # is the doubtful one: a look-alike read into returns a better pose
-    # explains), or it is a tracked pose whose second beacon merely lies where
-    # the pose puts it. A fix on two identified corners, each on its own
-    # surveyed edge, is not undone by one corner read another way.
+    # scan better to compete. A pose one beacon short of a fix competes within
+    # the margin too when its beacon is identified by a corner while the best
+    # rests on a single identified corner: the best's second beacon, confirmed
+    # by its returns alone, must then add more than the margin to what the
+    # other explains (on a long drive, a look-alike pair 80-290 m away was
+    # fixed with 5 mm sigmas from one beacon's corner and a few returns of rock
+    # read as its neighbour, 7-27 log-units ahead of the true one-beacon
+    # reading). A tracked pose whose second beacon merely lies where the pose
+    # puts it is doubtful likewise: a pose with one shaped beacon that explains
+    # the scan better competes. A fix on two identified corners, each on its
+    # own surveyed edge, is not undone by one corner read another way.
     margin = cfg.ambiguity_log_ratio * cfg.likelihood_tempering
-    doubtful = len(best.cornered) < cfg.min_beacons
-    proven = min(len(best.cornered), cfg.min_beacons)
+    proven_corners = _proven_corners(best, cfg)
+    doubtful = len(proven_corners) < cfg.min_beacons
+    tracked_best = best.hypothesis.kind == "prior" and len(best.shaped) < cfg.min_beacons
+    proven = min(len(proven_corners), cfg.min_beacons)
     share = cfg.verification.same_reading_share
     for other in verified:
         if (
@@ -273,9 +278,11 @@ def _choose(verified: list[Verified], cfg: LocatorConfig) -> tuple[Verified | No
             or other.reads_alike(best, share)
         ):
             continue  # the same reading of the scan: not a second place
-        if len(other.shaped) >= cfg.min_beacons and len(other.cornered) >= proven:
+        if (len(other.shaped) >= cfg.min_beacons and len(other.cornered) >= proven) or (
+            other.cornered and doubtful
+        ):
             slack = margin
-        elif (other.cornered and doubtful) or len(other.supported) >= cfg.min_beacons:
+        elif len(other.supported) >= cfg.min_beacons or (tracked_best and other.shaped):
             slack = 0.0
         else:
             continue  # one beacon, not even identified by a corner: a wall's bend can do that
@@ -295,7 +302,17 @@ def _settled(verified: list[Verified], cfg: LocatorConfig) -> bool:
     beacons each identified by its own corner. Then another pose competes only if it
     has ``min_beacons`` supporting beacons, which those poses cannot have."""
     best, _, _ = _choose(_admitted(verified, cfg), cfg)
-    return best is not None and len(best.cornered) >= cfg.min_beacons
+    return best is not None and len(_proven_corners(best, cfg)) >= cfg.min_beacons
+
+
+def _proven_corners(v: Verified, cfg: LocatorConfig) -> list[str]:
+    """The beacons of ``v`` identified by their own corners whose beams prove them too:
+    as many predicted beams hit them as two panels need returns (``2 *
+    min_panel_points``). A corner of rock beside one panel, read as a node, comes
+    with a few hits only (on a long drive, 4 for a look-alike's neighbour 64 m from
+    the truth)."""
+    need = 2 * cfg.verification.min_panel_points
+    return [b for b in v.cornered if v.checks[b].hit >= need]
 
 
 def _admitted(verified: list[Verified], cfg: LocatorConfig) -> list[Verified]:

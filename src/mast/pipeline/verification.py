@@ -539,8 +539,9 @@ def _support(
     their noise and fit them better than a line: ``placed_support``), and no corner
     of the scan lands beside one of its node edges (:func:`_stray_corner`). When
     ``tracked`` (a prior already says which beacon is where) no node is
-    identified and two panels with returns suffice, but the returns must
-    still bend as the beacon does and not run on past its nodes (a wrong
+    identified and two panels carrying ``min_panel_points`` returns each that
+    lie on them within their noise suffice, but they must still not run on
+    past its nodes (a wrong
     prior must not let clutter, or a few returns of the right beacons,
     confirm a pose the beams do not prove); a stray corner beside an edge is
     not held against them (the prior, not a corner, names the beacon).
@@ -570,12 +571,12 @@ def _support(
                 node_ok.add(b)
     supported = set(node_ok)
     shaped = set(node_ok)
-    # Without a node of its own, each of two panels must show its returns
-    # (unless a prior already says which beacon is where).
-    if not tracked:
-        candidates = {
-            b for b in candidates if sum(c >= cfg.min_panel_points for c in per_beacon[b]) >= 2
-        }
+    # Without a node of its own, each of two panels must show its returns, a prior or
+    # not: one panel with a stray return or two on its neighbour is one panel (rock
+    # beside it reads as the neighbour), and one panel cannot place a beacon.
+    candidates = {
+        b for b in candidates if sum(c >= cfg.min_panel_points for c in per_beacon[b]) >= 2
+    }
     beacon_no = panels.number
     for b in candidates - node_ok:
         mine = np.flatnonzero(panels.beacon == beacon_no[b])
