@@ -21,10 +21,13 @@ class Drive:
     beacons: Path
     bag: Path
     scans: int
+    owed: tuple[bool, ...] = ()
+    """Per scan of the bag, in order: whether it owes a fix (two beacons, two panels each)."""
 
 
 @pytest.fixture(scope="session")
 def drive(tmp_path_factory: pytest.TempPathFactory) -> Drive:
     scene = drive_scene(0, scans=DRIVE_SCANS, rate_hz=50.0)
     (written,) = write_scenario([scene], tmp_path_factory.mktemp("drive"), fmt="mcap")
-    return Drive(scene.survey, written.survey, written.scans[0], DRIVE_SCANS)
+    owed = tuple(sim.owes_fix() for sim in scene.iter_simulated())
+    return Drive(scene.survey, written.survey, written.scans[0], DRIVE_SCANS, owed)

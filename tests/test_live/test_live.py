@@ -82,7 +82,9 @@ def _assert_agree_with_locate(records: list[dict[str, Any]], recording: Path, dr
             d = math.hypot(live["easting"] - other["easting"], live["northing"] - other["northing"])
             assert d < 1e-4
             assert abs(live["azimuth_deg"] - other["azimuth_deg"]) * 3600 < 1.0
-    assert both >= len(records) // 2
+    # a loaded host locates the slow scans, those owing no fix, more often: the share is
+    # of the located scans that owe one
+    assert both >= sum(drive.owed[r["scan"]] for r in records) // 2
 
 
 @pytest.mark.parametrize("kind", ["sick", "hokuyo"])
@@ -99,9 +101,11 @@ def test_live_from_an_emulator_fixes_as_locate_does(
     assert summary.located == len(records) == drive.scans - summary.dropped
     assert sum(r["dropped"] for r in records) == summary.dropped
     # how many scans a loaded host drops is the machine's business, not the test's: every
-    # scan located is counted, and most of those located are fixed
+    # scan located is counted, and most of the located scans that owe a fix are fixed (a
+    # busy host locates the slow scans, those without two beacons, more often than not)
     assert summary.located >= 2
-    assert summary.fixed >= summary.located // 2
+    owed = [r for r in records if drive.owed[r["scan"]]]
+    assert sum(r["status"] == "fix" for r in owed) >= len(owed) // 2
     first = records[0]
     assert first["source"] == f"{kind}://127.0.0.1:{emulator.port}"
     assert first["tracking"] is False

@@ -34,7 +34,7 @@ from mast.core.scan import Scan
 from mast.errors import InputError
 from mast.live import cola, scip
 
-__all__ = ["KINDS", "Emulator", "EmulatorFaults", "hokuyo_parameters"]
+__all__ = ["KINDS", "Emulator", "EmulatorFaults", "encode_scan", "hokuyo_parameters"]
 
 KINDS = ("sick", "hokuyo")
 #: Hokuyo's error code for a beam without an echo (below DMIN, so read as no return).
@@ -82,6 +82,21 @@ def hokuyo_parameters(scan: Scan, *, model: str = "MAST-EMULATED-UST") -> scip.D
         afrt=afrt,
         scan_rpm=2400,
     )
+
+
+def encode_scan(kind: str, scan: Scan, *, ticks: int, counter: int, hz: float) -> bytes:
+    """``scan`` as a ``kind`` scanner sends it: a framed ``sSN LMDscandata`` telegram
+    (``sick``; device clock ``ticks`` in microseconds, scan ``counter``, ``hz`` scans a
+    second) or an ``MD`` reply (``hokuyo``; ``ticks`` in milliseconds), ranges in whole
+    millimetres and a beam without an echo as each protocol codes it."""
+    if kind == "sick":
+        return cola.encode_scandata(
+            scan, scan_counter=counter, time_since_startup_us=ticks, scan_frequency_hz=hz
+        )
+    if kind == "hokuyo":
+        mm = np.where(scan.valid, np.rint(scan.ranges_m * 1000.0), _NO_ECHO).astype(np.int64)
+        return scip.encode_distance_reply(mm, first_step=0, timestamp_ms=ticks)
+    raise InputError(f"unknown scanner kind {kind!r}; known: {', '.join(KINDS)}")
 
 
 class Emulator:
@@ -274,16 +289,7 @@ class Emulator:
         at = time.perf_counter_ns() if at_ns is None else at_ns
         ticks = max((at - self._t0_ns) // self._tick_ns, self._last_tick + 1)
         self._last_tick = ticks
-        if self.kind == "sick":
-            return cola.encode_scandata(
-                scan,
-                scan_counter=self._sent,
-                time_since_startup_us=ticks,
-                scan_frequency_hz=self.hz or 25.0,
-            )
-        assert self._params is not None
-        mm = np.where(scan.valid, np.rint(scan.ranges_m * 1000.0), _NO_ECHO).astype(np.int64)
-        return scip.encode_distance_reply(mm, first_step=0, timestamp_ms=ticks)
+        return encode_scan(self.kind, scan, ticks=ticks, counter=self._sent, hz=self.hz or 25.0)
 
     def _corrupt(self, telegram: bytes) -> bytes:
         if self.kind == "sick":

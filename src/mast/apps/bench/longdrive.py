@@ -46,24 +46,17 @@ def as_sent(kind: str, scan: Scan, counter: int = 0) -> Scan:
     encoded to its telegram with the protocol's own codec and decoded again (ranges in
     whole millimetres, the protocol's no-return codes); the stamp is kept."""
     from mast.live import cola, scip
-    from mast.live.emulate import _NO_ECHO, hokuyo_parameters
+    from mast.live.emulate import encode_scan, hokuyo_parameters
     from mast.live.sources import SickSource
 
+    sent = encode_scan(kind, scan, ticks=counter, counter=counter, hz=50.0)
     if kind == "sick":
-        framed = cola.encode_scandata(
-            scan, scan_counter=counter, time_since_startup_us=counter, scan_frequency_hz=50.0
-        )
-        (telegram,) = cola.split_telegrams(bytearray(framed))
+        (telegram,) = cola.split_telegrams(bytearray(sent))
         return cola.parse_scandata(telegram).to_scan(
             range_min_m=SickSource.RANGE_MIN_M, range_max_m=math.inf, stamp_ns=scan.stamp_ns
         )
-    if kind == "hokuyo":
-        params = hokuyo_parameters(scan)
-        mm = np.where(scan.valid, np.rint(scan.ranges_m * 1000.0), _NO_ECHO).astype(np.int64)
-        reply = scip.encode_distance_reply(mm, first_step=0, timestamp_ms=counter)
-        (telegram,) = scip.split_replies(bytearray(reply))
-        return scip.parse_distance_reply(telegram).to_scan(params, stamp_ns=scan.stamp_ns)
-    raise ValueError(f"unknown protocol {kind!r}")
+    (reply,) = scip.split_replies(bytearray(sent))
+    return scip.parse_distance_reply(reply).to_scan(hokuyo_parameters(scan), stamp_ns=scan.stamp_ns)
 
 
 @dataclass(slots=True)
