@@ -299,8 +299,9 @@ def _choose(verified: list[Verified], cfg: LocatorConfig) -> tuple[Verified | No
 def _settled(verified: list[Verified], cfg: LocatorConfig) -> bool:
     """Whether poses on fewer than ``min_beacons`` beacons' returns can no longer change
     what :func:`_choose` makes of ``verified``: it picks a best pose with ``min_beacons``
-    beacons each identified by its own corner. Then another pose competes only if it
-    has ``min_beacons`` supporting beacons, which those poses cannot have."""
+    beacons each identified by its own corner and proven by its beams
+    (:func:`_proven_corners`). Then another pose competes only if it has
+    ``min_beacons`` supporting beacons, which those poses cannot have."""
     best, _, _ = _choose(_admitted(verified, cfg), cfg)
     return best is not None and len(_proven_corners(best, cfg)) >= cfg.min_beacons
 

@@ -541,10 +541,10 @@ def _support(
     ``tracked`` (a prior already says which beacon is where) no node is
     identified and two panels carrying ``min_panel_points`` returns each that
     lie on them within their noise suffice, but they must still not run on
-    past its nodes (a wrong
-    prior must not let clutter, or a few returns of the right beacons,
-    confirm a pose the beams do not prove); a stray corner beside an edge is
-    not held against them (the prior, not a corner, names the beacon).
+    past its nodes (a wrong prior must not let clutter, or a few returns of
+    the right beacons, confirm a pose the beams do not prove); a stray corner
+    beside an edge is not held against them (the prior, not a corner, names
+    the beacon).
     """
     # Loosely: two panels with returns and as many in all as two panels need.
     per_beacon = _by_beacon(counts)
