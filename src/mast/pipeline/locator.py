@@ -350,13 +350,22 @@ def locate(scan: Scan, survey: Survey, *, config: LocatorConfig | None = None) -
         never raises for what a scan contains.
     """
     cfg = config or LocatorConfig()
+    return _prior_first(scan, survey, cfg, cfg)[0]
+
+
+def _prior_first(
+    scan: Scan, survey: Survey, searched: LocatorConfig, fallback: LocatorConfig
+) -> tuple[Fix, bool]:
+    """The prior's own search (``searched.prior``, if any), then, when it gives no fix,
+    the global search under ``fallback``, both on one segmentation of the scan; and
+    whether the prior was tried and gave no fix."""
     t0 = time.perf_counter()
-    seg = segment_scan(scan, cfg.segmentation)
-    if cfg.prior is not None:
-        fix = _locate(scan, survey, cfg, t0, seg, tracked=True)
+    seg = segment_scan(scan, searched.segmentation)
+    if searched.prior is not None:
+        fix = _locate(scan, survey, searched, t0, seg, tracked=True)
         if fix.ok:
-            return fix
-    return _locate(scan, survey, cfg, t0, seg, tracked=False)
+            return fix, False
+    return _locate(scan, survey, fallback, t0, seg, tracked=False), searched.prior is not None
 
 
 def _locate(
@@ -585,14 +594,8 @@ def locate_near(
 def _near(scan: Scan, survey: Survey, prior: Prior | None, cfg: LocatorConfig) -> tuple[Fix, bool]:
     """:func:`locate_near`, and whether the prior was tried and gave no fix."""
     if cfg.prior is None and prior is not None:
-        # The prior's own search, then the global one not narrowed by it, on one
-        # segmentation of the scan.
-        t0 = time.perf_counter()
-        seg = segment_scan(scan, cfg.segmentation)
-        fix = _locate(scan, survey, replace(cfg, prior=prior), t0, seg, tracked=True)
-        if fix.ok:
-            return fix, False
-        return _locate(scan, survey, cfg, t0, seg, tracked=False), True
+        # The prior's own search, then the global one not narrowed by it.
+        return _prior_first(scan, survey, replace(cfg, prior=prior), cfg)
     return locate(scan, survey, config=cfg), False
 
 
