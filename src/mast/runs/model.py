@@ -77,6 +77,9 @@ class RunSummary:
     coasted : int
         Scans whose returns did not find their keyframe's walls (or moved in a way no
         vehicle can) and were carried at constant velocity, with its uncertainty.
+    gaps : int
+        Scans that came more than ``TrackConfig.max_gap_s`` after the scan before
+        them: not chained by odometry (placed only if fixed, or by the scans after).
     """
 
     run: str
@@ -92,6 +95,7 @@ class RunSummary:
     last_stamp_ns: int | None = None
     elapsed_s: float = 0.0
     coasted: int = 0
+    gaps: int = 0
 
 
 _ROW = np.dtype(

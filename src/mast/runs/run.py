@@ -172,8 +172,13 @@ def track_run(
                     summary.scans += 1
                     if summary.first_stamp_ns is None:
                         summary.first_stamp_ns = scan.stamp_ns
-                    summary.last_stamp_ns = scan.stamp_ns
                     summary.coasted += step.motion is not None and step.motion.matches == 0
+                    if (
+                        summary.last_stamp_ns is not None
+                        and scan.stamp_ns - summary.last_stamp_ns > cfg.max_gap_s * 1e9
+                    ):
+                        summary.gaps += 1
+                    summary.last_stamp_ns = scan.stamp_ns
                     if step.fix.ok:
                         summary.fixes += 1
                         adj = step.fix.adjustment

@@ -29,7 +29,14 @@ from mast.core.scan import Scan
 from mast.pipeline.locator import Fix, LocatorConfig, locate_near
 from mast.pipeline.tracking import Prior
 from mast.runs.model import PlacedScan
-from mast.runs.odometry import Keyframe, Motion, OdometryConfig, keyframe, scan_to_scan
+from mast.runs.odometry import (
+    Keyframe,
+    Motion,
+    OdometryConfig,
+    keyframe,
+    recover_motion,
+    scan_to_scan,
+)
 
 __all__ = ["Node", "RunTracker", "Smoother", "Step", "TrackConfig", "smooth"]
 
@@ -62,8 +69,18 @@ class TrackConfig:
         keyframe against overlap lost.)
     max_speed_mps, max_yaw_rate_rad_s, max_accel_mps2 : float
         What a vehicle underground can do. A motion beyond them (ICP slid along
-        a smooth drift, or locked onto the wrong wall) is replaced by the
-        constant-velocity motion with the uncertainty the acceleration allows.
+        a smooth drift, or locked onto the wrong wall) is searched for again
+        over all the vehicle could have done (:func:`recover_motion`), and
+        failing that replaced by the constant-velocity motion with the
+        uncertainty the acceleration allows.
+    max_search_yaw_rad : float
+        Widest turn either way that search looks for.
+    max_coast_m : float
+        A scan whose motion can only be coasted (constant velocity), with its
+        position's standard deviation then beyond this, breaks the chain; the
+        run starts again at the next fix. A pose known to metres is no survey
+        position, and a stretch of such motions leaves the pose graph too
+        poorly posed to solve.
     """
 
     locator: LocatorConfig = field(default_factory=LocatorConfig)
@@ -79,6 +96,8 @@ class TrackConfig:
     max_speed_mps: float = 6.0
     max_yaw_rate_rad_s: float = math.radians(90.0)
     max_accel_mps2: float = 3.0
+    max_search_yaw_rad: float = math.radians(45.0)
+    max_coast_m: float = 1.0
 
 
 @dataclass(frozen=True, slots=True)
@@ -141,7 +160,7 @@ class RunTracker:
         self._key_pose: Pose2D | None = None
         self._key_cov = np.zeros((3, 3))
         self._key_stamp = 0
-        self._last: tuple[float, float, float] | None = None
+        self._last: Motion | None = None
         self._velocity = (0.0, 0.0, 0.0)
 
     def _prior(self, pose: Pose2D, cov: NDArray[np.float64]) -> Prior:
@@ -157,6 +176,7 @@ class RunTracker:
         cfg = self.config
         motion = None
         ref = None
+        wide = False
         if (
             self._key is not None
             and self._stamp is not None
@@ -167,20 +187,47 @@ class RunTracker:
             # Constant velocity: the last scan's place in the keyframe, one more step on.
             v = self._velocity
             step = (v[0] * dt, v[1] * dt, v[2] * dt)
-            last = (0.0, 0.0, 0.0) if self._last is None else self._last
+            last, last_cov = (0.0, 0.0, 0.0), np.zeros((3, 3))
+            if self._last is not None:
+                last = (self._last.dx, self._last.dy, self._last.dtheta)
+                last_cov = self._last.covariance
             guess = _chain(last, step)
-            motion = scan_to_scan(
-                key,
-                scan,
-                guess=guess,
-                range_sigma_m=cfg.locator.range_sigma_m,
-                config=cfg.odometry,
-            )
             since_key = (scan.stamp_ns - self._key_stamp) * 1e-9
+            # How far the constant-velocity guess can be off: what the vehicle's
+            # acceleration and turn rate allow since the last scan.
+            reach = self._slack(dt)
+            turn = min(cfg.max_yaw_rate_rad_s * max(dt, 0.04) + 0.02, cfg.max_search_yaw_rad)
+            motion = None
+            wide = reach > max(cfg.odometry.gates_m)
+            if not wide:
+                motion = scan_to_scan(
+                    key,
+                    scan,
+                    guess=guess,
+                    range_sigma_m=cfg.locator.range_sigma_m,
+                    config=cfg.odometry,
+                )
             if motion is None or not self._plausible(motion, guess, since_key):
-                motion = self._coasting(guess, since_key)
-            inc = _chain(_inverse(last), (motion.dx, motion.dy, motion.dtheta))
-            self._velocity = (inc[0] / dt, inc[1] / dt, inc[2] / dt) if dt > 0 else v
+                # Outside ICP's basin: search all the vehicle could have done since.
+                motion = recover_motion(
+                    key,
+                    scan,
+                    guess=guess,
+                    radius_m=reach,
+                    yaw_rad=turn,
+                    range_sigma_m=cfg.locator.range_sigma_m,
+                    config=cfg.odometry,
+                )
+            coast = self._coasting(guess, last_cov, dt)
+            if motion is None or not self._plausible(motion, guess, since_key):
+                motion = coast
+            elif coast is not None:
+                motion = _fused(motion, coast)
+            if motion is not None:
+                inc = _chain(_inverse(last), (motion.dx, motion.dy, motion.dtheta))
+                self._velocity = (inc[0] / dt, inc[1] / dt, inc[2] / dt) if dt > 0 else v
+            else:
+                self._velocity = (0.0, 0.0, 0.0)
         else:
             self._velocity = (0.0, 0.0, 0.0)
         predicted, cov = None, np.zeros((3, 3))
@@ -196,6 +243,7 @@ class RunTracker:
         # last one, or this scan is fixed (the best-known pose to carry on from).
         if (
             motion is None
+            or wide
             or fix.ok
             or math.hypot(motion.dx, motion.dy) > cfg.keyframe_m
             or abs(motion.dtheta) > cfg.keyframe_rad
@@ -205,7 +253,7 @@ class RunTracker:
             self._key_pose, self._key_cov = pose, cov
             self._last = None
         else:
-            self._last = (motion.dx, motion.dy, motion.dtheta)
+            self._last = motion
         return Step(
             index, scan.stamp_ns, fix, motion, ref if motion is not None else None, predicted
         )
@@ -224,12 +272,45 @@ class RunTracker:
     def _slack(self, since_key: float) -> float:
         return 0.05 + self.config.max_accel_mps2 * max(since_key, 0.04)
 
-    def _coasting(self, guess: tuple[float, float, float], since_key: float) -> Motion:
-        """The constant-velocity motion, as uncertain as the vehicle's acceleration makes it:
-        the run goes on through a scan whose returns did not find the keyframe's walls."""
-        s = self._slack(since_key)
-        yaw = 0.02 + self.config.max_yaw_rate_rad_s * 0.1 * max(since_key, 0.04)
-        return Motion(*guess, np.diag([s**2, s**2, yaw**2]), 0, math.nan)
+    def _coasting(
+        self, guess: tuple[float, float, float], last_cov: NDArray[np.float64], dt: float
+    ) -> Motion | None:
+        """The constant-velocity motion, as uncertain as the last motion and the vehicle's
+        acceleration since it make it: the run goes on through a scan whose returns did
+        not find the keyframe's walls. None (the chain breaks) when that leaves the
+        position less certain than ``max_coast_m``."""
+        s = self._slack(dt)
+        yaw = 0.02 + self.config.max_yaw_rate_rad_s * 0.1 * max(dt, 0.04)
+        cov = last_cov + np.diag([s**2, s**2, yaw**2])
+        if math.sqrt(max(np.linalg.eigvalsh(cov[:2, :2])[-1], 0.0)) > self.config.max_coast_m:
+            return None
+        return Motion(*guess, cov, 0, math.nan)
+
+
+def _fused(motion: Motion, prediction: Motion) -> Motion:
+    """The measured motion combined with the vehicle's constant-velocity prediction.
+
+    Along a smooth drift the scans do not tell how far the vehicle went; there
+    the measured motion is arbitrary and its variance huge, and the prediction
+    (as uncertain as the acceleration allows) is what is known. Elsewhere the
+    measurement dominates and is unchanged to a fraction of its sigma. This also
+    keeps a pose graph of several such motions in a row well posed.
+    """
+    a = np.linalg.inv(motion.covariance)
+    b = np.linalg.inv(prediction.covariance)
+    x = np.array([motion.dx, motion.dy, motion.dtheta])
+    g = np.array([prediction.dx, prediction.dy, prediction.dtheta])
+    g[2] = x[2] + math.remainder(g[2] - x[2], math.tau)
+    cov = np.linalg.inv(a + b)
+    mean = cov @ (a @ x + b @ g)
+    return Motion(
+        float(mean[0]),
+        float(mean[1]),
+        math.remainder(float(mean[2]), math.tau),
+        (cov + cov.T) / 2,
+        motion.matches,
+        motion.rms_m,
+    )
 
 
 def _chain(

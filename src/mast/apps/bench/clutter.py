@@ -492,6 +492,32 @@ def cast_beacons(
     return SimulatedScan(cast, pose, model, true_r, surface, surfaces)
 
 
+def mount_beacons(
+    data: Sequence[tuple[Scan, Pose2D]], beacons: int, rng: np.random.Generator
+) -> tuple[Survey, list[WallSite], list[BeaconDesign], list[Segmentation]]:
+    """Beacons of random designs mounted on a log's walls (:func:`wall_sites`), in the
+    frame of its true poses: the survey, the sites, their designs, and every scan's
+    segmentation."""
+    scans = [s for s, _ in data]
+    poses = [p for _, p in data]
+    segs = [segment_scan(s) for s in scans]
+    inc = float(np.median([s.angle_increment for s in scans]))
+    chord_range = chord_range_for(inc)
+    sites = wall_sites(
+        poses,
+        segs,
+        beacons,
+        half_span_m=chord_range[1] / 2 + SITE_MARGIN_M,
+        useful_range_m=chord_range[1] / CHORD_RANGE_M[1] * USEFUL_PANEL_M / (USEFUL_BEAMS * inc),
+    )
+    designs = beacon_designs(len(sites), rng, chord_range_m=chord_range)
+    survey = Survey(
+        Beacon(f"B{k + 1:02d}", d.mounted(s.point, s.direction, tunnel_side=s.tunnel_side))
+        for k, (s, d) in enumerate(zip(sites, designs, strict=True))
+    )
+    return survey, sites, designs, segs
+
+
 def run_clutter_log(
     name: str,
     data: Sequence[tuple[Scan, Pose2D]],
@@ -538,22 +564,7 @@ def run_clutter_log(
     cfg = config if config is not None else LocatorConfig(range_sigma_m=0.01)
     rng = np.random.default_rng(seed)
     scans = [s for s, _ in data]
-    poses = [p for _, p in data]
-    segs = [segment_scan(s) for s in scans]
-    inc = float(np.median([s.angle_increment for s in scans]))
-    chord_range = chord_range_for(inc)
-    sites = wall_sites(
-        poses,
-        segs,
-        beacons,
-        half_span_m=chord_range[1] / 2 + SITE_MARGIN_M,
-        useful_range_m=chord_range[1] / CHORD_RANGE_M[1] * USEFUL_PANEL_M / (USEFUL_BEAMS * inc),
-    )
-    designs = beacon_designs(len(sites), rng, chord_range_m=chord_range)
-    survey = Survey(
-        Beacon(f"B{k + 1:02d}", d.mounted(s.point, s.direction, tunnel_side=s.tunnel_side))
-        for k, (s, d) in enumerate(zip(sites, designs, strict=True))
-    )
+    survey, sites, designs, segs = mount_beacons(data, beacons, rng)
     summary = ClutterSummary(
         name, beacons=len(survey), designs=len({id(d) for d in designs}), tracked=priors
     )
