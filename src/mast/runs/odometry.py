@@ -339,8 +339,9 @@ def recover_motion(
     """The motion from ``key`` to ``scan`` anywhere within ``radius_m`` and ``yaw_rad`` of
     ``guess``: a correlative search of the window, then ICP from its best distinct poses.
 
-    The motion returned is the ICP result that matches the most returns; every
-    other distinct result that matches nearly as many (``alike_matches``) adds
+    The motion returned is the ICP result that fits best (matched returns, each
+    less its squared residual); every other distinct result that fits nearly as
+    well (``alike_matches``) adds
     its offset to the covariance (a mixture's covariance), so an ambiguous
     match is reported as ambiguous. None when no start converges onto the
     keyframe's walls.
@@ -387,18 +388,46 @@ def recover_motion(
         ):
             starts.append((x, y, th))
     found: list[Motion] = []
-    for start in starts:
+    # The guess itself too: along a drift whose rock is finer than the search's cells,
+    # the coarse scores are flat and only the guess starts ICP near the motion.
+    for start in [guess, *starts]:
         m = scan_to_scan(key, scan, guess=start, range_sigma_m=range_sigma_m, config=cfg)
         if m is not None:
             found.append(m)
     if not found:
         return None
-    found.sort(key=lambda m: (-m.matches, m.rms_m))
+    # Along a drift the coarse scores are flat and the best distinct starts may all lie
+    # in one stretch of it: ICP is also started every basin's width along the best
+    # motion's weakest direction, across the window, so that another place that fits
+    # as well is found (and declared) rather than missed.
+    best_m = max(found, key=lambda m: (m.matches, -m.rms_m))
+    _, vecs = np.linalg.eigh(best_m.covariance[:2, :2])
+    along = vecs[:, -1]
+    spacing = 1.5 * max(cfg.gates_m)
+    for k in range(1, min(math.ceil(radius_m / spacing), cfg.search_starts * 2) + 1):
+        for sign in (-1.0, 1.0):
+            x, y = np.array([best_m.dx, best_m.dy]) + sign * k * spacing * along
+            start = (float(x), float(y), best_m.dtheta)
+            m = scan_to_scan(key, scan, guess=start, range_sigma_m=range_sigma_m, config=cfg)
+            if m is not None:
+                found.append(m)
+    # How well each fits: its matched returns, each weighted by a Gaussian of its
+    # residual whose spread is that of the result matching the most returns. Along a
+    # drift, ICP from a wrong start slides to another place where as many returns lie
+    # on the walls, only less closely; in clutter, a wrong start finds fewer returns
+    # that lie a little closer (a wall or two, without the furniture).
+    widest = max(found, key=lambda m: m.matches)
+    s2 = 2.0 * max(widest.rms_m**2, 2.0 * range_sigma_m**2)
+
+    def fit(m: Motion) -> float:
+        return m.matches * math.exp(-(m.rms_m**2) / s2)
+
+    found.sort(key=fit, reverse=True)
     top_m = found[0]
     alike = [
         m
         for m in found[1:]
-        if m.matches >= cfg.alike_matches * top_m.matches
+        if fit(m) >= cfg.alike_matches * fit(top_m)
         and (
             math.hypot(m.dx - top_m.dx, m.dy - top_m.dy) > 2 * cfg.gates_m[-1]
             or abs(math.remainder(m.dtheta - top_m.dtheta, 2 * math.pi)) * reach

@@ -72,7 +72,10 @@ class TrackConfig:
         a smooth drift, or locked onto the wrong wall) is searched for again
         over all the vehicle could have done (:func:`recover_motion`), and
         failing that replaced by the constant-velocity motion with the
-        uncertainty the acceleration allows.
+        uncertainty the acceleration allows. When the scans are so far apart in
+        time that the constant-velocity guess may be off by more than ICP's
+        widest gate (a log that kept a scan every metre or two), every step is
+        searched that way, and every scan becomes a keyframe.
     max_search_yaw_rad : float
         Widest turn either way that search looks for.
     max_coast_m : float
