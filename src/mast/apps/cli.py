@@ -283,6 +283,11 @@ def _default(value: float) -> str:
 
 BeaconsOption = Annotated[Path, typer.Option("--beacons", "-b", help="Beacon survey CSV.")]
 TopicOption = Annotated[str | None, typer.Option("--topic", help="LaserScan topic in a bag.")]
+RealDataOption = Annotated[
+    Path, typer.Option("--data", help="Folder of real scans (../shared/data).")
+]
+LogBeaconsOption = Annotated[int, typer.Option("--beacons", min=2, help="Beacons mounted per log.")]
+DesignSeedOption = Annotated[int, typer.Option("--seed", help="Seed of the designs and the noise.")]
 RangeSigmaOption = Annotated[
     float | None,
     typer.Option(
@@ -1280,11 +1285,9 @@ def bench_speed(
 
 @bench_app.command("clutter")
 def bench_clutter(
-    data: Annotated[
-        Path, typer.Option("--data", help="Folder of real scans (../shared/data).")
-    ] = Path("../shared/data"),
-    beacons: Annotated[int, typer.Option("--beacons", min=2, help="Beacons mounted per log.")] = 29,
-    seed: Annotated[int, typer.Option("--seed", help="Seed of the designs and the noise.")] = 0,
+    data: RealDataOption = Path("../shared/data"),
+    beacons: LogBeaconsOption = 29,
+    seed: DesignSeedOption = 0,
     priors: Annotated[
         bool,
         typer.Option(
@@ -1305,11 +1308,9 @@ def bench_clutter(
 
 @bench_app.command("reallog")
 def bench_reallog(
-    data: Annotated[
-        Path, typer.Option("--data", help="Folder of real scans (../shared/data).")
-    ] = Path("../shared/data"),
-    beacons: Annotated[int, typer.Option("--beacons", min=2, help="Beacons mounted per log.")] = 29,
-    seed: Annotated[int, typer.Option("--seed", help="Seed of the designs and the noise.")] = 0,
+    data: RealDataOption = Path("../shared/data"),
+    beacons: LogBeaconsOption = 29,
+    seed: DesignSeedOption = 0,
     max_gap: Annotated[
         float, typer.Option("--max-gap", min=0.0, help="As mast track's --max-gap, seconds.")
     ] = 3.0,
@@ -1325,9 +1326,7 @@ def bench_reallog(
 
 @bench_app.command("real")
 def bench_real(
-    data: Annotated[
-        Path, typer.Option("--data", help="Folder of real scans (../shared/data).")
-    ] = Path("../shared/data"),
+    data: RealDataOption = Path("../shared/data"),
     every: Annotated[
         int, typer.Option("--every", min=1, help="Insert beacons into every Nth scan.")
     ] = 10,

@@ -40,7 +40,7 @@ from __future__ import annotations
 import math
 import time
 from collections import Counter
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -622,6 +622,18 @@ def run_clutter_log(
     return summary, survey, sites
 
 
+def carmen_logs(
+    data_dir: Path, logs: Iterable[str], seed: int
+) -> Iterator[tuple[str, list[tuple[Scan, Pose2D]], int]]:
+    """Each of ``logs`` present under ``data_dir``: its name, its scans with their
+    corrected poses, and its seed (``seed`` plus its place in :data:`CARMEN_LOGS`, so
+    that a log's run does not depend on which other logs are run)."""
+    for name in logs:
+        path = data_dir / CARMEN_LOGS[name]
+        if path.is_file():
+            yield name, list(read_carmen_log(path)), seed + list(CARMEN_LOGS).index(name)
+
+
 def run_real_clutter(
     data_dir: Path,
     *,
@@ -639,15 +651,12 @@ def run_real_clutter(
     the runs are deterministic and independent of which other logs are run.
     """
     out: list[ClutterSummary] = []
-    for name in logs:
-        path = data_dir / CARMEN_LOGS[name]
-        if not path.is_file():
-            continue
+    for name, data, log_seed in carmen_logs(data_dir, logs, seed):
         summary, _, _ = run_clutter_log(
             name,
-            list(read_carmen_log(path)),
+            data,
             beacons=beacons,
-            seed=seed + list(CARMEN_LOGS).index(name),
+            seed=log_seed,
             panel_noise_m=panel_noise_m,
             every=every,
             priors=priors,

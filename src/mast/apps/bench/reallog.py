@@ -34,12 +34,12 @@ from mast.apps.bench.clutter import (
     CARMEN_LOGS,
     PANEL_NOISE_M,
     _scanner_model,
+    carmen_logs,
     cast_beacons,
     mount_beacons,
 )
 from mast.core.pose import Pose2D
 from mast.core.scan import Scan
-from mast.io.carmen_log import read_carmen_log
 from mast.pipeline.locator import LocatorConfig
 from mast.runs.model import PlacedScan
 from mast.runs.track import Node, RunTracker, Smoother, TrackConfig
@@ -140,20 +140,9 @@ def run_real_logs(
     logs: Iterable[str] = tuple(CARMEN_LOGS),
     echo: Callable[[str], object] = print,
 ) -> list[RealRunFigures]:
-    """:func:`run_real_log` on each CARMEN log under ``data_dir``; each log's seed is
-    ``seed`` plus its place in :data:`~mast.apps.bench.clutter.CARMEN_LOGS`."""
-    out = []
-    for name in logs:
-        path = data_dir / CARMEN_LOGS[name]
-        if path.is_file():
-            out.append(
-                run_real_log(
-                    name,
-                    list(read_carmen_log(path)),
-                    beacons=beacons,
-                    seed=seed + list(CARMEN_LOGS).index(name),
-                    max_gap_s=max_gap_s,
-                    echo=echo,
-                )
-            )
-    return out
+    """:func:`run_real_log` on each CARMEN log under ``data_dir``
+    (:func:`~mast.apps.bench.clutter.carmen_logs` gives each its seed)."""
+    return [
+        run_real_log(name, data, beacons=beacons, seed=s, max_gap_s=max_gap_s, echo=echo)
+        for name, data, s in carmen_logs(data_dir, logs, seed)
+    ]
