@@ -22,11 +22,12 @@ degrees from its start. When the start is further off (a turn at a door, a
 log recorded a metre and 30° between scans), :func:`recover_motion` searches
 the whole window the vehicle could have reached: a correlative scan match
 (Olson, "Real-time correlative scan matching", ICRA 2009) of the returns
-against a coarse likelihood field of the keyframe's, then ICP from each of
-the best distinct poses. Where several of them fit the keyframe about as
-well (a corridor seen the same a metre on), the motion's covariance takes
-in their spread: the run is told the match is ambiguous rather than given
-one of them as certain.
+against a coarse likelihood field of the keyframe's, then ICP from the
+guess, from the best distinct poses and from poses along the best result's
+weakest direction (along a drift the coarse scores are flat). Where several
+of them fit the keyframe about as well (a corridor seen the same a metre
+on), the motion's covariance takes in their spread: the run is told the
+match is ambiguous rather than given one of them as certain.
 """
 
 from __future__ import annotations
@@ -80,9 +81,10 @@ class OdometryConfig:
     search_starts : int
         Distinct best poses of the wide search that ICP is started from.
     alike_matches : float
-        Another ICP result whose matched returns are at least this share of
-        the best one's, and that is a distinct motion, fits about as well: its
-        spread joins the motion's covariance.
+        Another ICP result whose fit (matched returns, each weighted by its
+        residual) is at least this share of the best one's, and that is a
+        distinct motion, fits about as well: its offset joins the motion's
+        covariance.
     wide_sigma_per_m, wide_sigma_rad_per_m, wide_sigma_per_rad : float
         What a motion searched over a wide window (scans a metre or more apart)
         is known to at best, beyond its fit: position 5 % of the step, azimuth
@@ -91,9 +93,9 @@ class OdometryConfig:
         errors the fit does not see: on the real CARMEN logs (1 m and up to 33°
         a step) the fit's own sigmas are 3-5 times smaller than the steps'
         errors against the corrected poses (median 2-3 cm, 0.1-0.2°; part of that
-        is the corrected poses' own few centimetres). With these terms 86-98 %
-        of the scans placed by odometry on those logs lie inside their 95 %
-        ellipse (``mast bench reallog``).
+        is the corrected poses' own few centimetres). With these terms 86 % and
+        99 % of the scans placed by odometry on those two logs lie inside their
+        95 % ellipse (``mast bench reallog``).
     """
 
     gates_m: tuple[float, ...] = (0.3, 0.12, 0.06)

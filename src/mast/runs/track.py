@@ -272,8 +272,9 @@ class RunTracker:
         off = math.hypot(motion.dx - guess[0], motion.dy - guess[1]) > self._slack(since_key)
         return not (far or turned or off)
 
-    def _slack(self, since_key: float) -> float:
-        return 0.05 + self.config.max_accel_mps2 * max(since_key, 0.04)
+    def _slack(self, seconds: float) -> float:
+        """How far the vehicle can stray from constant velocity in ``seconds``, metres."""
+        return 0.05 + self.config.max_accel_mps2 * max(seconds, 0.04)
 
     def _coasting(
         self, guess: tuple[float, float, float], last_cov: NDArray[np.float64], dt: float
