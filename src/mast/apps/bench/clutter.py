@@ -67,10 +67,13 @@ __all__ = [
     "ScanOutcome",
     "WallSite",
     "beacon_designs",
+    "carmen_logs",
     "cast_beacons",
     "chord_range_for",
+    "mount_beacons",
     "run_clutter_log",
     "run_real_clutter",
+    "scanner_model",
     "wall_sites",
 ]
 
@@ -445,7 +448,7 @@ def beacon_designs(
     return out
 
 
-def _scanner_model(scan: Scan, name: str) -> ScannerModel:
+def scanner_model(scan: Scan, name: str) -> ScannerModel:
     fov = math.degrees(float(scan.angles_rad[-1] - scan.angles_rad[0]))
     return ScannerModel(
         name,
@@ -488,7 +491,7 @@ def cast_beacons(
     )
     surface = np.where(hit, 1 + j, np.where(scan.valid, 0, -1)).astype(np.intp)
     true_r = np.where(hit, t, real)
-    model = scanner if scanner is not None else _scanner_model(scan, scan.frame_id)
+    model = scanner if scanner is not None else scanner_model(scan, scan.frame_id)
     return SimulatedScan(cast, pose, model, true_r, surface, surfaces)
 
 
@@ -570,7 +573,7 @@ def run_clutter_log(
     )
     prior_rng = np.random.default_rng([seed, 5])
     summary.noise_mm = 1e3 * float(np.median([g.noise_m for g in segs]))
-    model = _scanner_model(scans[0], name)
+    model = scanner_model(scans[0], name)
     for i, (scan, pose) in enumerate(data):
         if i % every:
             continue

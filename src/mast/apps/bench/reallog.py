@@ -33,10 +33,10 @@ import numpy as np
 from mast.apps.bench.clutter import (
     CARMEN_LOGS,
     PANEL_NOISE_M,
-    _scanner_model,
     carmen_logs,
     cast_beacons,
     mount_beacons,
+    scanner_model,
 )
 from mast.core.pose import Pose2D
 from mast.core.scan import Scan
@@ -115,7 +115,7 @@ def run_real_log(
         return figures
     rng = np.random.default_rng(seed)
     survey, _, _, _ = mount_beacons(pairs, beacons, rng)
-    model = _scanner_model(pairs[0][0], name)
+    model = scanner_model(pairs[0][0], name)
     config = TrackConfig(locator=LocatorConfig(range_sigma_m=0.01), max_gap_s=max_gap_s)
     tracker, smoother = RunTracker(survey, config), Smoother(config)
     truth = [p for _, p in pairs]
