@@ -339,14 +339,14 @@ def recover_motion(
     config: OdometryConfig | None = None,
 ) -> Motion | None:
     """The motion from ``key`` to ``scan`` anywhere within ``radius_m`` and ``yaw_rad`` of
-    ``guess``: a correlative search of the window, then ICP from its best distinct poses.
+    ``guess``: a correlative search of the window, then ICP from the guess, the search's
+    best distinct poses and poses along the best result's weakest direction.
 
     The motion returned is the ICP result that fits best (matched returns, each
-    less its squared residual); every other distinct result that fits nearly as
-    well (``alike_matches``) adds
-    its offset to the covariance (a mixture's covariance), so an ambiguous
-    match is reported as ambiguous. None when no start converges onto the
-    keyframe's walls.
+    weighted by a Gaussian of its residual); every other distinct result that
+    fits nearly as well (``alike_matches``) adds its offset to the covariance (a
+    mixture's covariance), so an ambiguous match is reported as ambiguous. None
+    when no start converges onto the keyframe's walls.
     """
     cfg = config or OdometryConfig()
     _, pts = scan.points()
