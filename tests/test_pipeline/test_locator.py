@@ -298,6 +298,49 @@ def test_a_surface_running_on_past_a_short_panel_refuses_a_turned_round_pose(dra
         assert fix.reason == "one_beacon"
 
 
+def test_rock_in_the_middle_panels_line_past_a_short_outer_panel_is_the_wall() -> None:
+    # Issue 31 (shared noisy scenes 0011, 0126, 0133, 0139; hostile 0032, 0060, 0067,
+    # 0074): a beacon of panels 0.26, 0.39 and 0.13 m, its short third panel ending on
+    # rock that stands 2 cm short of the middle panel's line and runs on in it. The
+    # overrun search reached 0.3 m past the node, past the beacon's free end, and took
+    # the rock for the middle panel running on: the beacon was refused. A beacon whose
+    # returns lie on its panels within their noise is now searched to its free end only.
+    from mast.sim.design import paper_design, polyline_design
+    from mast.sim.world import Surface
+
+    short = polyline_design((0.26, 0.39, 0.13), (math.radians(48.4), math.radians(25.3)))
+    b1 = paper_design().beacon("B1", (-1.5, 0.0), (1.0, 0.0))
+    b2 = short.beacon("B2", (1.5, 0.0), (1.0, 0.0))
+    e = b2.edges
+    along = (e[2] - e[1]) / np.linalg.norm(e[2] - e[1])
+    out = np.array([-along[1], along[0]])
+    rock = e[3] + (float((e[2] - e[3]) @ out) - 0.02) * out  # 2 cm short of P2's line
+    wb = WorldBuilder()
+    wall = Surface("wall")
+    wb.polyline([(-8.0, 0.0), e[0]], wall)
+    wb.panels(b1.edges, "B1")
+    wb.panels(e, "B2")
+    wb.polyline([e[3], rock, rock + 0.6 * along, (rock[0] + 0.6 * along[0], 0.0), (8.0, 0.0)], wall)
+    wb.polyline([(-8.0, 5.0), (8.0, 5.0)], wall)
+    world = wb.build()
+    survey = Survey([b1, b2])
+    scanner = ScannerModel("s", 270.0, 0.5, range_sigma_m=0.012)
+    cfg = LocatorConfig(range_sigma_m=0.012, survey_sigma_m=0.0)
+    searched_past = replace(cfg, verification=replace(cfg.verification, wall_past_free_ends=False))
+    poses = [(x, y, az) for x in (0.5, 1.0, 1.5, 2.0) for y in (2.0, 3.0) for az in (160, 180, 200)]
+    fixed = refused_before = 0
+    for i, (x, y, az) in enumerate(poses):
+        pose = Pose2D(x, y, math.radians(az))
+        sim = simulate_scan(world, pose, scanner, rng=np.random.default_rng(i))
+        fix = locate(sim.scan, survey, config=cfg)
+        if fix.ok:
+            fixed += 1
+            assert _errors(fix, pose)[0] < 0.02
+            refused_before += not locate(sim.scan, survey, config=searched_past).ok
+    assert fixed >= 20, fixed
+    assert refused_before >= 6, refused_before
+
+
 def test_a_corner_beside_an_edge_is_judged_by_its_own_uncertainty() -> None:
     # The accuracy benchmark's first owed pose at 270/0.5 deg, 12 mm, first draw:
     # the second beacon shows 4, 9 and 4 returns, and its shallow corners with

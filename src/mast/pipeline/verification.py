@@ -27,6 +27,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
+from functools import partial
 
 import numpy as np
 from numpy.typing import NDArray
@@ -86,6 +87,14 @@ class VerificationConfig:
         Returns past a panel's end whose offset from its line drifts by more
         than this many standard deviations of the slope are another surface
         crossing the line, not the line running on.
+    wall_past_free_ends : bool
+        A beacon whose returns lie on its panels within their noise may have
+        returns in a middle panel's line past the free end of a short outer
+        panel: that is the wall the beacon is mounted on (rough rock standing
+        in the middle panel's line). The overrun search then stops at the
+        beacon's free end, where it otherwise reaches ``overrun_reach_m`` past
+        the node. A look-alike read as the beacon misfits its shape and keeps
+        the full search.
     through_probability : float
         Probability of a return beyond a surveyed panel at the true pose
         (edges, mixed pixels): what each through-beam costs in the likelihood.
@@ -125,6 +134,7 @@ class VerificationConfig:
     overrun_reach_m: float = 0.3
     max_overrun_fraction: float = 0.25
     overrun_slope_sigmas: float = 3.0
+    wall_past_free_ends: bool = True
     through_probability: float = 0.01
     corner_reach_m: float = 0.3
     straight_alpha: float = 1e-3
@@ -319,6 +329,7 @@ def _overrun(
     gate_m: float,
     sigma_m: float,
     cfg: VerificationConfig,
+    to_free_ends: bool = False,
 ) -> dict[int, int]:
     """Returns continuing each panel's line past its nodes, on no other panel of the beacon.
 
@@ -331,7 +342,8 @@ def _overrun(
     angle) is not a continuation: the returns past each end count only when
     the line through them keeps the panel's direction (their lateral drift
     along the reach is within ``overrun_slope_sigmas`` standard deviations of
-    none).
+    none). With ``to_free_ends``, the search past a node stops where the
+    beacon does: no farther than the outer panel beyond that node is long.
     """
     # Only returns within a gate of a panel's line, and at most the reach past its
     # ends, can count: the others are left out before any (returns x panels) array.
@@ -346,14 +358,22 @@ def _overrun(
     out: dict[int, int] = {}
     numbers = panels.panel[beacon_panels]
     first, last = int(numbers.min()), int(numbers.max())
+    outer = {int(n): float(length[0, col]) for col, n in enumerate(numbers) if n in (first, last)}
+
+    def reach_past(neighbour: int) -> float:
+        if to_free_ends and neighbour in outer:
+            return min(cfg.overrun_reach_m, outer[neighbour])
+        return cfg.overrun_reach_m
+
     for col, k in enumerate(beacon_panels.tolist()):
         count = 0
         tk, sk, lk = t[:, col], s[:, col], float(length[0, col])
+        number = int(panels.panel[k])
         ends_checked = []
-        if int(panels.panel[k]) != last:
-            ends_checked.append((tk > lk) & (tk < lk + cfg.overrun_reach_m))
-        if int(panels.panel[k]) != first:
-            ends_checked.append((tk < 0) & (tk > -cfg.overrun_reach_m))
+        if number != last:
+            ends_checked.append((tk > lk) & (tk < lk + reach_past(number + 1)))
+        if number != first:
+            ends_checked.append((tk < 0) & (tk > -reach_past(number - 1)))
         for beyond in ends_checked:
             ends = band[:, col] & beyond
             past = ends & ((tk > lk + margin) | (tk < -margin))
@@ -369,6 +389,33 @@ def _overrun(
             count += n
         out[int(k)] = count
     return out
+
+
+def _runs_on(
+    points_mine: NDArray[np.float64],
+    panels: PanelSet,
+    beacon_panels: NDArray[np.intp],
+    counts: dict[tuple[str, int], int],
+    beacon: str,
+    gate_m: float,
+    noise: NoiseModel,
+    cfg: VerificationConfig,
+    to_free_ends: bool,
+) -> bool:
+    """Whether a beacon's returns run on past a node: on any panel, more returns
+    past it (:func:`_overrun`) than ``max_overrun_fraction`` of the panel's own
+    (never fewer than ``min_panel_points``)."""
+    over = _overrun(
+        points_mine, panels, beacon_panels, gate_m, noise.gate_sigma_m, cfg, to_free_ends
+    )
+    return any(
+        over[int(k)]
+        > max(
+            cfg.min_panel_points,
+            cfg.max_overrun_fraction * counts.get((beacon, int(panels.panel[k])), 0),
+        )
+        for k in beacon_panels
+    )
 
 
 def _seen_from_front(edges: NDArray[np.float64], position: NDArray[np.float64]) -> bool:
@@ -534,10 +581,12 @@ def _support(
     its returns are the beacon's and not clutter's: a corner of the scan
     identified as one of its edges lands on that edge, or two panels carry
     ``min_panel_points`` returns each, no panel's returns run on past its
-    nodes, they show a bend one straight line cannot explain (or, when another
-    beacon's identified corner lands on its edge, they lie on the panels within
-    their noise and fit them better than a line: ``placed_support``), and no corner
-    of the scan lands beside one of its node edges (:func:`_stray_corner`). When
+    nodes (nor past a short outer panel's free end, unless they lie on the
+    panels within their noise: ``wall_past_free_ends``), they show a bend one
+    straight line cannot explain (or, when another beacon's identified corner
+    lands on its edge, they lie on the panels within their noise and fit them
+    better than a line: ``placed_support``), and no corner of the scan lands
+    beside one of its node edges (:func:`_stray_corner`). When
     ``tracked`` (a prior already says which beacon is where) no node is
     identified and two panels carrying ``min_panel_points`` returns each that
     lie on them within their noise suffice, but they must still not run on
@@ -599,16 +648,10 @@ def _support(
         placed = cfg.placed_support and bool(node_ok) and in_place and chi_line > chi_beacon
         if not (bent or placed or (tracked and in_place)):
             continue
-        over = _overrun(points_mine, panels, mine, gate, noise.gate_sigma_m, cfg)
-        clean = all(
-            over[int(k)]
-            <= max(
-                cfg.min_panel_points,
-                cfg.max_overrun_fraction * counts.get((b, int(panels.panel[k])), 0),
-            )
-            for k in mine
-        )
-        if clean:
+        # Past a short outer panel's free end the wall may stand in the middle panel's
+        # line; only a beacon that lies on its panels within their noise is given that.
+        over = partial(_runs_on, points_mine, panels, mine, counts, b, gate, noise, cfg)
+        if not over(False) or (cfg.wall_past_free_ends and in_place and not over(True)):
             supported.add(b)
             if bent:
                 shaped.add(b)
