@@ -122,3 +122,28 @@ def test_many_designs_identify_as_testing_each_in_full() -> None:
             assert list(got.singles) == singles
             compared += len(nodes)
     assert compared > 20  # the scenes' own beacons and look-alike designs were identified
+
+
+def test_an_outer_panel_running_on_into_the_wall_still_identifies_its_node() -> None:
+    # Issue 31 (shared noisy scene 0026, hostile 0009): the rock past a beacon's free end
+    # e4 lies in the line of its third panel, and the segmentation cannot part them: the
+    # segment is longer than P3. The node e3 is still where the two lines meet; it is
+    # identified on the deflection and P2's length, with P3 not an identified panel.
+    from mast import Beacon, Survey
+    from mast.sim import ScannerModel
+
+    edges = np.array([[-0.8, 3.0], [-0.42, 2.7], [0.1, 3.0], [0.5, 3.0]])  # P3 on the wall
+    wb = WorldBuilder()
+    wb.polyline([[-30.0, 3.0], edges[0]], Surface("wall"))
+    wb.panels(edges, "B")
+    wb.polyline([edges[3], [30.0, 3.0]], Surface("wall"))
+    survey = Survey([Beacon("B", edges)])
+    sim = simulate_scan(wb.build(), Pose2D(0.0, 0.0, 0.0), ScannerModel("s", 270.0, 0.25))
+    seg = segment_scan(sim.scan)
+    e3 = [n for n in identify_panels(seg, survey).nodes if n.beacon == "B" and n.edge == 3]
+    assert e3
+    node = e3[0]
+    assert dict(zip(node.panels, node.identified, strict=True)) == {2: True, 3: False}
+    assert seg.segments[node.segments[node.panels.index(3)]].length > 10.0  # P3 and the wall
+    expected = Pose2D(0.0, 0.0, 0.0).mine_to_scanner(edges[2][None, :])[0]
+    assert np.hypot(*(node.node_scanner - expected)) < 1e-6

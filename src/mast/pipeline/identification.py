@@ -15,8 +15,10 @@ travel (the scan sweeps counter-clockwise, so it meets a beacon's edges as
   centroid to shift by half the unseen length at each end.
 
 The outcome is the paper's option 1-6; the deflection must always hold and
-at least one panel length must. A segment longer than its panel can be
-excluded outright (it is not that panel).
+at least one panel length must. A segment longer than a middle panel is
+excluded outright (it is not that panel); one longer than an outer panel is
+only not identified, since the wall beyond the beacon's free end may run on in
+that panel's line and the segmentation cannot part them.
 
 Single segments are also tested against every panel length (reported for
 diagnosis; a lone segment is too ambiguous to start a hypothesis).
@@ -196,10 +198,15 @@ def _test_corner(
                 continue
             # One-sided length tests from the node: never longer, shorter by at most the
             # far-end beam spacing (plus the near gap at the node).
-            if far_a > la + tol or far_b > lb + tol:
+            # A segment longer than a middle panel is not that panel. An outer panel's
+            # may run on past the beacon's free end into the wall it is mounted on
+            # (in the panel's line within the noise): not an identified panel then,
+            # but the corner stands on the deflection and the other panel's length.
+            long_a, long_b = far_a > la + tol, far_b > lb + tol
+            if (long_a and pa == 1) or (long_b and pb == 1) or (long_a and long_b):
                 continue
-            ok_a = far_a >= la - a.spacing_start - tol
-            ok_b = far_b >= lb - b.spacing_end - tol
+            ok_a = not long_a and far_a >= la - a.spacing_start - tol
+            ok_b = not long_b and far_b >= lb - b.spacing_end - tol
             c_meas = ext.c_meas
             c_design = float(tpl.centroid_distances[j])
             slack = 0.5 * (max(near_a, 0) + (la - far_a) + max(near_b, 0) + (lb - far_b))
