@@ -113,3 +113,53 @@ def test_no_beacon_confirmed_is_said_so_not_with_an_empty_name() -> None:
         "one_beacon",
         "no beacon is confirmed by the beams",
     )
+
+
+#: A visible second beacon refused because rock past the free end of its short outer
+#: panel stood in the middle panel's line (the overrun search reached past the beacon).
+WALL_PAST_A_FREE_END = [
+    "noisy/case0011",
+    "noisy/case0126",
+    "noisy/case0133",
+    "noisy/case0139",
+    "hostile/case0032",
+    "hostile/case0060",
+    "hostile/case0067",
+    "hostile/case0074",
+]
+
+#: A beacon's corner not identified: its outer panel's segment ran on into the wall.
+OUTER_PANEL_RUNS_ON = ["noisy/case0026", "hostile/case0009"]
+
+#: Called ambiguous against a pose whose beacons' returns do not lie on their panels
+#: (chi-square p of 1e-37 to 1e-7): rock beside a panel, or another design's shape,
+#: read as theirs.
+MISFIT_COMPETITOR = ["hostile/case0054", "hostile/case0057", "hostile/case0058", "hostile/case0063"]
+
+
+@pytest.mark.parametrize("name", WALL_PAST_A_FREE_END + OUTER_PANEL_RUNS_ON + MISFIT_COMPETITOR)
+def test_a_plainly_visible_second_beacon_now_fixes(name: str) -> None:
+    truth, fix, *_ = _case(name)
+    assert fix.ok, fix.detail
+    assert _right(truth, fix)
+
+
+@pytest.mark.parametrize("name", MISFIT_COMPETITOR)
+def test_a_competitor_that_misfits_its_beacons_does_not_compete(name: str) -> None:
+    """Without the fit rule the same scan is ambiguous: the competitor is real, and only
+    its misfit keeps it out."""
+    from mast.pipeline import locator
+
+    truth, fix, *_, cfg = _case(name)
+    assert fix.ok
+    others = [v for v in fix.verified if v is not fix.chosen and v.misfit]
+    assert others
+    assert fix.chosen is not None
+    assert not fix.chosen.misfit
+    for v in others:
+        assert (
+            math.hypot(v.pose.easting - truth["easting"], v.pose.northing - truth["northing"]) > 1
+        )
+    as_before = [replace(v, misfit=()) if v.misfit else v for v in fix.verified]
+    _, reason, _ = locator._choose(as_before, cfg)
+    assert reason == "ambiguous"

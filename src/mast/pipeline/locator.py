@@ -247,8 +247,17 @@ def _choose(verified: list[Verified], cfg: LocatorConfig) -> tuple[Verified | No
         names = ", ".join(best.supported) if best else ""
         if not names:
             return None, "one_beacon", "no beacon is confirmed by the beams"
+        if best is not None and len(best.supported) >= cfg.min_beacons:
+            return (
+                None,
+                "one_beacon",
+                f"beacons {names} lie where the pose puts them, but no identified corner"
+                " lands on a surveyed edge (shape does not tell which beacon is which)",
+            )
         return None, "one_beacon", f"only beacon {names} confirmed by the beams"
-    full.sort(key=lambda v: v.log_likelihood, reverse=True)
+    # A pose whose beacons lie on their surveyed panels within their noise comes before
+    # one that reads rock beside them, or another shape, as theirs.
+    full.sort(key=lambda v: (not v.misfit, v.log_likelihood), reverse=True)
     best = full[0]
     # Any other pose whose beacons prove their shape competes within the margin,
     # unless it has fewer beacons identified by their own corners than the best
@@ -278,6 +287,8 @@ def _choose(verified: list[Verified], cfg: LocatorConfig) -> tuple[Verified | No
             or other.reads_alike(best, share)
         ):
             continue  # the same reading of the scan: not a second place
+        if other.misfit and not best.misfit:
+            continue  # its beacons' returns do not lie on their panels: not a reading of them
         if (len(other.shaped) >= cfg.min_beacons and len(other.cornered) >= proven) or (
             other.cornered and doubtful
         ):

@@ -115,6 +115,14 @@ class VerificationConfig:
         its returns lie on its panels within their noise and fit its shape
         better than one straight line, though not by the margin of
         ``straight_alpha`` (a small beacon's bend inside the noise).
+    grazing_noise_floor : float
+        Whether returns lie on their panels within their noise
+        (:func:`_chi_on_panels`) weighs each offset by the range noise across
+        its panel, never less than this fraction of it: seen at grazing
+        incidence a beam's footprint and jitter put returns off a surface by
+        far more than its range noise projected on the normal (on the shared
+        independent scenes, 0.2-1.2 of the range noise where the projection
+        gives 0.15).
     same_reading_share : float
         Two verified poses that put at least this share of their returns on
         the same panels read the scan alike (:meth:`Verified.reads_alike`):
@@ -141,6 +149,7 @@ class VerificationConfig:
     duplicate_m: float = 0.05
     duplicate_rad: float = math.radians(0.5)
     placed_support: bool = True
+    grazing_noise_floor: float = 0.5
     same_reading_share: float = 0.8
 
 
@@ -292,6 +301,10 @@ class Verified:
     """Supporting beacons on whose surveyed edge an identified corner of the scan lands."""
     shaped: tuple[str, ...] = ()
     """Supporting beacons whose returns prove their shape: cornered, or bent as no line is."""
+    misfit: tuple[str, ...] = ()
+    """Supporting beacons whose returns do not lie on their surveyed panels within their
+    noise (:func:`_fits_in_place` at ``straight_alpha``): the pose reads rock beside
+    them, or another shape, as theirs."""
 
     @property
     def pose(self) -> Pose2D:
@@ -464,6 +477,30 @@ def _straight_and_fitted(
     chi_line = float(np.sum((q @ normal) ** 2 / var))
     chi_beacon = float(np.sum(to_panels_m**2 / (var + noise.survey_sigma_m**2)))
     return chi_line, chi_beacon
+
+
+def _chi_on_panels(
+    points: NDArray[np.float64],
+    to_panels_m: NDArray[np.float64],
+    normals: NDArray[np.float64],
+    origin: NDArray[np.float64],
+    noise: NoiseModel,
+    cfg: VerificationConfig,
+) -> float:
+    """Chi-square of a beacon's returns about their panels, each offset weighed by the
+    noise a return has across its own panel (``normals``, one per return): the range
+    noise on the panel's normal, never less than ``grazing_noise_floor`` of it, the
+    angle noise on its tangent, and the survey's variance. (:func:`_straight_and_fitted`
+    weighs every offset across the one line through all the returns, as the bend test
+    compares the two; for whether the returns lie on the panels, each panel's own
+    incidence is what counts.)"""
+    ray = points - origin
+    rho = np.hypot(ray[:, 0], ray[:, 1])
+    u = ray / np.where(rho > 0, rho, 1.0)[:, None]
+    cos_n = np.abs(np.einsum("ij,ij->i", u, normals))
+    across = noise.range_sigma_m * np.maximum(cos_n, cfg.grazing_noise_floor)
+    var = across**2 + (rho * noise.angle_sigma_rad) ** 2 * (1 - cos_n**2)
+    return float(np.sum(to_panels_m**2 / (var + noise.survey_sigma_m**2)))
 
 
 def _shows_a_bend(chi_line: float, chi_beacon: float, alpha: float) -> bool:
@@ -640,7 +677,15 @@ def _support(
             points_mine[on], icp.residual_m[on], icp.pose.position, noise
         )
         bent = _shows_a_bend(chi_line, chi_beacon, cfg.straight_alpha)
-        in_place = _fits_in_place(chi_beacon, n_on, cfg.straight_alpha)
+        chi_panels = _chi_on_panels(
+            points_mine[on],
+            icp.residual_m[on],
+            panels.normal[icp.panel[on]],
+            icp.pose.position,
+            noise,
+            cfg,
+        )
+        in_place = _fits_in_place(chi_panels, n_on, cfg.straight_alpha)
         # Where another beacon's identified corner already lands on its surveyed edge,
         # the pose is fixed to millimetres by it: this beacon need only lie where the
         # pose puts it, its returns on its panels within their noise and no straighter
@@ -656,6 +701,32 @@ def _support(
             if bent:
                 shaped.add(b)
     return tuple(sorted(supported)), tuple(sorted(node_ok)), tuple(sorted(shaped))
+
+
+def _misfits(
+    icp: IcpResult,
+    points_mine: NDArray[np.float64],
+    panels: PanelSet,
+    beacons: tuple[str, ...],
+    noise: NoiseModel,
+    cfg: VerificationConfig,
+) -> tuple[str, ...]:
+    """The ``beacons`` whose returns at ``icp``'s pose do not lie on their surveyed panels
+    within their noise: a chi-square beyond its ``straight_alpha`` point."""
+    out = []
+    for b in beacons:
+        on = np.isin(icp.panel, np.flatnonzero(panels.beacon == panels.number[b]))
+        chi = _chi_on_panels(
+            points_mine[on],
+            icp.residual_m[on],
+            panels.normal[icp.panel[on]],
+            icp.pose.position,
+            noise,
+            cfg,
+        )
+        if not _fits_in_place(chi, int(on.sum()), cfg.straight_alpha):
+            out.append(b)
+    return tuple(out)
 
 
 @dataclass(eq=False, slots=True)
@@ -744,10 +815,11 @@ def verify(
         if r.verified is None:
             h0, icp = r.hypothesis, r.icp
             checks = check_beams(scan, icp.pose, panels, noise, cfg, subset=r.near)
+            points_mine = icp.pose.scanner_to_mine(pts)
             supported, cornered, shaped = _support(
                 icp,
                 r.counts,
-                icp.pose.scanner_to_mine(pts),
+                points_mine,
                 panels,
                 index,
                 ident,
@@ -757,7 +829,8 @@ def verify(
                 cfg,
                 tracked=h0.kind == "prior",
             )
-            r.verified = Verified(h0, icp, r.counts, supported, checks, cornered, shaped)
+            misfit = _misfits(icp, points_mine, panels, supported, noise, cfg)
+            r.verified = Verified(h0, icp, r.counts, supported, checks, cornered, shaped, misfit)
         return r.verified
 
     def keep(seq: int, h: Hypothesis, refined: _Refined, again: bool) -> None:
