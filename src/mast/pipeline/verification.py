@@ -88,13 +88,14 @@ class VerificationConfig:
         than this many standard deviations of the slope are another surface
         crossing the line, not the line running on.
     wall_past_free_ends : bool
-        A beacon whose returns lie on its panels within their noise may have
-        returns in a middle panel's line past the free end of a short outer
-        panel: that is the wall the beacon is mounted on (rough rock standing
-        in the middle panel's line). The overrun search then stops at the
-        beacon's free end, where it otherwise reaches ``overrun_reach_m`` past
-        the node. A look-alike read as the beacon misfits its shape and keeps
-        the full search.
+        A beacon (without a node of its own, its returns on its panels within
+        their noise) may have returns in a middle panel's line past the free
+        end of a short outer panel: that is the wall the beacon is mounted on
+        (rough rock standing in the middle panel's line). The overrun search
+        stops at the beacon's free end when the full reach of
+        ``overrun_reach_m`` past the node finds the panel running on. (A
+        look-alike read as the beacon misfits its shape and is refused for
+        that.)
     through_probability : float
         Probability of a return beyond a surveyed panel at the true pose
         (edges, mixed pixels): what each through-beam costs in the likelihood.
@@ -117,7 +118,7 @@ class VerificationConfig:
         ``straight_alpha`` (a small beacon's bend inside the noise).
     grazing_noise_floor : float
         Whether returns lie on their panels within their noise
-        (:func:`_chi_on_panels`) weighs each offset by the range noise across
+        (:func:`_in_place`) weighs each offset by the range noise across
         its panel, never less than this fraction of it: seen at grazing
         incidence a beam's footprint and jitter put returns off a surface by
         far more than its range noise projected on the normal (on the shared
@@ -302,9 +303,10 @@ class Verified:
     shaped: tuple[str, ...] = ()
     """Supporting beacons whose returns prove their shape: cornered, or bent as no line is."""
     misfit: tuple[str, ...] = ()
-    """Supporting beacons whose returns do not lie on their surveyed panels within their
-    noise (:func:`_fits_in_place` at ``straight_alpha``): the pose reads rock beside
-    them, or another shape, as theirs."""
+    """Beacons whose returns at this pose do not lie on their surveyed panels within
+    their noise (:func:`_in_place`): the pose reads rock
+    beside them, or another shape, as theirs. A cornered beacon still supports the
+    pose; one without a node of its own does not."""
 
     @property
     def pose(self) -> Pose2D:
@@ -479,28 +481,44 @@ def _straight_and_fitted(
     return chi_line, chi_beacon
 
 
-def _chi_on_panels(
-    points: NDArray[np.float64],
-    to_panels_m: NDArray[np.float64],
-    normals: NDArray[np.float64],
-    origin: NDArray[np.float64],
+def _in_place(
+    icp: IcpResult,
+    points_mine: NDArray[np.float64],
+    panels: PanelSet,
+    beacon: str,
     noise: NoiseModel,
     cfg: VerificationConfig,
-) -> float:
-    """Chi-square of a beacon's returns about their panels, each offset weighed by the
-    noise a return has across its own panel (``normals``, one per return): the range
+) -> bool:
+    """Whether a beacon's returns at ``icp``'s pose lie on its surveyed panels within
+    their noise: their chi-square within its ``straight_alpha`` point.
+
+    Each offset is weighed by the noise a return has across its own panel: the range
     noise on the panel's normal, never less than ``grazing_noise_floor`` of it, the
     angle noise on its tangent, and the survey's variance. (:func:`_straight_and_fitted`
     weighs every offset across the one line through all the returns, as the bend test
-    compares the two; for whether the returns lie on the panels, each panel's own
-    incidence is what counts.)"""
-    ray = points - origin
+    compares the two; whether the returns lie on the panels turns on each panel's own
+    incidence.) Returns within ``edge_margin_m`` of the beacon's free ends are left
+    out: there a beam may as well meet the rock the beacon is mounted on.
+    """
+    mine = np.flatnonzero(panels.beacon == panels.number[beacon])
+    numbers = panels.panel[mine]
+    on = np.flatnonzero(np.isin(icp.panel, mine))
+    k = icp.panel[on]
+    p = points_mine[on]
+    t = np.einsum("ij,ij->i", p - panels.a[k], panels.direction[k])
+    first, last = int(numbers.min()), int(numbers.max())
+    free = ((panels.panel[k] == first) & (t < cfg.edge_margin_m)) | (
+        (panels.panel[k] == last) & (t > panels.length[k] - cfg.edge_margin_m)
+    )
+    on, k, p = on[~free], k[~free], p[~free]
+    ray = p - icp.pose.position
     rho = np.hypot(ray[:, 0], ray[:, 1])
     u = ray / np.where(rho > 0, rho, 1.0)[:, None]
-    cos_n = np.abs(np.einsum("ij,ij->i", u, normals))
+    cos_n = np.abs(np.einsum("ij,ij->i", u, panels.normal[k]))
     across = noise.range_sigma_m * np.maximum(cos_n, cfg.grazing_noise_floor)
     var = across**2 + (rho * noise.angle_sigma_rad) ** 2 * (1 - cos_n**2)
-    return float(np.sum(to_panels_m**2 / (var + noise.survey_sigma_m**2)))
+    chi = float(np.sum(icp.residual_m[on] ** 2 / (var + noise.survey_sigma_m**2)))
+    return on.size > 0 and chi2_sf(chi, int(on.size)) > cfg.straight_alpha
 
 
 def _shows_a_bend(chi_line: float, chi_beacon: float, alpha: float) -> bool:
@@ -514,11 +532,6 @@ def _shows_a_bend(chi_line: float, chi_beacon: float, alpha: float) -> bool:
     noise inflate both sums alike, so rough rock does not pass for a bend.
     """
     return chi_line - chi_beacon > chi2_isf(alpha, 2)
-
-
-def _fits_in_place(chi_beacon: float, n: int, alpha: float) -> bool:
-    """Whether a beacon's returns lie on its surveyed panels at the pose, within their noise."""
-    return n > 0 and chi2_sf(chi_beacon, n) > alpha
 
 
 def _stray_corner(
@@ -609,21 +622,22 @@ def _support(
     noise: NoiseModel,
     cfg: VerificationConfig,
     tracked: bool = False,
-) -> tuple[tuple[str, ...], tuple[str, ...], tuple[str, ...]]:
-    """Beacons that confirm a pose, the cornered and the shaped beacons.
+) -> tuple[tuple[str, ...], tuple[str, ...], tuple[str, ...], tuple[str, ...]]:
+    """Beacons that confirm a pose, the cornered and the shaped beacons, and the beacons
+    refused only because their returns do not lie on their panels within their noise.
 
     A beacon confirms the pose when, at that pose, (1) two of its panels
     have returns, ``2 * min_panel_points`` in all, (2) at least
     ``min_coverage`` of the unoccluded beams that should hit it do, and (3)
     its returns are the beacon's and not clutter's: a corner of the scan
     identified as one of its edges lands on that edge, or two panels carry
-    ``min_panel_points`` returns each, no panel's returns run on past its
-    nodes (nor past a short outer panel's free end, unless they lie on the
-    panels within their noise: ``wall_past_free_ends``), they show a bend one
-    straight line cannot explain (or, when another beacon's identified corner
-    lands on its edge, they lie on the panels within their noise and fit them
-    better than a line: ``placed_support``), and no corner of the scan lands
-    beside one of its node edges (:func:`_stray_corner`). When
+    ``min_panel_points`` returns each that lie on its panels within their noise
+    (:func:`_in_place`), no panel's returns run on past its nodes (nor past
+    a short outer panel's free end when ``wall_past_free_ends`` is off), they
+    show a bend one straight line cannot explain (or, when another beacon's
+    identified corner lands on its edge, fit the panels better than a line:
+    ``placed_support``), and no corner of the scan lands beside one of its node
+    edges (:func:`_stray_corner`). When
     ``tracked`` (a prior already says which beacon is where) no node is
     identified and two panels carrying ``min_panel_points`` returns each that
     lie on them within their noise suffice, but they must still not run on
@@ -657,6 +671,7 @@ def _support(
                 node_ok.add(b)
     supported = set(node_ok)
     shaped = set(node_ok)
+    misfit: set[str] = set()
     # Without a node of its own, each of two panels must show its returns, a prior or
     # not: one panel with a stray return or two on its neighbour is one panel (rock
     # beside it reads as the neighbour), and one panel cannot place a beacon.
@@ -677,30 +692,33 @@ def _support(
             points_mine[on], icp.residual_m[on], icp.pose.position, noise
         )
         bent = _shows_a_bend(chi_line, chi_beacon, cfg.straight_alpha)
-        chi_panels = _chi_on_panels(
-            points_mine[on],
-            icp.residual_m[on],
-            panels.normal[icp.panel[on]],
-            icp.pose.position,
-            noise,
-            cfg,
-        )
-        in_place = _fits_in_place(chi_panels, n_on, cfg.straight_alpha)
+        in_place = _in_place(icp, points_mine, panels, b, noise, cfg)
         # Where another beacon's identified corner already lands on its surveyed edge,
         # the pose is fixed to millimetres by it: this beacon need only lie where the
         # pose puts it, its returns on its panels within their noise and no straighter
         # than its shape (a small beacon's bend can be inside the noise).
         placed = cfg.placed_support and bool(node_ok) and in_place and chi_line > chi_beacon
-        if not (bent or placed or (tracked and in_place)):
+        if not (bent or placed or tracked):
+            continue
+        # Without a node of its own, a beacon's returns must lie on its panels within
+        # their noise: bent or not, rock beside a panel read as its neighbour does not
+        # (a tracked pose 5 cm off on a long drive, issue 31).
+        if not in_place:
+            misfit.add(b)
             continue
         # Past a short outer panel's free end the wall may stand in the middle panel's
-        # line; only a beacon that lies on its panels within their noise is given that.
+        # line (the beacon lies on its panels within their noise: checked above).
         over = partial(_runs_on, points_mine, panels, mine, counts, b, gate, noise, cfg)
-        if not over(False) or (cfg.wall_past_free_ends and in_place and not over(True)):
+        if not over(False) or (cfg.wall_past_free_ends and not over(True)):
             supported.add(b)
             if bent:
                 shaped.add(b)
-    return tuple(sorted(supported)), tuple(sorted(node_ok)), tuple(sorted(shaped))
+    return (
+        tuple(sorted(supported)),
+        tuple(sorted(node_ok)),
+        tuple(sorted(shaped)),
+        tuple(sorted(misfit)),
+    )
 
 
 def _misfits(
@@ -713,20 +731,7 @@ def _misfits(
 ) -> tuple[str, ...]:
     """The ``beacons`` whose returns at ``icp``'s pose do not lie on their surveyed panels
     within their noise: a chi-square beyond its ``straight_alpha`` point."""
-    out = []
-    for b in beacons:
-        on = np.isin(icp.panel, np.flatnonzero(panels.beacon == panels.number[b]))
-        chi = _chi_on_panels(
-            points_mine[on],
-            icp.residual_m[on],
-            panels.normal[icp.panel[on]],
-            icp.pose.position,
-            noise,
-            cfg,
-        )
-        if not _fits_in_place(chi, int(on.sum()), cfg.straight_alpha):
-            out.append(b)
-    return tuple(out)
+    return tuple(b for b in beacons if not _in_place(icp, points_mine, panels, b, noise, cfg))
 
 
 @dataclass(eq=False, slots=True)
@@ -816,7 +821,7 @@ def verify(
             h0, icp = r.hypothesis, r.icp
             checks = check_beams(scan, icp.pose, panels, noise, cfg, subset=r.near)
             points_mine = icp.pose.scanner_to_mine(pts)
-            supported, cornered, shaped = _support(
+            supported, cornered, shaped, refused = _support(
                 icp,
                 r.counts,
                 points_mine,
@@ -829,7 +834,9 @@ def verify(
                 cfg,
                 tracked=h0.kind == "prior",
             )
-            misfit = _misfits(icp, points_mine, panels, supported, noise, cfg)
+            misfit = tuple(
+                sorted({*_misfits(icp, points_mine, panels, cornered, noise, cfg), *refused})
+            )
             r.verified = Verified(h0, icp, r.counts, supported, checks, cornered, shaped, misfit)
         return r.verified
 
