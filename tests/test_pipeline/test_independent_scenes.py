@@ -123,7 +123,6 @@ WALL_PAST_A_FREE_END = [
     "noisy/case0133",
     "noisy/case0139",
     "hostile/case0032",
-    "hostile/case0060",
     "hostile/case0067",
     "hostile/case0074",
 ]
@@ -146,18 +145,25 @@ def test_a_plainly_visible_second_beacon_now_fixes(name: str) -> None:
 
 @pytest.mark.parametrize("name", MISFIT_COMPETITOR)
 def test_a_competitor_that_misfits_its_beacons_does_not_compete(name: str) -> None:
-    """The competitor is real (more than a metre away, within the ambiguity margin of the
-    fix's likelihood or above it): only its misfit keeps it out."""
-    truth, fix, *_, cfg = _case(name)
+    """The competitor (more than a metre away) reads rock or another shape as its
+    beacons: it is either refused outright (a misfitting beacon supports nothing) or
+    kept with its misfit, and then does not make the fitting fix ambiguous."""
+    truth, fix, *_ = _case(name)
     assert fix.ok
     assert fix.chosen is not None
     assert not fix.chosen.misfit
-    margin = cfg.ambiguity_log_ratio * cfg.likelihood_tempering
-    rivals = [
-        v
-        for v in fix.verified
-        if v.misfit
-        and math.hypot(v.pose.easting - truth["easting"], v.pose.northing - truth["northing"]) > 1
-        and v.log_likelihood >= fix.chosen.log_likelihood - margin
-    ]
-    assert rivals
+    for v in fix.verified:
+        far = math.hypot(v.pose.easting - truth["easting"], v.pose.northing - truth["northing"])
+        if far > 1 and len(v.supported) >= 2:
+            assert v.misfit
+
+
+@pytest.mark.parametrize("name", ["noisy/case0101", "hostile/case0060"])
+def test_a_pose_whose_cornered_beacon_misfits_is_not_a_fix(name: str) -> None:
+    """A beacon identified by its corner whose returns do not lie on its panels (rock
+    read as a panel it does not show) supports no pose: 0101 was fixed 0.17 degrees,
+    5.4 of its sigmas, off in azimuth; a look-alike 204 m away on a long drive rested on
+    such a corner. 0060 (hostile) is the price: within 2.7 CRB."""
+    _, fix, *_ = _case(name)
+    assert not fix.ok
+    assert fix.reason in ("inconsistent", "one_beacon")

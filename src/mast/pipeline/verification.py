@@ -304,9 +304,8 @@ class Verified:
     """Supporting beacons whose returns prove their shape: cornered, or bent as no line is."""
     misfit: tuple[str, ...] = ()
     """Beacons whose returns at this pose do not lie on their surveyed panels within
-    their noise (:func:`_in_place`): the pose reads rock
-    beside them, or another shape, as theirs. A cornered beacon still supports the
-    pose; one without a node of its own does not."""
+    their noise (:func:`_in_place`): the pose reads rock beside them, or another
+    shape, as theirs. They do not support the pose, identified corner or not."""
 
     @property
     def pose(self) -> Pose2D:
@@ -669,9 +668,13 @@ def _support(
                 node_sigma(node, seg), noise.survey_sigma_m, noise.range_sigma_m
             ):
                 node_ok.add(b)
+    # Identified by its corner or not, a beacon whose returns do not lie on its panels
+    # within their noise is not read right at this pose (a look-alike 204 m away on a
+    # long drive rested on such a corner).
+    misfit = {b for b in node_ok if not _in_place(icp, points_mine, panels, b, noise, cfg)}
+    node_ok -= misfit
     supported = set(node_ok)
     shaped = set(node_ok)
-    misfit: set[str] = set()
     # Without a node of its own, each of two panels must show its returns, a prior or
     # not: one panel with a stray return or two on its neighbour is one panel (rock
     # beside it reads as the neighbour), and one panel cannot place a beacon.
@@ -719,19 +722,6 @@ def _support(
         tuple(sorted(shaped)),
         tuple(sorted(misfit)),
     )
-
-
-def _misfits(
-    icp: IcpResult,
-    points_mine: NDArray[np.float64],
-    panels: PanelSet,
-    beacons: tuple[str, ...],
-    noise: NoiseModel,
-    cfg: VerificationConfig,
-) -> tuple[str, ...]:
-    """The ``beacons`` whose returns at ``icp``'s pose do not lie on their surveyed panels
-    within their noise: a chi-square beyond its ``straight_alpha`` point."""
-    return tuple(b for b in beacons if not _in_place(icp, points_mine, panels, b, noise, cfg))
 
 
 @dataclass(eq=False, slots=True)
@@ -834,10 +824,7 @@ def verify(
                 cfg,
                 tracked=h0.kind == "prior",
             )
-            misfit = tuple(
-                sorted({*_misfits(icp, points_mine, panels, cornered, noise, cfg), *refused})
-            )
-            r.verified = Verified(h0, icp, r.counts, supported, checks, cornered, shaped, misfit)
+            r.verified = Verified(h0, icp, r.counts, supported, checks, cornered, shaped, refused)
         return r.verified
 
     def keep(seq: int, h: Hypothesis, refined: _Refined, again: bool) -> None:
