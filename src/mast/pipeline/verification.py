@@ -450,6 +450,18 @@ def _seen_from_front(edges: NDArray[np.float64], position: NDArray[np.float64]) 
     return bool(out * side > 0)
 
 
+def _incidence(
+    points: NDArray[np.float64], origin: NDArray[np.float64], normals: NDArray[np.float64]
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Each return's range from ``origin`` and the cosine between its beam and the
+    surface normal (``normals``: one per return, or one row for all): what turns the
+    range and angle noise into the noise across that surface."""
+    ray = points - origin
+    rho = np.hypot(ray[:, 0], ray[:, 1])
+    u = ray / np.where(rho > 0, rho, 1.0)[:, None]
+    return rho, np.einsum("ij,ij->i", u, np.broadcast_to(normals, u.shape))
+
+
 def _straight_and_fitted(
     points: NDArray[np.float64],
     to_panels_m: NDArray[np.float64],
@@ -469,10 +481,7 @@ def _straight_and_fitted(
     q = points - centre
     _, vecs = np.linalg.eigh(q.T @ q)
     normal = vecs[:, 0]
-    ray = points - origin
-    rho = np.hypot(ray[:, 0], ray[:, 1])
-    u = ray / np.where(rho > 0, rho, 1.0)[:, None]
-    cos_n = u @ normal
+    rho, cos_n = _incidence(points, origin, normal[None, :])
     var = (noise.range_sigma_m * cos_n) ** 2 + (rho * noise.angle_sigma_rad) ** 2 * (1 - cos_n**2)
     var = np.maximum(var, (0.1 * noise.range_sigma_m) ** 2)
     chi_line = float(np.sum((q @ normal) ** 2 / var))
@@ -510,10 +519,8 @@ def _in_place(
         (panels.panel[k] == last) & (t > panels.length[k] - cfg.edge_margin_m)
     )
     on, k, p = on[~free], k[~free], p[~free]
-    ray = p - icp.pose.position
-    rho = np.hypot(ray[:, 0], ray[:, 1])
-    u = ray / np.where(rho > 0, rho, 1.0)[:, None]
-    cos_n = np.abs(np.einsum("ij,ij->i", u, panels.normal[k]))
+    rho, cos_n = _incidence(p, icp.pose.position, panels.normal[k])
+    cos_n = np.abs(cos_n)
     across = noise.range_sigma_m * np.maximum(cos_n, cfg.grazing_noise_floor)
     var = across**2 + (rho * noise.angle_sigma_rad) ** 2 * (1 - cos_n**2)
     chi = float(np.sum(icp.residual_m[on] ** 2 / (var + noise.survey_sigma_m**2)))
