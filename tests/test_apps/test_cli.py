@@ -325,3 +325,20 @@ def test_the_command_starts_without_the_heavy_libraries() -> None:
         [sys.executable, "-c", code], capture_output=True, text=True, timeout=60, check=True
     )
     assert done.stdout.strip() == "[]"
+
+
+def test_bench_field_small_run_writes_csv(tmp_path: Path) -> None:
+    import csv
+
+    r = runner.invoke(
+        app, ["bench", "field", "--scenes", "2", "--poses", "2", "--out", str(tmp_path)]
+    )
+    assert r.exit_code == 0, r.output
+    assert "RMS/CRB" in r.output
+    assert "95 % coverage" in r.output
+    for family in ("noisy", "hostile"):
+        with (tmp_path / f"field_{family}.csv").open() as fh:
+            rows = list(csv.DictReader(fh))
+        assert len(rows) == 4
+        assert {x["status"] for x in rows} <= {"fix", "no_fix"}
+        assert all(x["wrong"] == "0" for x in rows)

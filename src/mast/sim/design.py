@@ -44,6 +44,8 @@ class BeaconDesign:
     name : str
     edges_local : ndarray, shape (4, 2)
         ``e1..e4``; ``e1`` at the origin, ``e4`` on the x axis at ``x = chord``.
+        Shapes that are no beacon (look-alikes) may have more or fewer vertices;
+        their chord runs from the first to the last.
     """
 
     name: str
@@ -51,7 +53,7 @@ class BeaconDesign:
 
     @property
     def chord_m(self) -> float:
-        return float(np.hypot(*(self.edges_local[3] - self.edges_local[0])))
+        return float(np.hypot(*(self.edges_local[-1] - self.edges_local[0])))
 
     @property
     def depth_m(self) -> float:

@@ -1,10 +1,13 @@
 """Hostile scenes: rough rock, people, equipment, look-alike shapes, occlusion,
-dropouts, mixed pixels and range bias (``hard``); and a long drift with dozens of
-beacons of a few identical designs (``drift``)."""
+dropouts, mixed pixels and range bias (``hard``); a long drift with dozens of
+beacons of a few identical designs (``drift``); and scenes drawn as widely as the field
+(``field``): beacons of any identifiable shape and size bolted askew onto rough rock, five
+scanner models from 8 to 20 mm, and in their hostile half clutter that looks like panels."""
 
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -17,7 +20,7 @@ from mast.sim.scenarios import Scene, Shot
 from mast.sim.tunnel import Roughness, Tunnel, project_station, roughen
 from mast.sim.world import Surface, WorldBuilder
 
-__all__ = ["drift_scene", "hard_scene"]
+__all__ = ["FIELD_SCANNERS", "drift_scene", "field_scene", "hard_scene"]
 
 
 def _direction(azimuth_rad: float) -> NDArray[np.float64]:
@@ -36,12 +39,22 @@ def _centreline(
 
 
 def _wall_mount(
-    tunnel: Tunnel, station: float, side: str
+    tunnel: Tunnel, station: float, side: str, tilt_rad: float = 0.0, chord_m: float = 0.0
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], int]:
+    """Where a design's chord centre goes, the chord's direction and the tunnel's side.
+
+    A beacon bolted askew (``tilt_rad`` off the wall's line) stands out from the
+    wall so that its nearer base end touches the wall's line: one end on the
+    rock, the other clear of it (divergent or convergent to the wall).
+    """
     centre, tangent = tunnel.centre_point(station)
     normal = np.array([-tangent[1], tangent[0]])
-    on_wall = centre + (tunnel.width_m / 2) * normal * (1 if side == "left" else -1)
-    return on_wall, tangent, (-1 if side == "left" else 1)
+    inward = -normal if side == "left" else normal
+    on_wall = centre - (tunnel.width_m / 2) * inward
+    on_wall = on_wall + (chord_m / 2) * abs(math.sin(tilt_rad)) * inward
+    c, s = math.cos(tilt_rad), math.sin(tilt_rad)
+    chord_dir = np.array([c * tangent[0] - s * tangent[1], s * tangent[0] + c * tangent[1]])
+    return on_wall, chord_dir, (-1 if side == "left" else 1)
 
 
 def _build(
@@ -49,14 +62,17 @@ def _build(
     tunnel: Tunnel,
     placements: list[tuple[str, float, str, BeaconDesign, str]],
     roughness: Roughness | None,
+    tilts_rad: dict[str, float] | None = None,
 ) -> tuple[WorldBuilder, list[Beacon]]:
-    """Mount beacons and look-alikes ``(id, station, side, design, kind)``, then the walls."""
+    """Mount beacons and look-alikes ``(id, station, side, design, kind)``, each
+    ``tilts_rad[id]`` off its wall's line (0 when not given), then the walls."""
     left, right = tunnel.walls()
     wb = WorldBuilder()
     smooth: dict[str, list[tuple[float, float]]] = {"left": [], "right": []}
     beacons = []
     for bid, st, side, design, kind in placements:
-        on_wall, tangent, tside = _wall_mount(tunnel, st, side)
+        tilt = (tilts_rad or {}).get(bid, 0.0)
+        on_wall, tangent, tside = _wall_mount(tunnel, st, side, tilt, design.chord_m)
         edges = design.mounted(on_wall, tangent, tunnel_side=tside)
         if len(edges) == 4:
             wb.panels(edges, bid, kind=kind)
@@ -233,4 +249,128 @@ def drift_scene(seed: int, index: int = 0, *, poses: int = 10, length_m: float =
         ),
         seed=seed * 1000 + index + 900_000,
         params={"width_m": width, "beacons": len(beacons)},
+    )
+
+
+#: The field's scanners: the five classes the independent scenes are drawn with
+#: (SICK LMS111 and LMS151, LMS511, Hokuyo UTM-30LX, a 360-degree spinning scanner).
+FIELD_SCANNERS: tuple[ScannerModel, ...] = (
+    ScannerModel("lms111-0.5", 270.0, 0.5, range_max_m=20.0, range_sigma_m=0.012),
+    ScannerModel("lms151-0.25", 270.0, 0.25, range_max_m=50.0, range_sigma_m=0.012),
+    ScannerModel("lms511-0.1667", 190.0, 1.0 / 6.0, range_max_m=80.0, range_sigma_m=0.008),
+    ScannerModel("utm30-0.25", 270.0, 0.25, range_max_m=30.0, range_sigma_m=0.015),
+    ScannerModel("spin360-0.2", 360.0, 0.2, range_max_m=100.0, range_sigma_m=0.020),
+)
+
+
+def _field_design(rng: np.random.Generator) -> BeaconDesign:
+    """Half the paper's 2:3:1 hat, half a random identifiable hat; chords 0.45-2.0 m."""
+    if rng.random() < 0.5:
+        chord = float(rng.uniform(0.45, 2.0))
+        return paper_design(chord, chord * float(rng.uniform(0.12, 0.2)))
+    return random_design(rng, chord_range_m=(0.45, 2.0))
+
+
+def _panel_lookalike(rng: np.random.Generator) -> BeaconDesign:
+    """Clutter that looks like panels: a bracket, a board on stand-offs, a folded plate."""
+    a, b = rng.uniform(0.15, 0.9, 2)
+    turn = float(rng.uniform(math.radians(20), math.radians(110)))
+    if rng.random() < 0.5:  # an L or V: two faces meeting in a corner
+        pts = [np.zeros(2), np.array([a, 0.0]), np.array([a, 0.0]) + b * _direction(turn)]
+    else:  # a board standing off the wall: three faces, square-ish ends
+        d = float(rng.uniform(0.05, 0.25))
+        pts = [np.zeros(2), np.array([0.0, d]), np.array([a + b, d]), np.array([a + b, 0.0])]
+    e = np.array(pts, dtype=float)
+    e[:, 1] -= e[:, 1].min()
+    return BeaconDesign("panel-lookalike", e)
+
+
+def field_scene(seed: int, index: int = 0, *, hostile: bool = False, poses: int = 4) -> Scene:
+    """A drift drawn as widely as the field: 4-10 m wide with gentle bends, rough rock
+    (±2-8 cm at 0.2-1 m) right up to the beacons, two beacons 4-10 m apart of any
+    identifiable shape and size (half the paper's hat, chords 0.45-2 m) bolted up to
+    10 degrees off the wall's line, and shots between them by one of the five
+    :data:`FIELD_SCANNERS`. ``hostile`` adds equipment, people, look-alikes of the
+    surveyed designs and clutter shaped like panels near the beacons, mixed pixels at
+    every range jump and dropouts."""
+    rng = np.random.default_rng([seed, index, 31 if hostile else 30])
+    width = float(rng.uniform(4.0, 10.0))
+    tunnel = Tunnel(_centreline(rng, [22.0, 22.0, 22.0], 12.0), width)
+    s1 = float(rng.uniform(24.0, 30.0))
+    s2 = s1 + float(rng.uniform(4.0, 10.0))
+    side1 = "left" if rng.random() < 0.5 else "right"
+    side2 = ("right" if side1 == "left" else "left") if rng.random() < 0.6 else side1
+    designs = [_field_design(rng), _field_design(rng)]
+    placements: list[tuple[str, float, str, BeaconDesign, str]] = [
+        ("B1", s1, side1, designs[0], "beacon"),
+        ("B2", s2, side2, designs[1], "beacon"),
+    ]
+    tilts = {bid: math.radians(float(rng.uniform(-10.0, 10.0))) for bid in ("B1", "B2")}
+    if hostile:
+        for k in range(int(rng.integers(1, 4))):
+            st = float(rng.uniform(s1 - 8.0, s2 + 8.0))
+            if all(abs(st - p[1]) > 2.2 for p in placements):
+                r = rng.random()
+                fake = (
+                    designs[int(rng.integers(2))]
+                    if r < 0.3
+                    else _panel_lookalike(rng)
+                    if r < 0.8
+                    else _zigzag(rng)
+                )
+                side = "left" if rng.random() < 0.5 else "right"
+                placements.append((f"fake{k}", st, side, fake, "lookalike"))
+                tilts[f"fake{k}"] = math.radians(float(rng.uniform(-15.0, 15.0)))
+    rough = Roughness(
+        amplitude_m=float(rng.uniform(0.02, 0.08)),
+        wavelength_min_m=0.2,
+        wavelength_max_m=1.0,
+        beacon_margin_m=0.03,
+    )
+    wb, beacons = _build(rng, tunnel, placements, rough, tilts)
+    if hostile:
+        for _ in range(int(rng.integers(1, 5))):
+            centre, tangent = tunnel.centre_point(float(rng.uniform(s1 - 6.0, s2 + 6.0)))
+            normal = np.array([-tangent[1], tangent[0]])
+            p = centre + float(rng.uniform(-(width / 2 - 0.5), width / 2 - 0.5)) * normal
+            wb.box(
+                p,
+                (float(rng.uniform(0.3, 2.5)), float(rng.uniform(0.2, 1.2))),
+                float(rng.uniform(0, math.pi)),
+                Surface("clutter"),
+            )
+        for _ in range(int(rng.integers(0, 4))):
+            centre, tangent = tunnel.centre_point(float(rng.uniform(s1 - 4.0, s2 + 4.0)))
+            normal = np.array([-tangent[1], tangent[0]])
+            p = centre + float(rng.uniform(-(width / 2 - 0.4), width / 2 - 0.4)) * normal
+            wb.circle(p, float(rng.uniform(0.15, 0.3)), Surface("person"))
+    models = [
+        replace(
+            m,
+            dropout_prob=0.02,
+            mixed_pixel_prob=0.5,
+            beam_divergence_rad=math.radians(float(rng.uniform(0.2, 0.6))),
+        )
+        if hostile
+        else m
+        for m in FIELD_SCANNERS
+    ]
+    shots = _poses(rng, tunnel, s1 - 1.0, s2 + 1.0, poses, models)
+    family = "hostile" if hostile else "noisy"
+    return Scene(
+        f"field-{family}-{seed}-{index}",
+        wb.build(),
+        Survey(beacons),
+        shots,
+        description=(
+            f"{family} field drift {width:.1f} m, beacons {designs[0].chord_m:.2f} m and "
+            f"{designs[1].chord_m:.2f} m askew {math.degrees(tilts['B1']):+.0f}° and "
+            f"{math.degrees(tilts['B2']):+.0f}°, rock ±{rough.amplitude_m:.2f} m"
+        ),
+        seed=seed * 1000 + index + (700_000 if hostile else 600_000),
+        params={
+            "width_m": width,
+            "family": family,
+            "tilts_deg": {b: math.degrees(tilts[b]) for b in ("B1", "B2")},
+        },
     )

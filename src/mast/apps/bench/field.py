@@ -1,0 +1,199 @@
+"""Field benchmark: scenes drawn as widely as the field, scored as the independent scenes are.
+
+The project's own benchmarks were easier than the field: tuned to them the locator
+fixed 96 % of owed scans where independently drawn scenes gave 81-86 %. These scenes
+(:func:`mast.sim.hard.field_scene`) draw what those had and ours did not: beacons of
+any identifiable shape from 0.45 to 2 m, bolted up to 10 degrees askew onto rough rock,
+drifts 4-10 m wide, five scanner models from 8 to 20 mm, and in the hostile family
+clutter shaped like panels, look-alikes, mixed pixels at every range jump.
+
+Scored as the independent scenes are: a scan is **owed** a fix when two beacons each
+show two panels with at least 4 returns (at any incidence), and a fix is **wrong** when
+it is more than 5 cm or 0.25 degrees off and outside five of its own sigmas. Each scan
+is located with its scanner's own range sigma and an exact survey. Fixes are scored
+against the Cramer-Rao bound of their scan's true beacon returns (RMS/CRB and 95 %
+coverage per coordinate).
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+import time
+from collections import Counter
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from scipy import stats
+
+from mast.apps.bench.robustness import is_wrong
+from mast.io.atomic import atomic_open
+from mast.pipeline.bounds import truth_bound
+from mast.pipeline.locator import LocatorConfig, locate
+from mast.sim import simulate_scan
+from mast.sim.hard import field_scene
+from mast.sim.scanner import SimulatedScan
+
+__all__ = ["FIELD_OWED_MIN_POINTS", "FieldSummary", "owed_field", "run_field"]
+
+#: Returns a panel must show for the scan to owe a fix (the independent scenes' rule).
+FIELD_OWED_MIN_POINTS = 4
+
+_Z95 = float(stats.norm.ppf(0.975))
+
+
+def owed_field(sim: SimulatedScan) -> bool:
+    """Two beacons each show two panels with at least 4 returns, at any incidence."""
+    return sim.owes_fix(min_points=FIELD_OWED_MIN_POINTS, min_incidence_deg=0.0)
+
+
+@dataclass
+class FieldSummary:
+    family: str
+    scans: int = 0
+    owed: int = 0
+    owed_fixed: int = 0
+    fixes: int = 0
+    wrong: int = 0
+    reasons: Counter[str] = field(default_factory=Counter)
+    by_scanner: dict[str, list[int]] = field(default_factory=dict)
+    normalised: list[tuple[float, float, float]] = field(default_factory=list)
+    covered: list[tuple[bool, bool, bool]] = field(default_factory=list)
+    seconds: float = 0.0
+
+    @property
+    def fix_rate_owed(self) -> float:
+        return self.owed_fixed / self.owed if self.owed else math.nan
+
+    def ratios(self) -> tuple[float, float, float]:
+        """RMS error over the bound, E, N and azimuth, over every fix."""
+        if not self.normalised:
+            return (math.nan, math.nan, math.nan)
+        z = np.asarray(self.normalised)
+        r = np.sqrt(np.mean(z**2, axis=0))
+        return (float(r[0]), float(r[1]), float(r[2]))
+
+    def coverage(self) -> tuple[float, float, float]:
+        """Share of fixes whose 95 % interval holds the truth, E, N and azimuth."""
+        if not self.covered:
+            return (math.nan, math.nan, math.nan)
+        c = np.mean(np.asarray(self.covered, dtype=float), axis=0)
+        return (float(c[0]), float(c[1]), float(c[2]))
+
+    def lines(self) -> list[str]:
+        reasons = ", ".join(f"{k} {v}" for k, v in self.reasons.most_common())
+        re, rn, ra = self.ratios()
+        ce, cn, ca = self.coverage()
+        out = [
+            f"{self.family:<8} scans {self.scans:5d}  owed {self.owed:5d}  fixed where owed "
+            f"{self.owed_fixed:5d} ({100 * self.fix_rate_owed:5.1f} %)  fixes {self.fixes:5d}  "
+            f"WRONG {self.wrong}  ({self.seconds:.0f} s)",
+            f"{'':<8} RMS/CRB E {re:.3f} N {rn:.3f} A {ra:.3f}  "
+            f"95 % coverage E {ce:.3f} N {cn:.3f} A {ca:.3f}",
+            f"{'':<8} owed scans not fixed: {reasons or 'none'}",
+        ]
+        for name, (owed, fixed) in sorted(self.by_scanner.items()):
+            rate = 100 * fixed / owed if owed else math.nan
+            out.append(f"{'':<8} {name:<14} owed {owed:4d}  fixed {fixed:4d} ({rate:5.1f} %)")
+        return out
+
+
+def run_field(
+    *,
+    scenes: int = 150,
+    poses: int = 4,
+    seed: int = 0,
+    out_dir: Path | None = None,
+    echo: Callable[[str], object] = print,
+) -> list[FieldSummary]:
+    """Both families, ``scenes`` scenes of ``poses`` shots each; write
+    ``field_<family>.csv`` (one row per scan) into ``out_dir`` when given."""
+    out: list[FieldSummary] = []
+    for family in ("noisy", "hostile"):
+        t0 = time.perf_counter()
+        s = FieldSummary(family)
+        rows: list[dict[str, object]] = []
+        for i in range(scenes):
+            scene = field_scene(seed + i // 4, i % 4, hostile=family == "hostile", poses=poses)
+            for shot, sim in zip(scene.shots, scene.simulate_all(), strict=True):
+                model = shot.scanner
+                cfg = LocatorConfig(range_sigma_m=model.range_sigma_m, survey_sigma_m=0.0)
+                fix = locate(sim.scan, scene.survey, config=cfg)
+                owed = owed_field(sim)
+                wrong = is_wrong(fix, sim)
+                s.scans += 1
+                s.owed += owed
+                s.owed_fixed += owed and fix.ok
+                s.fixes += fix.ok
+                s.wrong += wrong
+                tally = s.by_scanner.setdefault(model.name.split("-")[0], [0, 0])
+                tally[0] += owed
+                tally[1] += owed and fix.ok
+                if owed and not fix.ok:
+                    s.reasons[fix.reason or "?"] += 1
+                if wrong:
+                    echo(
+                        f"  WRONG FIX {scene.name} {shot.label}: {fix.pose} "
+                        f"(true {shot.pose}), {fix.beacons}"
+                    )
+                err = [math.nan] * 3
+                crb = [math.nan] * 3
+                if fix.ok and fix.pose is not None and fix.adjustment is not None:
+                    t = shot.pose
+                    err = [
+                        fix.pose.easting - t.easting,
+                        fix.pose.northing - t.northing,
+                        math.remainder(fix.pose.azimuth - t.azimuth, 2 * math.pi),
+                    ]
+                    exact = simulate_scan(scene.world, t, model.noise_free())
+                    bound = truth_bound(
+                        t,
+                        exact.scan.angles_rad,
+                        exact.scan.valid,
+                        scene.survey,
+                        noise=cfg.noise,
+                        beacon_beams=exact.beacon_mask(),
+                    )
+                    crb = [float(v) for v in np.sqrt(np.diag(bound))]
+                    sig = fix.adjustment.sigma
+                    s.normalised.append((err[0] / crb[0], err[1] / crb[1], err[2] / crb[2]))
+                    s.covered.append(
+                        (
+                            abs(err[0]) <= _Z95 * sig[0],
+                            abs(err[1]) <= _Z95 * sig[1],
+                            abs(err[2]) <= _Z95 * sig[2],
+                        )
+                    )
+                rows.append(
+                    {
+                        "scene": scene.name,
+                        "shot": shot.label,
+                        "scanner": model.name,
+                        "owed": int(owed),
+                        "status": fix.status,
+                        "reason": fix.reason or "",
+                        "wrong": int(wrong),
+                        "beacons": " ".join(fix.beacons),
+                        "error_e_m": err[0],
+                        "error_n_m": err[1],
+                        "error_a_rad": err[2],
+                        "crb_e_m": crb[0],
+                        "crb_n_m": crb[1],
+                        "crb_a_rad": crb[2],
+                    }
+                )
+        s.seconds = time.perf_counter() - t0
+        out.append(s)
+        for line in s.lines():
+            echo(line)
+        if out_dir is not None:
+            out_dir.mkdir(parents=True, exist_ok=True)
+            with atomic_open(
+                out_dir / f"field_{family}.csv", "w", newline="", encoding="utf-8"
+            ) as fh:
+                w = csv.DictWriter(fh, fieldnames=list(rows[0]))
+                w.writeheader()
+                w.writerows(rows)
+    return out
