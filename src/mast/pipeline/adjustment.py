@@ -26,6 +26,7 @@ from mast.core.noise import NoiseModel
 from mast.core.pose import Pose2D
 from mast.core.quantiles import chi2_ppf, f_ppf, norm_ppf, t_ppf
 from mast.core.scan import Scan
+from mast.pipeline.edges import SILHOUETTE_VARIANCE, at_silhouette, jump_m
 
 __all__ = [
     "Adjustment",
@@ -197,6 +198,7 @@ def adjust_pose(
     offsets: NDArray[np.float64],
     *,
     noise: NoiseModel,
+    variance_scale: NDArray[np.float64] | None = None,
     max_iterations: int = 20,
 ) -> Adjustment:
     """Weighted least squares for (E, N, A) from ranges to known lines.
@@ -211,6 +213,9 @@ def adjust_pose(
         The surveyed line each return lies on, ``n . x = c``, mine frame.
     noise : NoiseModel
         A-priori precision of a range and of a beam angle.
+    variance_scale : ndarray, shape (n,), optional
+        Each return's a-priori variance is the noise model's times this (returns
+        at a beacon's silhouette, which may be mixed pixels: :mod:`mast.pipeline.edges`).
 
     Raises
     ------
@@ -222,7 +227,11 @@ def adjust_pose(
     it = 0
     for it in range(1, max_iterations + 1):  # noqa: B007 - the count is reported
         rho, jac, d_phi = range_model(p, angles_rad, normals, offsets)
-        var = noise.variance(d_phi)
+        var = (
+            noise.variance(d_phi)
+            if variance_scale is None
+            else noise.variance(d_phi) * variance_scale
+        )
         w = 1.0 / var
         v = ranges_m - rho
         N = jac.T @ (w[:, None] * jac)
@@ -237,7 +246,9 @@ def adjust_pose(
         if math.hypot(delta[0], delta[1]) < tol_m and abs(delta[2]) < 1e-13:
             break
     rho, jac, d_phi = range_model(p, angles_rad, normals, offsets)
-    var = noise.variance(d_phi)
+    var = (
+        noise.variance(d_phi) if variance_scale is None else noise.variance(d_phi) * variance_scale
+    )
     w = 1.0 / var
     v = ranges_m - rho
     N = jac.T @ (w[:, None] * jac)
@@ -264,6 +275,8 @@ class Observations:
     offsets: NDArray[np.float64]
     panel: NDArray[np.intp]
     beacon: NDArray[np.intp]
+    variance_scale: NDArray[np.float64] | None = None
+    """Each return's variance over the noise model's (None: all 1)."""
 
     def subset(self, keep: NDArray[np.bool_]) -> Observations:
         return Observations(
@@ -274,6 +287,7 @@ class Observations:
             self.offsets[keep],
             self.panel[keep],
             self.beacon[keep],
+            None if self.variance_scale is None else self.variance_scale[keep],
         )
 
     def __len__(self) -> int:
@@ -292,6 +306,7 @@ class Observations:
             self.normals,
             self.offsets,
             noise=noise,
+            variance_scale=self.variance_scale,
         )
 
 
@@ -303,8 +318,10 @@ def _ray_association(
     noise: NoiseModel,
     gate_sigmas: float,
     pose_cofactor: NDArray[np.float64] | None,
-) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
-    """Beams whose ray, cast from ``pose``, first meets a kept panel, and that panel.
+) -> tuple[NDArray[np.intp], NDArray[np.intp], NDArray[np.bool_]]:
+    """Beams whose ray, cast from ``pose``, first meets a kept panel, that panel, and
+    whether the beam lies at its beacon's silhouette (:func:`~mast.pipeline.edges.at_silhouette`:
+    it may be a mixed pixel).
 
     Casting the ray decides which panel a beam near a corner hits (the nearer
     one), where the nearest line to the return would be a coin toss within
@@ -320,6 +337,8 @@ def _ray_association(
     t, j = first_hits(pose.position, dirs, panels.a[keep], panels.b[keep])
     # Only the beams that meet a kept panel go on (memory follows them, not the scan).
     hit = np.flatnonzero(j >= 0)
+    ray_owner = np.full(scan.ranges_m.size, -1, dtype=np.intp)
+    ray_owner[beams[hit]] = panels.beacon[keep[j[hit]]]
     beams, dirs, t = beams[hit], dirs[hit], t[hit]
     pk = keep[j[hit]]
     nrm = panels.normal[pk]
@@ -332,7 +351,16 @@ def _ray_association(
         var = noise.gate_variance(d_phi) + np.where(np.isfinite(pred), pred, 0.0)
         gate = gate_sigmas * np.sqrt(var)
     ok = (np.abs(scan.ranges_m[beams] - t) <= gate) & (nu > MIN_INCIDENCE_COS)
-    return beams[ok], pk[ok]
+    edge = at_silhouette(
+        scan.ranges_m,
+        scan.valid,
+        beams[ok],
+        t[ok],
+        panels.beacon[pk[ok]],
+        ray_owner,
+        jump_m(noise.range_sigma_m),
+    )
+    return beams[ok], pk[ok], edge
 
 
 def _robust_inliers(
@@ -388,8 +416,10 @@ def adjust_on_panels(
     """Adjust the pose on the returns of the ``keep`` panels, re-associating as it moves.
 
     Each round casts every beam from the current pose (:func:`_ray_association`),
-    drops returns far outside the robust spread of the last round's residuals,
-    and adjusts; it stops when the returns used no longer change.
+    weights returns at a beacon's silhouette down (they may be mixed pixels:
+    :data:`~mast.pipeline.edges.SILHOUETTE_VARIANCE`), drops returns far outside
+    the robust spread of the last round's residuals, and adjusts; it stops when
+    the returns used, and their weights, no longer change.
 
     Returns
     -------
@@ -399,8 +429,9 @@ def adjust_on_panels(
     adj: Adjustment | None = None
     used = np.zeros(0, dtype=np.intp)
     used_panels = np.zeros(0, dtype=np.intp)
+    used_scale = np.zeros(0)
     for _ in range(MAX_ASSOCIATION_ROUNDS):
-        beams, pk = _ray_association(
+        beams, pk, edge = _ray_association(
             scan, pose, panels, keep, noise, gate_sigmas, None if adj is None else adj.cofactor
         )
         nrm = panels.normal[pk]
@@ -409,14 +440,27 @@ def adjust_on_panels(
             good = _robust_inliers(
                 adj, scan.angles_rad[beams], scan.ranges_m[beams], nrm, offsets, noise, gate_sigmas
             )
-            beams, pk, nrm, offsets = beams[good], pk[good], nrm[good], offsets[good]
-        if np.array_equal(beams, used) and adj is not None:
+            beams, pk, nrm, offsets, edge = (
+                beams[good],
+                pk[good],
+                nrm[good],
+                offsets[good],
+                edge[good],
+            )
+        scale = np.where(edge, SILHOUETTE_VARIANCE, 1.0)
+        if np.array_equal(beams, used) and np.array_equal(scale, used_scale) and adj is not None:
             break
         if beams.size < 4:
             return f"only {beams.size} returns on the panels"
         try:
             adj = adjust_pose(
-                pose, scan.angles_rad[beams], scan.ranges_m[beams], nrm, offsets, noise=noise
+                pose,
+                scan.angles_rad[beams],
+                scan.ranges_m[beams],
+                nrm,
+                offsets,
+                noise=noise,
+                variance_scale=scale,
             )
         except np.linalg.LinAlgError:
             adj = None
@@ -426,7 +470,7 @@ def adjust_on_panels(
             or np.linalg.cond(_scaled(adj.cofactor)) > MAX_CONDITION
         ):
             return "the panels seen do not constrain all of E, N and azimuth"
-        used, used_panels = beams, pk
+        used, used_panels, used_scale = beams, pk, scale
         pose = adj.pose
     assert adj is not None
     nrm = panels.normal[used_panels]
@@ -438,6 +482,7 @@ def adjust_on_panels(
         np.einsum("ij,ij->i", nrm, panels.a[used_panels]),
         used_panels,
         panels.beacon[used_panels],
+        used_scale,
     )
     return obs, adj
 
