@@ -245,6 +245,7 @@ def test_beam_check_kernel_matches_the_reference() -> None:
     panels = PanelSet.from_survey(scene.survey)
     cfg = VerificationConfig()
     rng = np.random.default_rng(3)
+    near_seen = 0
     for k, shot in enumerate(scene.shots[:6]):
         scan = simulate_scan(scene.world, shot.pose, shot.scanner, rng=rng).scan
         for dx, dy, da in ((0.0, 0.0, 0.0), (0.03, -0.02, 0.004), (0.5, 0.3, -0.05)):
@@ -256,10 +257,13 @@ def test_beam_check_kernel_matches_the_reference() -> None:
                 assert got.keys() == ref.keys()
                 for b, c in ref.items():
                     g = got[b]
-                    assert (g.hit, g.occluded, g.through, g.missing) == (
+                    assert (g.hit, g.occluded, g.through, g.missing, g.near) == (
                         c.hit,
                         c.occluded,
                         c.through,
                         c.missing,
+                        c.near,
                     )
                     assert g.log_likelihood == pytest.approx(c.log_likelihood, rel=1e-12, abs=1e-9)
+                    near_seen += c.near
+    assert near_seen > 0  # returns just short of a panel were counted and compared

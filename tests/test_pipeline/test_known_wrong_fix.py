@@ -77,6 +77,20 @@ def test_a_look_alike_pair_read_into_one_beacon_and_rock_is_no_fix(scan: str) ->
     assert not fix.ok, (fix.pose, fix.beacons)
 
 
+def test_rock_right_in_front_of_a_look_alikes_panels_does_not_confirm_it() -> None:
+    """Scan 7724 of the same drive, a few scans after 7715: D026 in view with 4 returns on
+    D027; fixed 117 m away on D018 with D019 confirmed by rock (12 hits on two panels),
+    and the scan's returns 10-30 cm short of D019's first panel on 7 more beams. Rock
+    read as a panel has rock right in front of it; a panel seldom does."""
+    scan = _long_scan("drive40s2_scan7724_mm.csv")
+    fix = locate(scan, read_survey(DATA / "drive40s2_beacons.csv"), config=LONG_CONFIG)
+    assert not fix.ok, (fix.pose, fix.beacons)
+    for v in fix.verified:
+        if "D019" in v.checks and v.checks["D019"].hit >= 10:
+            assert v.checks["D019"].near >= 5  # what refused it
+            assert "D019" not in v.supported
+
+
 def test_a_corner_of_rock_beside_one_panel_does_not_name_a_beacon() -> None:
     """Seed 0 at 50 Hz, scan 6276 (CoLa-A: no range limit sent), D015 in view: fixed
     64 m away on its look-alike D019 and 'D020', whose 'corner' was rock beside one

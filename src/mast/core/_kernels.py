@@ -655,17 +655,21 @@ def _beam_checks(
     sigma: float,
     hit_ll0: float,
     through_ll: float,
+    near: float,
+    near_ll: float,
 ) -> tuple[NDArray[np.intp], NDArray[np.float64]]:
     """``verification._check_beams_reference`` beam by beam: for every beam that
     meets a segment (panels shrunk at their ends) within the range limits, not
     near grazing, its verdict (hit, occluded, through, missing) counted per owner
-    (beacon), and the log-likelihood of the hits plus ``through_ll`` per through.
+    (beacon), the occluded ones no more than ``near`` short counted again, and the
+    log-likelihood of the hits plus ``through_ll`` per through and ``near_ll`` per
+    near-short return.
 
-    Returns counts, shape (owners, 4), and log-likelihoods, shape (owners,).
+    Returns counts, shape (owners, 5), and log-likelihoods, shape (owners,).
     The ray-segment test is :func:`_first_hits`'s, to the bit.
     """
     n = angles.shape[0]
-    counts = np.zeros((owners, 4), dtype=np.intp)
+    counts = np.zeros((owners, 5), dtype=np.intp)
     ll = np.zeros(owners)
     ex, ey, wx, wy, w_x_e = _crossing_terms_jit(origin, seg_a, seg_b)
     for i in range(n):
@@ -687,12 +691,14 @@ def _beam_checks(
             ll[b] += hit_ll0 - 0.5 * z * z
         elif res < -gate:
             counts[b, 1] += 1
+            if res >= -near:
+                counts[b, 4] += 1
         elif res > gate:
             counts[b, 2] += 1
         else:  # a NaN range marked valid: no verdict but missing
             counts[b, 3] += 1
     for b in range(owners):
-        ll[b] += counts[b, 2] * through_ll
+        ll[b] += counts[b, 2] * through_ll + counts[b, 4] * near_ll
     return counts, ll
 
 
