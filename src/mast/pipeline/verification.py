@@ -39,6 +39,7 @@ from mast.core.pose import Pose2D, wrap_angles
 from mast.core.quantiles import chi2_isf, chi2_sf
 from mast.core.scan import Scan
 from mast.pipeline.alignment import IcpResult, icp_point_to_line
+from mast.pipeline.edges import jump_m
 from mast.pipeline.hypotheses import Hypothesis, corner_covariance, node_sigma
 from mast.pipeline.identification import PanelIdentification
 from mast.pipeline.segmentation import Segmentation
@@ -534,11 +535,21 @@ def _in_place(
     weighs every offset across the one line through all the returns, as the bend test
     compares the two; whether the returns lie on the panels turns on each panel's own
     incidence.) Returns within ``edge_margin_m`` of the beacon's free ends are left
-    out: there a beam may as well meet the rock the beacon is mounted on.
+    out: there a beam may as well meet the rock the beacon is mounted on; and so are
+    returns at the beacon's silhouette (the next return, off the beacon, lies more than
+    a jump behind: :mod:`mast.pipeline.edges`), which may be mixed pixels.
     """
     mine = np.flatnonzero(panels.beacon == panels.number[beacon])
     numbers = panels.panel[mine]
-    on = np.flatnonzero(np.isin(icp.panel, mine))
+    ours = np.isin(icp.panel, mine)
+    on = np.flatnonzero(ours)
+    if on.size:
+        reach = np.hypot(*(points_mine - icp.pose.position).T)
+        edge = np.zeros(on.size, dtype=bool)
+        for side in (-1, 1):
+            nb = np.clip(on + side, 0, reach.size - 1)
+            edge |= ~ours[nb] & (reach[nb] - reach[on] > jump_m(noise.range_sigma_m))
+        on = on[~edge]
     k = icp.panel[on]
     p = points_mine[on]
     t = np.einsum("ij,ij->i", p - panels.a[k], panels.direction[k])
