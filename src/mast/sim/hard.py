@@ -112,6 +112,35 @@ def _poses(
     return tuple(shots)
 
 
+def _equipment_and_people(
+    rng: np.random.Generator,
+    wb: WorldBuilder,
+    tunnel: Tunnel,
+    box_stations: tuple[float, float],
+    person_stations: tuple[float, float],
+    least_box: tuple[float, float],
+    person_radius: tuple[float, float],
+) -> None:
+    """One to four boxes (equipment, up to 2.5 x 1.2 m, at least ``least_box``) and up
+    to three people (circles) anywhere across the drift between the stations given."""
+    width = tunnel.width_m
+    for _ in range(int(rng.integers(1, 5))):
+        centre, tangent = tunnel.centre_point(float(rng.uniform(*box_stations)))
+        normal = np.array([-tangent[1], tangent[0]])
+        p = centre + float(rng.uniform(-(width / 2 - 0.5), width / 2 - 0.5)) * normal
+        wb.box(
+            p,
+            (float(rng.uniform(least_box[0], 2.5)), float(rng.uniform(least_box[1], 1.2))),
+            float(rng.uniform(0, math.pi)),
+            Surface("clutter"),
+        )
+    for _ in range(int(rng.integers(0, 4))):
+        centre, tangent = tunnel.centre_point(float(rng.uniform(*person_stations)))
+        normal = np.array([-tangent[1], tangent[0]])
+        p = centre + float(rng.uniform(-(width / 2 - 0.4), width / 2 - 0.4)) * normal
+        wb.circle(p, float(rng.uniform(*person_radius)), Surface("person"))
+
+
 def _hostile_scanner(rng: np.random.Generator, resolution_deg: float) -> ScannerModel:
     bias = float(rng.uniform(-0.005, 0.005))
     return ScannerModel(
@@ -178,21 +207,9 @@ def hard_scene(seed: int, index: int = 0, *, poses: int = 5) -> Scene:
         amplitude_m=float(rng.uniform(0.03, 0.10)), wavelength_min_m=0.2, wavelength_max_m=1.0
     )
     wb, beacons = _build(rng, tunnel, placements, rough)
-    for _ in range(int(rng.integers(1, 5))):
-        centre, tangent = tunnel.centre_point(float(rng.uniform(lo - 3, hi + 3)))
-        normal = np.array([-tangent[1], tangent[0]])
-        p = centre + float(rng.uniform(-(width / 2 - 0.5), width / 2 - 0.5)) * normal
-        wb.box(
-            p,
-            (float(rng.uniform(0.4, 2.5)), float(rng.uniform(0.3, 1.2))),
-            float(rng.uniform(0, math.pi)),
-            Surface("clutter"),
-        )
-    for _ in range(int(rng.integers(0, 4))):
-        centre, tangent = tunnel.centre_point(float(rng.uniform(lo - 3, hi + 3)))
-        normal = np.array([-tangent[1], tangent[0]])
-        p = centre + float(rng.uniform(-(width / 2 - 0.4), width / 2 - 0.4)) * normal
-        wb.circle(p, float(rng.uniform(0.18, 0.3)), Surface("person"))
+    _equipment_and_people(
+        rng, wb, tunnel, (lo - 3, hi + 3), (lo - 3, hi + 3), (0.4, 0.3), (0.18, 0.3)
+    )
     models = [_hostile_scanner(rng, 0.25), _hostile_scanner(rng, 0.5)]
     shots = _poses(rng, tunnel, lo, hi, poses, models)
     return Scene(
@@ -329,21 +346,9 @@ def field_scene(seed: int, index: int = 0, *, hostile: bool = False, poses: int 
     )
     wb, beacons = _build(rng, tunnel, placements, rough, tilts)
     if hostile:
-        for _ in range(int(rng.integers(1, 5))):
-            centre, tangent = tunnel.centre_point(float(rng.uniform(s1 - 6.0, s2 + 6.0)))
-            normal = np.array([-tangent[1], tangent[0]])
-            p = centre + float(rng.uniform(-(width / 2 - 0.5), width / 2 - 0.5)) * normal
-            wb.box(
-                p,
-                (float(rng.uniform(0.3, 2.5)), float(rng.uniform(0.2, 1.2))),
-                float(rng.uniform(0, math.pi)),
-                Surface("clutter"),
-            )
-        for _ in range(int(rng.integers(0, 4))):
-            centre, tangent = tunnel.centre_point(float(rng.uniform(s1 - 4.0, s2 + 4.0)))
-            normal = np.array([-tangent[1], tangent[0]])
-            p = centre + float(rng.uniform(-(width / 2 - 0.4), width / 2 - 0.4)) * normal
-            wb.circle(p, float(rng.uniform(0.15, 0.3)), Surface("person"))
+        _equipment_and_people(
+            rng, wb, tunnel, (s1 - 6.0, s2 + 6.0), (s1 - 4.0, s2 + 4.0), (0.3, 0.2), (0.15, 0.3)
+        )
     models = [
         replace(
             m,

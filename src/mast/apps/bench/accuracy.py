@@ -16,7 +16,6 @@ beacon panel, so returns the locator failed to use count as lost efficiency.
 
 from __future__ import annotations
 
-import csv
 import math
 import time
 from collections.abc import Callable, Sequence
@@ -33,7 +32,7 @@ from mast.apps.bench.detection import (
     detection_rows,
     detection_table,
 )
-from mast.io.atomic import atomic_open
+from mast.apps.bench.rows import write_rows
 from mast.pipeline.bounds import truth_bound
 from mast.pipeline.locator import LocatorConfig, locate
 from mast.sim import ScannerModel, Scene, Shot, random_scene, simulate_scan
@@ -189,12 +188,12 @@ def run_accuracy(
         rows_by_config[model.name] = rows
         summaries.append(_summarise(model.name, rows, poses, draws, time.perf_counter() - t0))
         if out_dir is not None:
-            _write_rows(out_dir / f"accuracy_{model.name}.csv", rows)
+            write_rows(out_dir / f"accuracy_{model.name}.csv", rows)
         echo(_line(summaries[-1]))
     echo(detection_table(rows_by_config))
     if out_dir is not None:
-        _write_rows(out_dir / "accuracy_summary.csv", [asdict(s) for s in summaries])
-        _write_rows(out_dir / "detection.csv", detection_rows(detection_bins(rows_by_config)))
+        write_rows(out_dir / "accuracy_summary.csv", [asdict(s) for s in summaries])
+        write_rows(out_dir / "detection.csv", detection_rows(detection_bins(rows_by_config)))
     return summaries
 
 
@@ -251,14 +250,3 @@ def _line(s: AccuracySummary) -> str:
         f"test-pass {s.chi2_test_pass:.3f} KS p {s.chi2_ks_pvalue:.3f}  "
         f"({s.draws} draws, {s.seconds:.0f} s)"
     )
-
-
-def _write_rows(path: Path, rows: list[dict[str, object]]) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    keys: list[str] = []
-    for r in rows:
-        keys += [k for k in r if k not in keys]
-    with atomic_open(path, "w", newline="", encoding="utf-8") as fh:
-        w = csv.DictWriter(fh, fieldnames=keys)
-        w.writeheader()
-        w.writerows(rows)

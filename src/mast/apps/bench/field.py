@@ -17,7 +17,6 @@ coverage per coordinate).
 
 from __future__ import annotations
 
-import csv
 import math
 import time
 from collections import Counter
@@ -29,7 +28,7 @@ import numpy as np
 from scipy import stats
 
 from mast.apps.bench.robustness import is_wrong
-from mast.io.atomic import atomic_open
+from mast.apps.bench.rows import write_rows
 from mast.pipeline.bounds import truth_bound
 from mast.pipeline.locator import LocatorConfig, locate
 from mast.sim import simulate_scan
@@ -189,11 +188,5 @@ def run_field(
         for line in s.lines():
             echo(line)
         if out_dir is not None:
-            out_dir.mkdir(parents=True, exist_ok=True)
-            with atomic_open(
-                out_dir / f"field_{family}.csv", "w", newline="", encoding="utf-8"
-            ) as fh:
-                w = csv.DictWriter(fh, fieldnames=list(rows[0]))
-                w.writeheader()
-                w.writerows(rows)
+            write_rows(out_dir / f"field_{family}.csv", rows)
     return out

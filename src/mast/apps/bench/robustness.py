@@ -8,7 +8,6 @@ five of its own standard deviations), and the no-fix reasons.
 
 from __future__ import annotations
 
-import csv
 import math
 import time
 from collections import Counter
@@ -18,8 +17,8 @@ from pathlib import Path
 
 import numpy as np
 
+from mast.apps.bench.rows import write_rows
 from mast.core.pose import Pose2D
-from mast.io.atomic import atomic_open
 from mast.pipeline.locator import Fix, LocatorConfig, locate
 from mast.sim import Scene, drift_scene, hard_scene
 from mast.sim.scanner import SimulatedScan
@@ -139,11 +138,5 @@ def run_robustness(
         out.append(s)
         echo(s.line())
         if out_dir is not None:
-            out_dir.mkdir(parents=True, exist_ok=True)
-            with atomic_open(
-                out_dir / f"robustness_{family}.csv", "w", newline="", encoding="utf-8"
-            ) as fh:
-                w = csv.DictWriter(fh, fieldnames=list(rows[0]))
-                w.writeheader()
-                w.writerows(rows)
+            write_rows(out_dir / f"robustness_{family}.csv", rows)
     return out
