@@ -59,31 +59,3 @@ def test_a_return_with_four_times_the_variance_has_twice_the_sigma() -> None:
     # A return weighing less leaves the pose less certain.
     assert np.all(np.diag(weighted.cofactor) >= np.diag(plain.cofactor) - 1e-15)
     assert np.trace(weighted.cofactor) > np.trace(plain.cofactor)
-
-
-def test_a_beam_crossing_within_its_own_sigma_of_a_free_end_is_left_out() -> None:
-    from mast.core.beacon import Beacon, Survey
-    from mast.core.geometry import PanelSet
-    from mast.pipeline.adjustment import _near_free_end
-
-    # One hat beacon north of the scanner; beams aimed at panel 1 near e1 and mid-panel 2.
-    edges = np.array([[-0.6, 5.0], [-0.4, 4.8], [0.4, 4.8], [0.6, 5.0]])
-    panels = PanelSet.from_survey(Survey([Beacon("B", edges)]))
-    pose = Pose2D(0.0, 0.0, 0.0)
-    targets = np.array([[-0.599, 4.999], [-0.5, 4.9], [0.0, 4.8]])
-    dirs = targets / np.hypot(targets[:, 0], targets[:, 1])[:, None]
-    pk = np.array([0, 0, 1])
-    tight = np.diag([1e-8, 1e-8, 1e-10])  # the pose known to 0.1 mm and 2 arc-seconds
-    loose = np.diag([1e-4, 1e-4, 1e-4])  # to 1 cm and 0.6 degrees
-    consider = np.ones(3, dtype=bool)
-    # Known that well, a beam 1.4 mm inside the free end meets the panel.
-    assert _near_free_end(pose, tight, dirs, pk, panels, consider).tolist() == [False] * 3
-    # With the pose uncertain by a centimetre it may as well pass it by; one 0.14 m from
-    # e1 still meets it; the middle panel has no free end.
-    assert _near_free_end(pose, loose, dirs, pk, panels, consider).tolist() == [True, False, False]
-    very_loose = np.diag([1e-2, 1e-2, 1e-2])
-    assert _near_free_end(pose, very_loose, dirs, pk, panels, consider).tolist() == [
-        True,
-        True,
-        False,
-    ]

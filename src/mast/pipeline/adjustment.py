@@ -38,10 +38,6 @@ __all__ = [
     "survey_covariance",
 ]
 
-#: A beam crossing an outer panel's line within this many of its crossing's standard
-#: deviations of the beacon's free end may as well pass the panel by (:func:`_near_free_end`).
-FREE_END_SIGMAS = 1.0
-
 #: Beams closer than this to grazing a panel (|n . u| below) carry no usable range.
 MIN_INCIDENCE_COS = math.sin(math.radians(2.0))
 
@@ -355,8 +351,6 @@ def _ray_association(
         var = noise.gate_variance(d_phi) + np.where(np.isfinite(pred), pred, 0.0)
         gate = gate_sigmas * np.sqrt(var)
     ok = (np.abs(scan.ranges_m[beams] - t) <= gate) & (nu > MIN_INCIDENCE_COS)
-    if pose_cofactor is not None:
-        ok &= ~_near_free_end(pose, pose_cofactor, dirs, pk, panels, ok)
     edge = at_silhouette(
         scan.ranges_m,
         scan.valid,
@@ -367,64 +361,6 @@ def _ray_association(
         jump_m(noise.range_sigma_m),
     )
     return beams[ok], pk[ok], edge
-
-
-def _crossing(
-    pose: Pose2D, dirs: NDArray[np.float64], pk: NDArray[np.intp], panels: PanelSet
-) -> NDArray[np.float64]:
-    """Where each beam (unit ``dirs`` in the mine frame from ``pose``) crosses the line
-    of its panel ``pk``, as a distance along the panel from its first end."""
-    nrm = panels.normal[pk]
-    a = panels.a[pk]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        lam = np.einsum("ij,ij->i", nrm, a - pose.position) / np.einsum("ij,ij->i", nrm, dirs)
-    cross = pose.position + lam[:, None] * dirs
-    return np.asarray(np.einsum("ij,ij->i", cross - a, panels.direction[pk]))
-
-
-def _near_free_end(
-    pose: Pose2D,
-    cofactor: NDArray[np.float64],
-    dirs: NDArray[np.float64],
-    pk: NDArray[np.intp],
-    panels: PanelSet,
-    consider: NDArray[np.bool_],
-) -> NDArray[np.bool_]:
-    """Beams that cross an outer panel's line within :data:`FREE_END_SIGMAS` of their
-    own uncertainty (the pose's, ``cofactor``) of the beacon's free end: whether they
-    meet the panel or pass it by and return from the rock beyond cannot be told.
-
-    Seen obliquely, one such return on an outer panel holds the azimuth: taken in,
-    the adjustment turns the pose until the beam meets the panel and fits it (shared
-    noisy scene 0101: a return of rock 2 cm off panel 1's line, past its end at the
-    truth, turned the fix 5.4 sigmas in azimuth). Not weighed before the first
-    adjustment gives the pose's uncertainty.
-    """
-    out = np.zeros(pk.size, dtype=bool)
-    number = panels.panel[pk]
-    outer = consider & ((number == 1) | (number == 3))
-    if not outer.any():
-        return out
-    i = np.flatnonzero(outer)
-    s0 = _crossing(pose, dirs[i], pk[i], panels)
-    jac = np.empty((i.size, 3))
-    for c, step in enumerate((1e-4, 1e-4, 1e-6)):
-        moved = [pose.easting, pose.northing, pose.azimuth]
-        moved[c] += step
-        p = Pose2D(*moved)
-        # The beams turn with the pose: bearing = azimuth - beam angle.
-        d = dirs[i] if c < 2 else _turned(dirs[i], step)
-        jac[:, c] = (_crossing(p, d, pk[i], panels) - s0) / step
-    sd = np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", jac, cofactor, jac), 0.0))
-    to_end = np.where(number[i] == 1, s0, panels.length[pk[i]] - s0)
-    out[i] = ~(to_end > FREE_END_SIGMAS * sd)
-    return out
-
-
-def _turned(dirs: NDArray[np.float64], d_azimuth: float) -> NDArray[np.float64]:
-    """Unit directions (east, north) turned clockwise by ``d_azimuth`` (bearings grow)."""
-    c, s = math.cos(d_azimuth), math.sin(d_azimuth)
-    return np.stack([dirs[:, 0] * c + dirs[:, 1] * s, -dirs[:, 0] * s + dirs[:, 1] * c], axis=1)
 
 
 def _robust_inliers(
