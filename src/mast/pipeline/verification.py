@@ -39,7 +39,7 @@ from mast.core.pose import Pose2D, wrap_angles
 from mast.core.quantiles import chi2_isf, chi2_sf
 from mast.core.scan import Scan
 from mast.pipeline.alignment import IcpResult, icp_point_to_line
-from mast.pipeline.edges import jump_m
+from mast.pipeline.edges import at_silhouette, jump_m
 from mast.pipeline.hypotheses import Hypothesis, corner_covariance, node_sigma
 from mast.pipeline.identification import PanelIdentification
 from mast.pipeline.segmentation import Segmentation
@@ -544,11 +544,17 @@ def _in_place(
     ours = np.isin(icp.panel, mine)
     on = np.flatnonzero(ours)
     if on.size:
+        # The returns' own ranges stand for the prediction here: a test, not an estimate.
         reach = np.hypot(*(points_mine - icp.pose.position).T)
-        edge = np.zeros(on.size, dtype=bool)
-        for side in (-1, 1):
-            nb = np.clip(on + side, 0, reach.size - 1)
-            edge |= ~ours[nb] & (reach[nb] - reach[on] > jump_m(noise.range_sigma_m))
+        edge = at_silhouette(
+            reach,
+            np.ones(reach.size, dtype=bool),
+            on,
+            reach[on],
+            np.zeros(on.size, dtype=np.intp),
+            np.where(ours, 0, -1),
+            jump_m(noise.range_sigma_m),
+        )
         on = on[~edge]
     k = icp.panel[on]
     p = points_mine[on]
