@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import math
 import time
-from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -27,7 +26,7 @@ from pathlib import Path
 import numpy as np
 from scipy import stats
 
-from mast.apps.bench.robustness import is_wrong
+from mast.apps.bench.robustness import RobustnessSummary, is_wrong
 from mast.apps.bench.rows import write_rows
 from mast.pipeline.bounds import truth_bound
 from mast.pipeline.locator import LocatorConfig, locate
@@ -49,22 +48,13 @@ def owed_field(sim: SimulatedScan) -> bool:
 
 
 @dataclass
-class FieldSummary:
-    family: str
-    scans: int = 0
-    owed: int = 0
-    owed_fixed: int = 0
-    fixes: int = 0
-    wrong: int = 0
-    reasons: Counter[str] = field(default_factory=Counter)
+class FieldSummary(RobustnessSummary):
+    """A family's counts (``reasons``: of the owed scans not fixed), per scanner class,
+    and its fixes' errors over their bounds and whether their 95 % intervals cover."""
+
     by_scanner: dict[str, list[int]] = field(default_factory=dict)
     normalised: list[tuple[float, float, float]] = field(default_factory=list)
     covered: list[tuple[bool, bool, bool]] = field(default_factory=list)
-    seconds: float = 0.0
-
-    @property
-    def fix_rate_owed(self) -> float:
-        return self.owed_fixed / self.owed if self.owed else math.nan
 
     def ratios(self) -> tuple[float, float, float]:
         """RMS error over the bound, E, N and azimuth, over every fix."""
@@ -122,11 +112,7 @@ def run_field(
                 fix = locate(sim.scan, scene.survey, config=cfg)
                 owed = owed_field(sim)
                 wrong = is_wrong(fix, sim)
-                s.scans += 1
-                s.owed += owed
-                s.owed_fixed += owed and fix.ok
-                s.fixes += fix.ok
-                s.wrong += wrong
+                s.tally(fix.ok, owed, wrong)
                 tally = s.by_scanner.setdefault(model.name.split("-")[0], [0, 0])
                 tally[0] += owed
                 tally[1] += owed and fix.ok

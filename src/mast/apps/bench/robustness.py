@@ -66,6 +66,14 @@ class RobustnessSummary:
     def fix_rate_owed(self) -> float:
         return self.owed_fixed / self.owed if self.owed else math.nan
 
+    def tally(self, fixed: bool, owed: bool, wrong: bool) -> None:
+        """Count one scan: whether it was fixed, owed a fix, and fixed wrong."""
+        self.scans += 1
+        self.owed += owed
+        self.owed_fixed += owed and fixed
+        self.fixes += fixed
+        self.wrong += wrong
+
     def line(self) -> str:
         reasons = ", ".join(f"{k} {v}" for k, v in self.reasons.most_common())
         return (
@@ -103,11 +111,7 @@ def run_robustness(
                 fix = locate(sim.scan, scene.survey, config=cfg)
                 owed = owed_clean(sim)
                 wrong = is_wrong(fix, sim)
-                s.scans += 1
-                s.owed += owed
-                s.owed_fixed += owed and fix.ok
-                s.fixes += fix.ok
-                s.wrong += wrong
+                s.tally(fix.ok, owed, wrong)
                 if not fix.ok:
                     s.reasons[fix.reason or "?"] += 1
                 if wrong:
