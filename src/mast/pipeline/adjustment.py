@@ -223,15 +223,12 @@ def adjust_pose(
         When the normal matrix is singular (degenerate geometry).
     """
     n = angles_rad.size
+    scale = 1.0 if variance_scale is None else variance_scale
     p = pose
     it = 0
     for it in range(1, max_iterations + 1):  # noqa: B007 - the count is reported
         rho, jac, d_phi = range_model(p, angles_rad, normals, offsets)
-        var = (
-            noise.variance(d_phi)
-            if variance_scale is None
-            else noise.variance(d_phi) * variance_scale
-        )
+        var = noise.variance(d_phi) * scale
         w = 1.0 / var
         v = ranges_m - rho
         N = jac.T @ (w[:, None] * jac)
@@ -246,9 +243,7 @@ def adjust_pose(
         if math.hypot(delta[0], delta[1]) < tol_m and abs(delta[2]) < 1e-13:
             break
     rho, jac, d_phi = range_model(p, angles_rad, normals, offsets)
-    var = (
-        noise.variance(d_phi) if variance_scale is None else noise.variance(d_phi) * variance_scale
-    )
+    var = noise.variance(d_phi) * scale
     w = 1.0 / var
     v = ranges_m - rho
     N = jac.T @ (w[:, None] * jac)

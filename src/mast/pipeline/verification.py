@@ -301,13 +301,14 @@ def _check_beams_reference(
     for k in np.unique(beacon):
         m = beacon == k
         counts = np.bincount(kind[m], minlength=4)
+        near_n = int(np.sum(near[m]))
         ll = (
             float(np.sum(hit_ll[m & (kind == 0)]))
             + counts[2] * math.log(cfg.through_probability)
-            + int(np.sum(near[m])) * math.log(cfg.near_probability)
+            + near_n * math.log(cfg.near_probability)
         )
         hit_n, occ_n, thr_n, mis_n = (int(c) for c in counts)
-        out[panels.ids[k]] = BeamCheck(hit_n, occ_n, thr_n, mis_n, ll, int(np.sum(near[m])))
+        out[panels.ids[k]] = BeamCheck(hit_n, occ_n, thr_n, mis_n, ll, near_n)
     return out
 
 
