@@ -32,6 +32,7 @@ from mast.apps.bench.detection import (
     detection_rows,
     detection_table,
 )
+from mast.apps.bench.robustness import pose_error
 from mast.apps.bench.rows import write_rows
 from mast.pipeline.bounds import truth_bound
 from mast.pipeline.locator import LocatorConfig, locate
@@ -154,14 +155,7 @@ def run_accuracy(
                 }
                 if fix.ok and fix.pose is not None and fix.adjustment is not None:
                     adj = fix.adjustment
-                    p = shot.pose
-                    err = np.array(
-                        [
-                            fix.pose.easting - p.easting,
-                            fix.pose.northing - p.northing,
-                            math.remainder(fix.pose.azimuth - p.azimuth, 2 * math.pi),
-                        ]
-                    )
+                    err = pose_error(fix.pose, shot.pose)
                     ci = adj.interval95()
                     # the ellipse's own scale: semi-major = k * sqrt(largest eigenvalue)
                     ell = adj.ellipse()

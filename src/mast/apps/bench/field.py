@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 from scipy import stats
 
-from mast.apps.bench.robustness import RobustnessSummary, is_wrong
+from mast.apps.bench.robustness import RobustnessSummary, is_wrong, pose_error
 from mast.apps.bench.rows import write_rows
 from mast.pipeline.bounds import truth_bound
 from mast.pipeline.locator import LocatorConfig, locate
@@ -91,7 +91,7 @@ class FieldSummary(RobustnessSummary):
 
 def run_field(
     *,
-    scenes: int = 150,
+    scenes: int = 200,
     poses: int = 4,
     seed: int = 0,
     out_dir: Path | None = None,
@@ -127,11 +127,7 @@ def run_field(
                 crb = [math.nan] * 3
                 if fix.ok and fix.pose is not None and fix.adjustment is not None:
                     t = shot.pose
-                    err = [
-                        fix.pose.easting - t.easting,
-                        fix.pose.northing - t.northing,
-                        math.remainder(fix.pose.azimuth - t.azimuth, 2 * math.pi),
-                    ]
+                    err = [float(v) for v in pose_error(fix.pose, t)]
                     exact = simulate_scan(scene.world, t, model.noise_free())
                     bound = truth_bound(
                         t,

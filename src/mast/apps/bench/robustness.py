@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+from numpy.typing import NDArray
 
 from mast.apps.bench.rows import write_rows
 from mast.core.pose import Pose2D
@@ -23,7 +24,7 @@ from mast.pipeline.locator import Fix, LocatorConfig, locate
 from mast.sim import Scene, drift_scene, hard_scene
 from mast.sim.scanner import SimulatedScan
 
-__all__ = ["RobustnessSummary", "is_wrong", "owed_clean", "run_robustness"]
+__all__ = ["RobustnessSummary", "is_wrong", "owed_clean", "pose_error", "run_robustness"]
 
 WRONG_POSITION_M = 0.05
 WRONG_AZIMUTH_RAD = math.radians(0.25)
@@ -34,18 +35,22 @@ def owed_clean(sim: SimulatedScan) -> bool:
     return sim.owes_fix(min_points=8, min_incidence_deg=15.0)
 
 
+def pose_error(got: Pose2D, truth: Pose2D) -> NDArray[np.float64]:
+    """``got - truth``: easting and northing (m), azimuth (rad, within +-pi)."""
+    return np.array(
+        [
+            got.easting - truth.easting,
+            got.northing - truth.northing,
+            math.remainder(got.azimuth - truth.azimuth, 2 * math.pi),
+        ]
+    )
+
+
 def is_wrong(fix: Fix, truth: SimulatedScan | Pose2D) -> bool:
     """More than 5 cm or 0.25 deg off and outside five of its own standard deviations."""
     if not fix.ok or fix.pose is None or fix.adjustment is None:
         return False
-    t = truth if isinstance(truth, Pose2D) else truth.pose
-    err = np.array(
-        [
-            fix.pose.easting - t.easting,
-            fix.pose.northing - t.northing,
-            math.remainder(fix.pose.azimuth - t.azimuth, 2 * math.pi),
-        ]
-    )
+    err = pose_error(fix.pose, truth if isinstance(truth, Pose2D) else truth.pose)
     big = math.hypot(err[0], err[1]) > WRONG_POSITION_M or abs(err[2]) > WRONG_AZIMUTH_RAD
     outside = bool(np.any(np.abs(err) > 5 * fix.adjustment.sigma))
     return big and outside
