@@ -373,10 +373,17 @@ def _prior_first(
     t0 = time.perf_counter()
     seg = segment_scan(scan, searched.segmentation)
     if searched.prior is not None:
-        fix = _locate(scan, survey, searched, t0, seg, tracked=True)
-        if fix.ok:
-            return fix, False
-    return _locate(scan, survey, fallback, t0, seg, tracked=False), searched.prior is not None
+        _, panels = _survey_index(survey, scan.range_max_m)
+        batches = prior_hypotheses(
+            scan.points()[1], panels, searched.prior, scan.range_max_m, searched.tracking
+        )
+        # The best grid poses first; poses from other basins of the window only when
+        # those give no fix.
+        for batch in batches:
+            fix = _locate(scan, survey, searched, t0, seg, from_prior=batch)
+            if fix.ok:
+                return fix, False
+    return _locate(scan, survey, fallback, t0, seg), searched.prior is not None
 
 
 def _locate(
@@ -386,11 +393,12 @@ def _locate(
     t0: float,
     seg: Segmentation,
     *,
-    tracked: bool,
+    from_prior: list[Hypothesis] | None = None,
 ) -> Fix:
-    """:func:`locate` from the prior's own hypotheses (``tracked``) or from the global
-    ones (kept inside the prior's window, if there is one), on the scan's segmentation
-    ``seg`` (made once for both); ``t0`` is when it began."""
+    """:func:`locate` from hypotheses of the prior's own search (``from_prior``, a
+    batch of :func:`~mast.pipeline.tracking.prior_hypotheses`) or, without them, from the
+    global ones (kept inside the prior's window, if there is one), on the scan's
+    segmentation ``seg`` (made once for both); ``t0`` is when it began."""
     noise = cfg.noise
     index, panels = _survey_index(survey, scan.range_max_m)
     found: dict[str, object] = {"config": cfg, "hypotheses": (), "verified": (), "chosen": None}
@@ -419,12 +427,11 @@ def _locate(
     found["segmentation"] = seg
     ident = PanelIdentification((), ())
     found["identification"] = ident
-    if tracked:
-        assert cfg.prior is not None
-        hyps = prior_hypotheses(scan.points()[1], panels, cfg.prior, scan.range_max_m, cfg.tracking)
+    if from_prior is not None:
+        hyps = from_prior
         if not hyps:
             return finish(
-                reason="inconsistent", detail=f"no panel returns within the prior {cfg.prior.pose}"
+                reason="inconsistent", detail=f"no panel returns within the prior {cfg.prior}"
             )
     else:
         ident = identify_panels(

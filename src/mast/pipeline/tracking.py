@@ -86,6 +86,14 @@ class TrackingConfig:
         Two grid poses are distinct hypotheses when one moves the returns by
         at least this much from the other (translation, or rotation times the
         returns' median range): closer ones fall in the same ICP basin.
+    other_basins_m : float
+        The second batch of hypotheses, searched when the first gives no fix:
+        up to ``candidates`` more grid poses, each moving the returns by at
+        least this much from every pose before it. In a wide window the best
+        grid poses can all lie in one wrong basin (rock parallel to a middle
+        panel scores like the panel: shared independent scenes noisy 0096 and
+        0146, hostile 0046, the true pose ranked 8th to 14th, every pose above
+        it within 0.4 m and 3 degrees of one wrong one).
     """
 
     max_radius_m: float = 2.0
@@ -95,6 +103,7 @@ class TrackingConfig:
     max_points: int = 600
     candidates: int = 6
     distinct_m: float = 0.1
+    other_basins_m: float = 0.4
 
 
 def _likelihood_field(
@@ -264,13 +273,17 @@ def prior_hypotheses(
     prior: Prior,
     range_max_m: float,
     config: TrackingConfig = TrackingConfig(),
-) -> list[Hypothesis]:
-    """The best poses in the prior's window by a grid search, as hypotheses.
+) -> list[list[Hypothesis]]:
+    """The best poses in the prior's window by a grid search, as batches of hypotheses.
 
     Every candidate pose is scored by the likelihood field of the surveyed
     panels at the returns; rotations step so that no return moves more than
-    ``step_m``, translations step by ``step_m``. Returns an empty list when
-    the window is too wide to search this way or no panel is in reach.
+    ``step_m``, translations step by ``step_m``. The first batch holds the
+    best ``candidates`` poses at least ``distinct_m`` apart; the second, to be
+    searched only when the first gives no fix, the best ones at least
+    ``other_basins_m`` from every pose before them (empty when there are none).
+    Returns no batch when the window is too wide to search this way or no
+    panel is in reach.
     """
     tol = prior.azimuth_tolerance_rad
     if (
@@ -327,20 +340,27 @@ def prior_hypotheses(
         for t in np.arange(total.size) if top is None else top:
             best.append((float(total[t]), rot, float(shifts[t, 0]), float(shifts[t, 1])))
     best.sort(reverse=True)
-    out: list[Hypothesis] = []
-    chosen: list[tuple[float, float, float]] = []
     reach = float(np.median(r))
-    for total_score, rot, x, y in best:
-        if any(
-            math.hypot(x - cx, y - cy) < config.distinct_m
-            and abs(rot - cr) * reach < config.distinct_m
-            for cr, cx, cy in chosen
-        ):
-            continue
-        chosen.append((rot, x, y))
-        t = prior.pose.position + np.array([x, y])
-        sim = Similarity(1.0, math.remainder(rot, 2 * math.pi), t, 0.0)
-        out.append(Hypothesis((), sim, -total_score, "prior"))
-        if len(out) == config.candidates:
-            break
-    return out
+    chosen: list[tuple[float, float, float]] = []
+
+    def pick(apart_m: float) -> list[Hypothesis]:
+        """The best grid poses that move the returns at least ``apart_m`` from every
+        pose chosen before (and from each other), up to ``candidates``."""
+        out: list[Hypothesis] = []
+        for total_score, rot, x, y in best:
+            if any(
+                math.hypot(x - cx, y - cy) < apart_m and abs(rot - cr) * reach < apart_m
+                for cr, cx, cy in chosen
+            ):
+                continue
+            chosen.append((rot, x, y))
+            t = prior.pose.position + np.array([x, y])
+            sim = Similarity(1.0, math.remainder(rot, 2 * math.pi), t, 0.0)
+            out.append(Hypothesis((), sim, -total_score, "prior"))
+            if len(out) == config.candidates:
+                break
+        return out
+
+    first = pick(config.distinct_m)
+    other = pick(config.other_basins_m)
+    return [first, other] if other else [first]
