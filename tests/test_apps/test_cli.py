@@ -227,6 +227,8 @@ def test_bench_accuracy_small_run_writes_csv(tmp_path: Path) -> None:
     for x in rows:
         assert 0.0 <= float(x["fix_rate"]) <= 1.0
         assert int(x["draws"]) == 6
+        assert x["wrong"] == "0"
+    assert "WRONG 0" in r.output
 
 
 def test_reproduce_paper_writes_report_and_figures(tmp_path: Path) -> None:
@@ -336,9 +338,12 @@ def test_bench_field_small_run_writes_csv(tmp_path: Path) -> None:
     assert r.exit_code == 0, r.output
     assert "RMS/CRB" in r.output
     assert "95 % coverage" in r.output
+    assert "with a good prior" in r.output
     for family in ("noisy", "hostile"):
         with (tmp_path / f"field_{family}.csv").open() as fh:
             rows = list(csv.DictReader(fh))
         assert len(rows) == 4
         assert {x["status"] for x in rows} <= {"fix", "no_fix"}
         assert all(x["wrong"] == "0" for x in rows)
+        # Only the owed scans are located again with a prior.
+        assert all((x["prior_status"] != "") == (x["owed"] == "1") for x in rows)

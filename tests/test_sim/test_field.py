@@ -5,6 +5,8 @@ import math
 import numpy as np
 import pytest
 
+from mast.apps.bench.field import PRIOR_OFF_DEG, PRIOR_OFF_M, good_prior
+from mast.core.pose import Pose2D
 from mast.sim import simulate_scan
 from mast.sim.design import BeaconDesign
 from mast.sim.hard import FIELD_SCANNERS, field_scene
@@ -66,3 +68,20 @@ def test_field_shots_see_the_beacons_from_between_them() -> None:
         sim = simulate_scan(scene.world, shot.pose, shot.scanner.noise_free())
         assert sim.beacon_mask().any()
         assert math.dist(shot.pose.position, centre) < 15.0
+
+
+def test_the_field_benchmarks_good_prior_holds_the_truth_within_half_its_window() -> None:
+    truth = Pose2D.from_degrees(1000.0, 2000.0, 359.0)
+    rng = np.random.default_rng(5)
+    offs = []
+    for _ in range(500):
+        prior = good_prior(truth, rng)
+        off = math.hypot(prior.pose.easting - truth.easting, prior.pose.northing - truth.northing)
+        turn = abs(math.remainder(prior.pose.azimuth - truth.azimuth, 2 * math.pi))
+        assert off <= PRIOR_OFF_M + 1e-12
+        assert turn <= math.radians(PRIOR_OFF_DEG) + 1e-12
+        assert prior.radius_m == 2 * PRIOR_OFF_M
+        assert prior.admits(truth)
+        offs.append(off)
+    # Uniform over the disc: half the draws beyond 1/sqrt(2) of the radius.
+    assert 0.4 < np.mean(np.asarray(offs) > PRIOR_OFF_M / math.sqrt(2)) < 0.6

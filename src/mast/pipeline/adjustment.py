@@ -26,7 +26,7 @@ from mast.core.noise import NoiseModel
 from mast.core.pose import Pose2D
 from mast.core.quantiles import chi2_ppf, f_ppf, norm_ppf, t_ppf
 from mast.core.scan import Scan
-from mast.pipeline.edges import SILHOUETTE_VARIANCE, at_silhouette, behind_occluder, jump_m
+from mast.pipeline.edges import SILHOUETTE_VARIANCE, at_silhouette, jump_m
 
 __all__ = [
     "Adjustment",
@@ -346,12 +346,6 @@ def _ray_association(
         var = noise.gate_variance(d_phi) + np.where(np.isfinite(pred), pred, 0.0)
         gate = gate_sigmas * np.sqrt(var)
     ok = (np.abs(scan.ranges_m[beams] - t) <= gate) & (nu > MIN_INCIDENCE_COS)
-    # Returns on something standing against a panel pass the gate but not the panel.
-    short = np.full(scan.ranges_m.size, np.nan)
-    short[beams] = t - scan.ranges_m[beams]
-    gate_all = np.full(scan.ranges_m.size, np.inf)
-    gate_all[beams] = gate
-    ok &= ~behind_occluder(short, ray_owner, gate_all)[beams]
     edge = at_silhouette(
         scan.ranges_m,
         scan.valid,

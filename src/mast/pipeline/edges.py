@@ -32,14 +32,7 @@ import math
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = [
-    "JUMP_MIN_M",
-    "JUMP_SIGMAS",
-    "SILHOUETTE_VARIANCE",
-    "at_silhouette",
-    "behind_occluder",
-    "jump_m",
-]
+__all__ = ["JUMP_MIN_M", "JUMP_SIGMAS", "SILHOUETTE_VARIANCE", "at_silhouette", "jump_m"]
 
 #: A step between neighbouring returns is a jump beyond this many of its sigmas ...
 JUMP_SIGMAS = 4.0
@@ -81,39 +74,3 @@ def at_silhouette(
             past = ranges_m[nbc] - predicted_m > jump
         out |= inside & valid[nbc] & (ray_owner[nbc] != owner) & past
     return out
-
-
-def behind_occluder(
-    short_m: NDArray[np.float64],
-    ray_owner: NDArray[np.intp],
-    gate_m: float | NDArray[np.float64],
-) -> NDArray[np.bool_]:
-    """Which beams return from something standing against a panel, not from the panel.
-
-    ``short_m`` is, for every beam of the scan, how far its return lies short of
-    where its ray first meets a panel at the pose (``predicted - range``; NaN for
-    none), ``ray_owner`` the beacon that ray meets (-1: none). An object standing
-    in front of a panel returns its beams short of it, by more than the gate
-    (``gate_m``) where it stands off and by less where it leans against the panel
-    or its edge straddles the beam's footprint: those returns pass the gate but lie
-    on the object. A beam is taken for the object's when it is short of its panel
-    and belongs to a run of consecutive short beams on the same beacon of which at
-    least half are short by more than the gate: the object shows itself. (Rock read
-    as a panel at a wrong pose also runs short of it in places, a beam or two beyond
-    the gate and the rest inside it; those returns are the evidence against the
-    pose and stay: shared hostile scene 0063.) On a beacon with nothing in front of
-    it no beam is taken, and next to an object standing off it, one beam at most on
-    either side.
-    """
-    with np.errstate(invalid="ignore"):
-        short = (short_m > 0) & (ray_owner >= 0)
-        occluded = short & (short_m > gate_m)
-    same = np.zeros(short.size, dtype=bool)
-    same[1:] = short[1:] & short[:-1] & (ray_owner[1:] == ray_owner[:-1])
-    run = np.where(short, np.cumsum(short & ~same), 0)
-    size = np.bincount(run)
-    standing = np.bincount(run[occluded], minlength=size.size)
-    # The object shows itself: at least half the run's beams are short by more than the gate.
-    held = (2 * standing >= size) & (standing > 0)
-    held[0] = False
-    return np.asarray(held[run])

@@ -39,7 +39,7 @@ from mast.core.pose import Pose2D, wrap_angles
 from mast.core.quantiles import chi2_isf, chi2_sf
 from mast.core.scan import Scan
 from mast.pipeline.alignment import IcpResult, icp_point_to_line
-from mast.pipeline.edges import at_silhouette, behind_occluder, jump_m
+from mast.pipeline.edges import at_silhouette, jump_m
 from mast.pipeline.hypotheses import Hypothesis, corner_covariance, node_sigma
 from mast.pipeline.identification import PanelIdentification
 from mast.pipeline.segmentation import Segmentation
@@ -556,7 +556,7 @@ def _in_place(
             np.where(ours, 0, -1),
             jump_m(noise.range_sigma_m),
         )
-        on = on[~edge & ~_against(icp.pose, points_mine, reach, panels, mine, noise, cfg)[on]]
+        on = on[~edge]
     k = icp.panel[on]
     p = points_mine[on]
     t = np.einsum("ij,ij->i", p - panels.a[k], panels.direction[k])
@@ -571,31 +571,6 @@ def _in_place(
     var = across**2 + (rho * noise.angle_sigma_rad) ** 2 * (1 - cos_n**2)
     chi = float(np.sum(icp.residual_m[on] ** 2 / (var + noise.survey_sigma_m**2)))
     return on.size > 0 and chi2_sf(chi, int(on.size)) > cfg.straight_alpha
-
-
-def _against(
-    pose: Pose2D,
-    points_mine: NDArray[np.float64],
-    reach: NDArray[np.float64],
-    panels: PanelSet,
-    mine: NDArray[np.intp],
-    noise: NoiseModel,
-    cfg: VerificationConfig,
-) -> NDArray[np.bool_]:
-    """Per return (``points_mine``, one per beam, NaN for none; ``reach`` their
-    ranges), whether it lies on something standing against the beacon's panels
-    ``mine`` rather than on them (:func:`~mast.pipeline.edges.behind_occluder`)."""
-    ray = points_mine - pose.position
-    with np.errstate(invalid="ignore"):
-        dirs = ray / reach[:, None]
-    ok = np.flatnonzero(np.isfinite(reach) & (reach > 0))
-    t, j = first_hits(pose.position, dirs[ok], panels.a[mine], panels.b[mine])
-    short = np.full(reach.size, np.nan)
-    owner = np.full(reach.size, -1, dtype=np.intp)
-    meets = j >= 0
-    short[ok[meets]] = t[meets] - reach[ok[meets]]
-    owner[ok[meets]] = 0
-    return behind_occluder(short, owner, cfg.gate_sigmas * noise.gate_sigma_m)
 
 
 def _shows_a_bend(chi_line: float, chi_beacon: float, alpha: float) -> bool:

@@ -32,7 +32,7 @@ from mast.apps.bench.detection import (
     detection_rows,
     detection_table,
 )
-from mast.apps.bench.robustness import pose_error
+from mast.apps.bench.robustness import is_wrong, pose_error
 from mast.apps.bench.rows import write_rows
 from mast.pipeline.bounds import truth_bound
 from mast.pipeline.locator import LocatorConfig, locate
@@ -70,6 +70,7 @@ class AccuracySummary:
     chi2_test_pass: float
     chi2_ks_pvalue: float
     seconds: float
+    wrong: int = 0
 
 
 #: Returns a panel must show, noise-free, to count towards a pose being owed a fix.
@@ -145,6 +146,7 @@ def run_accuracy(
                     "pose": p_idx,
                     "draw": d,
                     "fixed": int(fix.ok),
+                    "wrong": int(is_wrong(fix, shot.pose)),
                     "reason": fix.reason or "",
                     "crb_e_m": crb[0],
                     "crb_n_m": crb[1],
@@ -203,7 +205,7 @@ def _summarise(
         empty: dict[str, object] = {
             f: math.nan for f in AccuracySummary.__dataclass_fields__ if f not in ("config",)
         }
-        empty.update(config=name, poses=poses, draws=len(rows), fix_rate=0.0, seconds=secs)
+        empty.update(config=name, poses=poses, draws=len(rows), fix_rate=0.0, seconds=secs, wrong=0)
         return AccuracySummary(**empty)  # type: ignore[arg-type]
     ee, en, ea = col("err_e_m"), col("err_n_m"), col("err_a_rad")
     pos = np.hypot(ee, en)
@@ -230,12 +232,13 @@ def _summarise(
         chi2_test_pass=float(np.mean(col("chi2_pass"))),
         chi2_ks_pvalue=float(stats.kstest(pit, "uniform").pvalue),
         seconds=secs,
+        wrong=sum(int(r["wrong"]) for r in fixed),  # type: ignore[call-overload]
     )
 
 
 def _line(s: AccuracySummary) -> str:
     return (
-        f"{s.config:<22} fix {100 * s.fix_rate:5.1f}%  "
+        f"{s.config:<22} fix {100 * s.fix_rate:5.1f}%  WRONG {s.wrong}  "
         f"pos med {s.pos_err_median_mm:6.2f} p95 {s.pos_err_p95_mm:6.2f} mm  "
         f'az med {s.az_err_median_arcsec:6.1f} p95 {s.az_err_p95_arcsec:6.1f}"  '
         f"RMS/CRB E {s.ratio_e:.3f} N {s.ratio_n:.3f} A {s.ratio_a:.3f}  "

@@ -20,7 +20,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -28,16 +28,44 @@ from scipy import stats
 
 from mast.apps.bench.robustness import RobustnessSummary, is_wrong, pose_error
 from mast.apps.bench.rows import write_rows
+from mast.core.pose import Pose2D
 from mast.pipeline.bounds import truth_bound
 from mast.pipeline.locator import LocatorConfig, locate
+from mast.pipeline.tracking import Prior
 from mast.sim import simulate_scan
 from mast.sim.hard import field_scene
 from mast.sim.scanner import SimulatedScan
 
-__all__ = ["FIELD_OWED_MIN_POINTS", "FieldSummary", "owed_field", "run_field"]
+__all__ = [
+    "FIELD_OWED_MIN_POINTS",
+    "PRIOR_OFF_DEG",
+    "PRIOR_OFF_M",
+    "FieldSummary",
+    "good_prior",
+    "owed_field",
+    "run_field",
+]
 
 #: Returns a panel must show for the scan to owe a fix (the independent scenes' rule).
 FIELD_OWED_MIN_POINTS = 4
+#: A good prior (issue 31): the truth moved by up to this much and this many degrees,
+#: its window twice that (as the independent scenes' tool draws them).
+PRIOR_OFF_M = 0.5
+PRIOR_OFF_DEG = 5.0
+
+
+def good_prior(truth: Pose2D, rng: np.random.Generator) -> Prior:
+    """The truth moved by up to :data:`PRIOR_OFF_M` (uniform over the disc) and
+    :data:`PRIOR_OFF_DEG`, with a window of twice each."""
+    turn = float(rng.uniform(0.0, 2.0 * math.pi))
+    off = PRIOR_OFF_M * math.sqrt(float(rng.random()))
+    centre = Pose2D(
+        truth.easting + off * math.cos(turn),
+        truth.northing + off * math.sin(turn),
+        truth.azimuth + math.radians(float(rng.uniform(-PRIOR_OFF_DEG, PRIOR_OFF_DEG))),
+    )
+    return Prior(centre, 2.0 * PRIOR_OFF_M, math.radians(2.0 * PRIOR_OFF_DEG))
+
 
 _Z95 = float(stats.norm.ppf(0.975))
 
@@ -55,6 +83,9 @@ class FieldSummary(RobustnessSummary):
     by_scanner: dict[str, list[int]] = field(default_factory=dict)
     normalised: list[tuple[float, float, float]] = field(default_factory=list)
     covered: list[tuple[bool, bool, bool]] = field(default_factory=list)
+    prior_fixed: int = 0
+    prior_lost: int = 0
+    prior_wrong: int = 0
 
     def ratios(self) -> tuple[float, float, float]:
         """RMS error over the bound, E, N and azimuth, over every fix."""
@@ -82,6 +113,10 @@ class FieldSummary(RobustnessSummary):
             f"{'':<8} RMS/CRB E {re:.3f} N {rn:.3f} A {ra:.3f}  "
             f"95 % coverage E {ce:.3f} N {cn:.3f} A {ca:.3f}",
             f"{'':<8} owed scans not fixed: {reasons or 'none'}",
+            f"{'':<8} with a good prior ({PRIOR_OFF_M} m, {PRIOR_OFF_DEG:g} deg off): fixed "
+            f"{self.prior_fixed} of {self.owed} owed "
+            f"({100 * self.prior_fixed / self.owed if self.owed else math.nan:5.1f} %), "
+            f"lost {self.prior_lost}, WRONG {self.prior_wrong}",
         ]
         for name, (owed, fixed) in sorted(self.by_scanner.items()):
             rate = 100 * fixed / owed if owed else math.nan
@@ -118,6 +153,16 @@ def run_field(
                 tally[1] += owed and fix.ok
                 if owed and not fix.ok:
                     s.reasons[fix.reason or "?"] += 1
+                prior_status = ""
+                if owed:
+                    # Each owed scan again with a good prior: it may only add fixes.
+                    rng = np.random.default_rng([seed, i, len(rows), 7])
+                    near = replace(cfg, prior=good_prior(shot.pose, rng))
+                    with_prior = locate(sim.scan, scene.survey, config=near)
+                    prior_status = with_prior.status
+                    s.prior_fixed += with_prior.ok
+                    s.prior_lost += fix.ok and not with_prior.ok
+                    s.prior_wrong += is_wrong(with_prior, sim)
                 if wrong:
                     echo(
                         f"  WRONG FIX {scene.name} {shot.label}: {fix.pose} "
@@ -156,6 +201,7 @@ def run_field(
                         "status": fix.status,
                         "reason": fix.reason or "",
                         "wrong": int(wrong),
+                        "prior_status": prior_status,
                         "beacons": " ".join(fix.beacons),
                         "error_e_m": err[0],
                         "error_n_m": err[1],
