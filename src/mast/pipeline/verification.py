@@ -110,7 +110,10 @@ class VerificationConfig:
         keeps the beacon from supporting the pose without an identified node.
     duplicate_m, duplicate_rad : float
         A hypothesis starting this close to an already verified pose is not
-        verified again.
+        verified again, nor is a refined pose this close to one kept. A few
+        sigmas of a fix: a start 4 cm and 0.5 degrees from a pose that misfits
+        one beacon can refine to the pose that fits both (shared hostile scene
+        0046 with a prior, when these were 5 cm and 0.5 degrees).
     placed_support : bool
         A beacon without a node of its own may support a pose on which
         another beacon's identified corner lands on its surveyed edge when
@@ -163,8 +166,8 @@ class VerificationConfig:
     through_probability: float = 0.01
     corner_reach_m: float = 0.3
     straight_alpha: float = 1e-3
-    duplicate_m: float = 0.05
-    duplicate_rad: float = math.radians(0.5)
+    duplicate_m: float = 0.02
+    duplicate_rad: float = math.radians(0.2)
     placed_support: bool = True
     grazing_noise_floor: float = 0.5
     same_reading_share: float = 0.8
