@@ -83,6 +83,38 @@ def test_a_good_prior_never_loses_a_fix_the_global_search_gives(name: str) -> No
         assert _right(truth, near)
 
 
+def test_a_prior_searches_other_basins_of_its_window_when_the_best_poses_fail() -> None:
+    """Hostile 0046 has no fix without a prior (its corners are not identified). With one
+    0.5 m and 5 degrees off, the six best grid poses of its window all lie in one wrong
+    basin, 1 m and 11-15 degrees off and within 0.3 m and 3.5 degrees of each other:
+    the second batch, poses at least 0.4 m from every one before, holds the true one
+    (its second)."""
+    name = "hostile/case0046"
+    truth, alone, scan, survey, cfg = _case(name)
+    assert not alone.ok
+    near = replace(cfg, prior=_prior(name, truth, 0.5, 5.0))
+    fix = locate(scan, survey, config=near)
+    assert fix.ok, fix.detail
+    assert _right(truth, fix)
+    one_batch = replace(near, tracking=replace(near.tracking, other_basins_m=math.inf))
+    assert not locate(scan, survey, config=one_batch).ok
+
+
+def test_a_start_near_a_misfitting_pose_is_still_refined_on_its_own() -> None:
+    """Hostile 0046 with a prior 0.4 m and 4 degrees off: the first grid pose refines to a
+    pose 0.5 degrees off that misfits one beacon; the third starts 4 cm and 0.14 degrees
+    from it and refines to the truth, with both beacons. Taken for the same pose (within
+    5 cm and 0.5 degrees, as verification once did), it was never refined."""
+    name = "hostile/case0046"
+    truth, _, scan, survey, cfg = _case(name)
+    near = replace(cfg, prior=_prior(name, truth, 0.4, 4.0))
+    fix = locate(scan, survey, config=near)
+    assert fix.ok, fix.detail
+    assert _right(truth, fix)
+    coarse = replace(near.verification, duplicate_m=0.05, duplicate_rad=math.radians(0.5))
+    assert not locate(scan, survey, config=replace(near, verification=coarse)).ok
+
+
 @pytest.mark.parametrize("name", ["noisy/case0002", "hostile/case0042"])
 def test_a_wrong_prior_still_gives_no_fix(name: str) -> None:
     """The global search a failed prior falls back on keeps only poses inside its window."""

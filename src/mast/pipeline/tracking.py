@@ -93,7 +93,7 @@ class TrackingConfig:
         grid poses can all lie in one wrong basin (rock parallel to a middle
         panel scores like the panel: shared independent scenes noisy 0096 and
         0146, hostile 0046, the true pose ranked 8th to 14th, every pose above
-        it within 0.4 m and 3 degrees of one wrong one).
+        it within 0.4 m and 3.5 degrees of one wrong one).
     """
 
     max_radius_m: float = 2.0
