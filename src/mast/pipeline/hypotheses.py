@@ -12,7 +12,13 @@ adjustment decide). Two kinds of hypothesis come out of here:
 * a **single node**: one identified node and the panels it was identified
   with fix a whole pose on their own (a point and a direction). Weaker, so it
   is offered after the pairs; verification against every beam must then find
-  a second beacon where the pose says it is.
+  a second beacon where the pose says it is;
+* a **panel pair** (:func:`panel_hypotheses`), only when the nodes give no fix:
+  two straight segments of the scan as long as two surveyed beacons' middle
+  panels, as far apart and turned as those panels are. A short outer panel
+  seen obliquely is often fitted into one line with the rock beside it, so
+  that no corner lands on its edge, while the middle panel between two nodes
+  is a segment of its own.
 """
 
 from __future__ import annotations
@@ -38,6 +44,7 @@ __all__ = [
     "corner_covariance",
     "node_covariance",
     "node_sigma",
+    "panel_hypotheses",
     "pose_hypotheses",
 ]
 
@@ -59,6 +66,23 @@ class HypothesisConfig:
         Most node-pair hypotheses passed on to verification (best first).
     max_single_hypotheses : int
         Most single-node hypotheses passed on (lowest Table 1 option first).
+    panel_min_points : int
+        Returns a segment needs to be taken for a middle panel
+        (:func:`panel_hypotheses`).
+    panel_short_fraction, panel_long_m : float
+        A segment is taken for a middle panel of length ``L`` when it is at
+        least ``panel_short_fraction * L`` long (the returns at both ends fall
+        short of the nodes, and a node's neighbour may take a few of them) and
+        at most ``L + panel_long_m`` (a shallow outer panel fitted into it). On
+        the shared independent scenes the middle panels' segments were 0.77 to
+        1.35 times their panels' lengths, 0.1 m longer at most.
+    min_panel_pair_m : float
+        Two segments closer than this are not taken for two beacons.
+    max_panel_segments : int
+        Most segments tried as middle panels (those with most returns first):
+        the search costs nothing where the scan shows no beacon.
+    max_panel_hypotheses : int
+        Most panel-pair hypotheses passed on (best agreement first).
     """
 
     sigmas: float = 5.0
@@ -66,6 +90,12 @@ class HypothesisConfig:
     min_node_separation_m: float = 0.2
     max_pair_hypotheses: int = 200
     max_single_hypotheses: int = 60
+    panel_min_points: int = 5
+    panel_short_fraction: float = 0.6
+    panel_long_m: float = 0.15
+    min_panel_pair_m: float = 1.0
+    max_panel_segments: int = 24
+    max_panel_hypotheses: int = 60
 
 
 @dataclass(frozen=True, eq=False)
@@ -81,8 +111,9 @@ class Hypothesis:
     misfit : float
         Largest normalised disagreement of the consistency tests (<= 1 passes).
     kind : str
-        ``"pair"`` (two nodes), ``"single"`` (one node and its panels) or
-        ``"prior"`` (a prior pose searched by the tracker).
+        ``"pair"`` (two nodes), ``"single"`` (one node and its panels),
+        ``"panels"`` (two beacons' middle panels, no node) or ``"prior"`` (a
+        prior pose searched by the tracker).
     spread_m : float
         Standard deviation of where the hypothesis puts a return: its node's
         position error plus its rotation error over twice the node's range
@@ -330,3 +361,98 @@ def pose_hypotheses(
     turns = itertools.chain.from_iterable(itertools.zip_longest(*per_node))
     singles = itertools.islice((h for h in turns if h is not None), config.max_single_hypotheses)
     return pairs + list(singles)
+
+
+def panel_hypotheses(
+    segmentation: Segmentation,
+    index: SurveyIndex,
+    config: HypothesisConfig = HypothesisConfig(),
+) -> list[Hypothesis]:
+    """Poses from two segments taken for two surveyed beacons' middle panels, no node.
+
+    A segment as long as a design's middle panel (within ``panel_short_fraction``
+    and ``panel_long_m``) may be that panel, its midpoint the panel's within half
+    the difference of their lengths. Two such segments make a hypothesis for two
+    surveyed beacons of those designs whose middle panels' midpoints lie as far
+    apart as the segments' (candidate pairs from the survey's index: their node
+    edges 2 lie within the panels' half lengths of that), when the rotation each
+    segment's direction implies (facing either way) agrees with the one the
+    vector between the two midpoints implies, within ``sigmas`` of the direction's
+    standard deviation and what the midpoints' slack turns it by. The pose
+    averages the two segments' rotations (weighted) and puts both midpoints on
+    their panels' midpoints. The beacons must then prove their shape at the
+    refined pose (:func:`~mast.pipeline.locator`), since no corner names them.
+    """
+    reps = index.representatives
+    lengths = [float(np.hypot(*(b.edges[2] - b.edges[1]))) for b in reps]
+    order = sorted(
+        range(len(segmentation.segments)), key=lambda i: (-len(segmentation.segments[i]), i)
+    )
+    cands: list[tuple[Segment, str, float]] = []
+    taken = 0
+    for i in order:
+        s = segmentation.segments[i]
+        if len(s) < config.panel_min_points or taken == config.max_panel_segments:
+            continue
+        fits = [
+            (s, b.id, length)
+            for b, length in zip(reps, lengths, strict=True)
+            if config.panel_short_fraction * length <= s.length <= length + config.panel_long_m
+        ]
+        taken += bool(fits)
+        cands.extend(fits)
+    survey, ids = index.survey, index.survey.ids
+    found: list[Hypothesis] = []
+    for (sa, da, la), (sb, db, lb) in itertools.combinations(cands, 2):
+        if sa is sb:
+            continue
+        d_vec = sb.midpoint - sa.midpoint
+        ds = float(np.hypot(*d_vec))
+        if ds < config.min_panel_pair_m:
+            continue
+        slack_a = 0.5 * abs(sa.length - la) + sa.spacing_start + sa.spacing_end
+        slack_b = 0.5 * abs(sb.length - lb) + sb.spacing_start + sb.spacing_end
+        tol_d = slack_a + slack_b + config.sigmas * segmentation.noise_m
+        rows_a, rows_b = index.pair_rows(da, 2, db, 2, ds, 0.5 * (la + lb) + tol_d)
+        if rows_a.size == 0:
+            continue
+        ba, bb = index.row_beacon(rows_a), index.row_beacon(rows_b)
+        for ka, kb in zip(ba.tolist(), bb.tolist(), strict=True):
+            if ka == kb:
+                continue
+            ea, eb = survey[ids[ka]].edges, survey[ids[kb]].edges
+            pa, pb = 0.5 * (ea[1] + ea[2]), 0.5 * (eb[1] + eb[2])
+            m_vec = pb - pa
+            dm = float(np.hypot(*m_vec))
+            if abs(dm - ds) > tol_d:
+                continue
+            turn = math.atan2(m_vec[1], m_vec[0]) - math.atan2(d_vec[1], d_vec[0])
+            slack_rot = math.atan2(tol_d, ds)
+            rots, weights = [], []
+            for seg_k, edges in ((sa, ea), (sb, eb)):
+                step = edges[2] - edges[1]
+                base = math.atan2(step[1], step[0]) - math.atan2(
+                    seg_k.direction[1], seg_k.direction[0]
+                )
+                # The segment's direction has no sign: the rotation nearer the vector's.
+                off = min(
+                    (_wrap(base - turn), _wrap(base + math.pi - turn)), key=lambda a: abs(a)
+                )
+                tol = max(
+                    config.min_rotation_tol_rad,
+                    config.sigmas * seg_k.sigma_direction + slack_rot,
+                )
+                if abs(off) > tol:
+                    break
+                rots.append(turn + off)
+                weights.append(1.0 / max(seg_k.sigma_direction, 1e-4) ** 2)
+            else:
+                rot = float(np.average(rots, weights=weights))
+                c, s_ = math.cos(rot), math.sin(rot)
+                rmat = np.array([[c, -s_], [s_, c]])
+                t = 0.5 * ((pa - rmat @ sa.midpoint) + (pb - rmat @ sb.midpoint))
+                sim = Similarity(1.0, _wrap(rot), np.asarray(t, dtype=float), 0.0)
+                spread = max(slack_a, slack_b) + 2.0 * ds * slack_rot
+                found.append(Hypothesis((), sim, abs(dm - ds) / tol_d, "panels", spread))
+    found.sort(key=lambda h: h.misfit)
+    return found[: config.max_panel_hypotheses]

@@ -42,7 +42,12 @@ from mast.pipeline.adjustment import (
 )
 from mast.pipeline.alignment import Similarity
 from mast.pipeline.bounds import cramer_rao_bound
-from mast.pipeline.hypotheses import Hypothesis, HypothesisConfig, pose_hypotheses
+from mast.pipeline.hypotheses import (
+    Hypothesis,
+    HypothesisConfig,
+    panel_hypotheses,
+    pose_hypotheses,
+)
 from mast.pipeline.identification import (
     IdentificationConfig,
     PanelIdentification,
@@ -236,11 +241,13 @@ def _choose(verified: list[Verified], cfg: LocatorConfig) -> tuple[Verified | No
     # Every beacon the beams confirm counts, but a fix needs ``min_cornered`` whose
     # identified corners land on their surveyed edges: shape tells beacons apart.
     # A tracked prior already says which beacon is which.
+    # Without a corner (a pose from two middle panels) every beacon must prove its shape.
     confirmed = [v for v in verified if len(v.supported) >= cfg.min_beacons]
     full = [
         v
         for v in confirmed
         if len(v.shaped if v.hypothesis.kind == "prior" else v.cornered) >= cfg.min_cornered
+        or (v.hypothesis.kind == "panels" and len(v.shaped) >= cfg.min_beacons)
     ]
     if not full:
         best = verified[0] if verified else None
@@ -438,45 +445,60 @@ def _locate(
             seg, index.representatives, cfg.identification, survey_sigma_m=noise.survey_sigma_m
         )
         found["identification"] = ident
-        if not ident.nodes:
-            return finish(
-                reason="no_beacon",
-                detail=f"{len(seg.segments)} segments, no beacon corner identified",
-            )
         # Not narrowed by the prior here: ICP may carry a start from outside the window
         # into it, and a pose the global search finds inside must not be lost.
-        hyps = pose_hypotheses(
-            ident, seg, index, cfg.hypotheses, survey_sigma_m=noise.survey_sigma_m
+        hyps = (
+            pose_hypotheses(ident, seg, index, cfg.hypotheses, survey_sigma_m=noise.survey_sigma_m)
+            if ident.nodes
+            else []
         )
-        if not hyps:
-            seen = sorted({b for n in ident.nodes for b in index.beacons_like(n.beacon)})
-            return finish(
-                reason="inconsistent",
-                detail=f"no pose from the corners of beacons {', '.join(seen[:6])}",
-            )
     found["hypotheses"] = tuple(hyps)
-    # Stage 4: ICP and every beam's verdict; the best pose by likelihood, unless ambiguous.
-    verified = verify(
-        hyps,
-        scan,
-        panels,
-        index,
-        ident,
-        seg,
-        noise,
-        cfg.verification,
-        settled=lambda kept: _settled(kept, cfg),
-        min_beacons=cfg.min_beacons,
-    )
-    verified = _admitted(verified, cfg)
-    found["verified"] = tuple(verified)
+
+    def verified_of(hypotheses: list[Hypothesis]) -> list[Verified]:
+        """Stage 4: ICP and every beam's verdict, the poses inside the prior's window."""
+        kept = verify(
+            hypotheses,
+            scan,
+            panels,
+            index,
+            ident,
+            seg,
+            noise,
+            cfg.verification,
+            settled=lambda kept: _settled(kept, cfg),
+            min_beacons=cfg.min_beacons,
+        )
+        return _admitted(kept, cfg)
+
+    # The best pose by likelihood, unless ambiguous, or why there is none.
+    verified = verified_of(hyps) if hyps else []
+    best, reason, detail = _choose(verified, cfg)
     if not verified:
         where = "" if cfg.prior is None else f" within the prior {cfg.prior.pose}"
-        return finish(
-            reason="inconsistent", detail=f"no pose hypothesis{where} is confirmed by the beams"
-        )
-    best, reason, detail = _choose(verified, cfg)
-    found["chosen"] = best or verified[0]
+        reason, detail = "inconsistent", f"no pose hypothesis{where} is confirmed by the beams"
+        if from_prior is None and not ident.nodes:
+            reason = "no_beacon"
+            detail = f"{len(seg.segments)} segments, no beacon corner identified"
+        elif from_prior is None and not hyps:
+            seen = sorted({b for n in ident.nodes for b in index.beacons_like(n.beacon)})
+            detail = f"no pose from the corners of beacons {', '.join(seen[:6])}"
+    if best is None and from_prior is None:
+        # Stage 3b, when the corners give no fix: two beacons' middle panels.
+        free = panel_hypotheses(seg, index, cfg.hypotheses)
+        from_panels = verified_of(free) if free else []
+        if from_panels:
+            found["hypotheses"] = (*hyps, *free)
+            both = sorted(
+                [*verified, *from_panels],
+                key=lambda v: (len(v.supported), v.log_likelihood),
+                reverse=True,
+            )
+            best, why, said = _choose(both, cfg)
+            if not verified:
+                reason, detail = why, said
+            verified = both
+    found["verified"] = tuple(verified)
+    found["chosen"] = best or (verified[0] if verified else None)
     if best is None:
         return finish(reason=reason, detail=detail)
     # Stage 5: adjustment on every beacon the beams confirm, then integrity and the global test.
