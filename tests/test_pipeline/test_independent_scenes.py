@@ -190,6 +190,22 @@ def test_a_competitor_that_misfits_its_beacons_does_not_compete(name: str) -> No
             assert v.misfit
 
 
+#: Each beacon's short outer panel fitted into one line with the rock beside it, so no
+#: corner lands on an edge (or one lands 0.1-0.25 m off and is named another design or
+#: edge), while both middle panels are segments of their own.
+CORNER_FREE = ["noisy/case0048", "noisy/case0096", "noisy/case0144", "hostile/case0023"]
+
+
+@pytest.mark.parametrize("name", CORNER_FREE)
+def test_two_middle_panels_fix_where_no_corner_lands_on_its_edge(name: str) -> None:
+    truth, fix, *_ = _case(name)
+    assert fix.ok, fix.detail
+    assert _right(truth, fix)
+    assert fix.chosen is not None
+    assert fix.chosen.hypothesis.kind == "panels"
+    assert len(fix.chosen.shaped) >= 2
+
+
 @pytest.mark.parametrize("name", ["noisy/case0101", "hostile/case0060"])
 def test_a_pose_whose_cornered_beacon_misfits_is_not_a_fix(name: str) -> None:
     """A beacon identified by its corner whose returns do not lie on its panels (rock

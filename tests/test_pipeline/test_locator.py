@@ -65,6 +65,53 @@ def test_random_scenes_every_owed_fix_is_exact(seed: int) -> None:
     assert found == owed
 
 
+@pytest.fixture
+def no_corners(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The locator with no hypothesis from identified corners: only the corner-free
+    stage (two beacons' middle panels, :func:`~mast.pipeline.hypotheses.panel_hypotheses`)."""
+    import mast.pipeline.locator as locator
+
+    monkeypatch.setattr(locator, "pose_hypotheses", lambda *a, **k: [])
+
+
+@pytest.mark.usefixtures("no_corners")
+def test_two_middle_panels_alone_fix_exactly_and_never_wrong() -> None:
+    """Where both beacons' middle panels show five returns or more and each beacon two
+    panels, the corner-free stage alone fixes (all but one of 20 shots) and every fix it
+    gives is exact; each rests on two beacons proving their own shape."""
+    owed = found = 0
+    for seed in range(6):
+        for index in range(4):
+            scene = random_scene(seed, index)
+            for shot, sim in zip(scene.shots, scene.simulate_all(), strict=True):
+                seen = sim.panels_seen(min_points=5)
+                middles = sum(2 in p and len(p) >= 2 for p in seen.values()) >= 2
+                fix = locate(sim.scan, scene.survey)
+                owed += middles
+                found += middles and fix.ok
+                if fix.ok:
+                    d, a = _errors(fix, shot.pose)
+                    assert d < 1e-4, (scene.name, shot.label, d)
+                    assert a < ARCSEC, (scene.name, shot.label, a / ARCSEC)
+                    assert fix.chosen is not None
+                    assert fix.chosen.hypothesis.kind == "panels"
+                    assert len(fix.chosen.shaped) >= 2
+    assert owed >= 15
+    assert found >= owed - 1
+
+
+@pytest.mark.usefixtures("no_corners")
+def test_two_middle_panels_of_another_site_or_of_rock_are_no_fix() -> None:
+    here, elsewhere = random_scene(4, 1), random_scene(9, 2)
+    for shot, sim in zip(here.shots, here.simulate_all(), strict=True):
+        assert not locate(sim.scan, elsewhere.survey).ok, shot.label
+    scene = paper_scenario()[1]
+    b1 = scene.survey["B1"]
+    moved = Survey([Beacon("B1", b1.edges + [0.0, 0.5]), scene.survey["B2"]])
+    for shot, sim in zip(scene.shots, scene.simulate_all(), strict=True):
+        assert not locate(sim.scan, moved).ok, shot.label
+
+
 def test_partial_segmentation_still_fixes() -> None:
     # B2's P1 mostly hidden behind a post: that beacon shows one panel and a deflection.
     from tests.test_pipeline.test_identification import _scene_with_occluder
