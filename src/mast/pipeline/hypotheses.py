@@ -382,77 +382,93 @@ def panel_hypotheses(
     averages the two segments' rotations (weighted) and puts both midpoints on
     their panels' midpoints. The beacons must then prove their shape at the
     refined pose (:func:`~mast.pipeline.locator`), since no corner names them.
+
+    Bounded: at most ``max_panel_segments`` segments (most returns first), and
+    only the design pairs surveyed within reach of each other are looked up.
     """
     reps = index.representatives
-    lengths = [float(np.hypot(*(b.edges[2] - b.edges[1]))) for b in reps]
+    lengths = np.array([float(np.hypot(*(b.edges[2] - b.edges[1]))) for b in reps])
+    keys = np.array([index.node_key(b.id, 2) for b in reps], dtype=np.int64)
     order = sorted(
         range(len(segmentation.segments)), key=lambda i: (-len(segmentation.segments[i]), i)
     )
-    cands: list[tuple[Segment, str, float]] = []
-    taken = 0
+    # Each segment that may be a middle panel, and the designs whose it may be.
+    cands: list[tuple[Segment, NDArray[np.intp]]] = []
     for i in order:
         s = segmentation.segments[i]
-        if len(s) < config.panel_min_points or taken == config.max_panel_segments:
+        if len(s) < config.panel_min_points:
             continue
-        fits = [
-            (s, b.id, length)
-            for b, length in zip(reps, lengths, strict=True)
-            if config.panel_short_fraction * length <= s.length <= length + config.panel_long_m
-        ]
-        taken += bool(fits)
-        cands.extend(fits)
+        fits = np.flatnonzero(
+            (config.panel_short_fraction * lengths <= s.length)
+            & (s.length <= lengths + config.panel_long_m)
+        )
+        if fits.size:
+            cands.append((s, fits))
+            if len(cands) == config.max_panel_segments:
+                break
     survey, ids = index.survey, index.survey.ids
     found: list[Hypothesis] = []
-    for (sa, da, la), (sb, db, lb) in itertools.combinations(cands, 2):
-        if sa is sb:
-            continue
+    for (sa, da), (sb, db) in itertools.combinations(cands, 2):
         d_vec = sb.midpoint - sa.midpoint
         ds = float(np.hypot(*d_vec))
         if ds < config.min_panel_pair_m:
             continue
-        slack_a = 0.5 * abs(sa.length - la) + sa.spacing_start + sa.spacing_end
-        slack_b = 0.5 * abs(sb.length - lb) + sb.spacing_start + sb.spacing_end
-        tol_d = slack_a + slack_b + config.sigmas * segmentation.noise_m
-        rows_a, rows_b = index.pair_rows(da, 2, db, 2, ds, 0.5 * (la + lb) + tol_d)
-        if rows_a.size == 0:
-            continue
-        ba, bb = index.row_beacon(rows_a), index.row_beacon(rows_b)
-        for ka, kb in zip(ba.tolist(), bb.tolist(), strict=True):
-            if ka == kb:
-                continue
-            ea, eb = survey[ids[ka]].edges, survey[ids[kb]].edges
-            pa, pb = 0.5 * (ea[1] + ea[2]), 0.5 * (eb[1] + eb[2])
-            m_vec = pb - pa
-            dm = float(np.hypot(*m_vec))
-            if abs(dm - ds) > tol_d:
-                continue
-            turn = math.atan2(m_vec[1], m_vec[0]) - math.atan2(d_vec[1], d_vec[0])
-            slack_rot = math.atan2(tol_d, ds)
-            rots, weights = [], []
-            for seg_k, edges in ((sa, ea), (sb, eb)):
-                step = edges[2] - edges[1]
-                base = math.atan2(step[1], step[0]) - math.atan2(
-                    seg_k.direction[1], seg_k.direction[0]
-                )
-                # The segment's direction has no sign: the rotation nearer the vector's.
-                off = min(
-                    (_wrap(base - turn), _wrap(base + math.pi - turn)), key=lambda a: abs(a)
-                )
-                tol = max(
-                    config.min_rotation_tol_rad,
-                    config.sigmas * seg_k.sigma_direction + slack_rot,
-                )
-                if abs(off) > tol:
-                    break
-                rots.append(turn + off)
-                weights.append(1.0 / max(seg_k.sigma_direction, 1e-4) ** 2)
-            else:
-                rot = float(np.average(rots, weights=weights))
-                c, s_ = math.cos(rot), math.sin(rot)
-                rmat = np.array([[c, -s_], [s_, c]])
-                t = 0.5 * ((pa - rmat @ sa.midpoint) + (pb - rmat @ sb.midpoint))
-                sim = Similarity(1.0, _wrap(rot), np.asarray(t, dtype=float), 0.0)
-                spread = max(slack_a, slack_b) + 2.0 * ds * slack_rot
-                found.append(Hypothesis((), sim, abs(dm - ds) / tol_d, "panels", spread))
+        ka, kb = np.meshgrid(da, db, indexing="ij")
+        near = index.have_pairs(keys[ka.ravel()], keys[kb.ravel()])
+        for k_a, k_b in zip(ka.ravel()[near].tolist(), kb.ravel()[near].tolist(), strict=True):
+            la, lb = float(lengths[k_a]), float(lengths[k_b])
+            slack_a = 0.5 * abs(sa.length - la) + sa.spacing_start + sa.spacing_end
+            slack_b = 0.5 * abs(sb.length - lb) + sb.spacing_start + sb.spacing_end
+            tol_d = slack_a + slack_b + config.sigmas * segmentation.noise_m
+            rows_a, rows_b = index.pair_rows(
+                reps[k_a].id, 2, reps[k_b].id, 2, ds, 0.5 * (la + lb) + tol_d
+            )
+            for ba, bb in zip(
+                index.row_beacon(rows_a).tolist(), index.row_beacon(rows_b).tolist(), strict=True
+            ):
+                ea, eb = survey[ids[ba]].edges, survey[ids[bb]].edges
+                h = _panel_pair(sa, sb, ea, eb, ds, tol_d, config)
+                if ba != bb and h is not None:
+                    found.append(replace(h, spread_m=max(slack_a, slack_b) + h.spread_m))
     found.sort(key=lambda h: h.misfit)
     return found[: config.max_panel_hypotheses]
+
+
+def _panel_pair(
+    sa: Segment,
+    sb: Segment,
+    ea: NDArray[np.float64],
+    eb: NDArray[np.float64],
+    ds: float,
+    tol_d: float,
+    config: HypothesisConfig,
+) -> Hypothesis | None:
+    """The pose that puts segments ``sa``, ``sb`` (midpoints ``ds`` apart) on the middle
+    panels of beacons with edges ``ea``, ``eb``, or None when the panels' midpoints are
+    not as far apart within ``tol_d`` or the directions disagree. ``spread_m`` holds
+    what the rotation's slack moves the far returns by."""
+    pa, pb = 0.5 * (ea[1] + ea[2]), 0.5 * (eb[1] + eb[2])
+    m_vec = pb - pa
+    dm = float(np.hypot(*m_vec))
+    if abs(dm - ds) > tol_d:
+        return None
+    d_vec = sb.midpoint - sa.midpoint
+    turn = math.atan2(m_vec[1], m_vec[0]) - math.atan2(d_vec[1], d_vec[0])
+    slack_rot = math.atan2(tol_d, ds)
+    rots, weights = [], []
+    for seg_k, edges in ((sa, ea), (sb, eb)):
+        step = edges[2] - edges[1]
+        base = math.atan2(step[1], step[0]) - math.atan2(seg_k.direction[1], seg_k.direction[0])
+        # The segment's direction has no sign: the rotation nearer the vector's.
+        off = min((_wrap(base - turn), _wrap(base + math.pi - turn)), key=abs)
+        tol = config.sigmas * seg_k.sigma_direction + slack_rot
+        if abs(off) > max(config.min_rotation_tol_rad, tol):
+            return None
+        rots.append(turn + off)
+        weights.append(1.0 / max(seg_k.sigma_direction, 1e-4) ** 2)
+    rot = float(np.average(rots, weights=weights))
+    c, s = math.cos(rot), math.sin(rot)
+    rmat = np.array([[c, -s], [s, c]])
+    t = 0.5 * ((pa - rmat @ sa.midpoint) + (pb - rmat @ sb.midpoint))
+    sim = Similarity(1.0, _wrap(rot), np.asarray(t, dtype=float), 0.0)
+    return Hypothesis((), sim, abs(dm - ds) / tol_d, "panels", 2.0 * ds * slack_rot)
