@@ -436,10 +436,6 @@ def _locate(
     found["identification"] = ident
     if from_prior is not None:
         hyps = from_prior
-        if not hyps:
-            return finish(
-                reason="inconsistent", detail=f"no panel returns within the prior {cfg.prior}"
-            )
     else:
         ident = identify_panels(
             seg, index.representatives, cfg.identification, survey_sigma_m=noise.survey_sigma_m
@@ -485,9 +481,9 @@ def _locate(
     if best is None and from_prior is None:
         # Stage 3b, when the corners give no fix: two beacons' middle panels.
         free = panel_hypotheses(seg, index, cfg.hypotheses)
+        found["hypotheses"] = (*hyps, *free)
         from_panels = verified_of(free) if free else []
         if from_panels:
-            found["hypotheses"] = (*hyps, *free)
             both = sorted(
                 [*verified, *from_panels],
                 key=lambda v: (len(v.supported), v.log_likelihood),
