@@ -280,8 +280,13 @@ def _choose(verified: list[Verified], cfg: LocatorConfig) -> tuple[Verified | No
     # reading). A tracked pose whose second beacon merely lies where the pose
     # puts it is doubtful likewise: a pose with one shaped beacon that explains
     # the scan better competes. A fix on two identified corners, each on its
-    # own surveyed edge, is not undone by one corner read another way.
+    # own surveyed edge, is not undone by one corner read another way. A pose from two
+    # middle panels alone is: any corner identified on its surveyed edge at another
+    # pose reads the scan by a beacon's shape, where the two middle panels only by
+    # their lengths (on a long drive, a beacon in view read as a look-alike 65 m away
+    # with rock as its neighbour, 53 log-units ahead of its own one-corner reading).
     margin = cfg.ambiguity_log_ratio * cfg.likelihood_tempering
+    from_panels = best.hypothesis.kind == "panels"
     proven_corners = _proven_corners(best, cfg)
     doubtful = len(proven_corners) < cfg.min_beacons
     tracked_best = best.hypothesis.kind == "prior" and len(best.shaped) < cfg.min_beacons
@@ -296,7 +301,9 @@ def _choose(verified: list[Verified], cfg: LocatorConfig) -> tuple[Verified | No
             continue  # the same reading of the scan: not a second place
         if other.misfit and not best.misfit:
             continue  # its beacons' returns do not lie on their panels: not a reading of them
-        if (len(other.shaped) >= cfg.min_beacons and len(other.cornered) >= proven) or (
+        if from_panels and other.cornered:
+            slack = math.inf
+        elif (len(other.shaped) >= cfg.min_beacons and len(other.cornered) >= proven) or (
             other.cornered and doubtful
         ):
             slack = margin
@@ -312,6 +319,14 @@ def _choose(verified: list[Verified], cfg: LocatorConfig) -> tuple[Verified | No
                 f"{other.pose} ({', '.join(other.supported)}) fit equally well",
             )
     return best, "", ""
+
+
+def _ranked_together(first: list[Verified], then: list[Verified]) -> list[Verified]:
+    """Two searches' verified poses as one list, most supported first, then by likelihood
+    (the first search's before the second's where they tie)."""
+    if not first:
+        return then
+    return sorted([*first, *then], key=lambda v: (len(v.supported), v.log_likelihood), reverse=True)
 
 
 def _settled(verified: list[Verified], cfg: LocatorConfig) -> bool:
@@ -386,10 +401,12 @@ def _prior_first(
         )
         # The best grid poses first; poses from other basins of the window only when
         # those give no fix.
+        verified: tuple[Verified, ...] = ()
         for batch in batches:
-            fix = _locate(scan, survey, searched, t0, seg, from_prior=batch)
+            fix = _locate(scan, survey, searched, t0, seg, from_prior=batch, before=verified)
             if fix.ok:
                 return fix, False
+            verified = fix.verified
     return _locate(scan, survey, fallback, t0, seg), searched.prior is not None
 
 
@@ -401,11 +418,13 @@ def _locate(
     seg: Segmentation,
     *,
     from_prior: list[Hypothesis] | None = None,
+    before: tuple[Verified, ...] = (),
 ) -> Fix:
     """:func:`locate` from hypotheses of the prior's own search (``from_prior``, a
     batch of :func:`~mast.pipeline.tracking.prior_hypotheses`) or, without them, from the
     global ones (kept inside the prior's window, if there is one), on the scan's
-    segmentation ``seg`` (made once for both); ``t0`` is when it began."""
+    segmentation ``seg`` (made once for both); ``t0`` is when it began. The poses an
+    earlier batch verified (``before``) compete with this batch's."""
     noise = cfg.noise
     index, panels = _survey_index(survey, scan.range_max_m)
     found: dict[str, object] = {"config": cfg, "hypotheses": (), "verified": (), "chosen": None}
@@ -467,7 +486,7 @@ def _locate(
         return _admitted(kept, cfg)
 
     # The best pose by likelihood, unless ambiguous, or why there is none.
-    verified = verified_of(hyps) if hyps else []
+    verified = _ranked_together(list(before), verified_of(hyps) if hyps else [])
     best, reason, detail = _choose(verified, cfg)
     if not verified:
         where = "" if cfg.prior is None else f" within the prior {cfg.prior.pose}"
@@ -484,11 +503,7 @@ def _locate(
         found["hypotheses"] = (*hyps, *free)
         from_panels = verified_of(free) if free else []
         if from_panels:
-            both = sorted(
-                [*verified, *from_panels],
-                key=lambda v: (len(v.supported), v.log_likelihood),
-                reverse=True,
-            )
+            both = _ranked_together(verified, from_panels)
             best, why, said = _choose(both, cfg)
             if not verified:
                 reason, detail = why, said
