@@ -135,3 +135,35 @@ def test_a_tracked_pose_proves_its_second_beacon(
     if step.fix.ok:
         assert step.fix.pose is not None
         assert math.dist(step.fix.pose.position, truth.position) < 0.03
+
+
+def test_a_pose_from_two_middle_panels_gives_way_to_a_corner_read_another_way() -> None:
+    """Seed 2 at 40 Hz, scan 3194 (issue 31, sixth round): D012 in view, with its corner.
+    The corner-free stage read it as its look-alike D008 65 m away and rock as D007's
+    middle panel, both bent as their shapes are, 53 log-units ahead of D012's own
+    reading on its identified corner. A corner identified on its surveyed edge at
+    another pose outweighs two middle panels."""
+    scan = _long_scan("drive40s2_scan3194_mm.csv")
+    fix = locate(scan, read_survey(DATA / "drive40s2_beacons.csv"), config=LONG_CONFIG)
+    assert not fix.ok, (fix.pose, fix.beacons)
+    far = [v for v in fix.verified if v.hypothesis.kind == "panels" and len(v.shaped) >= 2]
+    assert far  # the look-alike reading was found and refused, not missed
+    assert any(v.cornered == ("D012",) for v in fix.verified)
+
+
+def test_a_prior_searches_other_basins_against_what_its_best_poses_found() -> None:
+    """Seed 0 at 50 Hz, scan 4422, tracked 0.1 s after the last fix: the prior's best six
+    poses give D012 alone; a pose of the second batch, 5 cm and 0.55 degrees off, read
+    rock beside D011 as its panel. Judged with the first batch's poses, D012's reading
+    explains the scan as well, and a tracked pose resting on one shaped beacon does not
+    outrank it."""
+    tracker = SequenceLocator(read_survey(DATA / "drive50s0_beacons.csv"), config=LONG_CONFIG)
+    s = _long_scan("drive50s0_scan4422_mm.csv", math.inf)
+    last = Pose2D(7432.13194323877, 6885.10772632997, 1.7680036205866971)
+    truth = Pose2D(7432.301951536272, 6885.067338900567, 1.7643246871731326)
+    tracker.assume(last, s.stamp_ns - 100_000_000)
+    step = tracker.step(s)
+    assert step.tracked
+    if step.fix.ok:
+        assert step.fix.pose is not None
+        assert math.dist(step.fix.pose.position, truth.position) < 0.03
