@@ -5,7 +5,8 @@ A short chain of the paper's stages (``mast.pipeline``), each in its own module:
 1. :func:`~mast.pipeline.segmentation.segment_scan` — PCA line segmentation;
 2. :func:`~mast.pipeline.identification.identify_panels` — Table 1 identification;
 3. :func:`~mast.pipeline.hypotheses.pose_hypotheses` — pose hypotheses (or, with a
-   prior, :func:`~mast.pipeline.tracking.prior_hypotheses`);
+   prior, :func:`~mast.pipeline.tracking.prior_hypotheses`; when the corners give no
+   fix, :func:`~mast.pipeline.hypotheses.panel_hypotheses` from two middle panels);
 4. :func:`~mast.pipeline.verification.verify` — ICP and every beam's verdict;
 5. :func:`~mast.pipeline.adjustment.adjust_on_panels` — least squares, then
    :mod:`~mast.pipeline.integrity` (data snooping, beacon tests) and the global test.
