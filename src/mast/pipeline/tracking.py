@@ -87,9 +87,10 @@ class TrackingConfig:
         at least this much from the other (translation, or rotation times the
         returns' median range): closer ones fall in the same ICP basin.
     other_basins_m : float
-        The second batch of hypotheses, searched when the first gives no fix:
-        up to ``candidates`` more grid poses, each moving the returns by at
-        least this much from every pose before it. In a wide window the best
+        The second batch of hypotheses, searched when the first gives no fix
+        (and judged together with the poses the first verified): up to
+        ``candidates`` more grid poses, each moving the returns by at least
+        this much from every pose before it. In a wide window the best
         grid poses can all lie in one wrong basin (rock parallel to a middle
         panel scores like the panel: shared independent scenes noisy 0096 and
         0146, hostile 0046, the true pose ranked 8th to 14th, every pose above
