@@ -426,10 +426,12 @@ def panel_hypotheses(
             for ba, bb in zip(
                 index.row_beacon(rows_a).tolist(), index.row_beacon(rows_b).tolist(), strict=True
             ):
+                if ba == bb:
+                    continue  # one beacon's own edge 2 twice
                 ea, eb = survey[ids[ba]].edges, survey[ids[bb]].edges
-                h = _panel_pair(sa, sb, ea, eb, ds, tol_d, config)
-                if ba != bb and h is not None:
-                    found.append(replace(h, spread_m=max(slack_a, slack_b) + h.spread_m))
+                h = _panel_pair(sa, sb, ea, eb, ds, tol_d, max(slack_a, slack_b), config)
+                if h is not None:
+                    found.append(h)
     found.sort(key=lambda h: h.misfit)
     return found[: config.max_panel_hypotheses]
 
@@ -441,12 +443,14 @@ def _panel_pair(
     eb: NDArray[np.float64],
     ds: float,
     tol_d: float,
+    slack_m: float,
     config: HypothesisConfig,
 ) -> Hypothesis | None:
     """The pose that puts segments ``sa``, ``sb`` (midpoints ``ds`` apart) on the middle
     panels of beacons with edges ``ea``, ``eb``, or None when the panels' midpoints are
-    not as far apart within ``tol_d`` or the directions disagree. ``spread_m`` holds
-    what the rotation's slack moves the far returns by."""
+    not as far apart within ``tol_d`` or the directions disagree. Its ``spread_m`` is
+    how far a midpoint may lie along its panel (``slack_m``) and what the rotation's
+    slack moves the far returns by."""
     pa, pb = 0.5 * (ea[1] + ea[2]), 0.5 * (eb[1] + eb[2])
     m_vec = pb - pa
     dm = float(np.hypot(*m_vec))
@@ -471,4 +475,4 @@ def _panel_pair(
     rmat = np.array([[c, -s], [s, c]])
     t = 0.5 * ((pa - rmat @ sa.midpoint) + (pb - rmat @ sb.midpoint))
     sim = Similarity(1.0, _wrap(rot), np.asarray(t, dtype=float), 0.0)
-    return Hypothesis((), sim, abs(dm - ds) / tol_d, "panels", 2.0 * ds * slack_rot)
+    return Hypothesis((), sim, abs(dm - ds) / tol_d, "panels", slack_m + 2.0 * ds * slack_rot)

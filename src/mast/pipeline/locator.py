@@ -327,7 +327,7 @@ def _ranked_together(first: list[Verified], then: list[Verified]) -> list[Verifi
     (the first search's before the second's where they tie)."""
     if not first:
         return then
-    return sorted([*first, *then], key=lambda v: (len(v.supported), v.log_likelihood), reverse=True)
+    return sorted([*first, *then], key=lambda v: v.rank, reverse=True)
 
 
 def _settled(verified: list[Verified], cfg: LocatorConfig) -> bool:
@@ -502,9 +502,9 @@ def _locate(
         # Stage 3b, when the corners give no fix: two beacons' middle panels.
         free = panel_hypotheses(seg, index, cfg.hypotheses)
         found["hypotheses"] = (*hyps, *free)
-        from_panels = verified_of(free) if free else []
-        if from_panels:
-            both = _ranked_together(verified, from_panels)
+        on_panels = verified_of(free) if free else []
+        if on_panels:
+            both = _ranked_together(verified, on_panels)
             best, why, said = _choose(both, cfg)
             if not verified:
                 reason, detail = why, said

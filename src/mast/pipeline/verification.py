@@ -354,6 +354,11 @@ class Verified:
         """Beam-model log-likelihood ratio against clutter, over every predicted beam."""
         return sum(c.log_likelihood for c in self.checks.values())
 
+    @property
+    def rank(self) -> tuple[int, float]:
+        """What orders verified poses, higher first: beacons supporting, then likelihood."""
+        return len(self.supported), self.log_likelihood
+
     def same_pose(self, other: Pose2D, cfg: VerificationConfig) -> bool:
         return _same_pose(self.icp.pose, other, cfg)
 
@@ -966,4 +971,4 @@ def verify(
 def _ranked(out: list[Verified], sequence: dict[int, int]) -> list[Verified]:
     """Kept poses most supported first, then by likelihood, then in hypothesis order."""
     in_order = sorted(out, key=lambda v: sequence[id(v)])
-    return sorted(in_order, key=lambda v: (len(v.supported), v.log_likelihood), reverse=True)
+    return sorted(in_order, key=lambda v: v.rank, reverse=True)

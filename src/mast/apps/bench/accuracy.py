@@ -232,7 +232,7 @@ def _summarise(
         chi2_test_pass=float(np.mean(col("chi2_pass"))),
         chi2_ks_pvalue=float(stats.kstest(pit, "uniform").pvalue),
         seconds=secs,
-        wrong=sum(int(r["wrong"]) for r in fixed),  # type: ignore[call-overload]
+        wrong=int(col("wrong").sum()),
     )
 
 
