@@ -38,6 +38,7 @@ from mast.core.noise import NoiseModel
 from mast.core.pose import Pose2D, wrap_angles
 from mast.core.quantiles import chi2_isf, chi2_sf
 from mast.core.scan import Scan
+from mast.pipeline.adjustment import MIN_INCIDENCE_COS
 from mast.pipeline.alignment import IcpResult, icp_point_to_line
 from mast.pipeline.edges import at_silhouette, jump_m
 from mast.pipeline.hypotheses import Hypothesis, corner_covariance, node_sigma
@@ -544,7 +545,8 @@ def _in_place(
     weighs every offset across the one line through all the returns, as the bend test
     compares the two; whether the returns lie on the panels turns on each panel's own
     incidence.) Returns within ``edge_margin_m`` of the beacon's free ends are left
-    out: there a beam may as well meet the rock the beacon is mounted on; and so are
+    out: there a beam may as well meet the rock the beacon is mounted on; so are
+    beams within 2 degrees of grazing their panel; and so are
     returns at the beacon's silhouette (the next return, off the beacon, lies more than
     a jump behind: :mod:`mast.pipeline.edges`), which may be mixed pixels.
     """
@@ -575,6 +577,10 @@ def _in_place(
     on, k, p = on[~free], k[~free], p[~free]
     rho, cos_n = _incidence(p, icp.pose.position, panels.normal[k])
     cos_n = np.abs(cos_n)
+    # A beam within 2 degrees of grazing carries no usable range (the adjustment
+    # leaves it out too): its footprint spreads along the whole panel.
+    usable = cos_n > MIN_INCIDENCE_COS
+    on, rho, cos_n = on[usable], rho[usable], cos_n[usable]
     across = noise.range_sigma_m * np.maximum(cos_n, cfg.grazing_noise_floor)
     var = across**2 + (rho * noise.angle_sigma_rad) ** 2 * (1 - cos_n**2)
     chi = float(np.sum(icp.residual_m[on] ** 2 / (var + noise.survey_sigma_m**2)))
