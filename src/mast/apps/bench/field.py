@@ -12,7 +12,11 @@ show two panels with at least 4 returns (at any incidence), and a fix is **wrong
 it is more than 5 cm or 0.25 degrees off and outside five of its own sigmas. Each scan
 is located with its scanner's own range sigma and an exact survey. Fixes are scored
 against the Cramer-Rao bound of their scan's true beacon returns (RMS/CRB and 95 %
-coverage per coordinate).
+coverage per coordinate): the beams that, in the scan located, returned from a beacon's
+panel. A beam the scanner dropped carries nothing, and a mixed pixel (its footprint on
+a panel and on what lies behind) carries no range to the panel; counted as clean
+returns they made the bound of the hostile family's scans 1-4 % tighter than any
+estimator on the data received can reach (issue 31).
 """
 
 from __future__ import annotations
@@ -180,7 +184,7 @@ def run_field(
                         exact.scan.valid,
                         scene.survey,
                         noise=cfg.noise,
-                        beacon_beams=exact.beacon_mask(),
+                        beacon_beams=exact.beacon_mask() & sim.beacon_mask(),
                     )
                     crb = [float(v) for v in np.sqrt(np.diag(bound))]
                     sig = fix.adjustment.sigma
