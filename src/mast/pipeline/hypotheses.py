@@ -413,9 +413,9 @@ def panel_hypotheses(
         ds = float(np.hypot(*d_vec))
         if ds < config.min_panel_pair_m:
             continue
-        ka, kb = np.meshgrid(da, db, indexing="ij")
-        near = index.have_pairs(keys[ka.ravel()], keys[kb.ravel()])
-        for k_a, k_b in zip(ka.ravel()[near].tolist(), kb.ravel()[near].tolist(), strict=True):
+        ka, kb = (g.ravel() for g in np.meshgrid(da, db, indexing="ij"))
+        near = index.have_pairs(keys[ka], keys[kb])
+        for k_a, k_b in zip(ka[near].tolist(), kb[near].tolist(), strict=True):
             la, lb = float(lengths[k_a]), float(lengths[k_b])
             slack_a = 0.5 * abs(sa.length - la) + sa.spacing_start + sa.spacing_end
             slack_b = 0.5 * abs(sb.length - lb) + sb.spacing_start + sb.spacing_end
