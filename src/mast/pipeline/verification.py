@@ -616,9 +616,16 @@ def _stray_corner(
     the range and survey variances): two short or nearly collinear lines
     meet far from where their surfaces do. A corner on any surveyed edge,
     the free ends where the beacon meets the wall included, is the
-    beacon's own. Everything is compared in the scanner frame, where the
-    corners and their covariances are (``edges_scanner``: the beacon's
-    surveyed edges mapped there by the pose).
+    beacon's own. A corner is the scan's only where its two lines meet
+    between their returns, within ``gate_m`` of each line's facing end
+    (and the spacing of its returns there): two lines of rock that are
+    nearly straight on (a few degrees apart) meet a metre or more beyond
+    the returns, where the scan shows no corner at all (field hostile 1-1
+    pose 2: 0.33 m past both ends, beside a small beacon's 0.1 m panel;
+    shared noisy 0124: 3.5 m, beside a beacon of a turned-round pose).
+    Everything is compared in the scanner frame, where the corners and
+    their covariances are (``edges_scanner``: the beacon's surveyed edges
+    mapped there by the pose).
     """
     if not seg.corners:
         return False
@@ -628,6 +635,12 @@ def _stray_corner(
     extra = noise.gate_sigma_m**2 + noise.survey_sigma_m**2
     for k in np.flatnonzero(near_node):
         c = seg.corners[k]
+        a, b = seg.segments[c.first], seg.segments[c.second]
+        if (
+            math.dist(c.node, a.end) > gate_m + a.spacing_end
+            or math.dist(c.node, b.start) > gate_m + b.spacing_start
+        ):
+            continue  # the lines meet beyond their returns: no corner in the scan
         cov = corner_covariance(seg.segments[c.first], seg.segments[c.second], c.node, seg.noise_m)
         inv = np.linalg.inv(cov + extra * np.eye(2))
         off = edges_scanner - c.node
