@@ -215,3 +215,33 @@ def test_a_pose_whose_cornered_beacon_misfits_is_not_a_fix(name: str) -> None:
     _, fix, *_ = _case(name)
     assert not fix.ok
     assert fix.reason in ("inconsistent", "one_beacon")
+
+
+def test_an_adjustment_whose_returns_never_settle_is_no_fix() -> None:
+    """Noisy 0101 adjusted on both beacons from 0.1 degrees off the truth: two grazing
+    returns at a free end lie on the panel from one pose and past it from the other,
+    and the association alternates between azimuths 2.4 sigmas apart. No one pose is
+    determined to the precision an adjustment reports. From the truth it settles."""
+    import numpy as np
+
+    from mast.pipeline.adjustment import Unsettled, adjust_on_panels
+    from mast.pipeline.locator import _survey_index
+
+    truth, _, scan, survey, cfg = _case("noisy/case0101")
+    _, panels = _survey_index(survey, scan.range_max_m)
+    keep = np.flatnonzero(np.isin(panels.beacon, [panels.number[b] for b in ("596-E", "BCN01")]))
+
+    def adjusted(off_deg: float) -> object:
+        start = Pose2D.from_degrees(
+            truth["easting"], truth["northing"], truth["azimuth_deg"] + off_deg
+        )
+        gate = cfg.verification.gate_sigmas
+        return adjust_on_panels(scan, start, panels, keep, noise=cfg.noise, gate_sigmas=gate)
+
+    unsettled = adjusted(0.0966)
+    assert isinstance(unsettled, Unsettled)
+    assert "never settle" in unsettled.detail
+    settled = adjusted(0.0)
+    assert isinstance(settled, tuple)
+    da = (settled[1].pose.azimuth_deg - truth["azimuth_deg"] + 180.0) % 360.0 - 180.0
+    assert abs(da) < 0.02

@@ -38,6 +38,7 @@ from mast.core.scan import Scan
 from mast.pipeline.adjustment import (
     Adjustment,
     Observations,
+    Unsettled,
     adjust_on_panels,
     survey_covariance,
 )
@@ -525,6 +526,8 @@ def _locate(
     adjusted = adjust_on_panels(scan, best.pose, panels, keep, noise=noise, gate_sigmas=gate_sigmas)
     if isinstance(adjusted, str):
         return finish(reason="degenerate_geometry", detail=adjusted)
+    if isinstance(adjusted, Unsettled):
+        return finish(reason="rejected", detail=adjusted.detail)
     obs, adj = adjusted
     obs, adj, outliers = snoop(obs, adj, noise=noise)
 
