@@ -410,15 +410,24 @@ def _scaled(q: NDArray[np.float64]) -> NDArray[np.float64]:
 
 #: Most association and adjustment rounds before the returns used settle.
 MAX_ASSOCIATION_ROUNDS = 8
+#: Standard deviations apart (of either pose, in E, N or azimuth) beyond which two
+#: poses an unsettled association alternates between are no fix: the half-width of a
+#: two-sided 95 % interval, so that which of the two is reported may not by itself put
+#: the other outside the 95 % interval reported.
+UNSETTLED_SIGMAS = norm_ppf(0.975)
 
 
 @dataclass(frozen=True, slots=True)
 class Unsettled:
     """The returns an adjustment uses never settled, and the poses they alternate
-    between lie further apart than the pose's own standard deviations: no one pose is
-    determined to the precision an adjustment would report (``detail`` says how far)."""
+    between lie further apart than ``UNSETTLED_SIGMAS`` of their own standard
+    deviations: no one pose is determined to the precision an adjustment would
+    report (``detail`` says how far; ``observations`` and ``adjustment`` are the
+    last round's, for its residuals)."""
 
     detail: str
+    observations: Observations
+    adjustment: Adjustment
 
 
 #: Condition number of the correlation matrix beyond which (E, N, A) are not determined.
@@ -441,14 +450,15 @@ def adjust_on_panels(
     :data:`~mast.pipeline.edges.SILHOUETTE_VARIANCE`), drops returns far outside
     the robust spread of the last round's residuals, and adjusts; it stops when
     the returns used, and their weights, no longer change. When they never do
-    (``MAX_ASSOCIATION_ROUNDS``), the association alternates: the last two rounds'
-    poses, each adjusted on the returns the other's pose associates, must then lie
-    within one standard deviation of each other in each of E, N and azimuth, or
-    which returns are a panel's decides the pose beyond its precision. Shared noisy
-    0101: two grazing returns at a free end, on the panel from one pose and past it
-    from the other, held the fix between azimuths 0.07 degrees (2.3 sigmas) apart,
-    0.10 and 0.17 degrees off the truth; on the 12 other shared scenes whose
-    association never settled it moved the pose by 0.03-0.95 sigma.
+    (``MAX_ASSOCIATION_ROUNDS``), the last two rounds' poses, each adjusted on the
+    returns the pose before it associates, must lie within ``UNSETTLED_SIGMAS``
+    a-priori standard deviations of each other (either's) in each of E, N and
+    azimuth, or which returns are a panel's decides the pose beyond its precision.
+    Shared noisy 0101, adjusted from 0.1 degrees off the truth: two grazing returns
+    at a free end, on the panel from one pose and past it from the other, hold the
+    association alternating between azimuths 0.07 degrees (2.4 sigmas) apart, 0.10
+    and 0.17 degrees off the truth. On the 12 shared scenes whose fix's association
+    never settled, the last two poses lay 0.05-1.2 sigmas apart.
 
     Returns
     -------
@@ -460,6 +470,7 @@ def adjust_on_panels(
     used = np.zeros(0, dtype=np.intp)
     used_panels = np.zeros(0, dtype=np.intp)
     used_scale = np.zeros(0)
+    settled = True
     for _ in range(MAX_ASSOCIATION_ROUNDS):
         beams, pk, edge = _ray_association(
             scan, pose, panels, keep, noise, gate_sigmas, None if adj is None else adj.cofactor
@@ -504,13 +515,7 @@ def adjust_on_panels(
         used, used_panels, used_scale = beams, pk, scale
         pose = adj.pose
     else:
-        if last is not None and adj is not None:
-            apart = _apart(adj, last)
-            if apart > 1.0:
-                return Unsettled(
-                    f"the returns on the panels never settle: the poses they alternate "
-                    f"between lie up to {apart:.1f} standard deviations apart"
-                )
+        settled = False
     assert adj is not None
     nrm = panels.normal[used_panels]
     obs = Observations(
@@ -523,6 +528,15 @@ def adjust_on_panels(
         panels.beacon[used_panels],
         used_scale,
     )
+    if not settled and last is not None:
+        apart = max(_apart(adj, last), _apart(last, adj))
+        if apart > UNSETTLED_SIGMAS:
+            return Unsettled(
+                "the returns on the panels never settle: the poses they alternate between "
+                f"lie {apart:.1f} standard deviations apart",
+                obs,
+                adj,
+            )
     return obs, adj
 
 

@@ -87,7 +87,8 @@ NO_FIX_REASONS: dict[str, str] = {
     "inconsistent": "the identified beacons do not agree with their surveyed geometry",
     "ambiguous": "two different poses explain the scan equally well",
     "degenerate_geometry": "the panels seen do not determine position and azimuth",
-    "rejected": "the adjusted fix fails its global test: the returns do not fit the beacons",
+    "rejected": "the adjusted fix fails its global test, or the returns it uses never settle:"
+    " the returns do not fit the beacons",
 }
 
 
@@ -527,9 +528,9 @@ def _locate(
     if isinstance(adjusted, str):
         return finish(reason="degenerate_geometry", detail=adjusted)
     if isinstance(adjusted, Unsettled):
-        return finish(reason="rejected", detail=adjusted.detail)
-    obs, adj = adjusted
-    obs, adj, outliers = snoop(obs, adj, noise=noise)
+        obs, adj = adjusted.observations, adjusted.adjustment
+    else:
+        obs, adj = adjusted
 
     def summary(
         obs: Observations, adj: Adjustment, tests: list[BeaconTest] | None = None
@@ -537,6 +538,10 @@ def _locate(
         return residual_summary(
             obs, adj, ids=panels.ids, panel_numbers=panels.panel, noise=noise, tests=tests
         )
+
+    if isinstance(adjusted, Unsettled):
+        return finish(reason="rejected", detail=adjusted.detail, residuals=summary(obs, adj))
+    obs, adj, outliers = snoop(obs, adj, noise=noise)
 
     cleaned = exclude_inconsistent(obs, adj, noise=noise, min_beacons=cfg.min_beacons)
     if isinstance(cleaned, list):

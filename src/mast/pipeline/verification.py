@@ -617,12 +617,13 @@ def _stray_corner(
     meet far from where their surfaces do. A corner on any surveyed edge,
     the free ends where the beacon meets the wall included, is the
     beacon's own. A corner is the scan's only where its two lines meet
-    between their returns, within ``gate_m`` of each line's facing end
-    (and the spacing of its returns there): two lines of rock that are
-    nearly straight on (a few degrees apart) meet a metre or more beyond
-    the returns, where the scan shows no corner at all (field hostile 1-1
-    pose 2: 0.33 m past both ends, beside a small beacon's 0.1 m panel;
-    shared noisy 0124: 3.5 m, beside a beacon of a turned-round pose).
+    where they end: within ``gate_m`` of each line's facing end (plus the
+    spacing of its returns there).
+    Two lines of rock nearly straight on (a few degrees apart) meet far from
+    their ends, back among one line's returns or beyond them, where the scan
+    shows no corner at all (field hostile 1-1 pose 2: 0.33 m from both ends,
+    beside a small beacon's 0.1 m panel; shared noisy 0124: 3.5 m, beside a
+    beacon of a turned-round pose, which is then ambiguous with the truth).
     Everything is compared in the scanner frame, where the corners and
     their covariances are (``edges_scanner``: the beacon's surveyed edges
     mapped there by the pose).
@@ -640,8 +641,8 @@ def _stray_corner(
             math.dist(c.node, a.end) > gate_m + a.spacing_end
             or math.dist(c.node, b.start) > gate_m + b.spacing_start
         ):
-            continue  # the lines meet beyond their returns: no corner in the scan
-        cov = corner_covariance(seg.segments[c.first], seg.segments[c.second], c.node, seg.noise_m)
+            continue  # the lines meet away from where they end: no corner in the scan
+        cov = corner_covariance(a, b, c.node, seg.noise_m)
         inv = np.linalg.inv(cov + extra * np.eye(2))
         off = edges_scanner - c.node
         maha = np.einsum("ij,jk,ik->i", off, inv, off)
