@@ -32,7 +32,6 @@ __all__ = [
     "Adjustment",
     "ErrorEllipse",
     "Observations",
-    "Unsettled",
     "adjust_on_panels",
     "adjust_pose",
     "range_model",
@@ -359,20 +358,6 @@ def _ray_association(
     return beams[ok], pk[ok], edge
 
 
-def _apart(a: Adjustment, b: Adjustment) -> float:
-    """How far apart two adjusted poses lie, in the most of ``a``'s standard deviations
-    any one of E, N and azimuth moves."""
-    d = np.array(
-        [
-            a.pose.easting - b.pose.easting,
-            a.pose.northing - b.pose.northing,
-            math.remainder(a.pose.azimuth - b.pose.azimuth, 2 * math.pi),
-        ]
-    )
-    sd = np.sqrt(np.maximum(np.diag(a.cofactor), 1e-300))
-    return float(np.max(np.abs(d) / sd))
-
-
 def _robust_inliers(
     adj: Adjustment,
     angles_rad: NDArray[np.float64],
@@ -410,26 +395,6 @@ def _scaled(q: NDArray[np.float64]) -> NDArray[np.float64]:
 
 #: Most association and adjustment rounds before the returns used settle.
 MAX_ASSOCIATION_ROUNDS = 8
-#: Standard deviations apart (of either pose, in E, N or azimuth) beyond which two
-#: poses an unsettled association alternates between are no fix: the half-width of a
-#: two-sided 95 % interval, so that which of the two is reported may not by itself put
-#: the other outside the 95 % interval reported.
-UNSETTLED_SIGMAS = norm_ppf(0.975)
-
-
-@dataclass(frozen=True, slots=True)
-class Unsettled:
-    """The returns an adjustment uses never settled, and the poses they alternate
-    between lie further apart than ``UNSETTLED_SIGMAS`` of their own standard
-    deviations: no one pose is determined to the precision an adjustment would
-    report (``detail`` says how far; ``observations`` and ``adjustment`` are the
-    last round's, for its residuals)."""
-
-    detail: str
-    observations: Observations
-    adjustment: Adjustment
-
-
 #: Condition number of the correlation matrix beyond which (E, N, A) are not determined.
 MAX_CONDITION = 1e10
 
@@ -442,35 +407,24 @@ def adjust_on_panels(
     *,
     noise: NoiseModel,
     gate_sigmas: float,
-) -> tuple[Observations, Adjustment] | str | Unsettled:
+) -> tuple[Observations, Adjustment] | str:
     """Adjust the pose on the returns of the ``keep`` panels, re-associating as it moves.
 
     Each round casts every beam from the current pose (:func:`_ray_association`),
     weights returns at a beacon's silhouette down (they may be mixed pixels:
     :data:`~mast.pipeline.edges.SILHOUETTE_VARIANCE`), drops returns far outside
     the robust spread of the last round's residuals, and adjusts; it stops when
-    the returns used, and their weights, no longer change. When they never do
-    (``MAX_ASSOCIATION_ROUNDS``), the last two rounds' poses, each adjusted on the
-    returns the pose before it associates, must lie within ``UNSETTLED_SIGMAS``
-    a-priori standard deviations of each other (either's) in each of E, N and
-    azimuth, or which returns are a panel's decides the pose beyond its precision.
-    Shared noisy 0101, adjusted from 0.1 degrees off the truth: two grazing returns
-    at a free end, on the panel from one pose and past it from the other, hold the
-    association alternating between azimuths 0.07 degrees (2.4 sigmas) apart, 0.10
-    and 0.17 degrees off the truth. On the 12 shared scenes whose fix's association
-    never settled, the last two poses lay 0.05-1.2 sigmas apart.
+    the returns used, and their weights, no longer change.
 
     Returns
     -------
-    (Observations, Adjustment); a sentence saying why the panels seen do not
-    determine the pose; or :class:`Unsettled`.
+    (Observations, Adjustment), or a sentence saying why the panels seen do
+    not determine the pose.
     """
     adj: Adjustment | None = None
-    last: Adjustment | None = None
     used = np.zeros(0, dtype=np.intp)
     used_panels = np.zeros(0, dtype=np.intp)
     used_scale = np.zeros(0)
-    settled = True
     for _ in range(MAX_ASSOCIATION_ROUNDS):
         beams, pk, edge = _ray_association(
             scan, pose, panels, keep, noise, gate_sigmas, None if adj is None else adj.cofactor
@@ -491,7 +445,6 @@ def adjust_on_panels(
         scale = np.where(edge, SILHOUETTE_VARIANCE, 1.0)
         if np.array_equal(beams, used) and np.array_equal(scale, used_scale) and adj is not None:
             break
-        last = adj
         if beams.size < 4:
             return f"only {beams.size} returns on the panels"
         try:
@@ -514,8 +467,6 @@ def adjust_on_panels(
             return "the panels seen do not constrain all of E, N and azimuth"
         used, used_panels, used_scale = beams, pk, scale
         pose = adj.pose
-    else:
-        settled = False
     assert adj is not None
     nrm = panels.normal[used_panels]
     obs = Observations(
@@ -528,15 +479,6 @@ def adjust_on_panels(
         panels.beacon[used_panels],
         used_scale,
     )
-    if not settled and last is not None:
-        apart = max(_apart(adj, last), _apart(last, adj))
-        if apart > UNSETTLED_SIGMAS:
-            return Unsettled(
-                "the returns on the panels never settle: the poses they alternate between "
-                f"lie {apart:.1f} standard deviations apart",
-                obs,
-                adj,
-            )
     return obs, adj
 
 

@@ -38,7 +38,6 @@ from mast.core.scan import Scan
 from mast.pipeline.adjustment import (
     Adjustment,
     Observations,
-    Unsettled,
     adjust_on_panels,
     survey_covariance,
 )
@@ -87,8 +86,7 @@ NO_FIX_REASONS: dict[str, str] = {
     "inconsistent": "the identified beacons do not agree with their surveyed geometry",
     "ambiguous": "two different poses explain the scan equally well",
     "degenerate_geometry": "the panels seen do not determine position and azimuth",
-    "rejected": "the adjusted fix fails its global test, or the returns it uses never settle:"
-    " the returns do not fit the beacons",
+    "rejected": "the adjusted fix fails its global test: the returns do not fit the beacons",
 }
 
 
@@ -527,10 +525,8 @@ def _locate(
     adjusted = adjust_on_panels(scan, best.pose, panels, keep, noise=noise, gate_sigmas=gate_sigmas)
     if isinstance(adjusted, str):
         return finish(reason="degenerate_geometry", detail=adjusted)
-    if isinstance(adjusted, Unsettled):
-        obs, adj = adjusted.observations, adjusted.adjustment
-    else:
-        obs, adj = adjusted
+    obs, adj = adjusted
+    obs, adj, outliers = snoop(obs, adj, noise=noise)
 
     def summary(
         obs: Observations, adj: Adjustment, tests: list[BeaconTest] | None = None
@@ -538,10 +534,6 @@ def _locate(
         return residual_summary(
             obs, adj, ids=panels.ids, panel_numbers=panels.panel, noise=noise, tests=tests
         )
-
-    if isinstance(adjusted, Unsettled):
-        return finish(reason="rejected", detail=adjusted.detail, residuals=summary(obs, adj))
-    obs, adj, outliers = snoop(obs, adj, noise=noise)
 
     cleaned = exclude_inconsistent(obs, adj, noise=noise, min_beacons=cfg.min_beacons)
     if isinstance(cleaned, list):
