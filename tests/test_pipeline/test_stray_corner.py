@@ -50,7 +50,7 @@ def test_a_corner_where_two_surfaces_meet_refuses_a_beacon_beside_it() -> None:
     assert stray
 
 
-def test_lines_nearly_straight_on_meeting_beyond_their_returns_are_no_corner() -> None:
+def test_lines_nearly_straight_on_meeting_away_from_their_ends_are_no_corner() -> None:
     # A 3 cm step, then 3 degrees off: the two lines meet 0.6 m back along the first
     # piece, where the scan shows a straight wall (shared noisy 0071, field 1-1 pose 2).
     stray, gap = _wall(lambda y: 5.03 + 0.05 * (y + 0.3))
