@@ -16,6 +16,7 @@ E. Olson, "Real-time correlative scan matching", ICRA 2009.
 from __future__ import annotations
 
 import math
+from collections import OrderedDict
 from dataclasses import dataclass
 
 import numpy as np
@@ -27,7 +28,7 @@ from mast.core.pose import Pose2D
 from mast.pipeline.alignment import Similarity
 from mast.pipeline.hypotheses import Hypothesis
 
-__all__ = ["Prior", "TrackingConfig", "prior_hypotheses"]
+__all__ = ["Prior", "TrackingConfig", "prior_hypotheses", "window_may_fix"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -268,6 +269,81 @@ class _TiledField:
         return np.asarray(self.values[flat])
 
 
+def window_may_fix(
+    points_scanner: NDArray[np.float64],
+    panels: PanelSet,
+    prior: Prior,
+    range_max_m: float,
+    *,
+    gate_m: float,
+    margin_m: float,
+    margin_rad: float,
+    min_beacons: int,
+    min_panel_points: int,
+) -> bool:
+    """Whether any pose in the prior's window (widened by the margins) could put
+    returns on the panels of ``min_beacons`` beacons, two panels and ``2 *
+    min_panel_points`` returns each, within ``gate_m``: what a verified pose needs
+    before the beams are even checked (``verification._may_support``). False proves
+    the window's search can give no fix, so it need not run (on a drive, most scans
+    near the last fix see one beacon or none).
+
+    A return at range ``r`` moves at most ``radius + margin_m + r * (tolerance +
+    margin_rad)`` over the window (the chord of the turn is shorter than its arc);
+    a return is counted for every panel it could reach, so the count never falls
+    short of what a pose in the window associates.
+    """
+    tol = prior.azimuth_tolerance_rad
+    if tol is None or points_scanner.shape[0] == 0:
+        return tol is None
+    move = prior.radius_m + margin_m
+    near = panels.near(prior.pose.position, range_max_m + 1.0 + move)
+    if near.size == 0:
+        return False
+    r = np.hypot(points_scanner[:, 0], points_scanner[:, 1])
+    pts = prior.pose.scanner_to_mine(points_scanner)
+    reach = move + r * (tol + margin_rad) + gate_m
+    a, u, length = panels.a[near], panels.direction[near], panels.length[near]
+    rel = pts[:, None, :] - a[None, :, :]
+    along = np.clip(np.einsum("nkd,kd->nk", rel, u), 0.0, length[None, :])
+    off = rel - along[:, :, None] * u[None, :, :]
+    reached = np.hypot(off[:, :, 0], off[:, :, 1]) <= reach[:, None]
+    per_panel = reached.sum(axis=0)
+    owner = panels.beacon[near]
+    enough = 0
+    for b in np.unique(owner[per_panel > 0]):
+        mine = per_panel[owner == b]
+        if np.count_nonzero(mine) >= 2 and int(mine.sum()) >= 2 * min_panel_points:
+            enough += 1
+            if enough >= min_beacons:
+                return True
+    return False
+
+
+#: Tiled fields kept (least recently used dropped first): consecutive scans of a run
+#: mostly see the same panels, and a field costs milliseconds to build.
+_FIELD_CACHE_SIZE = 16
+_FIELD_CACHE: OrderedDict[tuple[int, bytes, float, float], tuple[PanelSet, _TiledField]] = (
+    OrderedDict()
+)
+
+
+def _tiled_field(
+    panels: PanelSet, subset: NDArray[np.intp], res: float, sigma: float
+) -> _TiledField:
+    """:meth:`_TiledField.build`, once per panel set, subset of it, cell size and sigma."""
+    key = (id(panels), np.ascontiguousarray(subset, dtype=np.intp).tobytes(), res, sigma)
+    hit = _FIELD_CACHE.get(key)
+    if hit is not None and hit[0] is panels:
+        _FIELD_CACHE.move_to_end(key)
+        return hit[1]
+    field = _TiledField.build(panels, subset, res, sigma)
+    while len(_FIELD_CACHE) >= _FIELD_CACHE_SIZE:
+        _FIELD_CACHE.popitem(last=False)
+    _FIELD_CACHE[key] = (panels, field)
+    return field
+
+
 def prior_hypotheses(
     points_scanner: NDArray[np.float64],
     panels: PanelSet,
@@ -317,7 +393,7 @@ def prior_hypotheses(
         pts, r = pts[keep], r[keep]
     step = config.step_m
     res = config.field_resolution_m
-    field = _TiledField.build(panels, near, res, sigma=step)
+    field = _tiled_field(panels, near, res, step)
     n_t = math.ceil(prior.radius_m / step)
     offs = np.arange(-n_t, n_t + 1) * step
     tx, ty = np.meshgrid(offs, offs, indexing="ij")
@@ -330,36 +406,60 @@ def prior_hypotheses(
     # The tiles each return can reach anywhere in the window.
     at_prior = prior.pose.scanner_to_mine(pts)
     tiles = field.reaching(at_prior, prior.radius_m + r * math.sin(tol) + step + res)
+    # The best ``keep_best`` translations of each rotation, then all of them best first
+    # (by score, then rotation, then translation, each from the largest).
     keep_best = 4 * config.candidates
-    best: list[tuple[float, float, float, float]] = []
+    top_scores, top_rots, top_at = [], [], []
     for k in range(-n_r, n_r + 1):
         rot = rot0 + k * d_rot
         c, s = math.cos(rot), math.sin(rot)
         cells = (pts @ np.array([[c, s], [-s, c]]) + prior.pose.position) / res
         total = field.scores(cells, tiles, shift_cells)
-        top = np.argpartition(total, -keep_best)[-keep_best:] if total.size > keep_best else None
-        for t in np.arange(total.size) if top is None else top:
-            best.append((float(total[t]), rot, float(shifts[t, 0]), float(shifts[t, 1])))
-    best.sort(reverse=True)
+        top = (
+            np.argpartition(total, -keep_best)[-keep_best:]
+            if total.size > keep_best
+            else np.arange(total.size)
+        )
+        top_scores.append(total[top])
+        top_rots.append(np.full(top.size, rot))
+        top_at.append(top)
+    at = np.concatenate(top_at)
+    score, rots = np.concatenate(top_scores), np.concatenate(top_rots)
+    xs, ys = shifts[at, 0], shifts[at, 1]
+    order = np.lexsort((ys, xs, rots, score))[::-1]
+    score, rots, xs, ys = score[order], rots[order], xs[order], ys[order]
     reach = float(np.median(r))
     chosen: list[tuple[float, float, float]] = []
+
+    def near_to(apart_m: float, cr: float, cx: float, cy: float) -> NDArray[np.bool_]:
+        """Which grid poses move the returns less than ``apart_m`` from pose (cr, cx, cy)."""
+        d = np.hypot(xs - cx, ys - cy)
+        # np.hypot and math.hypot may differ in the last bit: decide ties as math does.
+        for i in np.flatnonzero(np.abs(d - apart_m) < 1e-12):
+            d[i] = math.hypot(float(xs[i]) - cx, float(ys[i]) - cy)
+        close: NDArray[np.bool_] = (d < apart_m) & (np.abs(rots - cr) * reach < apart_m)
+        return close
 
     def pick(apart_m: float) -> list[Hypothesis]:
         """The best grid poses that move the returns at least ``apart_m`` from every
         pose chosen before (and from each other), up to ``candidates``."""
+        free = np.ones(score.size, dtype=bool)
+        for cr, cx, cy in chosen:
+            free &= ~near_to(apart_m, cr, cx, cy)
         out: list[Hypothesis] = []
-        for total_score, rot, x, y in best:
-            if any(
-                math.hypot(x - cx, y - cy) < apart_m and abs(rot - cr) * reach < apart_m
-                for cr, cx, cy in chosen
-            ):
-                continue
+        i = 0
+        while len(out) < config.candidates:
+            ahead = np.flatnonzero(free[i:])
+            if ahead.size == 0:
+                break
+            j = i + int(ahead[0])
+            rot, x, y = float(rots[j]), float(xs[j]), float(ys[j])
             chosen.append((rot, x, y))
+            free &= ~near_to(apart_m, rot, x, y)
             t = prior.pose.position + np.array([x, y])
             sim = Similarity(1.0, math.remainder(rot, 2 * math.pi), t, 0.0)
-            out.append(Hypothesis((), sim, -total_score, "prior"))
-            if len(out) == config.candidates:
-                break
+            out.append(Hypothesis((), sim, -float(score[j]), "prior"))
+            i = j + 1
         return out
 
     first = pick(config.distinct_m)
