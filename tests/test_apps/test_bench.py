@@ -184,11 +184,17 @@ def test_longdrive_sends_each_scan_through_its_protocol() -> None:
         assert np.any(sent.ranges_m[both] != scan.ranges_m[both])
 
 
-def test_longdrive_counts_owed_fixes_and_flags_none_wrong_on_a_short_drive() -> None:
+def test_longdrive_counts_owed_fixes_and_flags_none_wrong_on_a_short_drive(
+    tmp_path: Path,
+) -> None:
+    import csv
+
     from mast.apps.bench.longdrive import run_longdrive
 
     lines: list[str] = []
-    figures = run_longdrive(scans=150, seeds=1, workers=1, echo=lines.append)
+    figures = run_longdrive(
+        scans=150, seeds=1, workers=1, out_dir=tmp_path / "rows", echo=lines.append
+    )
     assert [(f.kind, f.rate_hz) for f in figures] == [("sick", 50.0), ("hokuyo", 40.0)]
     for f in figures:
         assert f.scans == 150
@@ -197,4 +203,11 @@ def test_longdrive_counts_owed_fixes_and_flags_none_wrong_on_a_short_drive() -> 
         assert not f.wrong
         assert f.owed_fixed <= f.fixes
         assert f.tracked_fixes < f.fixes
+        with (tmp_path / "rows" / f"longdrive_{f.kind}_0.csv").open() as fh:
+            rows = list(csv.DictReader(fh))
+        assert len(rows) == 150
+        assert sum(r["status"] == "fix" for r in rows) == f.fixes
+        assert sum(r["owed"] == "1" for r in rows) == f.owed
+        assert all(r["error_mm"] == "" for r in rows if r["status"] != "fix")
+        assert max(float(r["error_mm"]) for r in rows if r["status"] == "fix") < 50.0
     assert lines[-1].startswith("all: 300 scans")

@@ -128,10 +128,20 @@ def test_bag_records_follow_the_schema_with_stamp_topic_and_frame(
     stamps = [rec["stamp_ns"] for rec in recs]
     assert stamps == sorted(stamps)
     assert len(set(stamps)) == len(stamps)
+    last_fixed = None
     for rec in recs:
         _valid(validator, rec)
         assert rec["topic"] == "/scan"
         assert rec["frame_id"]
+        # A run is located in sequence: each record says whether the last fix, if no
+        # more than 0.5 s before, was tried as the scan's prior, and whether it failed.
+        near = last_fixed is not None and rec["stamp_ns"] - last_fixed <= 500_000_000
+        assert rec["tracking"] is near
+        assert not rec["track_lost"] or near
+        if near and rec["status"] != "fix":
+            assert rec["track_lost"]
+        if rec["status"] == "fix":
+            last_fixed = rec["stamp_ns"]
 
 
 def test_the_covariance_states_its_order_and_units(files: Path) -> None:

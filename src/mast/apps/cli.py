@@ -387,7 +387,7 @@ def locate(
     from mast.apps.report import ReportInputs, fix_record, fix_text
     from mast.io import read_survey
     from mast.io.bags import laserscan_topic
-    from mast.pipeline.locator import locate_sequence
+    from mast.pipeline.locator import SequenceLocator
 
     cfg, defaults = _precisions(range_sigma, angle_sigma, scanner, survey_sigma)
     if near is not None:
@@ -410,17 +410,18 @@ def locate(
             defaults=frozenset(defaults),
         )
         source = inputs.scan_file or str(scan_path)
-        # tee keeps the one scan being located for its record, not the whole bag
-        mine, theirs = itertools.tee(scans)
-        for i, (scan, fix) in enumerate(
-            zip(mine, locate_sequence(theirs, survey, config=cfg), strict=True)
-        ):
+        tracker = SequenceLocator(survey, config=cfg)
+        for i, scan in enumerate(scans):
+            step = tracker.step(scan)
+            fix = step.fix
             fixed += fix.ok
             label = f"{source}#{i}" if many else source
             if fmt is OutputFormat.json:
                 record = fix_record(
                     fix, source=source, index=i if many else None, scan=scan, inputs=inputs
                 )
+                if many:
+                    record.update(tracking=step.tracked, track_lost=step.track_lost)
                 typer.echo(json.dumps(record))
             else:
                 if located:
@@ -1174,13 +1175,18 @@ def bench_longdrive(
     scans: Annotated[int, typer.Option("--scans", min=100, help="Scans per drive.")] = 10_000,
     seeds: Annotated[int, typer.Option("--seeds", min=1, help="Drives per scanner.")] = 5,
     workers: Annotated[int, typer.Option("--workers", min=1, help="Processes.")] = 2,
+    out: Annotated[
+        Path | None, typer.Option("--out", help="Folder for every scan's outcome (CSV).")
+    ] = None,
 ) -> None:
     """Long drives: SICK (50 Hz) and Hokuyo (40 Hz) drives sent through their protocols and
     located in sequence as `mast locate RUN` and `mast live` do (owed scans fixed, wrong
-    fixes listed, fixes outside their own 99 % ellipse)."""
+    fixes listed, fixes outside their own 99 % ellipse, time a scan)."""
     from mast.apps.bench.longdrive import run_longdrive
 
-    run_longdrive(scans=scans, seeds=seeds, workers=workers, echo=typer.echo)
+    if out is not None:
+        check_output_folder(out)
+    run_longdrive(scans=scans, seeds=seeds, workers=workers, out_dir=out, echo=typer.echo)
 
 
 @bench_app.command("georef")

@@ -16,7 +16,14 @@ five of their own standard deviations, :func:`mast.apps.bench.robustness.is_wron
 each listed, and the share of fixes whose position lies outside its own 99 %
 error ellipse (expected 1 %).
 
-Run: ``mast bench longdrive [--scans 10000] [--seeds 5]`` (2 x seeds x scans scans).
+Also printed: the median and 95th percentile of the time ``SequenceLocator.step`` took a
+scan (the drives run side by side, one a worker). With ``--out DIR``, every scan's
+outcome is written to ``DIR/longdrive_<protocol>_<seed>.csv`` (scan, owed, status or
+reason, tracked, track lost, position and azimuth error of a fix, milliseconds), for
+comparing two versions scan by scan.
+
+Run: ``mast bench longdrive [--scans 10000] [--seeds 5] [--out DIR]`` (2 x seeds x scans
+scans).
 """
 
 from __future__ import annotations
@@ -26,9 +33,11 @@ import time
 from collections.abc import Callable, Iterator
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
+from mast.apps.bench.rows import write_rows
 from mast.core.scan import Scan
 
 __all__ = ["LONG_SCANNERS", "DriveFigures", "as_sent", "run_longdrive"]
@@ -72,16 +81,27 @@ class DriveFigures:
     outside_99: int = 0
     wrong: list[str] = field(default_factory=list)
     seconds: float = 0.0
+    rows: list[dict[str, object]] = field(default_factory=list)
+    """Per scan: index, owed, status ("fix" or the reason), tracked, track lost, position
+    error mm and azimuth error arc-seconds of a fix (empty otherwise), milliseconds."""
 
     def line(self) -> str:
         share = 100 * self.owed_fixed / max(self.owed, 1)
         out = 100 * self.outside_99 / max(self.fixes, 1)
+        ms = [float(str(r["elapsed_ms"])) for r in self.rows] or [0.0]
         return (
             f"{self.kind:>6} {self.rate_hz:g} Hz seed {self.seed}: {self.scans} scans, owed "
             f"{self.owed}, fixed {self.owed_fixed} ({share:.2f} %); fixes {self.fixes} "
             f"({self.tracked_fixes} tracked); outside their 99 % ellipse {self.outside_99} "
-            f"({out:.2f} %); WRONG {len(self.wrong)}  ({self.seconds:.0f} s)"
+            f"({out:.2f} %); WRONG {len(self.wrong)}; ms a scan median "
+            f"{np.median(ms):.2f} p95 {np.percentile(ms, 95):.2f}  ({self.seconds:.0f} s)"
         )
+
+    def write_rows(self, folder: Path) -> Path:
+        """The per-scan outcomes as ``folder/longdrive_<protocol>_<seed>.csv``."""
+        path = folder / f"longdrive_{self.kind}_{self.seed}.csv"
+        write_rows(path, self.rows)
+        return path
 
 
 def _drive(job: tuple[str, float, int, int]) -> DriveFigures:
@@ -99,13 +119,32 @@ def _drive(job: tuple[str, float, int, int]) -> DriveFigures:
     tracker = SequenceLocator(scene.survey, config=config)
     fig = DriveFigures(kind, rate_hz, seed)
     for i, sim in enumerate(scene.iter_simulated()):
-        step = tracker.step(as_sent(kind, sim.scan, i))
+        sent = as_sent(kind, sim.scan, i)
+        t_step = time.perf_counter()
+        step = tracker.step(sent)
+        ms = round(1e3 * (time.perf_counter() - t_step), 3)
         fix, truth = step.fix, sim.pose
         fig.scans += 1
         owed = sim.owes_fix()
         fig.owed += owed
+        row: dict[str, object] = {
+            "scan": i,
+            "owed": int(owed),
+            "status": fix.reason or fix.status,
+            "tracked": int(step.tracked),
+            "track_lost": int(step.track_lost),
+            "error_mm": "",
+            "error_az_arcsec": "",
+            "elapsed_ms": ms,
+        }
+        fig.rows.append(row)
         if not fix.ok or fix.pose is None or fix.adjustment is None:
             continue
+        row["status"] = "fix"
+        off = math.hypot(fix.pose.easting - truth.easting, fix.pose.northing - truth.northing)
+        turn = math.remainder(fix.pose.azimuth - truth.azimuth, math.tau)
+        row["error_mm"] = f"{1e3 * off:.3f}"
+        row["error_az_arcsec"] = f"{3600 * math.degrees(turn):.2f}"
         fig.owed_fixed += owed
         fig.fixes += 1
         fig.tracked_fixes += step.tracked
@@ -135,13 +174,19 @@ def run_longdrive(
     scans: int = 10_000,
     seeds: int = 5,
     workers: int = 2,
+    out_dir: Path | None = None,
     echo: Callable[[str], None] = print,
 ) -> list[DriveFigures]:
-    """Run the benchmark (see the module), one drive a worker process, and print its figures."""
+    """Run the benchmark (see the module), one drive a worker process, and print its figures
+    (and, with ``out_dir``, write every scan's outcome there)."""
     out: list[DriveFigures] = []
+    if out_dir is not None:
+        out_dir.mkdir(parents=True, exist_ok=True)
     with ProcessPoolExecutor(max_workers=workers) as pool:
         for fig in pool.map(_drive, _jobs(scans, seeds)):
             echo(fig.line())
+            if out_dir is not None:
+                fig.write_rows(out_dir)
             for w in fig.wrong:
                 echo(f"    WRONG {w}")
             out.append(fig)
