@@ -5,9 +5,13 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 
 from mast.core.geometry import PanelSet
-from mast.pipeline.tracking import _likelihood_field, _TiledField
+from mast.core.pose import Pose2D
+from mast.pipeline.alignment import Similarity
+from mast.pipeline.hypotheses import Hypothesis
+from mast.pipeline.tracking import Prior, TrackingConfig, _likelihood_field, _TiledField
 from mast.sim import drive_scene, paper_scene
 
 RES = 0.02
@@ -102,3 +106,110 @@ def test_compiled_window_scores_match_the_lookups() -> None:
         ref = np.maximum(ref, field.lookup(pts / RES, tiles[:, slot], shifts))
     np.testing.assert_allclose(got, ref.sum(axis=1), rtol=1e-12, atol=1e-12)
     assert np.ptp(got) > 1.0  # the translations score differently
+
+
+def _reference_prior_hypotheses(
+    points_scanner: np.ndarray, panels: PanelSet, prior: Prior, range_max_m: float
+) -> list[list[Hypothesis]]:
+    """``prior_hypotheses`` as first written (issue 31): every grid pose kept in a Python
+    list, sorted, and picked one at a time against those chosen before."""
+    config = TrackingConfig()
+    tol = prior.azimuth_tolerance_rad
+    assert tol is not None
+    near = panels.near(prior.pose.position, range_max_m + prior.radius_m)
+    pts = points_scanner
+    r = np.hypot(pts[:, 0], pts[:, 1])
+    at_prior = prior.pose.scanner_to_mine(pts)
+    slack = prior.radius_m + r * math.sin(tol) + 0.1
+    _, dist = panels.associate(at_prior, np.inf, subset=near)
+    mid = 0.5 * (panels.a[near] + panels.b[near])
+    d_mid = np.min(
+        np.hypot(at_prior[:, None, 0] - mid[None, :, 0], at_prior[:, None, 1] - mid[None, :, 1])
+        - 0.5 * panels.length[near][None, :],
+        axis=1,
+    )
+    cand = np.minimum(np.abs(dist), d_mid) <= slack
+    pts, r = pts[cand], r[cand]
+    if pts.shape[0] > config.max_points:
+        keep = np.linspace(0, pts.shape[0] - 1, config.max_points).round().astype(int)
+        pts, r = pts[keep], r[keep]
+    step, res = config.step_m, config.field_resolution_m
+    field = _TiledField.build(panels, near, res, sigma=step)
+    n_t = math.ceil(prior.radius_m / step)
+    offs = np.arange(-n_t, n_t + 1) * step
+    tx, ty = np.meshgrid(offs, offs, indexing="ij")
+    inside = np.hypot(tx, ty) <= prior.radius_m + 1e-9
+    shifts = np.column_stack([tx[inside], ty[inside]])
+    d_rot = step / max(float(r.max()), step)
+    n_r = math.ceil(tol / d_rot)
+    rot0 = math.pi / 2 - prior.pose.azimuth
+    tiles = field.reaching(
+        prior.pose.scanner_to_mine(pts), prior.radius_m + r * math.sin(tol) + step + res
+    )
+    keep_best = 4 * config.candidates
+    best: list[tuple[float, float, float, float]] = []
+    for k in range(-n_r, n_r + 1):
+        rot = rot0 + k * d_rot
+        c, s = math.cos(rot), math.sin(rot)
+        cells = (pts @ np.array([[c, s], [-s, c]]) + prior.pose.position) / res
+        total = field.scores(cells, tiles, shifts / res)
+        top = np.argpartition(total, -keep_best)[-keep_best:] if total.size > keep_best else None
+        for t in np.arange(total.size) if top is None else top:
+            best.append((float(total[t]), rot, float(shifts[t, 0]), float(shifts[t, 1])))
+    best.sort(reverse=True)
+    reach = float(np.median(r))
+    chosen: list[tuple[float, float, float]] = []
+
+    def pick(apart_m: float) -> list[Hypothesis]:
+        out: list[Hypothesis] = []
+        for total_score, rot, x, y in best:
+            if any(
+                math.hypot(x - cx, y - cy) < apart_m and abs(rot - cr) * reach < apart_m
+                for cr, cx, cy in chosen
+            ):
+                continue
+            chosen.append((rot, x, y))
+            t = prior.pose.position + np.array([x, y])
+            sim = Similarity(1.0, math.remainder(rot, 2 * math.pi), t, 0.0)
+            out.append(Hypothesis((), sim, -total_score, "prior"))
+            if len(out) == config.candidates:
+                break
+        return out
+
+    first = pick(config.distinct_m)
+    other = pick(config.other_basins_m)
+    return [first, other] if other else [first]
+
+
+@pytest.mark.parametrize(("radius_m", "tol_deg"), [(0.05, 1.0), (0.3, 4.0), (1.0, 10.0)])
+def test_the_window_search_ranks_and_picks_its_poses_as_the_reference(
+    radius_m: float, tol_deg: float
+) -> None:
+    """Candidates ranked in arrays, tiles taken from the cache: the same hypotheses, in
+    the same order, to the last bit, as one grid pose at a time in Python."""
+    from mast.pipeline.tracking import prior_hypotheses
+
+    scene = drive_scene(0, scans=3)
+    panels = PanelSet.from_survey(scene.survey)
+    rng = np.random.default_rng(3)
+    for sim in scene.iter_simulated():
+        truth = sim.pose
+        prior = Prior(
+            Pose2D(
+                truth.easting + rng.uniform(-0.5, 0.5) * radius_m,
+                truth.northing + rng.uniform(-0.5, 0.5) * radius_m,
+                truth.azimuth + math.radians(rng.uniform(-0.5, 0.5) * tol_deg),
+            ),
+            radius_m,
+            math.radians(tol_deg),
+        )
+        pts = sim.scan.points()[1]
+        for _ in range(2):  # built, then from the cache
+            got = prior_hypotheses(pts, panels, prior, sim.scan.range_max_m)
+            want = _reference_prior_hypotheses(pts, panels, prior, sim.scan.range_max_m)
+            assert [len(b) for b in got] == [len(b) for b in want]
+            assert len(got[0]) > 0
+            for g, w in zip([h for b in got for h in b], [h for b in want for h in b], strict=True):
+                assert g.misfit == w.misfit
+                assert g.similarity.rotation_rad == w.similarity.rotation_rad
+                assert np.array_equal(g.similarity.translation, w.similarity.translation)
