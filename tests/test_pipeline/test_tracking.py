@@ -11,7 +11,14 @@ from mast.core.geometry import PanelSet
 from mast.core.pose import Pose2D
 from mast.pipeline.alignment import Similarity
 from mast.pipeline.hypotheses import Hypothesis
-from mast.pipeline.tracking import Prior, TrackingConfig, _likelihood_field, _TiledField
+from mast.pipeline.tracking import (
+    Prior,
+    TrackingConfig,
+    _likelihood_field,
+    _TiledField,
+    _window_grid,
+    _window_returns,
+)
 from mast.sim import drive_scene, paper_scene
 
 RES = 0.02
@@ -117,31 +124,10 @@ def _reference_prior_hypotheses(
     tol = prior.azimuth_tolerance_rad
     assert tol is not None
     near = panels.near(prior.pose.position, range_max_m + prior.radius_m)
-    pts = points_scanner
-    r = np.hypot(pts[:, 0], pts[:, 1])
-    at_prior = prior.pose.scanner_to_mine(pts)
-    slack = prior.radius_m + r * math.sin(tol) + 0.1
-    _, dist = panels.associate(at_prior, np.inf, subset=near)
-    mid = 0.5 * (panels.a[near] + panels.b[near])
-    d_mid = np.min(
-        np.hypot(at_prior[:, None, 0] - mid[None, :, 0], at_prior[:, None, 1] - mid[None, :, 1])
-        - 0.5 * panels.length[near][None, :],
-        axis=1,
-    )
-    cand = np.minimum(np.abs(dist), d_mid) <= slack
-    pts, r = pts[cand], r[cand]
-    if pts.shape[0] > config.max_points:
-        keep = np.linspace(0, pts.shape[0] - 1, config.max_points).round().astype(int)
-        pts, r = pts[keep], r[keep]
+    pts, r = _window_returns(points_scanner, panels, prior, near, tol, config)
     step, res = config.step_m, config.field_resolution_m
     field = _TiledField.build(panels, near, res, sigma=step)
-    n_t = math.ceil(prior.radius_m / step)
-    offs = np.arange(-n_t, n_t + 1) * step
-    tx, ty = np.meshgrid(offs, offs, indexing="ij")
-    inside = np.hypot(tx, ty) <= prior.radius_m + 1e-9
-    shifts = np.column_stack([tx[inside], ty[inside]])
-    d_rot = step / max(float(r.max()), step)
-    n_r = math.ceil(tol / d_rot)
+    shifts, d_rot, n_r = _window_grid(prior.radius_m, tol, step, r)
     rot0 = math.pi / 2 - prior.pose.azimuth
     tiles = field.reaching(
         prior.pose.scanner_to_mine(pts), prior.radius_m + r * math.sin(tol) + step + res

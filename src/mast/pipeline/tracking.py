@@ -344,6 +344,49 @@ def _tiled_field(
     return field
 
 
+def _window_returns(
+    points_scanner: NDArray[np.float64],
+    panels: PanelSet,
+    prior: Prior,
+    near: NDArray[np.intp],
+    tol: float,
+    config: TrackingConfig,
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """The returns that, anywhere in the window, could lie on a panel in reach (evenly
+    thinned to ``max_points``), and their ranges."""
+    pts = points_scanner
+    r = np.hypot(pts[:, 0], pts[:, 1])
+    at_prior = prior.pose.scanner_to_mine(pts)
+    slack = prior.radius_m + r * math.sin(tol) + 0.1
+    _, dist = panels.associate(at_prior, np.inf, subset=near)
+    mid = 0.5 * (panels.a[near] + panels.b[near])
+    d_mid = np.min(
+        np.hypot(at_prior[:, None, 0] - mid[None, :, 0], at_prior[:, None, 1] - mid[None, :, 1])
+        - 0.5 * panels.length[near][None, :],
+        axis=1,
+    )
+    cand = np.minimum(np.abs(dist), d_mid) <= slack
+    pts, r = pts[cand], r[cand]
+    if pts.shape[0] > config.max_points:
+        keep = np.linspace(0, pts.shape[0] - 1, config.max_points).round().astype(int)
+        pts, r = pts[keep], r[keep]
+    return pts, r
+
+
+def _window_grid(
+    radius_m: float, tol: float, step: float, r: NDArray[np.float64]
+) -> tuple[NDArray[np.float64], float, int]:
+    """The window's translations (a disc of ``step`` grid points), the rotation step
+    that moves no return more than ``step``, and the rotation steps either way."""
+    n_t = math.ceil(radius_m / step)
+    offs = np.arange(-n_t, n_t + 1) * step
+    tx, ty = np.meshgrid(offs, offs, indexing="ij")
+    inside = np.hypot(tx, ty) <= radius_m + 1e-9
+    shifts = np.column_stack([tx[inside], ty[inside]])
+    d_rot = step / max(float(r.max()), step)
+    return shifts, d_rot, math.ceil(tol / d_rot)
+
+
 def prior_hypotheses(
     points_scanner: NDArray[np.float64],
     panels: PanelSet,
@@ -372,36 +415,14 @@ def prior_hypotheses(
     near = panels.near(prior.pose.position, range_max_m + prior.radius_m)
     if near.size == 0 or points_scanner.shape[0] == 0:
         return []
-    pts = points_scanner
-    r = np.hypot(pts[:, 0], pts[:, 1])
-    # Returns that, anywhere in the window, could lie on a panel.
-    at_prior = prior.pose.scanner_to_mine(pts)
-    slack = prior.radius_m + r * math.sin(tol) + 0.1
-    _, dist = panels.associate(at_prior, np.inf, subset=near)
-    mid = 0.5 * (panels.a[near] + panels.b[near])
-    d_mid = np.min(
-        np.hypot(at_prior[:, None, 0] - mid[None, :, 0], at_prior[:, None, 1] - mid[None, :, 1])
-        - 0.5 * panels.length[near][None, :],
-        axis=1,
-    )
-    cand = np.minimum(np.abs(dist), d_mid) <= slack
-    pts, r = pts[cand], r[cand]
+    pts, r = _window_returns(points_scanner, panels, prior, near, tol, config)
     if pts.shape[0] < 6:
         return []
-    if pts.shape[0] > config.max_points:
-        keep = np.linspace(0, pts.shape[0] - 1, config.max_points).round().astype(int)
-        pts, r = pts[keep], r[keep]
     step = config.step_m
     res = config.field_resolution_m
     field = _tiled_field(panels, near, res, step)
-    n_t = math.ceil(prior.radius_m / step)
-    offs = np.arange(-n_t, n_t + 1) * step
-    tx, ty = np.meshgrid(offs, offs, indexing="ij")
-    inside = np.hypot(tx, ty) <= prior.radius_m + 1e-9
-    shifts = np.column_stack([tx[inside], ty[inside]])
+    shifts, d_rot, n_r = _window_grid(prior.radius_m, tol, step, r)
     shift_cells = shifts / res
-    d_rot = step / max(float(r.max()), step)
-    n_r = math.ceil(tol / d_rot)
     rot0 = math.pi / 2 - prior.pose.azimuth
     # The tiles each return can reach anywhere in the window.
     at_prior = prior.pose.scanner_to_mine(pts)
