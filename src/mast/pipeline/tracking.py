@@ -294,21 +294,20 @@ def window_may_fix(
     short of what a pose in the window associates.
     """
     tol = prior.azimuth_tolerance_rad
-    if tol is None or points_scanner.shape[0] == 0:
-        return tol is None
+    if tol is None:
+        return True  # an azimuth window without bounds: nothing to bound with
+    if points_scanner.shape[0] == 0:
+        return False
     move = prior.radius_m + margin_m
     near = panels.near(prior.pose.position, range_max_m + 1.0 + move)
     if near.size == 0:
         return False
     r = np.hypot(points_scanner[:, 0], points_scanner[:, 1])
-    pts = prior.pose.scanner_to_mine(points_scanner)
     reach = move + r * (tol + margin_rad) + gate_m
-    a, u, length = panels.a[near], panels.direction[near], panels.length[near]
-    rel = pts[:, None, :] - a[None, :, :]
-    along = np.clip(np.einsum("nkd,kd->nk", rel, u), 0.0, length[None, :])
-    off = rel - along[:, :, None] * u[None, :, :]
-    reached = np.hypot(off[:, :, 0], off[:, :, 1]) <= reach[:, None]
-    per_panel = reached.sum(axis=0)
+    # Distance from each return (at the prior) to each panel segment.
+    t, across = panels.project(prior.pose.scanner_to_mine(points_scanner), near)
+    beyond = np.maximum(np.maximum(-t, t - panels.length[near][None, :]), 0.0)
+    per_panel = (beyond**2 + across**2 <= (reach**2)[:, None]).sum(axis=0)
     owner = panels.beacon[near]
     enough = 0
     for b in np.unique(owner[per_panel > 0]):
