@@ -17,7 +17,7 @@ from __future__ import annotations
 import math
 import time
 from collections import OrderedDict
-from collections.abc import Iterable, Iterator
+from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -68,6 +68,7 @@ from mast.pipeline.verification import VerificationConfig, Verified, verify
 __all__ = [
     "NO_FIX_REASONS",
     "Fix",
+    "FixedPose",
     "LocatorConfig",
     "Prior",
     "SequenceConfig",
@@ -384,47 +385,66 @@ def locate(scan: Scan, survey: Survey, *, config: LocatorConfig | None = None) -
         never raises for what a scan contains.
     """
     cfg = config or LocatorConfig()
-    return _prior_first(scan, survey, cfg, cfg)[0]
+    return _prior_first(scan, survey, cfg, () if cfg.prior is None else (cfg.prior,), cfg)[0]
 
 
 def _prior_first(
-    scan: Scan, survey: Survey, searched: LocatorConfig, fallback: LocatorConfig
+    scan: Scan,
+    survey: Survey,
+    searched: LocatorConfig,
+    priors: Sequence[Prior],
+    fallback: LocatorConfig,
 ) -> tuple[Fix, bool]:
-    """The prior's own search (``searched.prior``, if any), then, when it gives no fix,
-    the global search under ``fallback``, both on one segmentation of the scan; and
-    whether the prior was tried and gave no fix. A window in which no pose could be
-    fixed (:func:`~mast.pipeline.tracking.window_may_fix`) is not searched."""
+    """Each prior's own search in turn (``searched`` with that prior), then, when none
+    gives a fix, the global search under ``fallback``, all on one segmentation of the
+    scan; and whether a prior was tried and gave no fix. A prediction's narrow window
+    comes before the wide one around it: the first costs a few grid poses, and a scan
+    it does not fix is searched as if it had not been tried. A window in which no pose
+    could be fixed (:func:`~mast.pipeline.tracking.window_may_fix`) is not searched."""
     t0 = time.perf_counter()
     seg = segment_scan(scan, searched.segmentation)
-    prior = searched.prior
-    if prior is not None:
+    ident: PanelIdentification | None = None
+    if priors:
         _, panels = _survey_index(survey, scan.range_max_m)
         points = scan.points()[1]
-        may_fix = window_may_fix(
+    for prior in priors:
+        within = replace(searched, prior=prior)
+        if not window_may_fix(
             points,
             panels,
             prior,
             scan.range_max_m,
-            gate_m=searched.verification.gate_sigmas * searched.noise.gate_sigma_m,
-            margin_m=searched.prior_margin_m,
-            margin_rad=searched.prior_margin_rad,
-            min_beacons=searched.min_beacons,
-            min_panel_points=searched.verification.min_panel_points,
-        )
-        batches = (
-            prior_hypotheses(points, panels, prior, scan.range_max_m, searched.tracking)
-            if may_fix
-            else []
-        )
+            gate_m=within.verification.gate_sigmas * within.noise.gate_sigma_m,
+            margin_m=within.prior_margin_m,
+            margin_rad=within.prior_margin_rad,
+            min_beacons=within.min_beacons,
+            min_panel_points=within.verification.min_panel_points,
+        ):
+            continue  # no pose in the window could be fixed: its search is skipped
+        if ident is None:
+            ident = _identified(seg, survey, scan.range_max_m, searched)
+        batches = prior_hypotheses(points, panels, prior, scan.range_max_m, within.tracking)
         # The best grid poses first; poses from other basins of the window only when
         # those give no fix.
         verified: tuple[Verified, ...] = ()
         for batch in batches:
-            fix = _locate(scan, survey, searched, t0, seg, from_prior=batch, before=verified)
+            fix = _locate(
+                scan, survey, within, t0, seg, from_prior=batch, before=verified, ident=ident
+            )
             if fix.ok:
                 return fix, False
             verified = fix.verified
-    return _locate(scan, survey, fallback, t0, seg), prior is not None
+    return _locate(scan, survey, fallback, t0, seg, ident=ident), bool(priors)
+
+
+def _identified(
+    seg: Segmentation, survey: Survey, range_max_m: float, cfg: LocatorConfig
+) -> PanelIdentification:
+    """Stage 2: the scan's segments identified as beacon panels and corners."""
+    index, _ = _survey_index(survey, range_max_m)
+    return identify_panels(
+        seg, index.representatives, cfg.identification, survey_sigma_m=cfg.noise.survey_sigma_m
+    )
 
 
 def _locate(
@@ -436,12 +456,16 @@ def _locate(
     *,
     from_prior: list[Hypothesis] | None = None,
     before: tuple[Verified, ...] = (),
+    ident: PanelIdentification | None = None,
 ) -> Fix:
     """:func:`locate` from hypotheses of the prior's own search (``from_prior``, a
     batch of :func:`~mast.pipeline.tracking.prior_hypotheses`) or, without them, from the
     global ones (kept inside the prior's window, if there is one), on the scan's
-    segmentation ``seg`` (made once for both); ``t0`` is when it began. The poses an
-    earlier batch verified (``before``) compete with this batch's."""
+    segmentation ``seg`` (made once for both) and its identification ``ident`` (made
+    here when not given); ``t0`` is when it began. The poses an earlier batch verified
+    (``before``) compete with this batch's. The prior's poses are verified against the
+    identified corners too: a beacon whose corner the scan shows is held to it, however
+    the pose was found."""
     noise = cfg.noise
     index, panels = _survey_index(survey, scan.range_max_m)
     found: dict[str, object] = {"config": cfg, "hypotheses": (), "verified": (), "chosen": None}
@@ -468,15 +492,12 @@ def _locate(
 
     # Stages 1-3: segments (given), identified panels, pose hypotheses.
     found["segmentation"] = seg
-    ident = PanelIdentification((), ())
+    if ident is None:
+        ident = _identified(seg, survey, scan.range_max_m, cfg)
     found["identification"] = ident
     if from_prior is not None:
         hyps = from_prior
     else:
-        ident = identify_panels(
-            seg, index.representatives, cfg.identification, survey_sigma_m=noise.survey_sigma_m
-        )
-        found["identification"] = ident
         # Not narrowed by the prior here: ICP may carry a start from outside the window
         # into it, and a pose the global search finds inside must not be lost.
         hyps = (
@@ -612,6 +633,29 @@ def _locate(
 
 
 @dataclass(frozen=True, slots=True)
+class FixedPose:
+    """A fixed pose of a sequence: when, where, and its covariance (E, N, A)."""
+
+    stamp_ns: int
+    pose: Pose2D
+    covariance: NDArray[np.float64]
+
+
+def _inside(inner: Prior, outer: Prior) -> bool:
+    """Whether every pose ``inner`` admits, ``outer`` admits too."""
+    if inner.azimuth_tolerance_rad is None or outer.azimuth_tolerance_rad is None:
+        return False
+    d = math.hypot(
+        inner.pose.easting - outer.pose.easting, inner.pose.northing - outer.pose.northing
+    )
+    da = abs(math.remainder(inner.pose.azimuth - outer.pose.azimuth, math.tau))
+    return (
+        d + inner.radius_m <= outer.radius_m
+        and da + inner.azimuth_tolerance_rad <= outer.azimuth_tolerance_rad
+    )
+
+
+@dataclass(frozen=True, slots=True)
 class SequenceConfig:
     """How a scan sequence passes each fix on as the next scan's prior.
 
@@ -628,6 +672,14 @@ class SequenceConfig:
         as wide as it can have moved since the previous fix, plus
         ``min_radius_m`` and ``min_azimuth_rad``, up to the largest window.
     min_radius_m, min_azimuth_rad : float
+    max_accel_mps2, max_yaw_accel_rad_s2 : float
+        The most a vehicle speeds up, brakes or changes its turn rate: how far it
+        can stray from the constant-velocity prediction of the last two fixes
+        (:meth:`predicted`).
+    prediction_sigmas : float
+        The prediction's window holds this many of its standard deviations (from
+        the two fixes' covariances), plus what the accelerations allow and
+        ``min_radius_m`` and ``min_azimuth_rad`` (the scanner's own jolts).
     """
 
     max_gap_s: float = 0.5
@@ -637,6 +689,38 @@ class SequenceConfig:
     max_turn_rad_s: float = math.radians(90.0)
     min_radius_m: float = 0.05
     min_azimuth_rad: float = math.radians(1.0)
+    max_accel_mps2: float = 3.0
+    max_yaw_accel_rad_s2: float = 2.0
+    prediction_sigmas: float = 3.0
+
+    def predicted(self, before: FixedPose, last: FixedPose, stamp_ns: int) -> Prior | None:
+        """The window about ``last`` carried on to ``stamp_ns`` at the velocity since
+        ``before`` (constant velocity), or None when either gap is longer than
+        ``max_gap_s``. The secant velocity is that of the middle of the two fixes: with
+        an acceleration ``a`` the prediction is off by ``a dt (dt + dt_fix) / 2``."""
+        dt_fix = (last.stamp_ns - before.stamp_ns) * 1e-9
+        dt = (stamp_ns - last.stamp_ns) * 1e-9
+        if not (0.0 < dt_fix <= self.max_gap_s and 0.0 <= dt <= self.max_gap_s):
+            return None
+        k = dt / dt_fix
+        p0, p1 = before.pose, last.pose
+        turn = math.remainder(p1.azimuth - p0.azimuth, math.tau)
+        pose = Pose2D(
+            p1.easting + k * (p1.easting - p0.easting),
+            p1.northing + k * (p1.northing - p0.northing),
+            (p1.azimuth + k * turn) % math.tau,
+        )
+        cov = (1.0 + k) ** 2 * last.covariance + k**2 * before.covariance
+        sigma_m = math.sqrt(max(float(np.linalg.eigvalsh(cov[:2, :2])[-1]), 0.0))
+        sigma_rad = math.sqrt(max(float(cov[2, 2]), 0.0))
+        unseen = 0.5 * dt * (dt + dt_fix)
+        return Prior(
+            pose,
+            self.min_radius_m + self.prediction_sigmas * sigma_m + self.max_accel_mps2 * unseen,
+            self.min_azimuth_rad
+            + self.prediction_sigmas * sigma_rad
+            + self.max_yaw_accel_rad_s2 * unseen,
+        )
 
     def prior(self, pose: Pose2D, elapsed_s: float) -> Prior:
         """The window around ``pose``, ``elapsed_s`` after it was fixed."""
@@ -648,22 +732,37 @@ class SequenceConfig:
 
 
 def locate_near(
-    scan: Scan, survey: Survey, prior: Prior | None, *, config: LocatorConfig | None = None
+    scan: Scan,
+    survey: Survey,
+    prior: Prior | None,
+    *,
+    config: LocatorConfig | None = None,
+    narrow: Prior | None = None,
 ) -> Fix:
     """Locate a scan near a predicted pose first, from scratch when that gives no fix.
 
-    The prior only narrows the search (no identification needed within it);
-    a scan it cannot fix is located as if there were none, so a prediction can
-    add fixes but never steer one. A prior in ``config`` takes precedence.
+    The prior only narrows the search; a scan it cannot fix is located as if there
+    were none, so a prediction can add fixes but never steer one. A prior in
+    ``config`` takes precedence. ``narrow``, a window inside ``prior`` (the
+    prediction's own few standard deviations), is searched before it: a scan it does
+    not fix is searched as without it.
     """
-    return _near(scan, survey, prior, config or LocatorConfig())[0]
+    return _near(scan, survey, prior, config or LocatorConfig(), narrow)[0]
 
 
-def _near(scan: Scan, survey: Survey, prior: Prior | None, cfg: LocatorConfig) -> tuple[Fix, bool]:
+def _near(
+    scan: Scan,
+    survey: Survey,
+    prior: Prior | None,
+    cfg: LocatorConfig,
+    narrow: Prior | None = None,
+) -> tuple[Fix, bool]:
     """:func:`locate_near`, and whether the prior was tried and gave no fix."""
     if cfg.prior is None and prior is not None:
-        # The prior's own search, then the global one not narrowed by it.
-        return _prior_first(scan, survey, replace(cfg, prior=prior), cfg)
+        # The priors' own searches, then the global one not narrowed by them.
+        if narrow is not None and _inside(narrow, prior):
+            return _prior_first(scan, survey, cfg, (narrow, prior), cfg)
+        return _prior_first(scan, survey, cfg, (prior,), cfg)
     return locate(scan, survey, config=cfg), False
 
 
@@ -706,32 +805,44 @@ class SequenceLocator:
         self.survey = survey
         self.config = config or LocatorConfig()
         self.sequence = sequence
-        self._last: tuple[int, Pose2D] | None = None
+        self._last: FixedPose | None = None
+        self._before: FixedPose | None = None
 
     @property
     def last_pose(self) -> Pose2D | None:
         """The last fixed pose, the next scan's prior when close in time."""
-        return None if self._last is None else self._last[1]
+        return None if self._last is None else self._last.pose
 
     @property
     def last_stamp_ns(self) -> int:
         """Stamp of the last fixed scan (0 before the first fix)."""
-        return 0 if self._last is None else self._last[0]
+        return 0 if self._last is None else self._last.stamp_ns
 
     def assume(self, pose: Pose2D | None, stamp_ns: int = 0) -> None:
-        """Take ``pose`` (at ``stamp_ns``) as the last fix, or forget it (None)."""
-        self._last = None if pose is None else (stamp_ns, pose)
+        """Take ``pose`` (at ``stamp_ns``) as the last fix, or forget it (None); either
+        way no velocity is known until the next two fixes."""
+        self._before = None
+        self._last = None if pose is None else FixedPose(stamp_ns, pose, np.zeros((3, 3)))
 
     def step(self, scan: Scan) -> SequenceStep:
-        """Locate ``scan`` and remember its pose when fixed."""
+        """Locate ``scan`` and remember its pose when fixed.
+
+        Near the last fix, the constant-velocity prediction of the last two
+        (:meth:`SequenceConfig.predicted`) is searched first, then the window of all
+        the vehicle can have done since the last fix, then the whole survey.
+        """
         cfg, seq = self.config, self.sequence
-        prior = None
-        if self._last is not None and abs(scan.stamp_ns - self._last[0]) <= seq.max_gap_s * 1e9:
-            prior = seq.prior(self._last[1], abs(scan.stamp_ns - self._last[0]) / 1e9)
-        fix, lost = _near(scan, self.survey, prior, cfg)
+        prior = narrow = None
+        last = self._last
+        if last is not None and abs(scan.stamp_ns - last.stamp_ns) <= seq.max_gap_s * 1e9:
+            prior = seq.prior(last.pose, abs(scan.stamp_ns - last.stamp_ns) / 1e9)
+            if self._before is not None:
+                narrow = seq.predicted(self._before, last, scan.stamp_ns)
+        fix, lost = _near(scan, self.survey, prior, cfg, narrow)
         tracked = cfg.prior is None and prior is not None
-        if fix.ok and fix.pose is not None:
-            self._last = (scan.stamp_ns, fix.pose)
+        if fix.ok and fix.pose is not None and fix.adjustment is not None:
+            self._before = last
+            self._last = FixedPose(scan.stamp_ns, fix.pose, fix.adjustment.covariance)
         return SequenceStep(fix, tracked, lost)
 
 

@@ -57,6 +57,10 @@ class TrackConfig:
         deviations, within these bounds.
     prior_azimuth_rad, max_prior_azimuth_rad : float
         The same for the azimuth.
+    narrow_radius_m, narrow_azimuth_rad : float
+        Searched first: the window of three standard deviations of the prediction
+        without the lower bounds above, widened by these (the scanner's own jolts).
+        A scan it does not fix is searched in the window above, then from scratch.
     huber_k : float
         Huber kernel threshold, in standard deviations, of every factor.
     keyframe_m, keyframe_rad : float
@@ -93,6 +97,8 @@ class TrackConfig:
     max_prior_radius_m: float = 1.0
     prior_azimuth_rad: float = math.radians(5.0)
     max_prior_azimuth_rad: float = math.radians(10.0)
+    narrow_radius_m: float = 0.05
+    narrow_azimuth_rad: float = math.radians(1.0)
     huber_k: float = 1.345
     keyframe_m: float = 2.0
     keyframe_rad: float = math.radians(5.0)
@@ -166,13 +172,15 @@ class RunTracker:
         self._last: Motion | None = None
         self._velocity = (0.0, 0.0, 0.0)
 
-    def _prior(self, pose: Pose2D, cov: NDArray[np.float64]) -> Prior:
+    def _prior(self, pose: Pose2D, cov: NDArray[np.float64]) -> tuple[Prior, Prior]:
+        """The window about the predicted pose, and the narrow one searched first."""
         cfg = self.config
         pos = float(np.sqrt(max(np.linalg.eigvalsh(cov[:2, :2])[-1], 0.0)))
         radius = min(max(3.0 * pos, cfg.prior_radius_m), cfg.max_prior_radius_m)
         az = math.sqrt(max(cov[2, 2], 0.0))
         tol = min(max(3.0 * az, cfg.prior_azimuth_rad), cfg.max_prior_azimuth_rad)
-        return Prior(pose, radius, tol)
+        narrow = Prior(pose, cfg.narrow_radius_m + 3.0 * pos, cfg.narrow_azimuth_rad + 3.0 * az)
+        return Prior(pose, radius, tol), narrow
 
     def step(self, index: int, scan: Scan) -> Step:
         """Locate one scan (the next of the run) and measure its motion."""
@@ -236,8 +244,8 @@ class RunTracker:
         predicted, cov = None, np.zeros((3, 3))
         if motion is not None and self._key_pose is not None:
             predicted, cov = compose(self._key_pose, self._key_cov, motion)
-        prior = None if predicted is None else self._prior(predicted, cov)
-        fix = locate_near(scan, self.survey, prior, config=cfg.locator)
+        prior, narrow = (None, None) if predicted is None else self._prior(predicted, cov)
+        fix = locate_near(scan, self.survey, prior, config=cfg.locator, narrow=narrow)
         pose: Pose2D | None = predicted
         if fix.ok and fix.pose is not None and fix.adjustment is not None:
             pose, cov = fix.pose, fix.adjustment.covariance.copy()

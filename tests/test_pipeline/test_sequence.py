@@ -1,0 +1,113 @@
+"""Scans located in sequence: the constant-velocity window first, the wide one after.
+
+A scan near the last fix is searched first in the window the last two fixes predict
+(constant velocity, a few of the prediction's sigmas plus what the vehicle's
+accelerations allow), then in the window of all the vehicle can have done since the
+last fix, then over the whole survey.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+from functools import cache
+
+import numpy as np
+import pytest
+
+from mast.core.pose import Pose2D
+from mast.pipeline.locator import (
+    FixedPose,
+    LocatorConfig,
+    SequenceConfig,
+    SequenceLocator,
+)
+from mast.sim import DriveScene, SimulatedScan, drive_scene
+
+SEQ = SequenceConfig()
+
+
+def test_the_prediction_carries_the_last_two_fixes_on_across_north() -> None:
+    # 0.1 m east and 1 degree clockwise (azimuth 359.5 -> 0.5) in 0.04 s.
+    cov = np.diag([1e-6, 4e-6, 1e-8])
+    before = FixedPose(0, Pose2D(100.0, 200.0, math.radians(359.5)), cov)
+    last = FixedPose(40_000_000, Pose2D(100.1, 200.0, math.radians(0.5)), cov)
+    window = SEQ.predicted(before, last, 60_000_000)  # half a step on
+    assert window is not None
+    assert window.pose.easting == pytest.approx(100.15, abs=1e-12)
+    assert window.pose.northing == pytest.approx(200.0, abs=1e-12)
+    assert math.degrees(window.pose.azimuth) == pytest.approx(1.0, abs=1e-9)
+    # (1 + k)^2 + k^2 of the larger position variance, k = 0.5; what 3 m/s^2 allows
+    # over 0.02 s beyond a secant velocity 0.04 s wide: 3 * 0.02 * 0.06 / 2.
+    sigma = math.sqrt(2.5 * 4e-6)
+    unseen = 0.5 * 0.02 * 0.06
+    assert window.radius_m == pytest.approx(0.05 + 3 * sigma + 3.0 * unseen, rel=1e-9)
+    assert window.azimuth_tolerance_rad == pytest.approx(
+        math.radians(1.0) + 3 * math.sqrt(2.5e-8) + 2.0 * unseen, rel=1e-9
+    )
+
+
+def test_no_prediction_across_a_gap_or_backwards_in_time() -> None:
+    p, cov = Pose2D(0.0, 0.0, 0.0), np.zeros((3, 3))
+    at = FixedPose(0, p, cov)
+    assert SEQ.predicted(at, FixedPose(600_000_000, p, cov), 650_000_000) is None
+    assert SEQ.predicted(at, FixedPose(40_000_000, p, cov), 600_000_000) is None
+    assert SEQ.predicted(at, FixedPose(40_000_000, p, cov), 30_000_000) is None
+    assert SEQ.predicted(at, FixedPose(0, p, cov), 40_000_000) is None
+
+
+@cache
+def _drive() -> tuple[DriveScene, tuple[SimulatedScan, ...]]:
+    # The first 40 scans of this drive (25 Hz, 1-3 m/s) each show two beacons.
+    scene = drive_scene(0, scans=30)
+    return scene, tuple(scene.iter_simulated())
+
+
+def _config(scene: DriveScene) -> LocatorConfig:
+    return LocatorConfig(range_sigma_m=scene.shots[0].scanner.range_sigma_m)
+
+
+def _off(pose: Pose2D, truth: Pose2D) -> tuple[float, float]:
+    d = math.hypot(pose.easting - truth.easting, pose.northing - truth.northing)
+    return d, abs(math.remainder(pose.azimuth - truth.azimuth, math.tau))
+
+
+def test_a_drive_is_tracked_in_the_predicted_window() -> None:
+    scene, sims = _drive()
+    tracker = SequenceLocator(scene.survey, config=_config(scene))
+    radii = []
+    for k, sim in enumerate(sims[:12]):
+        step = tracker.step(sim.scan)
+        assert step.fix.ok, (k, step.fix.reason)
+        assert step.fix.pose is not None
+        d, a = _off(step.fix.pose, sim.pose)
+        assert d < 0.02
+        assert a < math.radians(0.1)
+        assert step.tracked == (k > 0)
+        assert not step.track_lost
+        if k >= 2:  # two fixes before: a velocity
+            prior = step.fix.config.prior
+            assert prior is not None
+            radii.append(prior.radius_m)
+    wide = SEQ.prior(sims[0].pose, 0.04).radius_m
+    assert max(radii) < 0.5 * wide
+
+
+def test_a_jolt_off_the_prediction_is_found_in_the_wide_window() -> None:
+    scene, sims = _drive()
+    tracker = SequenceLocator(scene.survey, config=_config(scene))
+    for sim in sims[:4]:
+        assert tracker.step(sim.scan).fix.ok
+    # The vehicle is where it would be three scans on, one scan's time later.
+    ahead = sims[6]
+    jumped = _off(ahead.pose, sims[4].pose)[0]
+    assert 0.1 < jumped < SEQ.prior(sims[3].pose, 0.04).radius_m - 0.02
+    scan = replace(ahead.scan, stamp_ns=sims[4].scan.stamp_ns)
+    step = tracker.step(scan)
+    assert step.fix.ok
+    assert step.fix.pose is not None
+    assert not step.track_lost
+    assert _off(step.fix.pose, ahead.pose)[0] < 0.02
+    prior = step.fix.config.prior
+    assert prior is not None
+    assert prior.radius_m == pytest.approx(SEQ.prior(sims[3].pose, 0.04).radius_m)
