@@ -14,6 +14,7 @@ from mast.apps.bench.speed import (
     OTHER_STAGE,
     PEER_MISSING,
     STAGES,
+    TRACKED_STAGES,
     Stats,
     kept_scans,
     measure_locate,
@@ -40,6 +41,7 @@ def test_tiny_run_has_every_figure(tmp_path: Path) -> None:
         minewide_poses=2,
         survey_beacons=50,
         startup_runs=1,
+        tracked_scans=12,
         out=out,
         echo=lines.append,
     )
@@ -95,7 +97,27 @@ def test_tiny_run_has_every_figure(tmp_path: Path) -> None:
         assert p.azimuth_err_arcsec.max < 3600.0 * 5
     # the printed table holds each section, and --out holds the same text
     text = "\n".join(lines)
-    for section in ("1. locate", "2. whole runs", "3. mine-wide", "4. start-up", "5. peer"):
+    # 6. tracked scans: the drive's first scan has no prior, the rest are fixed near it
+    t = figs.tracked
+    assert t is not None
+    assert t.scans == 12
+    assert t.global_ms.count == 1
+    assert t.tracked_ms.count >= 8
+    assert t.narrow <= t.tracked_ms.count
+    assert t.position_err_mm.max < 50.0
+    stages = dict(t.stages_ms)
+    assert list(stages) == [s for s, _ in TRACKED_STAGES] + [OTHER_STAGE]
+    assert all(s.count == t.tracked_ms.count for s in stages.values())
+    _positive(stages["window bound"])
+    _positive(stages["hypotheses"])
+    for section in (
+        "1. locate",
+        "2. whole runs",
+        "3. mine-wide",
+        "4. start-up",
+        "5. peer",
+        "6. tracked scans",
+    ):
         assert section in text
     assert "mast locate BAG" in text
     assert "mast track BAG" in text
@@ -115,6 +137,7 @@ def test_missing_peer_is_reported_not_raised(monkeypatch: pytest.MonkeyPatch) ->
         track_scans=(),
         minewide_poses=0,
         startup_runs=0,
+        tracked_scans=0,
         echo=lines.append,
     )
     assert figs.peer is None

@@ -1283,6 +1283,10 @@ def bench_speed(
     startup_runs: Annotated[
         int, typer.Option("--startup-runs", min=0, help="Fresh 'mast --help' runs (0: skip).")
     ] = 5,
+    tracked_scans: Annotated[
+        int,
+        typer.Option("--tracked-scans", min=0, help="Drive scans located in sequence (0: skip)."),
+    ] = 600,
     seed: Annotated[int, typer.Option("--seed", help="Seed of the drives and scenes.")] = 0,
     out: Annotated[
         Path | None, typer.Option("--out", help="Also write the figures to this text file.")
@@ -1290,7 +1294,8 @@ def bench_speed(
 ) -> None:
     """Speed: locate per scan and per stage (1081 and 1800 beams), bags read, located and
     tracked (each in a fresh process: throughput, peak memory), a 200-beacon survey,
-    start-up, and a peer (small_gicp point-to-plane ICP) on the same scans."""
+    start-up, a peer (small_gicp point-to-plane ICP) on the same scans, and tracked
+    scans (a drive located in sequence) per stage beside the peer from their priors."""
     from mast.apps.bench.speed import DEFAULT_BAG_SCANS, DEFAULT_TRACK_SCANS, run_speed
 
     if out is not None:
@@ -1303,6 +1308,7 @@ def bench_speed(
         minewide_poses=minewide_poses,
         survey_beacons=beacons,
         startup_runs=startup_runs,
+        tracked_scans=tracked_scans,
         seed=seed,
         out=out,
         echo=typer.echo,

@@ -1,7 +1,7 @@
 """Speed benchmark (issue 11): a fix per scan, whole runs, a mine-wide survey, start-up,
 and a general-purpose registration library beside MAST on the same scans.
 
-Five measurements, printed as tables (figures, not timed assertions):
+Six measurements, printed as tables (figures, not timed assertions):
 
 1. ``locate`` per scan, one core, on scans held in memory (no file parsing): a
    simulated drive (:func:`mast.sim.drive_scene`, 270 deg at 0.25 deg, 1081 beams,
@@ -30,6 +30,12 @@ Five measurements, printed as tables (figures, not timed assertions):
    normals), starting from the true pose moved 0.2 m and 2 deg. Its time per scan
    and pose error beside ``locate``'s on the same scans. small_gicp is optional
    (``pip install 'mast-survey[bench]'``); without it the benchmark says so.
+6. Tracked scans: a 25 Hz drive located in sequence
+   (:class:`~mast.pipeline.locator.SequenceLocator`, each scan first near the last
+   fix), its scans timed apart by how they were found (fixed by the prior's own
+   search, prior tried then the global search, no prior), the tracked fixes' time
+   per stage (a second, clocked pass) and errors, and the peer on the same scans'
+   beacon returns from the pose of each fix's prior.
 
 Run: ``mast bench speed`` (or ``python -m mast.apps.bench.speed``).
 """
@@ -63,13 +69,14 @@ from mast.apps.bench.minewide import MinewideSummary, run_minewide
 from mast.core.beacon import Survey
 from mast.core.geometry import PanelSet
 from mast.core.pose import Pose2D
-from mast.pipeline.locator import Fix, LocatorConfig, locate
+from mast.pipeline.locator import Fix, LocatorConfig, SequenceLocator, SequenceStep, locate
 from mast.sim import SCANNERS, DriveScene, ScannerModel, SimulatedScan, drive_scene, write_scenario
 
 __all__ = [
     "DEFAULT_BAG_SCANS",
     "DEFAULT_LOCATE_SCANS",
     "DEFAULT_SCANS_360",
+    "DEFAULT_TRACKED_SCANS",
     "DEFAULT_TRACK_SCANS",
     "PEER_MISSING",
     "KeptScans",
@@ -79,12 +86,14 @@ __all__ = [
     "SpeedFigures",
     "StartupSpeed",
     "Stats",
+    "TrackedSpeed",
     "kept_scans",
     "measure_locate",
     "measure_minewide",
     "measure_peer",
     "measure_runs",
     "measure_startup",
+    "measure_tracked",
     "run_speed",
 ]
 
@@ -100,6 +109,9 @@ DEFAULT_SURVEY_BEACONS = 200
 DEFAULT_MINEWIDE_POSES = 40
 #: ``mast --help`` runs, of which the median is quoted.
 DEFAULT_STARTUP_RUNS = 5
+
+#: Scans of a 25 Hz drive located in sequence, each near the last fix (section 6).
+DEFAULT_TRACKED_SCANS = 600
 
 #: The simulator's 360 degree scanner (1800 beams at 0.2 degrees).
 SCANNER_360 = "spinning-360-0.2"
@@ -150,6 +162,12 @@ STAGES: tuple[tuple[str, tuple[str, ...]], ...] = (
     ),
 )
 OTHER_STAGE = "other"
+#: A tracked scan's stages: the bound that skips a window that cannot fix, then the
+#: global ones (the window's grid search is among the hypotheses).
+TRACKED_STAGES: tuple[tuple[str, tuple[str, ...]], ...] = (
+    ("window bound", ("window_may_fix",)),
+    *STAGES,
+)
 
 # A fresh process for a whole run: times itself from before its first mast import to
 # its end and writes its figures to a side file (standard output may be /dev/null).
@@ -275,6 +293,33 @@ class PeerSpeed:
 
 
 @dataclass(frozen=True, slots=True)
+class TrackedSpeed:
+    """A drive located in sequence (:class:`~mast.pipeline.locator.SequenceLocator`).
+
+    Milliseconds per scan by how it was found: ``tracked_ms`` the scans fixed by their
+    prior's own search (``narrow`` of them in the constant-velocity window), ``lost_ms``
+    those whose prior was tried and gave no fix (then the global search ran), and
+    ``global_ms`` those without a prior. ``stages_ms`` splits the tracked fixes' time
+    as section 1 does; the errors are those of the tracked fixes. ``peer_*``: the
+    peer from each tracked fix's prior pose on the same scans (empty without it).
+    """
+
+    scans: int
+    rate_hz: float
+    fixed: int
+    narrow: int
+    tracked_ms: Stats
+    lost_ms: Stats
+    global_ms: Stats
+    stages_ms: tuple[tuple[str, Stats], ...]
+    position_err_mm: Stats
+    azimuth_err_arcsec: Stats
+    peer_ms: Stats
+    peer_position_err_mm: Stats
+    peer_azimuth_err_arcsec: Stats
+
+
+@dataclass(frozen=True, slots=True)
 class SpeedFigures:
     """Everything the benchmark measured, and the lines it printed."""
 
@@ -285,6 +330,7 @@ class SpeedFigures:
     peer: PeerSpeed | None
     peer_note: str
     lines: tuple[str, ...]
+    tracked: TrackedSpeed | None = None
 
 
 # --------------------------------------------------------------------------- scans
@@ -377,7 +423,9 @@ def _clocked(fn: Callable[..., Any], stage: str, clock: dict[str, float]) -> Cal
 
 
 @contextmanager
-def _stage_clocks(clock: dict[str, float]) -> Iterator[None]:
+def _stage_clocks(
+    clock: dict[str, float], stages: tuple[tuple[str, tuple[str, ...]], ...] = STAGES
+) -> Iterator[None]:
     """Wrap the locator's stage functions with a clock adding into ``clock`` per stage.
 
     A function missing from the locator (renamed) is left out: its time is ``other``.
@@ -385,7 +433,7 @@ def _stage_clocks(clock: dict[str, float]) -> Iterator[None]:
     from mast.pipeline import locator as module
 
     saved: dict[str, Any] = {}
-    for stage, names in STAGES:
+    for stage, names in stages:
         for name in names:
             fn = getattr(module, name, None)
             if callable(fn):
@@ -479,6 +527,84 @@ def measure_locate(
 
 
 # --------------------------------------------------------------------------- whole runs
+
+
+def measure_tracked(count: int, *, seed: int = 0) -> TrackedSpeed:
+    """Locate ``count`` scans of a 25 Hz drive in sequence, timed, then again with the
+    stage functions clocked; the peer from each tracked fix's prior on the same scans."""
+    scene = drive_scene(seed, scans=count)
+    sims = tuple(scene.iter_simulated())
+    cfg = LocatorConfig(range_sigma_m=scene.shots[0].scanner.range_sigma_m)
+    if sims:  # the survey's index, any compilation: once per run, not per scan
+        locate(sims[0].scan, scene.survey, config=cfg)
+    steps: list[SequenceStep] = []
+    seconds: list[float] = []
+    wide: list[float] = []  # the radius of the window of all the vehicle can have done
+    tracker = SequenceLocator(scene.survey, config=cfg)
+    for sim in sims:
+        last = tracker.last_pose
+        elapsed = abs(sim.scan.stamp_ns - tracker.last_stamp_ns) / 1e9
+        wide.append(math.inf if last is None else tracker.sequence.prior(last, elapsed).radius_m)
+        t0 = time.perf_counter()
+        steps.append(tracker.step(sim.scan))
+        seconds.append(time.perf_counter() - t0)
+    found = [st.tracked and not st.track_lost and st.fix.ok for st in steps]
+    # The second pass, clocked: the same steps (the locator is deterministic).
+    per: dict[str, list[float]] = {stage: [] for stage, _ in TRACKED_STAGES}
+    per[OTHER_STAGE] = []
+    clock: dict[str, float] = {}
+    tracker = SequenceLocator(scene.survey, config=cfg)
+    with _stage_clocks(clock, TRACKED_STAGES):
+        for sim, kept in zip(sims, found, strict=True):
+            clock.clear()
+            t0 = time.perf_counter()
+            tracker.step(sim.scan)
+            total = time.perf_counter() - t0
+            if kept:
+                for stage, _ in TRACKED_STAGES:
+                    per[stage].append(1e3 * clock.get(stage, 0.0))
+                per[OTHER_STAGE].append(1e3 * (total - sum(clock.values())))
+    pos, az, narrow = [], [], 0
+    peer_ms, peer_pos, peer_az = [], [], []
+    sg = _peer_module()
+    target = tree = None
+    if sg is not None:
+        target, tree, _ = _peer_target(scene.survey, sg)
+    for sim, st, kept, radius in zip(sims, steps, found, wide, strict=True):
+        prior = st.fix.config.prior
+        if not kept or st.fix.pose is None or prior is None:
+            continue
+        p, a = _pose_errors(sim.pose, st.fix.pose)
+        pos.append(p)
+        az.append(a)
+        narrow += prior.radius_m < radius
+        if sg is not None:
+            beams, points = sim.scan.points()
+            source = points[sim.beacon_mask()[beams]]
+            if len(source) >= 3:
+                ms, got, _ = _peer_align(sg, target, tree, source, prior.pose)
+                peer_ms.append(ms)
+                pp, pa = _pose_errors(sim.pose, got)
+                peer_pos.append(pp)
+                peer_az.append(pa)
+    times = 1e3 * np.asarray(seconds)
+    tracked = np.asarray([st.tracked for st in steps], dtype=bool)
+    lost = np.asarray([st.track_lost for st in steps], dtype=bool)
+    return TrackedSpeed(
+        scans=len(sims),
+        rate_hz=scene.rate_hz,
+        fixed=sum(st.fix.ok for st in steps),
+        narrow=narrow,
+        tracked_ms=Stats.of(times[np.asarray(found, dtype=bool)]),
+        lost_ms=Stats.of(times[lost]),
+        global_ms=Stats.of(times[~tracked]),
+        stages_ms=tuple((stage, Stats.of(v)) for stage, v in per.items()),
+        position_err_mm=Stats.of(pos),
+        azimuth_err_arcsec=Stats.of(az),
+        peer_ms=Stats.of(peer_ms),
+        peer_position_err_mm=Stats.of(peer_pos),
+        peer_azimuth_err_arcsec=Stats.of(peer_az),
+    )
 
 
 def _child_run(step: str, scans: int, mode: str, args: Sequence[str], tmp: Path) -> ProcessRun:
@@ -603,6 +729,39 @@ def _pose_of(m: NDArray[np.float64]) -> Pose2D:
     return Pose2D(float(m[0, 3]), float(m[1, 3]), math.atan2(m[0, 0], m[1, 0]))
 
 
+def _peer_align(
+    sg: Any, target: Any, tree: Any, source: NDArray[np.float64], start: Pose2D
+) -> tuple[float, Pose2D, bool]:
+    """The peer aligning scanner-frame ``source`` points to the panel model from
+    ``start``: its milliseconds, the pose it ends at, and whether it converged."""
+    lifted = np.column_stack([source, np.zeros(len(source))])
+    t1 = time.perf_counter()
+    cloud = sg.PointCloud(lifted)
+    result = sg.align(
+        target,
+        cloud,
+        tree,
+        init_T_target_source=_matrix(start),
+        registration_type="PLANE_ICP",
+        max_correspondence_distance=PEER_MAX_CORRESPONDENCE_M,
+        num_threads=1,
+        max_iterations=PEER_MAX_ITERATIONS,
+        rotation_epsilon=PEER_EPSILON,
+        translation_epsilon=PEER_EPSILON,
+    )
+    ms = 1e3 * (time.perf_counter() - t1)
+    return ms, _pose_of(np.asarray(result.T_target_source)), bool(result.converged)
+
+
+def _peer_target(survey: Survey, sg: Any) -> tuple[Any, Any, float]:
+    """The peer's model of the surveyed panels, its tree, and milliseconds to build."""
+    t0 = time.perf_counter()
+    target = sg.PointCloud(_panel_model(survey))
+    tree = sg.KdTree(target, 1)
+    sg.estimate_normals(target, tree, PEER_NEIGHBOURS, 1)
+    return target, tree, 1e3 * (time.perf_counter() - t0)
+
+
 def measure_peer(kept: KeptScans, *, seed: int = 0) -> PeerSpeed | None:
     """The peer on the scans ``locate`` fixed, beside ``locate``'s own figures on them;
     ``None`` when small_gicp is not installed."""
@@ -610,11 +769,7 @@ def measure_peer(kept: KeptScans, *, seed: int = 0) -> PeerSpeed | None:
     if sg is None:
         return None
     rng = np.random.default_rng([seed, 23])
-    t0 = time.perf_counter()
-    target = sg.PointCloud(_panel_model(kept.survey))
-    tree = sg.KdTree(target, 1)
-    sg.estimate_normals(target, tree, PEER_NEIGHBOURS, 1)
-    build_ms = 1e3 * (time.perf_counter() - t0)
+    target, tree, build_ms = _peer_target(kept.survey, sg)
     times, pos, az, mast_t, mast_pos, mast_az = [], [], [], [], [], []
     converged = 0
     for sim, fix, dt in zip(kept.sims, kept.fixes, kept.seconds, strict=True):
@@ -632,24 +787,10 @@ def measure_peer(kept: KeptScans, *, seed: int = 0) -> PeerSpeed | None:
             truth.northing + PEER_OFFSET_M * math.sin(heading),
             truth.azimuth + turn,
         )
-        lifted = np.column_stack([source, np.zeros(len(source))])
-        t1 = time.perf_counter()
-        cloud = sg.PointCloud(lifted)
-        result = sg.align(
-            target,
-            cloud,
-            tree,
-            init_T_target_source=_matrix(start),
-            registration_type="PLANE_ICP",
-            max_correspondence_distance=PEER_MAX_CORRESPONDENCE_M,
-            num_threads=1,
-            max_iterations=PEER_MAX_ITERATIONS,
-            rotation_epsilon=PEER_EPSILON,
-            translation_epsilon=PEER_EPSILON,
-        )
-        times.append(1e3 * (time.perf_counter() - t1))
-        converged += bool(result.converged)
-        p, a = _pose_errors(truth, _pose_of(np.asarray(result.T_target_source)))
+        ms, got, ok = _peer_align(sg, target, tree, source, start)
+        times.append(ms)
+        converged += ok
+        p, a = _pose_errors(truth, got)
         pos.append(p)
         az.append(a)
         mp, ma = _pose_errors(truth, fix.pose)
@@ -721,6 +862,52 @@ def _locate_lines(figs: Sequence[LocateSpeed]) -> list[str]:
                 "slows Python-level calls most):"
             )
             lines += [f"    {100 * share:5.1f}%  {name}" for name, share in f.hot]
+    return lines
+
+
+def _tracked_lines(t: TrackedSpeed, note: str) -> list[str]:
+    lines = [
+        f"6. tracked scans: a {t.rate_hz:g} Hz simulated drive (1081 beams, 12 mm) located in "
+        f"sequence, each scan near the last fix (SequenceLocator); {t.scans} scans, "
+        f"{t.fixed} fixed",
+        f"  {'scans':<42} {'count':>6} {'ms: median':>10} {'p95':>7} {'max':>7} {'mean':>7}",
+    ]
+    for name, st in (
+        (f"fixed in the prior's window ({t.narrow} predicted)", t.tracked_ms),
+        ("prior tried, no fix there, then global", t.lost_ms),
+        ("no prior (the first, or after a gap)", t.global_ms),
+    ):
+        figures = (
+            f"{st.median:10.2f} {st.p95:7.2f} {st.max:7.2f} {st.mean:7.2f}"
+            if st.count
+            else f"{'-':>10} {'-':>7} {'-':>7} {'-':>7}"
+        )
+        lines.append(f"  {name:<42} {st.count:>6} {figures}")
+    lines += [
+        "  stages of the scans fixed by the prior's search, ms per scan (a second pass, clocked):",
+        f"  {'stage':<24} {'median':>8} {'p95':>8} {'max':>8} {'mean':>8}",
+    ]
+    lines += [
+        f"  {stage:<24} {s.median:8.2f} {s.p95:8.2f} {s.max:8.2f} {s.mean:8.2f}"
+        for stage, s in t.stages_ms
+    ]
+    lines.append(
+        f"  errors of those fixes: position mm median {t.position_err_mm.median:.2f}, p95 "
+        f"{t.position_err_mm.p95:.2f}, max {t.position_err_mm.max:.2f}; azimuth arcsec "
+        f"median {t.azimuth_err_arcsec.median:.1f}, p95 {t.azimuth_err_arcsec.p95:.1f}, "
+        f"max {t.azimuth_err_arcsec.max:.1f}"
+    )
+    if t.peer_ms.count:
+        lines.append(
+            f"  peer from each fix's prior pose, the same scans' beacon returns: ms median "
+            f"{t.peer_ms.median:.2f}, p95 {t.peer_ms.p95:.2f}; position mm median "
+            f"{t.peer_position_err_mm.median:.2f}, max {t.peer_position_err_mm.max:.2f}; "
+            f"azimuth arcsec median {t.peer_azimuth_err_arcsec.median:.1f}, max "
+            f"{t.peer_azimuth_err_arcsec.max:.1f}; time ratio MAST / peer (medians) "
+            f"{t.tracked_ms.median / t.peer_ms.median:.1f}"
+        )
+    elif note:
+        lines.append(f"  {note}")
     return lines
 
 
@@ -833,6 +1020,7 @@ def run_speed(
     minewide_poses: int = DEFAULT_MINEWIDE_POSES,
     survey_beacons: int = DEFAULT_SURVEY_BEACONS,
     startup_runs: int = DEFAULT_STARTUP_RUNS,
+    tracked_scans: int = DEFAULT_TRACKED_SCANS,
     seed: int = 0,
     out: Path | None = None,
     echo: Callable[[str], object] = print,
@@ -852,6 +1040,8 @@ def run_speed(
         Beacons of the mine-wide survey.
     startup_runs : int
         Fresh ``mast --help`` processes (0: skip).
+    tracked_scans : int
+        Scans of the drive located in sequence (0: skip).
     seed : int
         Seed of the drives, the mine-wide scenes and the peer's starts.
     out : Path, optional
@@ -902,9 +1092,17 @@ def run_speed(
         say("")
         for line in _peer_lines(peer, note):
             say(line)
+    tracked = None
+    if tracked_scans > 0:
+        tracked = measure_tracked(tracked_scans, seed=seed)
+        say("")
+        for line in _tracked_lines(tracked, PEER_MISSING if _peer_module() is None else ""):
+            say(line)
     if out is not None:
         out.write_text("\n".join(lines) + "\n", encoding="utf-8")
-    return SpeedFigures(tuple(locates), tuple(runs), minewide, startup, peer, note, tuple(lines))
+    return SpeedFigures(
+        tuple(locates), tuple(runs), minewide, startup, peer, note, tuple(lines), tracked
+    )
 
 
 if __name__ == "__main__":  # pragma: no cover - benchmark entry point
