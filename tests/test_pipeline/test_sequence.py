@@ -17,10 +17,14 @@ import pytest
 
 from mast.core.pose import Pose2D
 from mast.pipeline.locator import (
+    STAGES,
     FixedPose,
+    Locator,
     LocatorConfig,
     SequenceConfig,
     SequenceLocator,
+    locate,
+    locate_near,
 )
 from mast.sim import DriveScene, SimulatedScan, drive_scene
 
@@ -111,3 +115,37 @@ def test_a_jolt_off_the_prediction_is_found_in_the_wide_window() -> None:
     prior = step.fix.config.prior
     assert prior is not None
     assert prior.radius_m == pytest.approx(SEQ.prior(sims[3].pose, 0.04).radius_m)
+
+
+def test_the_locator_object_is_the_one_chain_and_times_its_stages() -> None:
+    """``Locator`` holds the survey's index once and gives what ``locate`` and
+    ``locate_near`` give, with each stage's time on the result."""
+    scene, sims = _drive()
+    cfg = _config(scene)
+    locator = Locator(scene.survey, cfg)
+    range_max = sims[0].scan.range_max_m
+    assert locator.ready(range_max) is locator.ready(range_max)
+    first = locator.locate(sims[0].scan)
+    again = locate(sims[0].scan, scene.survey, config=cfg)
+    assert first.ok
+    assert again.ok
+    assert first.pose == again.pose
+    assert first.verified[0].pose == again.verified[0].pose
+    # Without a prior: no window was searched; every stage's time within the total.
+    assert set(first.stages_s) <= set(STAGES)
+    assert {"segmentation", "identification", "hypotheses", "verification", "adjustment"} <= set(
+        first.stages_s
+    )
+    assert "window" not in first.stages_s
+    assert all(t >= 0.0 for t in first.stages_s.values())
+    assert sum(first.stages_s.values()) <= first.elapsed_s
+    # Near the first fix: the window's search fixes the next scan, as locate_near does.
+    assert first.pose is not None
+    prior = SEQ.prior(first.pose, 0.04)
+    near = locator.locate(sims[1].scan, prior)
+    assert near.ok
+    assert near.config.prior == prior
+    assert near.pose == locate_near(sims[1].scan, scene.survey, prior, config=cfg).pose
+    assert near.stages_s["window"] > 0.0
+    assert "hypotheses" not in near.stages_s  # the global hypotheses were not needed
+    assert sum(near.stages_s.values()) <= near.elapsed_s

@@ -18,6 +18,7 @@ import math
 import time
 from collections import OrderedDict
 from collections.abc import Iterable, Iterator, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -62,13 +63,21 @@ from mast.pipeline.integrity import (
     snoop,
 )
 from mast.pipeline.segmentation import Segmentation, SegmentationConfig, segment_scan
-from mast.pipeline.tracking import Prior, TrackingConfig, prior_hypotheses, window_may_fix
+from mast.pipeline.tracking import (
+    Prior,
+    TrackingConfig,
+    VehicleLimits,
+    prior_hypotheses,
+    window_may_fix,
+)
 from mast.pipeline.verification import VerificationConfig, Verified, verify
 
 __all__ = [
     "NO_FIX_REASONS",
+    "STAGES",
     "Fix",
     "FixedPose",
+    "Locator",
     "LocatorConfig",
     "Prior",
     "SequenceConfig",
@@ -88,6 +97,16 @@ NO_FIX_REASONS: dict[str, str] = {
     "ambiguous": "two different poses explain the scan equally well",
     "degenerate_geometry": "the panels seen do not determine position and azimuth",
     "rejected": "the adjusted fix fails its global test: the returns do not fit the beacons",
+}
+
+#: The stages a fix's time is split into (:attr:`Fix.stages_s`), in the order they run.
+STAGES: dict[str, str] = {
+    "segmentation": "the scan cut into straight lines",
+    "window": "a prior's window: the bound on what it can fix, and its grid search",
+    "identification": "corners of the lines identified as beacon edges",
+    "hypotheses": "poses from the identified corners, or from two middle panels",
+    "verification": "ICP from every hypothesis, and every beam's verdict on it",
+    "adjustment": "least squares, data snooping, the beacon and global tests, the bound",
 }
 
 
@@ -198,6 +217,9 @@ class Fix:
     residuals: Residuals | None = None
     """Residuals of the adjustment (overall, per beacon and panel, beacon tests): of the
     fix, or of the adjustment a fix was refused on (``inconsistent``, ``rejected``)."""
+    stages_s: dict[str, float] = field(default_factory=dict)
+    """Seconds spent in each stage (:data:`STAGES`) up to this result; what they leave of
+    ``elapsed_s`` is the locator's own bookkeeping (choosing between poses, the record)."""
 
     @property
     def ok(self) -> bool:
@@ -359,6 +381,62 @@ def _admitted(verified: list[Verified], cfg: LocatorConfig) -> list[Verified]:
     return [v for v in verified if cfg.prior.admits(v.pose, *margin)]
 
 
+class Locator:
+    """A survey made ready to locate scans against, and the one way scans are located.
+
+    What belongs to the survey is built once, on the first scan from a scanner of a
+    given range, and kept for every scan after it: the survey's index of edge pairs,
+    its panel set (:func:`_survey_index`, shared with every locator of the same survey
+    object), and the likelihood tiles of the prior's window search (per panel set,
+    :func:`~mast.pipeline.tracking.prior_hypotheses`). Each scan is then a short chain
+    of stage calls, :data:`STAGES`, timed on the result (:attr:`Fix.stages_s`).
+
+    Parameters
+    ----------
+    survey : Survey
+    config : LocatorConfig, optional
+        Its ``prior``, when given, confines every scan (see :func:`locate`).
+    """
+
+    def __init__(self, survey: Survey, config: LocatorConfig | None = None) -> None:
+        self.survey = survey
+        self.config = config or LocatorConfig()
+        self._ready: dict[float, tuple[SurveyIndex, PanelSet]] = {}
+
+    def ready(self, range_max_m: float = math.inf) -> tuple[SurveyIndex, PanelSet]:
+        """The survey's index and panels for a scanner of this range (built once)."""
+        hit = self._ready.get(range_max_m)
+        if hit is None:
+            hit = self._ready[range_max_m] = _survey_index(self.survey, range_max_m)
+        return hit
+
+    def locate(self, scan: Scan, prior: Prior | None = None, *, narrow: Prior | None = None) -> Fix:
+        """Fix the scanner's pose from ``scan``.
+
+        Without ``prior``, as :func:`locate`. With it (a prediction, such as the last
+        fix), the scan is searched near the prediction first and from scratch when that
+        gives no fix, as :func:`locate_near`; ``narrow`` is a window inside ``prior``
+        searched before it.
+        """
+        return self._near(scan, prior, narrow)[0]
+
+    def _near(
+        self, scan: Scan, prior: Prior | None, narrow: Prior | None = None
+    ) -> tuple[Fix, bool]:
+        """:meth:`locate`, and whether a prior was tried and gave no fix."""
+        cfg = self.config
+        ready = self.ready(scan.range_max_m)
+        if cfg.prior is None and prior is not None:
+            # The priors' own searches, then the global one not narrowed by them.
+            if narrow is not None and _inside(narrow, prior):
+                return _prior_first(scan, ready, cfg, (narrow, prior), cfg)
+            return _prior_first(scan, ready, cfg, (prior,), cfg)
+        # The config's own prior (if any) confines the scan: its search, then the global
+        # one kept inside its window.
+        confined = () if cfg.prior is None else (cfg.prior,)
+        return _prior_first(scan, ready, cfg, confined, cfg)[0], False
+
+
 def locate(scan: Scan, survey: Survey, *, config: LocatorConfig | None = None) -> Fix:
     """Fix the scanner's pose from one scan of surveyed beacons.
 
@@ -384,74 +462,100 @@ def locate(scan: Scan, survey: Survey, *, config: LocatorConfig | None = None) -
         ``"no_fix"`` with a reason from :data:`NO_FIX_REASONS`. The locator
         never raises for what a scan contains.
     """
-    cfg = config or LocatorConfig()
-    return _prior_first(scan, survey, cfg, () if cfg.prior is None else (cfg.prior,), cfg)[0]
+    return Locator(survey, config).locate(scan)
+
+
+class _Clock:
+    """Seconds one scan's location spent in each stage (:data:`STAGES`)."""
+
+    __slots__ = ("spent",)
+
+    def __init__(self) -> None:
+        self.spent: dict[str, float] = {}
+
+    @contextmanager
+    def __call__(self, stage: str) -> Iterator[None]:
+        t0 = time.perf_counter()
+        try:
+            yield
+        finally:
+            self.spent[stage] = self.spent.get(stage, 0.0) + time.perf_counter() - t0
 
 
 def _prior_first(
     scan: Scan,
-    survey: Survey,
+    ready: tuple[SurveyIndex, PanelSet],
     searched: LocatorConfig,
     priors: Sequence[Prior],
     fallback: LocatorConfig,
 ) -> tuple[Fix, bool]:
     """Each prior's own search in turn (``searched`` with that prior), then, when none
     gives a fix, the global search under ``fallback``, all on one segmentation of the
-    scan; and whether a prior was tried and gave no fix. A prediction's narrow window
-    comes before the wide one around it: the first costs a few grid poses, and a scan
-    it does not fix is searched as if it had not been tried. A window in which no pose
-    could be fixed (:func:`~mast.pipeline.tracking.window_may_fix`) is not searched."""
+    scan against the survey's index and panels (``ready``); and whether a prior was
+    tried and gave no fix. A prediction's narrow window comes before the wide one
+    around it: the first costs a few grid poses, and a scan it does not fix is searched
+    as if it had not been tried. A window in which no pose could be fixed
+    (:func:`~mast.pipeline.tracking.window_may_fix`) is not searched."""
     t0 = time.perf_counter()
-    seg = segment_scan(scan, searched.segmentation)
+    clock = _Clock()
+    with clock("segmentation"):
+        seg = segment_scan(scan, searched.segmentation)
     ident: PanelIdentification | None = None
     if priors:
-        _, panels = _survey_index(survey, scan.range_max_m)
+        _, panels = ready
         points = scan.points()[1]
     for prior in priors:
         within = replace(searched, prior=prior)
-        if not window_may_fix(
-            points,
-            panels,
-            prior,
-            scan.range_max_m,
-            gate_m=within.verification.gate_sigmas * within.noise.gate_sigma_m,
-            margin_m=within.prior_margin_m,
-            margin_rad=within.prior_margin_rad,
-            min_beacons=within.min_beacons,
-            min_panel_points=within.verification.min_panel_points,
-        ):
+        with clock("window"):
+            may_fix = window_may_fix(
+                points,
+                panels,
+                prior,
+                scan.range_max_m,
+                gate_m=within.verification.gate_sigmas * within.noise.gate_sigma_m,
+                margin_m=within.prior_margin_m,
+                margin_rad=within.prior_margin_rad,
+                min_beacons=within.min_beacons,
+                min_panel_points=within.verification.min_panel_points,
+            )
+        if not may_fix:
             continue  # no pose in the window could be fixed: its search is skipped
         if ident is None:
-            ident = _identified(seg, survey, scan.range_max_m, searched)
-        batches = prior_hypotheses(points, panels, prior, scan.range_max_m, within.tracking)
+            ident = _identified(seg, ready, searched, clock)
+        with clock("window"):
+            batches = prior_hypotheses(points, panels, prior, scan.range_max_m, within.tracking)
         # The best grid poses first; poses from other basins of the window only when
         # those give no fix.
         verified: tuple[Verified, ...] = ()
         for batch in batches:
             fix = _locate(
-                scan, survey, within, t0, seg, from_prior=batch, before=verified, ident=ident
+                scan, ready, within, t0, clock, seg, from_prior=batch, before=verified, ident=ident
             )
             if fix.ok:
                 return fix, False
             verified = fix.verified
-    return _locate(scan, survey, fallback, t0, seg, ident=ident), bool(priors)
+    return _locate(scan, ready, fallback, t0, clock, seg, ident=ident), bool(priors)
 
 
 def _identified(
-    seg: Segmentation, survey: Survey, range_max_m: float, cfg: LocatorConfig
+    seg: Segmentation, ready: tuple[SurveyIndex, PanelSet], cfg: LocatorConfig, clock: _Clock
 ) -> PanelIdentification:
     """Stage 2: the scan's segments identified as beacon panels and corners."""
-    index, _ = _survey_index(survey, range_max_m)
-    return identify_panels(
-        seg, index.representatives, cfg.identification, survey_sigma_m=cfg.noise.survey_sigma_m
-    )
+    with clock("identification"):
+        return identify_panels(
+            seg,
+            ready[0].representatives,
+            cfg.identification,
+            survey_sigma_m=cfg.noise.survey_sigma_m,
+        )
 
 
 def _locate(
     scan: Scan,
-    survey: Survey,
+    ready: tuple[SurveyIndex, PanelSet],
     cfg: LocatorConfig,
     t0: float,
+    clock: _Clock,
     seg: Segmentation,
     *,
     from_prior: list[Hypothesis] | None = None,
@@ -462,12 +566,13 @@ def _locate(
     batch of :func:`~mast.pipeline.tracking.prior_hypotheses`) or, without them, from the
     global ones (kept inside the prior's window, if there is one), on the scan's
     segmentation ``seg`` (made once for both) and its identification ``ident`` (made
-    here when not given); ``t0`` is when it began. The poses an earlier batch verified
-    (``before``) compete with this batch's. The prior's poses are verified against the
-    identified corners too: a beacon whose corner the scan shows is held to it, however
-    the pose was found."""
+    here when not given), against the survey's index and panels (``ready``); ``t0`` is
+    when it began, ``clock`` what each stage has taken so far. The poses an earlier
+    batch verified (``before``) compete with this batch's. The prior's poses are
+    verified against the identified corners too: a beacon whose corner the scan shows
+    is held to it, however the pose was found."""
     noise = cfg.noise
-    index, panels = _survey_index(survey, scan.range_max_m)
+    index, panels = ready
     found: dict[str, object] = {"config": cfg, "hypotheses": (), "verified": (), "chosen": None}
 
     def finish(
@@ -486,41 +591,50 @@ def _locate(
             "observation_panels": np.zeros(0, dtype=np.intp),
             **found,
             **kw,
-            "elapsed_s": time.perf_counter() - t0,
         }
+        now = time.perf_counter()
+        if adjusting is not None:
+            clock.spent["adjustment"] = clock.spent.get("adjustment", 0.0) + now - adjusting
+        fields["elapsed_s"] = now - t0
+        fields["stages_s"] = dict(clock.spent)
         return Fix(**fields)  # type: ignore[arg-type]
+
+    adjusting: float | None = None  # when stage 5 began
 
     # Stages 1-3: segments (given), identified panels, pose hypotheses.
     found["segmentation"] = seg
-    if ident is None:
-        ident = _identified(seg, survey, scan.range_max_m, cfg)
-    found["identification"] = ident
+    known = _identified(seg, ready, cfg, clock) if ident is None else ident
+    found["identification"] = known
     if from_prior is not None:
         hyps = from_prior
     else:
         # Not narrowed by the prior here: ICP may carry a start from outside the window
         # into it, and a pose the global search finds inside must not be lost.
-        hyps = (
-            pose_hypotheses(ident, seg, index, cfg.hypotheses, survey_sigma_m=noise.survey_sigma_m)
-            if ident.nodes
-            else []
-        )
+        with clock("hypotheses"):
+            hyps = (
+                pose_hypotheses(
+                    known, seg, index, cfg.hypotheses, survey_sigma_m=noise.survey_sigma_m
+                )
+                if known.nodes
+                else []
+            )
     found["hypotheses"] = tuple(hyps)
 
     def verified_of(hypotheses: list[Hypothesis]) -> list[Verified]:
         """Stage 4: ICP and every beam's verdict, the poses inside the prior's window."""
-        kept = verify(
-            hypotheses,
-            scan,
-            panels,
-            index,
-            ident,
-            seg,
-            noise,
-            cfg.verification,
-            settled=lambda kept: _settled(kept, cfg),
-            min_beacons=cfg.min_beacons,
-        )
+        with clock("verification"):
+            kept = verify(
+                hypotheses,
+                scan,
+                panels,
+                index,
+                known,
+                seg,
+                noise,
+                cfg.verification,
+                settled=lambda kept: _settled(kept, cfg),
+                min_beacons=cfg.min_beacons,
+            )
         return _admitted(kept, cfg)
 
     # The best pose by likelihood, unless ambiguous, or why there is none.
@@ -529,15 +643,16 @@ def _locate(
     if not verified:
         where = "" if cfg.prior is None else f" within the prior {cfg.prior.pose}"
         reason, detail = "inconsistent", f"no pose hypothesis{where} is confirmed by the beams"
-        if from_prior is None and not ident.nodes:
+        if from_prior is None and not known.nodes:
             reason = "no_beacon"
             detail = f"{len(seg.segments)} segments, no beacon corner identified"
         elif from_prior is None and not hyps:
-            seen = sorted({b for n in ident.nodes for b in index.beacons_like(n.beacon)})
+            seen = sorted({b for n in known.nodes for b in index.beacons_like(n.beacon)})
             detail = f"no pose from the corners of beacons {', '.join(seen[:6])}"
     if best is None and from_prior is None:
         # Stage 3b, when the corners give no fix: two beacons' middle panels.
-        free = panel_hypotheses(seg, index, cfg.hypotheses)
+        with clock("hypotheses"):
+            free = panel_hypotheses(seg, index, cfg.hypotheses)
         found["hypotheses"] = (*hyps, *free)
         on_panels = verified_of(free) if free else []
         if on_panels:
@@ -551,6 +666,7 @@ def _locate(
     if best is None:
         return finish(reason=reason, detail=detail)
     # Stage 5: adjustment on every beacon the beams confirm, then integrity and the global test.
+    adjusting = time.perf_counter()
     agree = set(best.supported) | {
         b
         for b, c in best.checks.items()
@@ -667,30 +783,20 @@ class SequenceConfig:
         Largest radius of the prior around the previous fix.
     azimuth_tolerance_rad : float
         Largest azimuth window of the prior around the previous fix.
-    max_speed_mps, max_turn_rad_s : float
-        The fastest a vehicle underground drives and turns: the prior's window is
-        as wide as it can have moved since the previous fix, plus
-        ``min_radius_m`` and ``min_azimuth_rad``, up to the largest window.
-    min_radius_m, min_azimuth_rad : float
-    max_accel_mps2, max_yaw_accel_rad_s2 : float
-        The most a vehicle speeds up, brakes or changes its turn rate: how far it
-        can stray from the constant-velocity prediction of the last two fixes
-        (:meth:`predicted`).
+    vehicle : VehicleLimits
+        What the vehicle can do: the wide window is as wide as it can have moved
+        since the previous fix, plus its jolts, up to the largest window; the
+        prediction's window (:meth:`predicted`) as far as it can have strayed from
+        constant velocity, plus its jolts.
     prediction_sigmas : float
         The prediction's window holds this many of its standard deviations (from
-        the two fixes' covariances), plus what the accelerations allow and
-        ``min_radius_m`` and ``min_azimuth_rad`` (the scanner's own jolts).
+        the two fixes' covariances) on top of that.
     """
 
     max_gap_s: float = 0.5
     radius_m: float = 0.5
     azimuth_tolerance_rad: float = math.radians(5.0)
-    max_speed_mps: float = 6.0
-    max_turn_rad_s: float = math.radians(90.0)
-    min_radius_m: float = 0.05
-    min_azimuth_rad: float = math.radians(1.0)
-    max_accel_mps2: float = 3.0
-    max_yaw_accel_rad_s2: float = 2.0
+    vehicle: VehicleLimits = field(default_factory=VehicleLimits)
     prediction_sigmas: float = 3.0
 
     def predicted(self, before: FixedPose, last: FixedPose, stamp_ns: int) -> Prior | None:
@@ -714,20 +820,22 @@ class SequenceConfig:
         sigma_m = math.sqrt(max(float(np.linalg.eigvalsh(cov[:2, :2])[-1]), 0.0))
         sigma_rad = math.sqrt(max(float(cov[2, 2]), 0.0))
         unseen = 0.5 * dt * (dt + dt_fix)
+        v = self.vehicle
         return Prior(
             pose,
-            self.min_radius_m + self.prediction_sigmas * sigma_m + self.max_accel_mps2 * unseen,
-            self.min_azimuth_rad
-            + self.prediction_sigmas * sigma_rad
-            + self.max_yaw_accel_rad_s2 * unseen,
+            v.jolt_m + self.prediction_sigmas * sigma_m + v.max_accel_mps2 * unseen,
+            v.jolt_rad + self.prediction_sigmas * sigma_rad + v.max_yaw_accel_rad_s2 * unseen,
         )
 
     def prior(self, pose: Pose2D, elapsed_s: float) -> Prior:
         """The window around ``pose``, ``elapsed_s`` after it was fixed."""
         return Prior(
             pose,
-            min(self.radius_m, self.min_radius_m + self.max_speed_mps * elapsed_s),
-            min(self.azimuth_tolerance_rad, self.min_azimuth_rad + self.max_turn_rad_s * elapsed_s),
+            min(self.radius_m, self.vehicle.jolt_m + self.vehicle.max_speed_mps * elapsed_s),
+            min(
+                self.azimuth_tolerance_rad,
+                self.vehicle.jolt_rad + self.vehicle.max_turn_rad_s * elapsed_s,
+            ),
         )
 
 
@@ -747,23 +855,7 @@ def locate_near(
     prediction's own few standard deviations), is searched before it: a scan it does
     not fix is searched as without it.
     """
-    return _near(scan, survey, prior, config or LocatorConfig(), narrow)[0]
-
-
-def _near(
-    scan: Scan,
-    survey: Survey,
-    prior: Prior | None,
-    cfg: LocatorConfig,
-    narrow: Prior | None = None,
-) -> tuple[Fix, bool]:
-    """:func:`locate_near`, and whether the prior was tried and gave no fix."""
-    if cfg.prior is None and prior is not None:
-        # The priors' own searches, then the global one not narrowed by them.
-        if narrow is not None and _inside(narrow, prior):
-            return _prior_first(scan, survey, cfg, (narrow, prior), cfg)
-        return _prior_first(scan, survey, cfg, (prior,), cfg)
-    return locate(scan, survey, config=cfg), False
+    return Locator(survey, config).locate(scan, prior, narrow=narrow)
 
 
 @dataclass(frozen=True, slots=True)
@@ -802,8 +894,9 @@ class SequenceLocator:
         config: LocatorConfig | None = None,
         sequence: SequenceConfig = SequenceConfig(),
     ) -> None:
+        self.locator = Locator(survey, config)
         self.survey = survey
-        self.config = config or LocatorConfig()
+        self.config = self.locator.config
         self.sequence = sequence
         self._last: FixedPose | None = None
         self._before: FixedPose | None = None
@@ -838,7 +931,7 @@ class SequenceLocator:
             prior = seq.prior(last.pose, abs(scan.stamp_ns - last.stamp_ns) / 1e9)
             if self._before is not None:
                 narrow = seq.predicted(self._before, last, scan.stamp_ns)
-        fix, lost = _near(scan, self.survey, prior, cfg, narrow)
+        fix, lost = self.locator._near(scan, prior, narrow)
         tracked = cfg.prior is None and prior is not None
         if fix.ok and fix.pose is not None and fix.adjustment is not None:
             self._before = last

@@ -28,7 +28,33 @@ from mast.core.pose import Pose2D
 from mast.pipeline.alignment import Similarity
 from mast.pipeline.hypotheses import Hypothesis
 
-__all__ = ["Prior", "TrackingConfig", "prior_hypotheses", "window_may_fix"]
+__all__ = ["Prior", "TrackingConfig", "VehicleLimits", "prior_hypotheses", "window_may_fix"]
+
+
+@dataclass(frozen=True, slots=True)
+class VehicleLimits:
+    """What a vehicle underground can do between two scans, and what the scanner adds:
+    the one definition that every tracking window (a scan sequence's, a run's) and the
+    run odometry's plausibility checks are built from.
+
+    Attributes
+    ----------
+    max_speed_mps, max_turn_rad_s : float
+        The fastest a vehicle drives and turns.
+    max_accel_mps2, max_yaw_accel_rad_s2 : float
+        The most it speeds up, brakes or changes its turn rate: how far it can stray
+        from a constant-velocity prediction.
+    jolt_m, jolt_rad : float
+        The scanner's own jolts on its mount and the stamps' jitter, beyond the
+        vehicle's motion: the least a window around a prediction is widened by.
+    """
+
+    max_speed_mps: float = 6.0
+    max_turn_rad_s: float = math.radians(90.0)
+    max_accel_mps2: float = 3.0
+    max_yaw_accel_rad_s2: float = 2.0
+    jolt_m: float = 0.05
+    jolt_rad: float = math.radians(1.0)
 
 
 @dataclass(frozen=True, slots=True)

@@ -26,8 +26,8 @@ from numpy.typing import NDArray
 from mast.core.beacon import Survey
 from mast.core.pose import Pose2D
 from mast.core.scan import Scan
-from mast.pipeline.locator import Fix, LocatorConfig, locate_near
-from mast.pipeline.tracking import Prior
+from mast.pipeline.locator import Fix, Locator, LocatorConfig
+from mast.pipeline.tracking import Prior, VehicleLimits
 from mast.runs.model import PlacedScan
 from mast.runs.odometry import (
     Keyframe,
@@ -39,6 +39,11 @@ from mast.runs.odometry import (
 )
 
 __all__ = ["Node", "RunTracker", "Smoother", "Step", "TrackConfig", "smooth"]
+
+
+#: The turn odometry's checks allow beyond the vehicle's turn rate (the scanner's jolts
+#: as the motion estimate sees them), radians.
+_TURN_SLACK_RAD = 0.02
 
 
 @dataclass(frozen=True, slots=True)
@@ -57,10 +62,18 @@ class TrackConfig:
         deviations, within these bounds.
     prior_azimuth_rad, max_prior_azimuth_rad : float
         The same for the azimuth.
-    narrow_radius_m, narrow_azimuth_rad : float
-        Searched first: the window of three standard deviations of the prediction
-        without the lower bounds above, widened by these (the scanner's own jolts).
-        A scan it does not fix is searched in the window above, then from scratch.
+    vehicle : VehicleLimits
+        What a vehicle underground can do, and the scanner's jolts. Searched first:
+        the window of three standard deviations of the prediction without the lower
+        bounds above, widened by the jolts; a scan it does not fix is searched in
+        the window above, then from scratch. A motion beyond the vehicle's speed and
+        turn rate (ICP slid along a smooth drift, or locked onto the wrong wall) is
+        searched for again over all the vehicle could have done
+        (:func:`recover_motion`), and failing that replaced by the constant-velocity
+        motion with the uncertainty the acceleration allows. When the scans are so
+        far apart in time that the constant-velocity guess may be off by more than
+        ICP's widest gate (a log that kept a scan every metre or two), every step
+        is searched that way, and every scan becomes a keyframe.
     huber_k : float
         Huber kernel threshold, in standard deviations, of every factor.
     keyframe_m, keyframe_rad : float
@@ -71,15 +84,6 @@ class TrackConfig:
         bench run``, dead reckoning over 50 m drifted 24 mm RMS with keyframes
         every metre, 19 mm every two metres and 32 mm every three: errors per
         keyframe against overlap lost.)
-    max_speed_mps, max_yaw_rate_rad_s, max_accel_mps2 : float
-        What a vehicle underground can do. A motion beyond them (ICP slid along
-        a smooth drift, or locked onto the wrong wall) is searched for again
-        over all the vehicle could have done (:func:`recover_motion`), and
-        failing that replaced by the constant-velocity motion with the
-        uncertainty the acceleration allows. When the scans are so far apart in
-        time that the constant-velocity guess may be off by more than ICP's
-        widest gate (a log that kept a scan every metre or two), every step is
-        searched that way, and every scan becomes a keyframe.
     max_search_yaw_rad : float
         Widest turn either way that search looks for.
     max_coast_m : float
@@ -97,14 +101,10 @@ class TrackConfig:
     max_prior_radius_m: float = 1.0
     prior_azimuth_rad: float = math.radians(5.0)
     max_prior_azimuth_rad: float = math.radians(10.0)
-    narrow_radius_m: float = 0.05
-    narrow_azimuth_rad: float = math.radians(1.0)
+    vehicle: VehicleLimits = field(default_factory=VehicleLimits)
     huber_k: float = 1.345
     keyframe_m: float = 2.0
     keyframe_rad: float = math.radians(5.0)
-    max_speed_mps: float = 6.0
-    max_yaw_rate_rad_s: float = math.radians(90.0)
-    max_accel_mps2: float = 3.0
     max_search_yaw_rad: float = math.radians(45.0)
     max_coast_m: float = 1.0
 
@@ -156,13 +156,14 @@ class RunTracker:
 
     The pose is carried from the last fix by the motions between scans; the
     next scan is searched within a window of about three of its standard
-    deviations (:func:`~mast.pipeline.locator.locate_near`), and from scratch
+    deviations (:meth:`~mast.pipeline.locator.Locator.locate`), and from scratch
     when that gives no fix. Memory does not grow with the run.
     """
 
     def __init__(self, survey: Survey, config: TrackConfig | None = None) -> None:
         self.survey = survey
         self.config = config or TrackConfig()
+        self.locator = Locator(survey, self.config.locator)
         self._stamp: int | None = None
         # The keyframe: its scan index, lines, and pose with covariance (if placed).
         self._key: tuple[int, Keyframe] | None = None
@@ -179,7 +180,7 @@ class RunTracker:
         radius = min(max(3.0 * pos, cfg.prior_radius_m), cfg.max_prior_radius_m)
         az = math.sqrt(max(cov[2, 2], 0.0))
         tol = min(max(3.0 * az, cfg.prior_azimuth_rad), cfg.max_prior_azimuth_rad)
-        narrow = Prior(pose, cfg.narrow_radius_m + 3.0 * pos, cfg.narrow_azimuth_rad + 3.0 * az)
+        narrow = Prior(pose, cfg.vehicle.jolt_m + 3.0 * pos, cfg.vehicle.jolt_rad + 3.0 * az)
         return Prior(pose, radius, tol), narrow
 
     def step(self, index: int, scan: Scan) -> Step:
@@ -207,7 +208,9 @@ class RunTracker:
             # How far the constant-velocity guess can be off: what the vehicle's
             # acceleration and turn rate allow since the last scan.
             reach = self._slack(dt)
-            turn = min(cfg.max_yaw_rate_rad_s * max(dt, 0.04) + 0.02, cfg.max_search_yaw_rad)
+            turn = min(
+                cfg.vehicle.max_turn_rad_s * max(dt, 0.04) + _TURN_SLACK_RAD, cfg.max_search_yaw_rad
+            )
             motion = None
             wide = reach > max(cfg.odometry.gates_m)
             if not wide:
@@ -245,7 +248,7 @@ class RunTracker:
         if motion is not None and self._key_pose is not None:
             predicted, cov = compose(self._key_pose, self._key_cov, motion)
         prior, narrow = (None, None) if predicted is None else self._prior(predicted, cov)
-        fix = locate_near(scan, self.survey, prior, config=cfg.locator, narrow=narrow)
+        fix = self.locator.locate(scan, prior, narrow=narrow)
         pose: Pose2D | None = predicted
         if fix.ok and fix.pose is not None and fix.adjustment is not None:
             pose, cov = fix.pose, fix.adjustment.covariance.copy()
@@ -275,14 +278,16 @@ class RunTracker:
         """Whether a vehicle can have made this motion: not beyond its speed and turn
         rate, and not further from constant velocity than its acceleration allows."""
         cfg = self.config
-        far = math.hypot(motion.dx, motion.dy) > cfg.max_speed_mps * since_key + 0.05
-        turned = abs(motion.dtheta) > cfg.max_yaw_rate_rad_s * since_key + 0.02
+        v = cfg.vehicle
+        far = math.hypot(motion.dx, motion.dy) > v.max_speed_mps * since_key + v.jolt_m
+        turned = abs(motion.dtheta) > v.max_turn_rad_s * since_key + _TURN_SLACK_RAD
         off = math.hypot(motion.dx - guess[0], motion.dy - guess[1]) > self._slack(since_key)
         return not (far or turned or off)
 
     def _slack(self, seconds: float) -> float:
         """How far the vehicle can stray from constant velocity in ``seconds``, metres."""
-        return 0.05 + self.config.max_accel_mps2 * max(seconds, 0.04)
+        v = self.config.vehicle
+        return v.jolt_m + v.max_accel_mps2 * max(seconds, 0.04)
 
     def _coasting(
         self, guess: tuple[float, float, float], last_cov: NDArray[np.float64], dt: float
@@ -292,7 +297,7 @@ class RunTracker:
         not find the keyframe's walls. None (the chain breaks) when that leaves the
         position less certain than ``max_coast_m``."""
         s = self._slack(dt)
-        yaw = 0.02 + self.config.max_yaw_rate_rad_s * 0.1 * max(dt, 0.04)
+        yaw = _TURN_SLACK_RAD + self.config.vehicle.max_turn_rad_s * 0.1 * max(dt, 0.04)
         cov = last_cov + np.diag([s**2, s**2, yaw**2])
         if math.sqrt(max(np.linalg.eigvalsh(cov[:2, :2])[-1], 0.0)) > self.config.max_coast_m:
             return None
