@@ -34,7 +34,8 @@ Six measurements, printed as tables (figures, not timed assertions):
    (:class:`~mast.pipeline.locator.SequenceLocator`, each scan first near the last
    fix), its scans timed apart by how they were found (fixed by the prior's own
    search, prior tried then the global search, no prior), the tracked fixes' time
-   per stage (a second, clocked pass) and errors, and the peer on the same scans'
+   per stage (as the locator clocks them on each fix, ``Fix.stages_s``) and errors,
+   and the peer on the same scans'
    beacon returns from the pose of each fix's prior.
 
 Run: ``mast bench speed`` (or ``python -m mast.apps.bench.speed``).
@@ -69,6 +70,7 @@ from mast.apps.bench.minewide import MinewideSummary, run_minewide
 from mast.core.beacon import Survey
 from mast.core.geometry import PanelSet
 from mast.core.pose import Pose2D
+from mast.pipeline.locator import STAGES as LOCATOR_STAGES
 from mast.pipeline.locator import Fix, LocatorConfig, SequenceLocator, SequenceStep, locate
 from mast.sim import SCANNERS, DriveScene, ScannerModel, SimulatedScan, drive_scene, write_scenario
 
@@ -162,12 +164,6 @@ STAGES: tuple[tuple[str, tuple[str, ...]], ...] = (
     ),
 )
 OTHER_STAGE = "other"
-#: A tracked scan's stages: the bound that skips a window that cannot fix, then the
-#: global ones (the window's grid search is among the hypotheses).
-TRACKED_STAGES: tuple[tuple[str, tuple[str, ...]], ...] = (
-    ("window bound", ("window_may_fix",)),
-    *STAGES,
-)
 
 # A fresh process for a whole run: times itself from before its first mast import to
 # its end and writes its figures to a side file (standard output may be /dev/null).
@@ -423,9 +419,7 @@ def _clocked(fn: Callable[..., Any], stage: str, clock: dict[str, float]) -> Cal
 
 
 @contextmanager
-def _stage_clocks(
-    clock: dict[str, float], stages: tuple[tuple[str, tuple[str, ...]], ...] = STAGES
-) -> Iterator[None]:
+def _stage_clocks(clock: dict[str, float]) -> Iterator[None]:
     """Wrap the locator's stage functions with a clock adding into ``clock`` per stage.
 
     A function missing from the locator (renamed) is left out: its time is ``other``.
@@ -433,7 +427,7 @@ def _stage_clocks(
     from mast.pipeline import locator as module
 
     saved: dict[str, Any] = {}
-    for stage, names in stages:
+    for stage, names in STAGES:
         for name in names:
             fn = getattr(module, name, None)
             if callable(fn):
@@ -530,8 +524,9 @@ def measure_locate(
 
 
 def measure_tracked(count: int, *, seed: int = 0) -> TrackedSpeed:
-    """Locate ``count`` scans of a 25 Hz drive in sequence, timed, then again with the
-    stage functions clocked; the peer from each tracked fix's prior on the same scans."""
+    """Locate ``count`` scans of a 25 Hz drive in sequence, timed, each tracked fix's time
+    split by the stages the locator clocks on it; the peer from each tracked fix's prior
+    on the same scans."""
     scene = drive_scene(seed, scans=count)
     sims = tuple(scene.iter_simulated())
     cfg = LocatorConfig(range_sigma_m=scene.shots[0].scanner.range_sigma_m)
@@ -549,21 +544,15 @@ def measure_tracked(count: int, *, seed: int = 0) -> TrackedSpeed:
         steps.append(tracker.step(sim.scan))
         seconds.append(time.perf_counter() - t0)
     found = [st.tracked and not st.track_lost and st.fix.ok for st in steps]
-    # The second pass, clocked: the same steps (the locator is deterministic).
-    per: dict[str, list[float]] = {stage: [] for stage, _ in TRACKED_STAGES}
+    # Per stage, as the locator clocked them on each fix (Fix.stages_s); "other" is the
+    # rest of the step's time (choosing between poses, the sequence's bookkeeping).
+    per: dict[str, list[float]] = {stage: [] for stage in LOCATOR_STAGES}
     per[OTHER_STAGE] = []
-    clock: dict[str, float] = {}
-    tracker = SequenceLocator(scene.survey, config=cfg)
-    with _stage_clocks(clock, TRACKED_STAGES):
-        for sim, kept in zip(sims, found, strict=True):
-            clock.clear()
-            t0 = time.perf_counter()
-            tracker.step(sim.scan)
-            total = time.perf_counter() - t0
-            if kept:
-                for stage, _ in TRACKED_STAGES:
-                    per[stage].append(1e3 * clock.get(stage, 0.0))
-                per[OTHER_STAGE].append(1e3 * (total - sum(clock.values())))
+    for st, took, kept in zip(steps, seconds, found, strict=True):
+        if kept:
+            for stage in LOCATOR_STAGES:
+                per[stage].append(1e3 * st.fix.stages_s.get(stage, 0.0))
+            per[OTHER_STAGE].append(1e3 * (took - sum(st.fix.stages_s.values())))
     pos, az, narrow = [], [], 0
     peer_ms, peer_pos, peer_az = [], [], []
     sg = _peer_module()
@@ -884,7 +873,8 @@ def _tracked_lines(t: TrackedSpeed, note: str) -> list[str]:
         )
         lines.append(f"  {name:<42} {st.count:>6} {figures}")
     lines += [
-        "  stages of the scans fixed by the prior's search, ms per scan (a second pass, clocked):",
+        "  stages of the scans fixed by the prior's search, ms per scan (as the locator clocks "
+        "them on each fix, Fix.stages_s):",
         f"  {'stage':<24} {'median':>8} {'p95':>8} {'max':>8} {'mean':>8}",
     ]
     lines += [
