@@ -139,8 +139,8 @@ def _reference_prior_hypotheses(
         c, s = math.cos(rot), math.sin(rot)
         cells = (pts @ np.array([[c, s], [-s, c]]) + prior.pose.position) / res
         total = field.scores(cells, tiles, shifts / res)
-        top = np.argpartition(total, -keep_best)[-keep_best:] if total.size > keep_best else None
-        for t in np.arange(total.size) if top is None else top:
+        # the best ``keep_best`` by score, ties to the lower number (a stable sort)
+        for t in np.argsort(-total, kind="stable")[:keep_best]:
             best.append((float(total[t]), rot, float(shifts[t, 0]), float(shifts[t, 1])))
     best.sort(reverse=True)
     reach = float(np.median(r))
@@ -199,3 +199,39 @@ def test_the_window_search_ranks_and_picks_its_poses_as_the_reference(
                 assert g.misfit == w.misfit
                 assert g.similarity.rotation_rad == w.similarity.rotation_rad
                 assert np.array_equal(g.similarity.translation, w.similarity.translation)
+
+
+@pytest.mark.parametrize(("radius_m", "spread_m"), [(0.1, 0.05), (0.6, 0.3), (1.5, 2.0)])
+def test_branch_and_bound_ranks_each_rotation_as_scoring_every_translation(
+    radius_m: float, spread_m: float
+) -> None:
+    """window_top against window_scores over the whole grid, ranked by score then number:
+    the same translations and the same scores, to the last bit, zero-score ties (returns
+    far from every tile) included."""
+    from mast.core._kernels import window_top
+    from mast.pipeline.tracking import _ranked_top, _window_places
+
+    panels = PanelSet.from_survey(paper_scene().survey)
+    field = _TiledField.build(panels, np.arange(len(panels)), RES, SIGMA)
+    rng = np.random.default_rng(11)
+    on = panels.a + panels.direction * rng.uniform(0, 1, (len(panels), 1)) * panels.length[:, None]
+    pts = (on[:, None, :] + rng.normal(0.0, spread_m, (len(panels), 12, 2))).reshape(-1, 2)
+    tiles = field.reaching(pts, np.full(len(pts), radius_m + 0.1))
+    offs, inside = _window_places(radius_m, 0.04)
+    tx, ty = np.meshgrid(offs, offs, indexing="ij")
+    shifts = np.column_stack([tx[inside], ty[inside]]) / RES
+    number = np.full(inside.shape, -1, dtype=np.intp)
+    number[inside] = np.arange(shifts.shape[0])
+    rotations = [pts + rng.normal(0.0, 0.02, pts.shape) for _ in range(4)]
+    rotations.append(pts + 50.0)  # every return out of reach: all scores zero
+    cells = np.stack(rotations) / RES
+    keep = 24
+    grid = (field.lo / RES, field.shape, field.offset, field.pyramid)
+    top, score = window_top(cells, tiles, *grid, offs / RES, number, keep)
+    for q in range(cells.shape[0]):
+        total = field.scores(cells[q], tiles, shifts)
+        want = _ranked_top(total, keep)
+        np.testing.assert_array_equal(top[q], want)
+        np.testing.assert_array_equal(score[q], total[want])
+    assert np.all(score[-1] == 0.0)
+    assert np.any(score[0] > 0.0)

@@ -8,6 +8,7 @@ the machine code.
 
 from __future__ import annotations
 
+import heapq
 import math
 from collections.abc import Callable
 from typing import Any
@@ -19,6 +20,7 @@ from numpy.typing import NDArray
 __all__ = [
     "associate",
     "beam_checks",
+    "field_pyramid",
     "first_hits",
     "icp_stages",
     "line_fits",
@@ -27,6 +29,7 @@ __all__ = [
     "penalty",
     "segment_run",
     "window_scores",
+    "window_top",
     "within",
 ]
 
@@ -66,46 +69,51 @@ def _partition_dp(
     best = np.empty(n + 1)
     best[0] = -pen
     last = np.zeros(n + 1, dtype=np.intp)
+    cost = np.empty(w)  # cost[k]: the piece from j - top + k to j, without the small-piece term
     for j in range(1, n + 1):
         top = min(j, w)
-        bj = math.inf
-        arg = j - 1
-        for d in range(1, top + 1):
-            i = j - d
-            m = float(d)
-            ax = sx[j] - sx[i]
-            ay = sy[j] - sy[i]
-            vxx = sxx[j] - sxx[i] - ax * ax / m
-            vyy = syy[j] - syy[i] - ay * ay / m
-            vxy = sxy[j] - sxy[i] - ax * ay / m
+        i0 = j - top
+        sxj, syj, sxxj, syyj, sxyj = sx[j], sy[j], sxx[j], syy[j], sxy[j]
+        uxxj, uyyj, uxyj = uxx[j], uyy[j], uxy[j]
+        # Branch-free over the piece starts, in increasing order, so that the compiler
+        # runs four at a time; IEEE division and square root round the same either way.
+        for k in range(top):
+            i = i0 + k
+            m = float(j - i)
+            ax = sxj - sx[i]
+            ay = syj - sy[i]
+            vxx = sxxj - sxx[i] - ax * ax / m
+            vyy = syyj - syy[i] - ay * ay / m
+            vxy = sxyj - sxy[i] - ax * ay / m
             dv = vxx - vyy
             q = 0.25 * dv * dv + vxy * vxy
-            half_r = math.sqrt(q) if q > 0.0 else 0.0
+            root = np.sqrt(q)
+            half_r = root if q > 0.0 else 0.0
             sse = 0.5 * (vxx + vyy) - half_r
-            if sse < 0.0:
-                sse = 0.0
+            sse = sse if sse >= 0.0 else 0.0
             # Normal of the line (the scatter's minor axis): with cos 2t = dv / r and
             # sin 2t = 2 vxy / r (t = 0 when r = 0), n = (-sin t, cos t).
-            if half_r > 0.0:
-                c2 = 0.5 * dv / half_r
-                s2 = vxy / half_r
-            else:
-                c2 = 1.0
-                s2 = 0.0
+            turned = half_r > 0.0
+            den = half_r if turned else 1.0
+            c2 = 0.5 * dv / den if turned else 1.0
+            s2 = vxy / den if turned else 0.0
             nu2 = (
-                0.5 * (1.0 - c2) * (uxx[j] - uxx[i])
-                - s2 * (uxy[j] - uxy[i])
-                + 0.5 * (1.0 + c2) * (uyy[j] - uyy[i])
+                0.5 * (1.0 - c2) * (uxxj - uxx[i])
+                - s2 * (uxyj - uxy[i])
+                + 0.5 * (1.0 + c2) * (uyyj - uyy[i])
             ) / m
-            if nu2 < 0.05:
-                nu2 = 0.05
-            cost = sse / (var * nu2) + pen
+            nu2 = nu2 if nu2 >= 0.05 else 0.05
+            cost[k] = sse / (var * nu2) + pen
+        bj = math.inf
+        arg = j - 1
+        for d in range(1, top + 1):  # shortest piece first: ties go to it
+            total = cost[top - d]
             if d < 3:
-                cost += 4.0 * m
-            total = best[i] + cost
+                total += 4.0 * d
+            total = best[j - d] + total
             if total < bj:
                 bj = total
-                arg = i
+                arg = j - d
         best[j] = bj
         last[j] = arg
     return last
@@ -390,6 +398,212 @@ def _window_scores(
             total += best
         out[m] = total
     return out
+
+
+def _field_pyramid(
+    tile_shape: NDArray[np.intp],
+    tile_offset: NDArray[np.intp],
+    values: NDArray[np.float64],
+    levels: int,
+) -> NDArray[np.float64]:
+    """Row ``h`` holds, for each cell of each tile, the largest value of the ``2^h x 2^h``
+    cells from it (those inside its tile): the bounds of :func:`_window_top`. Row 0 is
+    ``values``, last (outside) cell included."""
+    out = np.empty((levels + 1, values.shape[0]))
+    out[0, :] = values
+    for h in range(1, levels + 1):
+        half = 1 << (h - 1)
+        out[h, values.shape[0] - 1] = values[values.shape[0] - 1]
+        for t in range(tile_shape.shape[0]):
+            w, ht, off = tile_shape[t, 0], tile_shape[t, 1], tile_offset[t]
+            for i in range(w):
+                for j in range(ht):
+                    v = out[h - 1, off + i * ht + j]
+                    if i + half < w:
+                        v = max(v, out[h - 1, off + (i + half) * ht + j])
+                        if j + half < ht:
+                            v = max(v, out[h - 1, off + (i + half) * ht + j + half])
+                    if j + half < ht:
+                        v = max(v, out[h - 1, off + i * ht + j + half])
+                    out[h, off + i * ht + j] = v
+    return out
+
+
+def _pose_score(
+    local: NDArray[np.float64],
+    tiles: NDArray[np.intp],
+    tile_shape: NDArray[np.intp],
+    tile_offset: NDArray[np.intp],
+    values: NDArray[np.float64],
+    sx: float,
+    sy: float,
+) -> float:
+    """One translation's score, summed exactly as :func:`_window_scores` sums it."""
+    total = 0.0
+    for i in range(local.shape[0]):
+        best = 0.0
+        for k in range(tiles.shape[1]):
+            t = tiles[i, k]
+            if t < 0:
+                continue
+            gi = math.floor(local[i, k, 0] + sx)
+            gj = math.floor(local[i, k, 1] + sy)
+            w, h = tile_shape[t, 0], tile_shape[t, 1]
+            if gi >= 0 and gi < w and gj >= 0 and gj < h:
+                v = values[tile_offset[t] + gi * h + gj]
+                if v > best:
+                    best = v
+        total += best
+    return total
+
+
+def _block_bound(
+    local: NDArray[np.float64],
+    tiles: NDArray[np.intp],
+    tile_shape: NDArray[np.intp],
+    tile_offset: NDArray[np.intp],
+    pyramid: NDArray[np.float64],
+    x0: float,
+    x1: float,
+    y0: float,
+    y1: float,
+) -> float:
+    """At least the score of every translation in ``[x0, x1] x [y0, y1]`` (cells): each
+    point's largest value over the cells it can fall in, from the pyramid. Rounding is
+    monotonic, so the sum of these bounds in the same order is at least every score."""
+    levels = pyramid.shape[0] - 1
+    total = 0.0
+    for i in range(local.shape[0]):
+        best = 0.0
+        for k in range(tiles.shape[1]):
+            t = tiles[i, k]
+            if t < 0:
+                continue
+            w, h = tile_shape[t, 0], tile_shape[t, 1]
+            i0 = math.floor(local[i, k, 0] + x0)
+            i1 = math.floor(local[i, k, 0] + x1)
+            j0 = math.floor(local[i, k, 1] + y0)
+            j1 = math.floor(local[i, k, 1] + y1)
+            if i1 < 0 or i0 >= w or j1 < 0 or j0 >= h:
+                continue
+            i0, i1 = max(i0, 0), min(i1, w - 1)
+            j0, j1 = max(j0, 0), min(j1, h - 1)
+            width = max(i1 - i0, j1 - j0) + 1
+            lv = 0
+            while (1 << lv) < width and lv < levels:
+                lv += 1
+            v = pyramid[lv, tile_offset[t] + i0 * h + j0]
+            if v > best:
+                best = v
+        total += best
+    return total
+
+
+def _window_top(
+    cells: NDArray[np.float64],
+    tiles: NDArray[np.intp],
+    tile_lo: NDArray[np.float64],
+    tile_shape: NDArray[np.intp],
+    tile_offset: NDArray[np.intp],
+    pyramid: NDArray[np.float64],
+    offs: NDArray[np.float64],
+    number: NDArray[np.intp],
+    keep: int,
+) -> tuple[NDArray[np.intp], NDArray[np.float64]]:
+    """For each rotation, the ``keep`` best translations of a window's grid, by score
+    (largest first) then by number: :func:`_window_scores` over every translation,
+    ranked, without scoring most of them (branch and bound over the grid's quadtree,
+    Olson 2009; Hess et al. 2016).
+
+    ``cells`` holds each rotation's points in cells, shape (rotations, n, 2); ``tiles``
+    the tiles each point reaches (-1 pads); ``pyramid`` the field's
+    :func:`_field_pyramid`; the translation at grid place (a, b) is ``(offs[a],
+    offs[b])`` cells, numbered ``number[a, b]`` (-1: outside the window; numbers
+    follow the places in row order). A block of places is opened best bound first,
+    blocks before poses of an equal score, so poses come out exactly in the ranking's
+    order; once the best bound left is zero, every pose left scores zero, and those
+    are taken by number. Returns the numbers and scores, shape (rotations, keep).
+    """
+    rotations, n = cells.shape[0], cells.shape[1]
+    slots = tiles.shape[1]
+    side = offs.shape[0]
+    size = 1
+    while size < side:
+        size *= 2
+    inside = np.zeros((side + 1, side + 1), dtype=np.int64)  # places in [0, a) x [0, b)
+    for a in range(side):
+        for b in range(side):
+            inside[a + 1, b + 1] = (
+                inside[a, b + 1] + inside[a + 1, b] - inside[a, b] + (number[a, b] >= 0)
+            )
+    keep = min(keep, int(inside[side, side]))
+    top = np.full((rotations, keep), -1, dtype=np.intp)
+    score = np.zeros((rotations, keep))
+    local = np.zeros((n, slots, 2))
+    taken = np.zeros((side, side), dtype=np.bool_)
+    values = pyramid[0]
+    for r in range(rotations):
+        for i in range(n):
+            for k in range(slots):
+                t = tiles[i, k]
+                if t >= 0:
+                    local[i, k, 0] = cells[r, i, 0] - tile_lo[t, 0]
+                    local[i, k, 1] = cells[r, i, 1] - tile_lo[t, 1]
+        taken[:, :] = False
+        got = 0
+        # (minus the value, 0 for a block and 1 for a pose, a, b, block size)
+        last = side - 1
+        root = _block_bound_jit(
+            local, tiles, tile_shape, tile_offset, pyramid, offs[0], offs[last], offs[0], offs[last]
+        )
+        heap = [(-root, 0, 0, 0, size)]
+        if size == 1:  # one place: the pose itself
+            one = _pose_score_jit(local, tiles, tile_shape, tile_offset, values, offs[0], offs[0])
+            heap = [(-one, 1, 0, 0, 1)]
+        while len(heap) > 0 and got < keep:
+            value, kind, a0, b0, s = heapq.heappop(heap)
+            if kind == 1:
+                top[r, got] = number[a0, b0]
+                score[r, got] = -value
+                taken[a0, b0] = True
+                got += 1
+                continue
+            if -value <= 0.0:
+                break  # every pose left scores zero
+            half = s // 2
+            for da in (0, half):
+                for db in (0, half):
+                    a, b = a0 + da, b0 + db
+                    if a >= side or b >= side:
+                        continue
+                    a1, b1 = min(a + half, side), min(b + half, side)
+                    if inside[a1, b1] - inside[a, b1] - inside[a1, b] + inside[a, b] == 0:
+                        continue
+                    if half == 1:
+                        v = _pose_score_jit(
+                            local, tiles, tile_shape, tile_offset, values, offs[a], offs[b]
+                        )
+                        heapq.heappush(heap, (-v, 1, a, b, 1))
+                    else:
+                        v = _block_bound_jit(
+                            local,
+                            tiles,
+                            tile_shape,
+                            tile_offset,
+                            pyramid,
+                            offs[a],
+                            offs[a1 - 1],
+                            offs[b],
+                            offs[b1 - 1],
+                        )
+                        heapq.heappush(heap, (-v, 0, a, b, half))
+        for a in range(side):  # the poses scoring zero, by number
+            for b in range(side):
+                if got < keep and number[a, b] >= 0 and not taken[a, b]:
+                    top[r, got] = number[a, b]
+                    score[r, got] = 0.0
+                    got += 1
+    return top, score
 
 
 def _run_moments(points: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -703,7 +917,11 @@ def _beam_checks(
 
 
 #: Compiled on first use (numba's own types; mypy sees plain callables).
-partition_dp: Callable[..., NDArray[np.intp]] = njit(cache=True, nogil=True)(_partition_dp)
+#: ``error_model="numpy"``: no division-by-zero checks in the loop (every divisor is
+#: positive), so that it vectorises.
+partition_dp: Callable[..., NDArray[np.intp]] = njit(cache=True, nogil=True, error_model="numpy")(
+    _partition_dp
+)
 _partition_dp_jit = partition_dp
 penalty: Callable[[int], float] = njit(cache=True, nogil=True)(_penalty)
 _penalty_jit = penalty
@@ -724,3 +942,7 @@ icp_stages: Callable[..., Any] = njit(cache=True, nogil=True)(_icp_stages)
 within: Callable[..., Any] = njit(cache=True, nogil=True)(_within)
 window_scores: Callable[..., NDArray[np.float64]] = njit(cache=True, nogil=True)(_window_scores)
 first_hits: Callable[..., Any] = njit(cache=True, nogil=True)(_first_hits)
+field_pyramid: Callable[..., NDArray[np.float64]] = njit(cache=True, nogil=True)(_field_pyramid)
+_pose_score_jit: Callable[..., float] = njit(cache=True, nogil=True)(_pose_score)
+_block_bound_jit: Callable[..., float] = njit(cache=True, nogil=True)(_block_bound)
+window_top: Callable[..., Any] = njit(cache=True, nogil=True)(_window_top)

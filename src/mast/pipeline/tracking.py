@@ -23,6 +23,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import ndimage
 
+from mast.core._kernels import field_pyramid, window_top
 from mast.core.geometry import PanelSet
 from mast.core.pose import Pose2D
 from mast.pipeline.alignment import Similarity
@@ -189,6 +190,9 @@ class _TiledField:
     offset: NDArray[np.intp]
     values: NDArray[np.float64]
     res: float
+    pyramid: NDArray[np.float64]
+    """Row ``h``: each cell's largest value over the ``2^h`` cells from it along both
+    axes, within its tile (row 0 is ``values``): the window search's bounds."""
 
     @classmethod
     def build(
@@ -215,12 +219,18 @@ class _TiledField:
             chunks.append(field.ravel())
             total += field.size
         chunks.append(np.zeros(1))
+        shape_arr = np.array(shapes, dtype=np.intp).reshape(-1, 2)
+        offset_arr = np.array(offsets, dtype=np.intp)
+        values = np.concatenate(chunks)
+        # Enough levels that the top one holds each tile's largest value from any cell.
+        levels = max(0, math.ceil(math.log2(max(1, int(shape_arr.max(initial=1))))))
         return cls(
             np.array(lows, dtype=float).reshape(-1, 2),
-            np.array(shapes, dtype=np.intp).reshape(-1, 2),
-            np.array(offsets, dtype=np.intp),
-            np.concatenate(chunks),
+            shape_arr,
+            offset_arr,
+            values,
             res,
+            field_pyramid(shape_arr, offset_arr, values, levels),
         )
 
     @property
@@ -403,13 +413,28 @@ def _window_grid(
 ) -> tuple[NDArray[np.float64], float, int]:
     """The window's translations (a disc of ``step`` grid points), the rotation step
     that moves no return more than ``step``, and the rotation steps either way."""
-    n_t = math.ceil(radius_m / step)
-    offs = np.arange(-n_t, n_t + 1) * step
+    offs, inside = _window_places(radius_m, step)
     tx, ty = np.meshgrid(offs, offs, indexing="ij")
-    inside = np.hypot(tx, ty) <= radius_m + 1e-9
     shifts = np.column_stack([tx[inside], ty[inside]])
     d_rot = step / max(float(r.max()), step)
     return shifts, d_rot, math.ceil(tol / d_rot)
+
+
+def _window_places(radius_m: float, step: float) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
+    """The grid's offsets along each axis and which places (a, b), at ``(offs[a],
+    offs[b])``, lie in the disc; :func:`_window_grid` numbers them in row order."""
+    n_t = math.ceil(radius_m / step)
+    offs = np.arange(-n_t, n_t + 1, dtype=np.float64) * step
+    tx, ty = np.meshgrid(offs, offs, indexing="ij")
+    inside: NDArray[np.bool_] = np.hypot(tx, ty) <= radius_m + 1e-9
+    return offs, inside
+
+
+def _ranked_top(total: NDArray[np.float64], keep: int) -> NDArray[np.intp]:
+    """The ``keep`` largest of ``total`` by value, ties by the lower index: what
+    :func:`mast.core._kernels.window_top` gives for one rotation (the tests compare)."""
+    order: NDArray[np.intp] = np.lexsort((np.arange(total.size), -total))[:keep]
+    return order
 
 
 def prior_hypotheses(
@@ -447,30 +472,35 @@ def prior_hypotheses(
     res = config.field_resolution_m
     field = _tiled_field(panels, near, res, step)
     shifts, d_rot, n_r = _window_grid(prior.radius_m, tol, step, r)
-    shift_cells = shifts / res
+    offs, inside = _window_places(prior.radius_m, step)
+    number = np.full(inside.shape, -1, dtype=np.intp)
+    number[inside] = np.arange(shifts.shape[0])
     rot0 = math.pi / 2 - prior.pose.azimuth
     # The tiles each return can reach anywhere in the window.
     at_prior = prior.pose.scanner_to_mine(pts)
     tiles = field.reaching(at_prior, prior.radius_m + r * math.sin(tol) + step + res)
-    # The best ``keep_best`` translations of each rotation, then all of them best first
-    # (by score, then rotation, then translation, each from the largest).
+    # The best ``keep_best`` translations of each rotation (by score, then number), then
+    # all of them best first (by score, then rotation, then translation, each from the
+    # largest).
     keep_best = 4 * config.candidates
-    top_scores, top_rots, top_at = [], [], []
-    for k in range(-n_r, n_r + 1):
-        rot = rot0 + k * d_rot
+    rot_list = [rot0 + k * d_rot for k in range(-n_r, n_r + 1)]
+    cells = np.empty((len(rot_list), pts.shape[0], 2))
+    for q, rot in enumerate(rot_list):
         c, s = math.cos(rot), math.sin(rot)
-        cells = (pts @ np.array([[c, s], [-s, c]]) + prior.pose.position) / res
-        total = field.scores(cells, tiles, shift_cells)
-        top = (
-            np.argpartition(total, -keep_best)[-keep_best:]
-            if total.size > keep_best
-            else np.arange(total.size)
-        )
-        top_scores.append(total[top])
-        top_rots.append(np.full(top.size, rot))
-        top_at.append(top)
-    at = np.concatenate(top_at)
-    score, rots = np.concatenate(top_scores), np.concatenate(top_rots)
+        cells[q] = (pts @ np.array([[c, s], [-s, c]]) + prior.pose.position) / res
+    at, score = window_top(
+        cells,
+        np.ascontiguousarray(tiles, dtype=np.intp),
+        field.lo / res,
+        field.shape,
+        field.offset,
+        field.pyramid,
+        offs / res,
+        number,
+        keep_best,
+    )
+    rots = np.repeat(np.asarray(rot_list), at.shape[1])
+    at, score = at.ravel(), score.ravel()
     xs, ys = shifts[at, 0], shifts[at, 1]
     order = np.lexsort((ys, xs, rots, score))[::-1]
     score, rots, xs, ys = score[order], rots[order], xs[order], ys[order]
