@@ -118,8 +118,10 @@ def test_compiled_window_scores_match_the_lookups() -> None:
 def _reference_prior_hypotheses(
     points_scanner: np.ndarray, panels: PanelSet, prior: Prior, range_max_m: float
 ) -> list[list[Hypothesis]]:
-    """``prior_hypotheses`` as first written (issue 31): every grid pose kept in a Python
-    list, sorted, and picked one at a time against those chosen before."""
+    """``prior_hypotheses`` written plainly: every grid pose of the window scored, kept in
+    a Python list, sorted, and picked one at a time against those chosen before."""
+    from mast.core._kernels import near_chosen
+
     config = TrackingConfig()
     tol = prior.azimuth_tolerance_rad
     assert tol is not None
@@ -132,29 +134,30 @@ def _reference_prior_hypotheses(
     tiles = field.reaching(
         prior.pose.scanner_to_mine(pts), prior.radius_m + r * math.sin(tol) + step + res
     )
-    keep_best = 4 * config.candidates
     best: list[tuple[float, float, float, float]] = []
     for k in range(-n_r, n_r + 1):
         rot = rot0 + k * d_rot
         c, s = math.cos(rot), math.sin(rot)
-        cells = (pts @ np.array([[c, s], [-s, c]]) + prior.pose.position) / res
+        x, y = pts[:, 0], pts[:, 1]
+        px, py = prior.pose.position
+        cells = np.column_stack([(x * c - y * s + px) / res, (x * s + y * c + py) / res])
         total = field.scores(cells, tiles, shifts / res)
-        # the best ``keep_best`` by score, ties to the lower number (a stable sort)
-        for t in np.argsort(-total, kind="stable")[:keep_best]:
-            best.append((float(total[t]), rot, float(shifts[t, 0]), float(shifts[t, 1])))
+        for t in range(total.size):
+            if total[t] > 0.0:  # a pose that puts no return near a panel is no hypothesis
+                best.append((float(total[t]), rot, float(shifts[t, 0]), float(shifts[t, 1])))
     best.sort(reverse=True)
     reach = float(np.median(r))
-    chosen: list[tuple[float, float, float]] = []
+    chosen = np.zeros((2 * config.candidates, 3))
+    count = 0
 
     def pick(apart_m: float) -> list[Hypothesis]:
+        nonlocal count
         out: list[Hypothesis] = []
         for total_score, rot, x, y in best:
-            if any(
-                math.hypot(x - cx, y - cy) < apart_m and abs(rot - cr) * reach < apart_m
-                for cr, cx, cy in chosen
-            ):
+            if near_chosen(chosen, count, apart_m, reach, rot, x, y):
                 continue
-            chosen.append((rot, x, y))
+            chosen[count] = (rot, x, y)
+            count += 1
             t = prior.pose.position + np.array([x, y])
             sim = Similarity(1.0, math.remainder(rot, 2 * math.pi), t, 0.0)
             out.append(Hypothesis((), sim, -total_score, "prior"))
@@ -167,12 +170,15 @@ def _reference_prior_hypotheses(
     return [first, other] if other else [first]
 
 
-@pytest.mark.parametrize(("radius_m", "tol_deg"), [(0.05, 1.0), (0.3, 4.0), (1.0, 10.0)])
+@pytest.mark.parametrize(
+    ("radius_m", "tol_deg"), [(0.05, 1.0), (0.12, 2.0), (0.3, 4.0), (1.0, 10.0), (1.9, 14.0)]
+)
 def test_the_window_search_ranks_and_picks_its_poses_as_the_reference(
     radius_m: float, tol_deg: float
 ) -> None:
-    """Candidates ranked in arrays, tiles taken from the cache: the same hypotheses, in
-    the same order, to the last bit, as one grid pose at a time in Python."""
+    """Poses found by branch and bound, tiles taken from the cache: the same hypotheses,
+    in the same order, to the last bit, as scoring every grid pose in Python, ranking
+    them and picking one at a time."""
     from mast.pipeline.tracking import prior_hypotheses
 
     scene = drive_scene(0, scans=3)
@@ -199,39 +205,3 @@ def test_the_window_search_ranks_and_picks_its_poses_as_the_reference(
                 assert g.misfit == w.misfit
                 assert g.similarity.rotation_rad == w.similarity.rotation_rad
                 assert np.array_equal(g.similarity.translation, w.similarity.translation)
-
-
-@pytest.mark.parametrize(("radius_m", "spread_m"), [(0.1, 0.05), (0.6, 0.3), (1.5, 2.0)])
-def test_branch_and_bound_ranks_each_rotation_as_scoring_every_translation(
-    radius_m: float, spread_m: float
-) -> None:
-    """window_top against window_scores over the whole grid, ranked by score then number:
-    the same translations and the same scores, to the last bit, zero-score ties (returns
-    far from every tile) included."""
-    from mast.core._kernels import window_top
-    from mast.pipeline.tracking import _ranked_top, _window_places
-
-    panels = PanelSet.from_survey(paper_scene().survey)
-    field = _TiledField.build(panels, np.arange(len(panels)), RES, SIGMA)
-    rng = np.random.default_rng(11)
-    on = panels.a + panels.direction * rng.uniform(0, 1, (len(panels), 1)) * panels.length[:, None]
-    pts = (on[:, None, :] + rng.normal(0.0, spread_m, (len(panels), 12, 2))).reshape(-1, 2)
-    tiles = field.reaching(pts, np.full(len(pts), radius_m + 0.1))
-    offs, inside = _window_places(radius_m, 0.04)
-    tx, ty = np.meshgrid(offs, offs, indexing="ij")
-    shifts = np.column_stack([tx[inside], ty[inside]]) / RES
-    number = np.full(inside.shape, -1, dtype=np.intp)
-    number[inside] = np.arange(shifts.shape[0])
-    rotations = [pts + rng.normal(0.0, 0.02, pts.shape) for _ in range(4)]
-    rotations.append(pts + 50.0)  # every return out of reach: all scores zero
-    cells = np.stack(rotations) / RES
-    keep = 24
-    grid = (field.lo / RES, field.shape, field.offset, field.pyramid)
-    top, score = window_top(cells, tiles, *grid, offs / RES, number, keep)
-    for q in range(cells.shape[0]):
-        total = field.scores(cells[q], tiles, shifts)
-        want = _ranked_top(total, keep)
-        np.testing.assert_array_equal(top[q], want)
-        np.testing.assert_array_equal(score[q], total[want])
-    assert np.all(score[-1] == 0.0)
-    assert np.any(score[0] > 0.0)

@@ -24,12 +24,13 @@ __all__ = [
     "first_hits",
     "icp_stages",
     "line_fits",
+    "near_chosen",
     "nearest_within",
     "partition_dp",
     "penalty",
     "segment_run",
+    "window_picks",
     "window_scores",
-    "window_top",
     "within",
 ]
 
@@ -407,7 +408,7 @@ def _field_pyramid(
     levels: int,
 ) -> NDArray[np.float64]:
     """Row ``h`` holds, for each cell of each tile, the largest value of the ``2^h x 2^h``
-    cells from it (those inside its tile): the bounds of :func:`_window_top`. Row 0 is
+    cells from it (those inside its tile): the bounds of :func:`_window_picks`. Row 0 is
     ``values``, last (outside) cell included."""
     out = np.empty((levels + 1, values.shape[0]))
     out[0, :] = values
@@ -489,121 +490,236 @@ def _block_bound(
             i0, i1 = max(i0, 0), min(i1, w - 1)
             j0, j1 = max(j0, 0), min(j1, h - 1)
             width = max(i1 - i0, j1 - j0) + 1
+            # Squares of 2^lv cells, 2^lv <= width < 2^(lv + 1), from the rectangle's two
+            # ends along each axis: together they cover it, and no cell beyond its span.
             lv = 0
-            while (1 << lv) < width and lv < levels:
+            while (2 << lv) <= width and lv < levels:
                 lv += 1
-            v = pyramid[lv, tile_offset[t] + i0 * h + j0]
+            side = 1 << lv
+            ia = max(i1 - side + 1, i0)
+            ja = max(j1 - side + 1, j0)
+            row = pyramid[lv]
+            off = tile_offset[t]
+            v = max(
+                max(row[off + i0 * h + j0], row[off + i0 * h + ja]),
+                max(row[off + ia * h + j0], row[off + ia * h + ja]),
+            )
             if v > best:
                 best = v
         total += best
     return total
 
 
-def _window_top(
-    cells: NDArray[np.float64],
+def _near_pose(
+    rot: float, x: float, y: float, other: NDArray[np.float64], apart: float, reach: float
+) -> bool:
+    """Whether pose (rotation ``rot``, translation ``x, y``) moves the returns less than
+    ``apart`` from pose ``other`` (rotation, x, y): its translation within ``apart`` and
+    its rotation within ``apart / reach``."""
+    return abs(rot - other[0]) * reach < apart and math.hypot(x - other[1], y - other[2]) < apart
+
+
+def _near_chosen(
+    chosen: NDArray[np.float64],
+    count: int,
+    apart: float,
+    reach: float,
+    rot: float,
+    x: float,
+    y: float,
+) -> bool:
+    """Whether a pose is near (:func:`_near_pose`) one of the first ``count`` rows of
+    ``chosen``."""
+    for c in range(count):  # noqa: SIM110 (a loop numba compiles)
+        if _near_pose_jit(rot, x, y, chosen[c], apart, reach):
+            return True
+    return False
+
+
+def _suppress(
+    free: NDArray[np.bool_],
+    places: NDArray[np.int64],
+    rots: NDArray[np.float64],
+    offs_m: NDArray[np.float64],
+    pose: NDArray[np.float64],
+    apart: float,
+    reach: float,
+) -> None:
+    """Mark the grid poses near ``pose`` as no longer free, and recount the free places
+    of every rotation that changed (``places[r, a, b]``: free ones in ``[0, a) x [0, b)``)."""
+    side = offs_m.shape[0]
+    for r in range(rots.shape[0]):
+        if abs(rots[r] - pose[0]) * reach >= apart:
+            continue
+        changed = False
+        for a in range(side):
+            for b in range(side):
+                if free[r, a, b] and _near_pose_jit(
+                    rots[r], offs_m[a], offs_m[b], pose, apart, reach
+                ):
+                    free[r, a, b] = False
+                    changed = True
+        if changed:
+            for a in range(side):
+                for b in range(side):
+                    places[r, a + 1, b + 1] = (
+                        places[r, a, b + 1] + places[r, a + 1, b] - places[r, a, b] + free[r, a, b]
+                    )
+
+
+def _window_picks(
+    points: NDArray[np.float64],
+    rots: NDArray[np.float64],
+    origin: NDArray[np.float64],
+    res: float,
     tiles: NDArray[np.intp],
     tile_lo: NDArray[np.float64],
     tile_shape: NDArray[np.intp],
     tile_offset: NDArray[np.intp],
     pyramid: NDArray[np.float64],
-    offs: NDArray[np.float64],
-    number: NDArray[np.intp],
-    keep: int,
-) -> tuple[NDArray[np.intp], NDArray[np.float64]]:
-    """For each rotation, the ``keep`` best translations of a window's grid, by score
-    (largest first) then by number: :func:`_window_scores` over every translation,
-    ranked, without scoring most of them (branch and bound over the grid's quadtree,
-    Olson 2009; Hess et al. 2016).
+    offs_cells: NDArray[np.float64],
+    offs_m: NDArray[np.float64],
+    inside: NDArray[np.bool_],
+    reach: float,
+    candidates: int,
+    distinct_m: float,
+    other_m: float,
+) -> tuple[NDArray[np.float64], int, int]:
+    """The window's hypotheses by branch and bound (Olson 2009; Hess et al. 2016): the
+    poses of the grid in order of score (then rotation, then translation, each from the
+    largest), taking each that moves the returns at least ``distinct_m`` from every pose
+    taken before (:func:`_near_chosen`), up to ``candidates``; then, going on down the
+    same order, up to ``candidates`` more at least ``other_m`` from every pose taken.
+    Poses scoring zero (no return near a panel) are never taken.
 
-    ``cells`` holds each rotation's points in cells, shape (rotations, n, 2); ``tiles``
-    the tiles each point reaches (-1 pads); ``pyramid`` the field's
-    :func:`_field_pyramid`; the translation at grid place (a, b) is ``(offs[a],
-    offs[b])`` cells, numbered ``number[a, b]`` (-1: outside the window; numbers
-    follow the places in row order). A block of places is opened best bound first,
-    blocks before poses of an equal score, so poses come out exactly in the ranking's
-    order; once the best bound left is zero, every pose left scores zero, and those
-    are taken by number. Returns the numbers and scores, shape (rotations, keep).
+    ``points`` are the returns in the scanner frame, shape (n, 2); at rotation
+    ``rots[r]`` (increasing, radians counter-clockwise from east) and translation ``t``
+    a return ``(x, y)`` lies at ``((x cos - y sin + origin[0] + t[0]) / res, (x sin + y cos
+    + origin[1] + t[1]) / res)`` cells; ``tiles`` the tiles each point reaches (-1 pads);
+    ``pyramid`` the field's :func:`_field_pyramid`. The translation at grid place (a, b)
+    is ``(offs_cells[a], offs_cells[b])`` cells, ``(offs_m[a], offs_m[b])`` metres, in
+    the window where ``inside[a, b]``. Each rotation's grid is a quadtree of blocks,
+    opened best bound first (blocks before poses of an equal value), so poses come out
+    in exactly the order of scoring them all; the places still free (not near a pose
+    taken) are counted per rotation, and a block with none is never opened. The second
+    pass needs no pose the first passed over: every pose within ``distinct_m`` of one
+    taken is within ``other_m`` of it.
+
+    Returns the poses taken as rows (rotation index, a, b, score), and how many of them
+    the first pass took and the second.
     """
-    rotations, n = cells.shape[0], cells.shape[1]
+    rotations, n = rots.shape[0], points.shape[0]
     slots = tiles.shape[1]
-    side = offs.shape[0]
+    side = offs_cells.shape[0]
     size = 1
     while size < side:
         size *= 2
-    inside = np.zeros((side + 1, side + 1), dtype=np.int64)  # places in [0, a) x [0, b)
-    for a in range(side):
-        for b in range(side):
-            inside[a + 1, b + 1] = (
-                inside[a, b + 1] + inside[a + 1, b] - inside[a, b] + (number[a, b] >= 0)
-            )
-    keep = min(keep, int(inside[side, side]))
-    top = np.full((rotations, keep), -1, dtype=np.intp)
-    score = np.zeros((rotations, keep))
-    local = np.zeros((n, slots, 2))
-    taken = np.zeros((side, side), dtype=np.bool_)
-    values = pyramid[0]
+    free = np.empty((rotations, side, side), dtype=np.bool_)
+    places = np.zeros((rotations, side + 1, side + 1), dtype=np.int64)
     for r in range(rotations):
+        for a in range(side):
+            for b in range(side):
+                free[r, a, b] = inside[a, b]
+                places[r, a + 1, b + 1] = (
+                    places[r, a, b + 1] + places[r, a + 1, b] - places[r, a, b] + inside[a, b]
+                )
+    values = pyramid[0]
+    local = np.zeros((rotations, n, slots, 2))
+    for r in range(rotations):
+        c, s = math.cos(rots[r]), math.sin(rots[r])
         for i in range(n):
+            x, y = points[i, 0], points[i, 1]
+            cx = (x * c - y * s + origin[0]) / res
+            cy = (x * s + y * c + origin[1]) / res
             for k in range(slots):
                 t = tiles[i, k]
                 if t >= 0:
-                    local[i, k, 0] = cells[r, i, 0] - tile_lo[t, 0]
-                    local[i, k, 1] = cells[r, i, 1] - tile_lo[t, 1]
-        taken[:, :] = False
-        got = 0
-        # (minus the value, 0 for a block and 1 for a pose, a, b, block size)
-        last = side - 1
-        root = _block_bound_jit(
-            local, tiles, tile_shape, tile_offset, pyramid, offs[0], offs[last], offs[0], offs[last]
+                    local[r, i, k, 0] = cx - tile_lo[t, 0]
+                    local[r, i, k, 1] = cy - tile_lo[t, 1]
+    taken = np.zeros((2 * candidates, 4))
+    chosen = np.zeros((2 * candidates, 3))  # rotation, x, y (metres)
+    got = 0
+    first = -1
+    apart = distinct_m
+    last = side - 1
+    # (minus the value, 0 for a block and 1 for a pose, minus the rotation index, minus
+    # a, minus b, block size): the heap gives the largest value, then blocks, then the
+    # largest rotation, a and b.
+    heap = [(0.0, 0, 0, 0, 0, 0) for _ in range(0)]
+    for r in range(rotations):
+        if size == 1:
+            if inside[0, 0]:
+                v = _pose_score_jit(
+                    local[r], tiles, tile_shape, tile_offset, values, offs_cells[0], offs_cells[0]
+                )
+                heap.append((-v, 1, -r, 0, 0, 1))
+            continue
+        v = _block_bound_jit(
+            local[r],
+            tiles,
+            tile_shape,
+            tile_offset,
+            pyramid,
+            offs_cells[0],
+            offs_cells[last],
+            offs_cells[0],
+            offs_cells[last],
         )
-        heap = [(-root, 0, 0, 0, size)]
-        if size == 1:  # one place: the pose itself
-            one = _pose_score_jit(local, tiles, tile_shape, tile_offset, values, offs[0], offs[0])
-            heap = [(-one, 1, 0, 0, 1)]
-        while len(heap) > 0 and got < keep:
-            value, kind, a0, b0, s = heapq.heappop(heap)
-            if kind == 1:
-                top[r, got] = number[a0, b0]
-                score[r, got] = -value
-                taken[a0, b0] = True
-                got += 1
+        heap.append((-v, 0, -r, 0, 0, size))
+    heapq.heapify(heap)
+    while len(heap) > 0 and got < 2 * candidates:
+        value, kind, neg_r, neg_a, neg_b, s = heapq.heappop(heap)
+        if -value <= 0.0:
+            break  # every pose left scores zero
+        r, a0, b0 = -neg_r, -neg_a, -neg_b
+        if kind == 1:
+            if not free[r, a0, b0]:
                 continue
-            if -value <= 0.0:
-                break  # every pose left scores zero
-            half = s // 2
-            for da in (0, half):
-                for db in (0, half):
-                    a, b = a0 + da, b0 + db
-                    if a >= side or b >= side:
-                        continue
-                    a1, b1 = min(a + half, side), min(b + half, side)
-                    if inside[a1, b1] - inside[a, b1] - inside[a1, b] + inside[a, b] == 0:
-                        continue
-                    if half == 1:
-                        v = _pose_score_jit(
-                            local, tiles, tile_shape, tile_offset, values, offs[a], offs[b]
-                        )
-                        heapq.heappush(heap, (-v, 1, a, b, 1))
-                    else:
-                        v = _block_bound_jit(
-                            local,
-                            tiles,
-                            tile_shape,
-                            tile_offset,
-                            pyramid,
-                            offs[a],
-                            offs[a1 - 1],
-                            offs[b],
-                            offs[b1 - 1],
-                        )
-                        heapq.heappush(heap, (-v, 0, a, b, half))
-        for a in range(side):  # the poses scoring zero, by number
-            for b in range(side):
-                if got < keep and number[a, b] >= 0 and not taken[a, b]:
-                    top[r, got] = number[a, b]
-                    score[r, got] = 0.0
-                    got += 1
-    return top, score
+            taken[got, 0] = r
+            taken[got, 1] = a0
+            taken[got, 2] = b0
+            taken[got, 3] = -value
+            chosen[got, 0] = rots[r]
+            chosen[got, 1] = offs_m[a0]
+            chosen[got, 2] = offs_m[b0]
+            _suppress_jit(free, places, rots, offs_m, chosen[got], apart, reach)
+            got += 1
+            if got == candidates and first < 0:
+                first = got
+                apart = other_m
+                for c in range(got):
+                    _suppress_jit(free, places, rots, offs_m, chosen[c], apart, reach)
+            continue
+        half = s // 2
+        for da in (0, half):
+            for db in (0, half):
+                a, b = a0 + da, b0 + db
+                if a >= side or b >= side:
+                    continue
+                a1, b1 = min(a + half, side), min(b + half, side)
+                pr = places[r]
+                if pr[a1, b1] - pr[a, b1] - pr[a1, b] + pr[a, b] == 0:
+                    continue  # no place in it, or every one near a pose taken
+                if half == 1:
+                    sx, sy = offs_cells[a], offs_cells[b]
+                    v = _pose_score_jit(local[r], tiles, tile_shape, tile_offset, values, sx, sy)
+                    heapq.heappush(heap, (-v, 1, neg_r, -a, -b, 1))
+                else:
+                    v = _block_bound_jit(
+                        local[r],
+                        tiles,
+                        tile_shape,
+                        tile_offset,
+                        pyramid,
+                        offs_cells[a],
+                        offs_cells[a1 - 1],
+                        offs_cells[b],
+                        offs_cells[b1 - 1],
+                    )
+                    heapq.heappush(heap, (-v, 0, neg_r, -a, -b, half))
+    if first < 0:
+        first = got
+    return taken[:got], first, got - first
 
 
 def _run_moments(points: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -945,4 +1061,7 @@ first_hits: Callable[..., Any] = njit(cache=True, nogil=True)(_first_hits)
 field_pyramid: Callable[..., NDArray[np.float64]] = njit(cache=True, nogil=True)(_field_pyramid)
 _pose_score_jit: Callable[..., float] = njit(cache=True, nogil=True)(_pose_score)
 _block_bound_jit: Callable[..., float] = njit(cache=True, nogil=True)(_block_bound)
-window_top: Callable[..., Any] = njit(cache=True, nogil=True)(_window_top)
+_near_pose_jit: Callable[..., bool] = njit(cache=True, nogil=True)(_near_pose)
+near_chosen: Callable[..., bool] = njit(cache=True, nogil=True)(_near_chosen)
+_suppress_jit: Callable[..., None] = njit(cache=True, nogil=True)(_suppress)
+window_picks: Callable[..., Any] = njit(cache=True, nogil=True)(_window_picks)

@@ -23,7 +23,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import ndimage
 
-from mast.core._kernels import field_pyramid, window_top
+from mast.core._kernels import field_pyramid, window_picks
 from mast.core.geometry import PanelSet
 from mast.core.pose import Pose2D
 from mast.pipeline.alignment import Similarity
@@ -248,11 +248,13 @@ class _TiledField:
             & (centres[:, None, :] - reach[:, None, None] <= hi[None, :, :]),
             axis=2,
         )
-        slots = max(1, int(meets.sum(axis=1).max(initial=0)))
-        out = np.full((centres.shape[0], slots), -1, dtype=np.intp)
-        for i, tiles in enumerate(meets):
-            k = np.flatnonzero(tiles)
-            out[i, : k.size] = k
+        count = meets.sum(axis=1)
+        slots = max(1, int(count.max(initial=0)))
+        # Each point's tiles in increasing order (a stable sort puts the met ones first).
+        order = np.argsort(~meets, axis=1, kind="stable")[:, :slots]
+        out: NDArray[np.intp] = np.where(
+            np.arange(slots)[None, :] < count[:, None], order, -1
+        ).astype(np.intp)
         return out
 
     def scores(
@@ -430,13 +432,6 @@ def _window_places(radius_m: float, step: float) -> tuple[NDArray[np.float64], N
     return offs, inside
 
 
-def _ranked_top(total: NDArray[np.float64], keep: int) -> NDArray[np.intp]:
-    """The ``keep`` largest of ``total`` by value, ties by the lower index: what
-    :func:`mast.core._kernels.window_top` gives for one rotation (the tests compare)."""
-    order: NDArray[np.intp] = np.lexsort((np.arange(total.size), -total))[:keep]
-    return order
-
-
 def prior_hypotheses(
     points_scanner: NDArray[np.float64],
     panels: PanelSet,
@@ -452,8 +447,11 @@ def prior_hypotheses(
     best ``candidates`` poses at least ``distinct_m`` apart; the second, to be
     searched only when the first gives no fix, the best ones at least
     ``other_basins_m`` from every pose before them (empty when there are none).
-    Returns no batch when the window is too wide to search this way or no
-    panel is in reach.
+    A pose that puts no return near a panel (scores zero) is never taken. The poses
+    come from a branch and bound over each rotation's grid
+    (:func:`mast.core._kernels.window_picks`), in exactly the order of scoring them
+    all, without scoring most of them. Returns no batch when the window is too wide
+    to search this way, no panel is in reach or no pose scores.
     """
     tol = prior.azimuth_tolerance_rad
     if (
@@ -471,73 +469,36 @@ def prior_hypotheses(
     step = config.step_m
     res = config.field_resolution_m
     field = _tiled_field(panels, near, res, step)
-    shifts, d_rot, n_r = _window_grid(prior.radius_m, tol, step, r)
+    _, d_rot, n_r = _window_grid(prior.radius_m, tol, step, r)
     offs, inside = _window_places(prior.radius_m, step)
-    number = np.full(inside.shape, -1, dtype=np.intp)
-    number[inside] = np.arange(shifts.shape[0])
     rot0 = math.pi / 2 - prior.pose.azimuth
     # The tiles each return can reach anywhere in the window.
     at_prior = prior.pose.scanner_to_mine(pts)
     tiles = field.reaching(at_prior, prior.radius_m + r * math.sin(tol) + step + res)
-    # The best ``keep_best`` translations of each rotation (by score, then number), then
-    # all of them best first (by score, then rotation, then translation, each from the
-    # largest).
-    keep_best = 4 * config.candidates
-    rot_list = [rot0 + k * d_rot for k in range(-n_r, n_r + 1)]
-    cells = np.empty((len(rot_list), pts.shape[0], 2))
-    for q, rot in enumerate(rot_list):
-        c, s = math.cos(rot), math.sin(rot)
-        cells[q] = (pts @ np.array([[c, s], [-s, c]]) + prior.pose.position) / res
-    at, score = window_top(
-        cells,
+    rots = np.array([rot0 + k * d_rot for k in range(-n_r, n_r + 1)])
+    taken, first, _ = window_picks(
+        np.ascontiguousarray(pts, dtype=float),
+        rots,
+        prior.pose.position,
+        res,
         np.ascontiguousarray(tiles, dtype=np.intp),
         field.lo / res,
         field.shape,
         field.offset,
         field.pyramid,
         offs / res,
-        number,
-        keep_best,
+        offs,
+        inside,
+        float(np.median(r)),
+        config.candidates,
+        config.distinct_m,
+        config.other_basins_m,
     )
-    rots = np.repeat(np.asarray(rot_list), at.shape[1])
-    at, score = at.ravel(), score.ravel()
-    xs, ys = shifts[at, 0], shifts[at, 1]
-    order = np.lexsort((ys, xs, rots, score))[::-1]
-    score, rots, xs, ys = score[order], rots[order], xs[order], ys[order]
-    reach = float(np.median(r))
-    chosen: list[tuple[float, float, float]] = []
-
-    def near_to(apart_m: float, cr: float, cx: float, cy: float) -> NDArray[np.bool_]:
-        """Which grid poses move the returns less than ``apart_m`` from pose (cr, cx, cy)."""
-        d = np.hypot(xs - cx, ys - cy)
-        # np.hypot and math.hypot may differ in the last bit: decide ties as math does.
-        for i in np.flatnonzero(np.abs(d - apart_m) < 1e-12):
-            d[i] = math.hypot(float(xs[i]) - cx, float(ys[i]) - cy)
-        close: NDArray[np.bool_] = (d < apart_m) & (np.abs(rots - cr) * reach < apart_m)
-        return close
-
-    def pick(apart_m: float) -> list[Hypothesis]:
-        """The best grid poses that move the returns at least ``apart_m`` from every
-        pose chosen before (and from each other), up to ``candidates``."""
-        free = np.ones(score.size, dtype=bool)
-        for cr, cx, cy in chosen:
-            free &= ~near_to(apart_m, cr, cx, cy)
-        out: list[Hypothesis] = []
-        i = 0
-        while len(out) < config.candidates:
-            ahead = np.flatnonzero(free[i:])
-            if ahead.size == 0:
-                break
-            j = i + int(ahead[0])
-            rot, x, y = float(rots[j]), float(xs[j]), float(ys[j])
-            chosen.append((rot, x, y))
-            free &= ~near_to(apart_m, rot, x, y)
-            t = prior.pose.position + np.array([x, y])
-            sim = Similarity(1.0, math.remainder(rot, 2 * math.pi), t, 0.0)
-            out.append(Hypothesis((), sim, -float(score[j]), "prior"))
-            i = j + 1
-        return out
-
-    first = pick(config.distinct_m)
-    other = pick(config.other_basins_m)
-    return [first, other] if other else [first]
+    out: list[Hypothesis] = []
+    for k, a, b, score in taken.tolist():
+        t = prior.pose.position + np.array([offs[int(a)], offs[int(b)]])
+        sim = Similarity(1.0, math.remainder(float(rots[int(k)]), 2 * math.pi), t, 0.0)
+        out.append(Hypothesis((), sim, -score, "prior"))
+    if not out:
+        return []
+    return [out[:first], out[first:]] if len(out) > first else [out]
