@@ -865,9 +865,11 @@ def _line_fits(
 ) -> NDArray[np.float64]:
     """Every piece's total-least-squares line (``segmentation.fit_line`` and
     ``_make_segment``): rows of centroid (2), direction (2), rms, length, start
-    and end along the line from the centroid, the spacings at both ends, and the
-    direction's standard deviation for range noise ``noise``."""
-    out = np.empty((pieces.shape[0], 10))
+    and end along the line from the centroid, the spacings at both ends, the
+    direction's standard deviation for range noise ``noise``, then the normal (the
+    direction turned +90 degrees) and the first and last return projected on the line
+    (the centroid plus start or end times the direction), 16 columns."""
+    out = np.empty((pieces.shape[0], 16))
     for q in range(pieces.shape[0]):
         lo, hi = pieces[q, 0], pieces[q, 1]
         m = hi - lo
@@ -911,6 +913,12 @@ def _line_fits(
         out[q, 7] = s0
         out[q, 8] = s1
         out[q, 9] = perp / math.sqrt(t_spread) if t_spread > 0.0 else math.inf
+        out[q, 10] = -dy
+        out[q, 11] = dx
+        out[q, 12] = mx + t0 * dx
+        out[q, 13] = my + t0 * dy
+        out[q, 14] = mx + t1 * dx
+        out[q, 15] = my + t1 * dy
     return out
 
 

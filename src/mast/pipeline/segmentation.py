@@ -458,21 +458,19 @@ def _segment_of(
     pts: NDArray[np.float64],
     fit: NDArray[np.float64],
 ) -> Segment:
-    """A segment from its row of :func:`mast.core._kernels.line_fits`."""
-    centroid = fit[0:2].copy()
-    direction = fit[2:4].copy()
-    t0, t1 = float(fit[5]), float(fit[6])
+    """A segment from its row of :func:`mast.core._kernels.line_fits` (its vectors are
+    views of the row)."""
     return Segment(
         index=index,
         run=run,
         beams=beams,
         points=pts,
-        centroid=centroid,
-        direction=direction,
-        normal=np.array([-direction[1], direction[0]]),
-        length=t1 - t0,
-        start=centroid + t0 * direction,
-        end=centroid + t1 * direction,
+        centroid=fit[0:2],
+        direction=fit[2:4],
+        normal=fit[10:12],
+        length=float(fit[6]) - float(fit[5]),
+        start=fit[12:14],
+        end=fit[14:16],
         rms=float(fit[4]),
         sigma_direction=float(fit[9]),
         spacing_start=float(fit[7]),
@@ -542,9 +540,10 @@ def segment_scan(scan: Scan, config: SegmentationConfig = SegmentationConfig()) 
         pieces = segment_run(p, noise**2, config.min_points, MAX_PIECE)
         pieces = pieces[pieces[:, 1] - pieces[:, 0] >= config.min_points]
         fits = line_fits(p, pieces, noise)  # the compiled _make_segment's fits
+        fits.flags.writeable = False  # the segments' vectors are views of its rows
         prev: Segment | None = None
         for (i, j), fit in zip(pieces.tolist(), fits, strict=True):
-            seg = _segment_of(len(segments), run, beams[lo + i : lo + j].copy(), p[i:j], fit)
+            seg = _segment_of(len(segments), run, beams[lo + i : lo + j], p[i:j], fit)
             if prev is not None and prev.last_beam + 1 + config.max_gap_beams >= seg.first_beam:
                 corner = _corner(prev, seg)
                 if corner is not None:
