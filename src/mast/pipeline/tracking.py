@@ -2,15 +2,20 @@
 
 With a prior pose (the previous scan's fix, or ``--near``), identification is
 not needed: every surveyed panel is where the prior says, to within the
-prior's radius and azimuth tolerance. The window is searched exhaustively on
-a grid (a correlative scan match against a likelihood field of the surveyed
-panels), and the best poses are handed on as hypotheses to be refined by ICP
-and verified like any other. A wrong prior finds no pose that the beams
-confirm and gives no fix, never one that follows the prior.
+prior's radius and azimuth tolerance. The window's grid is searched (a
+correlative scan match against a likelihood field of the surveyed panels) by
+branch and bound: each rotation's translations form a quadtree whose blocks are
+bounded from a max pyramid of the field, so the poses come out best first, as
+scoring them all would rank them, without scoring most of them. The best poses
+are handed on as hypotheses to be refined by ICP and verified like any other. A
+wrong prior finds no pose that the beams confirm and gives no fix, never one that
+follows the prior.
 
 References
 ----------
 E. Olson, "Real-time correlative scan matching", ICRA 2009.
+W. Hess, D. Kohler, H. Rapp and D. Andor, "Real-time loop closure in 2D LIDAR
+SLAM", ICRA 2016 (the branch and bound).
 """
 
 from __future__ import annotations
