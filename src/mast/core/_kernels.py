@@ -381,23 +381,9 @@ def _window_scores(
                 local[i, k, 1] = cells[i, 1] - tile_lo[t, 1]
     out = np.zeros(shifts.shape[0])
     for m in range(shifts.shape[0]):
-        sx, sy = shifts[m, 0], shifts[m, 1]
-        total = 0.0
-        for i in range(n):
-            best = 0.0
-            for k in range(slots):
-                t = tiles[i, k]
-                if t < 0:
-                    continue
-                gi = math.floor(local[i, k, 0] + sx)
-                gj = math.floor(local[i, k, 1] + sy)
-                w, h = tile_shape[t, 0], tile_shape[t, 1]
-                if gi >= 0 and gi < w and gj >= 0 and gj < h:
-                    v = values[tile_offset[t] + gi * h + gj]
-                    if v > best:
-                        best = v
-            total += best
-        out[m] = total
+        out[m] = _pose_score_jit(
+            local, tiles, tile_shape, tile_offset, values, shifts[m, 0], shifts[m, 1]
+        )
     return out
 
 
@@ -439,7 +425,8 @@ def _pose_score(
     sx: float,
     sy: float,
 ) -> float:
-    """One translation's score, summed exactly as :func:`_window_scores` sums it."""
+    """One translation's score: over the points, the largest value of the cells they
+    fall in (over their tiles), summed in the points' order."""
     total = 0.0
     for i in range(local.shape[0]):
         best = 0.0
