@@ -120,7 +120,7 @@ def _reference_prior_hypotheses(
 ) -> list[list[Hypothesis]]:
     """``prior_hypotheses`` written plainly: every grid pose of the window scored, kept in
     a Python list, sorted, and picked one at a time against those chosen before."""
-    from mast.core._kernels import near_chosen
+    from mast.core._kernels import near_pose
 
     config = TrackingConfig()
     tol = prior.azimuth_tolerance_rad
@@ -154,7 +154,7 @@ def _reference_prior_hypotheses(
         nonlocal count
         out: list[Hypothesis] = []
         for total_score, rot, x, y in best:
-            if near_chosen(chosen, count, apart_m, reach, rot, x, y):
+            if any(near_pose(rot, x, y, chosen[c], apart_m, reach) for c in range(count)):
                 continue
             chosen[count] = (rot, x, y)
             count += 1

@@ -24,7 +24,7 @@ __all__ = [
     "first_hits",
     "icp_stages",
     "line_fits",
-    "near_chosen",
+    "near_pose",
     "nearest_within",
     "partition_dp",
     "penalty",
@@ -506,21 +506,11 @@ def _near_pose(
     return abs(rot - other[0]) * reach < apart and math.hypot(x - other[1], y - other[2]) < apart
 
 
-def _near_chosen(
-    chosen: NDArray[np.float64],
-    count: int,
-    apart: float,
-    reach: float,
-    rot: float,
-    x: float,
-    y: float,
-) -> bool:
-    """Whether a pose is near (:func:`_near_pose`) one of the first ``count`` rows of
-    ``chosen``."""
-    for c in range(count):  # noqa: SIM110 (a loop numba compiles)
-        if _near_pose_jit(rot, x, y, chosen[c], apart, reach):
-            return True
-    return False
+def _recount(places: NDArray[np.int64], free: NDArray[np.bool_]) -> None:
+    """``places[a, b]``: how many of ``free[:a, :b]`` are set (a summed-area table)."""
+    for a in range(free.shape[0]):
+        for b in range(free.shape[1]):
+            places[a + 1, b + 1] = places[a, b + 1] + places[a + 1, b] - places[a, b] + free[a, b]
 
 
 def _suppress(
@@ -547,11 +537,7 @@ def _suppress(
                     free[r, a, b] = False
                     changed = True
         if changed:
-            for a in range(side):
-                for b in range(side):
-                    places[r, a + 1, b + 1] = (
-                        places[r, a, b + 1] + places[r, a + 1, b] - places[r, a, b] + free[r, a, b]
-                    )
+            _recount_jit(places[r], free[r])
 
 
 def _window_picks(
@@ -575,7 +561,7 @@ def _window_picks(
     """The window's hypotheses by branch and bound (Olson 2009; Hess et al. 2016): the
     poses of the grid in order of score (then rotation, then translation, each from the
     largest), taking each that moves the returns at least ``distinct_m`` from every pose
-    taken before (:func:`_near_chosen`), up to ``candidates``; then, going on down the
+    taken before (:func:`_near_pose`), up to ``candidates``; then, going on down the
     same order, up to ``candidates`` more at least ``other_m`` from every pose taken.
     Poses scoring zero (no return near a panel) are never taken.
 
@@ -604,12 +590,8 @@ def _window_picks(
     free = np.empty((rotations, side, side), dtype=np.bool_)
     places = np.zeros((rotations, side + 1, side + 1), dtype=np.int64)
     for r in range(rotations):
-        for a in range(side):
-            for b in range(side):
-                free[r, a, b] = inside[a, b]
-                places[r, a + 1, b + 1] = (
-                    places[r, a, b + 1] + places[r, a + 1, b] - places[r, a, b] + inside[a, b]
-                )
+        free[r] = inside
+        _recount_jit(places[r], free[r])
     values = pyramid[0]
     local = np.zeros((rotations, n, slots, 2))
     for r in range(rotations):
@@ -1056,7 +1038,8 @@ first_hits: Callable[..., Any] = njit(cache=True, nogil=True)(_first_hits)
 field_pyramid: Callable[..., NDArray[np.float64]] = njit(cache=True, nogil=True)(_field_pyramid)
 _pose_score_jit: Callable[..., float] = njit(cache=True, nogil=True)(_pose_score)
 _block_bound_jit: Callable[..., float] = njit(cache=True, nogil=True)(_block_bound)
-_near_pose_jit: Callable[..., bool] = njit(cache=True, nogil=True)(_near_pose)
-near_chosen: Callable[..., bool] = njit(cache=True, nogil=True)(_near_chosen)
+near_pose: Callable[..., bool] = njit(cache=True, nogil=True)(_near_pose)
+_near_pose_jit = near_pose
+_recount_jit: Callable[..., None] = njit(cache=True, nogil=True)(_recount)
 _suppress_jit: Callable[..., None] = njit(cache=True, nogil=True)(_suppress)
 window_picks: Callable[..., Any] = njit(cache=True, nogil=True)(_window_picks)

@@ -423,8 +423,14 @@ def _window_grid(
     offs, inside = _window_places(radius_m, step)
     tx, ty = np.meshgrid(offs, offs, indexing="ij")
     shifts = np.column_stack([tx[inside], ty[inside]])
+    return (shifts, *_rotation_steps(tol, step, r))
+
+
+def _rotation_steps(tol: float, step: float, r: NDArray[np.float64]) -> tuple[float, int]:
+    """The rotation step that moves no return (ranges ``r``) more than ``step``, and the
+    steps either way that cover ``tol``."""
     d_rot = step / max(float(r.max()), step)
-    return shifts, d_rot, math.ceil(tol / d_rot)
+    return d_rot, math.ceil(tol / d_rot)
 
 
 def _window_places(radius_m: float, step: float) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
@@ -474,7 +480,7 @@ def prior_hypotheses(
     step = config.step_m
     res = config.field_resolution_m
     field = _tiled_field(panels, near, res, step)
-    _, d_rot, n_r = _window_grid(prior.radius_m, tol, step, r)
+    d_rot, n_r = _rotation_steps(tol, step, r)
     offs, inside = _window_places(prior.radius_m, step)
     rot0 = math.pi / 2 - prior.pose.azimuth
     # The tiles each return can reach anywhere in the window.
