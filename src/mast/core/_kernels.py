@@ -28,6 +28,7 @@ __all__ = [
     "nearest_within",
     "partition_dp",
     "penalty",
+    "reach_counts",
     "segment_run",
     "window_picks",
     "window_scores",
@@ -231,23 +232,98 @@ def _within(
 ) -> tuple[NDArray[np.bool_], NDArray[np.bool_]]:
     """Points within ``reach`` (Euclidean) of any of ``panels``, and which of ``panels``
     have a point that close: ``PanelSet._within_reference`` without its
-    (points x panels) arrays."""
+    (points x panels) arrays. One panel at a time over every point, so that the
+    compiler runs several points at once."""
     n = points.shape[0]
+    x = np.ascontiguousarray(points[:, 0])
+    y = np.ascontiguousarray(points[:, 1])
+    zero = np.zeros(n)
     near = np.zeros(n, dtype=np.bool_)
+    close = np.empty(n, dtype=np.bool_)
     reached = np.zeros(panels.shape[0], dtype=np.bool_)
-    r2 = reach * reach
-    for p in range(n):
-        for k in range(panels.shape[0]):
-            q = panels[k]
-            rx = points[p, 0] - a[q, 0]
-            ry = points[p, 1] - a[q, 1]
-            t = rx * direction[q, 0] + ry * direction[q, 1]
-            s = rx * normal[q, 0] + ry * normal[q, 1]
-            over = max(max(-t, t - length[q]), 0.0)
-            if over * over + s * s <= r2:
-                near[p] = True
-                reached[k] = True
+    for k in range(panels.shape[0]):
+        _close_to_jit(x, y, zero, panels[k], a, direction, normal, length, reach, 0.0, close)
+        any_close = False
+        for p in range(n):
+            any_close |= close[p]
+            near[p] |= close[p]
+        reached[k] = any_close
     return near, reached
+
+
+def _close_to(
+    x: NDArray[np.float64],
+    y: NDArray[np.float64],
+    ranges: NDArray[np.float64],
+    q: int,
+    a: NDArray[np.float64],
+    direction: NDArray[np.float64],
+    normal: NDArray[np.float64],
+    length: NDArray[np.float64],
+    reach: float,
+    per_range: float,
+    close: NDArray[np.bool_],
+) -> None:
+    """``close[p]``: point ``p`` within ``reach + per_range * ranges[p]`` of panel ``q``,
+    as a segment."""
+    ax, ay = a[q, 0], a[q, 1]
+    dx, dy = direction[q, 0], direction[q, 1]
+    nx, ny = normal[q, 0], normal[q, 1]
+    ln = length[q]
+    for p in range(x.shape[0]):
+        rx = x[p] - ax
+        ry = y[p] - ay
+        t = rx * dx + ry * dy
+        s = rx * nx + ry * ny
+        over = max(max(-t, t - ln), 0.0)
+        r = reach + per_range * ranges[p]
+        close[p] = over * over + s * s <= r * r
+
+
+def _reach_counts(
+    points: NDArray[np.float64],
+    ranges: NDArray[np.float64],
+    a: NDArray[np.float64],
+    direction: NDArray[np.float64],
+    normal: NDArray[np.float64],
+    length: NDArray[np.float64],
+    beacon: NDArray[np.intp],
+    panels: NDArray[np.intp],
+    reach: float,
+    per_range: float,
+    beacons: int,
+) -> NDArray[np.int64]:
+    """How many points lie within ``reach + per_range * range`` (Euclidean) of any panel
+    of each beacon, among ``panels``; a point counts once for a beacon however many of
+    its panels it is near. ``beacon[q]`` is panel ``q``'s beacon (``0 <= beacon <
+    beacons``), ``ranges`` each point's range. ``PanelSet._reach_counts_reference``
+    without its (points x panels) arrays."""
+    n = points.shape[0]
+    x = np.ascontiguousarray(points[:, 0])
+    y = np.ascontiguousarray(points[:, 1])
+    counts = np.zeros(beacons, dtype=np.int64)
+    close = np.empty(n, dtype=np.bool_)
+    mark = np.zeros(n, dtype=np.bool_)
+    done = np.zeros(panels.shape[0], dtype=np.bool_)
+    for k in range(panels.shape[0]):
+        if done[k]:
+            continue
+        b = beacon[panels[k]]
+        mark[:] = False
+        for m in range(k, panels.shape[0]):  # every panel of beacon b, once
+            if beacon[panels[m]] != b:
+                continue
+            done[m] = True
+            _close_to_jit(
+                x, y, ranges, panels[m], a, direction, normal, length, reach, per_range, close
+            )
+            for p in range(n):
+                mark[p] |= close[p]
+        c = 0
+        for p in range(n):
+            c += mark[p]
+        counts[b] = c
+    return counts
 
 
 def _icp_stages(
@@ -1032,7 +1108,9 @@ beam_checks: Callable[..., Any] = njit(cache=True, nogil=True)(_beam_checks)
 associate: Callable[..., Any] = njit(cache=True, nogil=True)(_associate)
 _associate_jit = associate
 icp_stages: Callable[..., Any] = njit(cache=True, nogil=True)(_icp_stages)
+_close_to_jit: Callable[..., None] = njit(cache=True, nogil=True)(_close_to)
 within: Callable[..., Any] = njit(cache=True, nogil=True)(_within)
+reach_counts: Callable[..., NDArray[np.int64]] = njit(cache=True, nogil=True)(_reach_counts)
 window_scores: Callable[..., NDArray[np.float64]] = njit(cache=True, nogil=True)(_window_scores)
 first_hits: Callable[..., Any] = njit(cache=True, nogil=True)(_first_hits)
 field_pyramid: Callable[..., NDArray[np.float64]] = njit(cache=True, nogil=True)(_field_pyramid)

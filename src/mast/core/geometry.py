@@ -251,6 +251,61 @@ class PanelSet:
             reached |= np.any(close, axis=0)
         return near, panels[reached]
 
+    def reach_counts(
+        self,
+        points_mine: NDArray[np.float64],
+        ranges: NDArray[np.float64],
+        reach_m: float,
+        per_range: float,
+        *,
+        subset: NDArray[np.intp] | None = None,
+    ) -> NDArray[np.int64]:
+        """For each beacon (position in :attr:`ids`), how many points lie within
+        ``reach_m + per_range * range`` of any of its panels (of ``subset``), ``ranges``
+        being each point's range; a point counts once for a beacon. Compiled
+        (:func:`mast.core._kernels.reach_counts`); :meth:`_reach_counts_reference` is
+        the same in numpy."""
+        from mast.core._kernels import reach_counts
+
+        panels = np.arange(len(self)) if subset is None else subset
+        if points_mine.shape[0] == 0 or panels.size == 0:
+            return np.zeros(len(self.ids), dtype=np.int64)
+        return reach_counts(
+            np.ascontiguousarray(points_mine, dtype=float).reshape(-1, 2),
+            np.ascontiguousarray(ranges, dtype=float),
+            self.a,
+            self.direction,
+            self.normal,
+            self.length,
+            self.beacon,
+            np.ascontiguousarray(panels, dtype=np.intp),
+            float(reach_m),
+            float(per_range),
+            len(self.ids),
+        )
+
+    def _reach_counts_reference(
+        self,
+        points_mine: NDArray[np.float64],
+        ranges: NDArray[np.float64],
+        reach_m: float,
+        per_range: float,
+        *,
+        subset: NDArray[np.intp] | None = None,
+    ) -> NDArray[np.int64]:
+        """:meth:`reach_counts` in numpy (the tests compare the two)."""
+        panels = np.arange(len(self)) if subset is None else subset
+        counts = np.zeros(len(self.ids), dtype=np.int64)
+        if points_mine.shape[0] == 0 or panels.size == 0:
+            return counts
+        t, s = self.project(points_mine, panels)
+        over = np.maximum(np.maximum(-t, t - self.length[panels][None, :]), 0.0)
+        reach = reach_m + per_range * np.asarray(ranges, dtype=float)
+        close = over**2 + s**2 <= (reach**2)[:, None]
+        for b in np.unique(self.beacon[panels]):
+            counts[b] = int(np.any(close[:, self.beacon[panels] == b], axis=1).sum())
+        return counts
+
     def associate(
         self,
         points_mine: NDArray[np.float64],
