@@ -134,25 +134,35 @@ def _associate(
     and inside its extent, and the signed distance; -1 and inf for none.
 
     ``gates`` holds one gate per point, or a single gate for all. Ties go to the
-    first panel, as ``argmin`` does in ``PanelSet._associate_reference``.
+    first panel, as ``argmin`` does in ``PanelSet._associate_reference``. One panel at
+    a time over every point (panels in order, so ties still go to the first), so that
+    the compiler runs several points at once.
     """
     n = points.shape[0]
+    x = np.ascontiguousarray(points[:, 0])
+    y = np.ascontiguousarray(points[:, 1])
+    g = np.empty(n)
+    if gates.shape[0] == 1:
+        g[:] = gates[0]
+    else:
+        g[:] = gates
     idx = np.full(n, -1, dtype=np.intp)
     dist = np.full(n, np.inf)
-    one = gates.shape[0] == 1
-    for p in range(n):
-        g = gates[0] if one else gates[p]
-        best = np.inf
-        for k in range(panels.shape[0]):
-            q = panels[k]
-            rx = points[p, 0] - a[q, 0]
-            ry = points[p, 1] - a[q, 1]
-            t = rx * direction[q, 0] + ry * direction[q, 1]
-            if t < 0.0 or t > length[q]:
-                continue
-            s = rx * normal[q, 0] + ry * normal[q, 1]
-            if abs(s) <= g and abs(s) < best:
-                best = abs(s)
+    best = np.full(n, np.inf)
+    for k in range(panels.shape[0]):
+        q = panels[k]
+        ax, ay = a[q, 0], a[q, 1]
+        dx, dy = direction[q, 0], direction[q, 1]
+        nx, ny = normal[q, 0], normal[q, 1]
+        ln = length[q]
+        for p in range(n):
+            rx = x[p] - ax
+            ry = y[p] - ay
+            t = rx * dx + ry * dy
+            s = rx * nx + ry * ny
+            d = abs(s)
+            if t >= 0.0 and t <= ln and d <= g[p] and d < best[p]:
+                best[p] = d
                 idx[p] = q
                 dist[p] = s
     return idx, dist
