@@ -91,3 +91,31 @@ def test_look_ups_match_a_walk_over_every_pair(designs: int, reach: float) -> No
         got = [(x, y) for x, y in both if same or x != y]
         limit = min(reach, DesignTolerance().max_pair_distance_m)
         assert got == _pairs_by_walk(index, a, ea, b, eb, d, tol, same, limit)
+
+
+@pytest.mark.parametrize("designs", [1, 3, 40])
+def test_pair_counts_are_the_lengths_of_pair_rows(designs: int) -> None:
+    survey = _survey(90, designs, seed=designs)
+    index = SurveyIndex.from_survey(survey)
+    rng = np.random.default_rng(designs)
+    ids = survey.ids
+    n = 400
+    picks = [(ids[int(rng.integers(len(ids)))], ids[int(rng.integers(len(ids)))]) for _ in range(n)]
+    edges = rng.choice(NODE_EDGES, size=(n, 2))
+    # distances drawn near surveyed ones too, so that windows open and close on pairs
+    d = np.where(rng.random(n) < 0.5, rng.uniform(0.2, 60.0, n), 12.0 * rng.integers(1, 5, n))
+    tol = rng.choice([0.0, 0.05, 2.0, 10.0], size=n)
+    keys_a = np.array(
+        [index.node_key(a, int(e)) for (a, _), e in zip(picks, edges[:, 0], strict=True)]
+    )
+    keys_b = np.array(
+        [index.node_key(b, int(e)) for (_, b), e in zip(picks, edges[:, 1], strict=True)]
+    )
+    got = index.pair_counts(keys_a, keys_b, d, tol)
+    want = [
+        index.pair_rows(a, int(ea), b, int(eb), float(dk), float(tk))[0].size
+        for (a, b), (ea, eb), dk, tk in zip(picks, edges, d, tol, strict=True)
+    ]
+    assert got.tolist() == want
+    assert sum(want) > 0
+    assert want.count(0) > 0

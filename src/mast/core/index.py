@@ -116,6 +116,31 @@ def _key_pair_code(ka: Any, kb: Any, designs: int) -> Any:
     return ka * max(designs * len(NODE_EDGES), 1) + kb
 
 
+def _first_at_least(
+    values: NDArray[np.float64],
+    start: NDArray[np.intp],
+    stop: NDArray[np.intp],
+    bound: NDArray[np.float64],
+    *,
+    strict: bool,
+) -> NDArray[np.intp]:
+    """In each sorted slice ``values[start:stop]``, the position of the first value at
+    least ``bound`` (above it, if ``strict``), or ``stop``: ``start +
+    searchsorted(values[start:stop], bound, side="right" if strict else "left")`` for
+    every slice at once."""
+    lo, hi = start.astype(np.intp), stop.astype(np.intp)
+    last = max(values.size - 1, 0)
+    while True:
+        open_ = lo < hi
+        if not np.any(open_):
+            return lo
+        mid = (lo + hi) // 2
+        v = values[np.minimum(mid, last)]
+        below = (v <= bound) if strict else (v < bound)
+        lo = np.where(open_ & below, mid + 1, lo)
+        hi = np.where(open_ & ~below, mid, hi)
+
+
 @dataclass(frozen=True, slots=True)
 class _Bucket:
     """The surveyed edge pairs of one (design, edge) key pair, sorted by (distance,
@@ -262,6 +287,30 @@ class SurveyIndex:
             return np.zeros(code.shape, dtype=bool)
         at = np.minimum(np.searchsorted(self._codes, code), self._codes.size - 1)
         return np.asarray(self._codes[at] == code)
+
+    def pair_counts(
+        self,
+        keys_a: NDArray[np.int64],
+        keys_b: NDArray[np.int64],
+        distance_m: NDArray[np.float64],
+        tolerance_m: NDArray[np.float64],
+    ) -> NDArray[np.intp]:
+        """For each pair of keys (either order), how many surveyed edge pairs lie
+        ``distance_m`` apart within ``tolerance_m``: the length of what :meth:`pair_rows`
+        returns, for many at once (a binary search in every bucket side by side)."""
+        count = np.zeros(np.shape(keys_a), dtype=np.intp)
+        if self._codes.size == 0 or count.size == 0:
+            return count
+        code = _key_pair_code(
+            np.minimum(keys_a, keys_b), np.maximum(keys_a, keys_b), len(self.designs)
+        )
+        at = np.minimum(np.searchsorted(self._codes, code), self._codes.size - 1)
+        found = self._codes[at] == code
+        start, stop = self._starts[at], np.where(found, self._starts[at + 1], self._starts[at])
+        lo = _first_at_least(self._pair_d, start, stop, distance_m - tolerance_m, strict=False)
+        hi = _first_at_least(self._pair_d, start, stop, distance_m + tolerance_m, strict=True)
+        count[:] = hi - lo
+        return count
 
     def pair_rows(
         self,

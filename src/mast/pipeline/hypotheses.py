@@ -408,30 +408,62 @@ def panel_hypotheses(
                 break
     survey, ids = index.survey, index.survey.ids
     found: list[Hypothesis] = []
-    for (sa, da), (sb, db) in itertools.combinations(cands, 2):
-        d_vec = sb.midpoint - sa.midpoint
-        ds = float(np.hypot(*d_vec))
-        if ds < config.min_panel_pair_m:
-            continue
-        ka, kb = (g.ravel() for g in np.meshgrid(da, db, indexing="ij"))
-        near = index.have_pairs(keys[ka], keys[kb])
-        for k_a, k_b in zip(ka[near].tolist(), kb[near].tolist(), strict=True):
-            la, lb = float(lengths[k_a]), float(lengths[k_b])
-            slack_a = 0.5 * abs(sa.length - la) + sa.spacing_start + sa.spacing_end
-            slack_b = 0.5 * abs(sb.length - lb) + sb.spacing_start + sb.spacing_end
-            tol_d = slack_a + slack_b + config.sigmas * segmentation.noise_m
-            rows_a, rows_b = index.pair_rows(
-                reps[k_a].id, 2, reps[k_b].id, 2, ds, 0.5 * (la + lb) + tol_d
-            )
-            for ba, bb in zip(
-                index.row_beacon(rows_a).tolist(), index.row_beacon(rows_b).tolist(), strict=True
-            ):
-                if ba == bb:
-                    continue  # one beacon's own edge 2 twice
-                ea, eb = survey[ids[ba]].edges, survey[ids[bb]].edges
-                h = _panel_pair(sa, sb, ea, eb, ds, tol_d, max(slack_a, slack_b), config)
-                if h is not None:
-                    found.append(h)
+    # Every pair of candidates far enough apart, and each pair of their designs surveyed
+    # within reach of each other (one look-up for all), in the order of the pairs.
+    pairs = list(itertools.combinations(range(len(cands)), 2))
+    mids = np.array([c[0].midpoint for c in cands]).reshape(-1, 2)
+    gaps = [float(np.hypot(*(mids[j] - mids[i]))) for i, j in pairs]
+    apart = [
+        (i, j, ds) for (i, j), ds in zip(pairs, gaps, strict=True) if ds >= config.min_panel_pair_m
+    ]
+    if not apart:
+        return []
+    designs = [c[1].tolist() for c in cands]
+    combos = [
+        (at, k_a, k_b)
+        for at, (i, j, _) in enumerate(apart)
+        for k_a in designs[i]
+        for k_b in designs[j]
+    ]
+    owner, ka_all, kb_all = (np.array(c, dtype=np.int64) for c in zip(*combos, strict=True))
+    near = index.have_pairs(keys[ka_all], keys[kb_all])
+    owner, ka_all, kb_all = owner[near], ka_all[near], kb_all[near]
+    # Each candidate pair's tolerance, and how many surveyed pairs lie within it (one
+    # search for all): only those with any are looked up one by one.
+    seg_len = np.array([c[0].length for c in cands])
+    sp_start = np.array([c[0].spacing_start for c in cands])
+    sp_end = np.array([c[0].spacing_end for c in cands])
+    first = np.array([a[0] for a in apart], dtype=np.intp)[owner]
+    second = np.array([a[1] for a in apart], dtype=np.intp)[owner]
+    gap = np.array([a[2] for a in apart])[owner]
+    la, lb = lengths[ka_all], lengths[kb_all]
+    # (in the order of the scalar expressions below: the same roundings)
+    slack_a = 0.5 * np.abs(seg_len[first] - la) + sp_start[first] + sp_end[first]
+    slack_b = 0.5 * np.abs(seg_len[second] - lb) + sp_start[second] + sp_end[second]
+    tol_d = slack_a + slack_b + config.sigmas * segmentation.noise_m
+    reach = 0.5 * (la + lb) + tol_d
+    some = index.pair_counts(keys[ka_all], keys[kb_all], gap, reach) > 0
+    for at, k_a, k_b, tol, far, slack in zip(
+        owner[some].tolist(),
+        ka_all[some].tolist(),
+        kb_all[some].tolist(),
+        tol_d[some].tolist(),
+        reach[some].tolist(),
+        np.maximum(slack_a, slack_b)[some].tolist(),
+        strict=True,
+    ):
+        i, j, ds = apart[at]
+        (sa, _), (sb, _) = cands[i], cands[j]
+        rows_a, rows_b = index.pair_rows(reps[k_a].id, 2, reps[k_b].id, 2, ds, far)
+        for ba, bb in zip(
+            index.row_beacon(rows_a).tolist(), index.row_beacon(rows_b).tolist(), strict=True
+        ):
+            if ba == bb:
+                continue  # one beacon's own edge 2 twice
+            ea, eb = survey[ids[ba]].edges, survey[ids[bb]].edges
+            h = _panel_pair(sa, sb, ea, eb, ds, tol, slack, config)
+            if h is not None:
+                found.append(h)
     found.sort(key=lambda h: h.misfit)
     return found[: config.max_panel_hypotheses]
 
