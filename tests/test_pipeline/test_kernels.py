@@ -229,6 +229,24 @@ def test_reach_counts_kernel_matches_the_reference() -> None:
     assert seen > 0
 
 
+def test_panel_reach_counts_kernel_matches_the_reference() -> None:
+    panels = PanelSet.from_survey(paper_scene().survey)
+    rng = np.random.default_rng(4)
+    lo, hi = panels.a.min(axis=0) - 1.0, panels.a.max(axis=0) + 1.0
+    pts = np.vstack([rng.uniform(lo, hi, size=(3000, 2)), panels.a, panels.b])
+    ranges = rng.uniform(0.0, 30.0, size=len(pts))
+    seen = 0
+    for subset in (None, np.arange(len(panels))[::3], np.zeros(0, dtype=np.intp)):
+        for reach, per_range, after in ((0.0, 0.0, 0.0), (0.05, 0.0, 0.04), (0.3, 0.02, 0.04)):
+            got = panels.panel_reach_counts(pts, ranges, reach, per_range, after, subset=subset)
+            ref = panels._panel_reach_counts_reference(
+                pts, ranges, reach, per_range, after, subset=subset
+            )
+            np.testing.assert_array_equal(got, ref)
+            seen += int(got.sum())
+    assert seen > 0
+
+
 def test_first_hits_kernel_matches_the_reference() -> None:
     from mast.core.geometry import _first_hits_reference, first_hits
 

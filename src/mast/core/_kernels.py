@@ -26,6 +26,7 @@ __all__ = [
     "line_fits",
     "near_pose",
     "nearest_within",
+    "panel_reach_counts",
     "partition_dp",
     "penalty",
     "reach_counts",
@@ -273,9 +274,10 @@ def _close_to(
     reach: float,
     per_range: float,
     close: NDArray[np.bool_],
+    after: float = 0.0,
 ) -> None:
-    """``close[p]``: point ``p`` within ``reach + per_range * ranges[p]`` of panel ``q``,
-    as a segment."""
+    """``close[p]``: point ``p`` within ``reach + per_range * ranges[p] + after`` of panel
+    ``q``, as a segment."""
     ax, ay = a[q, 0], a[q, 1]
     dx, dy = direction[q, 0], direction[q, 1]
     nx, ny = normal[q, 0], normal[q, 1]
@@ -286,7 +288,7 @@ def _close_to(
         t = rx * dx + ry * dy
         s = rx * nx + ry * ny
         over = max(max(-t, t - ln), 0.0)
-        r = reach + per_range * ranges[p]
+        r = reach + per_range * ranges[p] + after
         close[p] = over * over + s * s <= r * r
 
 
@@ -333,6 +335,37 @@ def _reach_counts(
         for p in range(n):
             c += mark[p]
         counts[b] = c
+    return counts
+
+
+def _panel_reach_counts(
+    points: NDArray[np.float64],
+    ranges: NDArray[np.float64],
+    a: NDArray[np.float64],
+    direction: NDArray[np.float64],
+    normal: NDArray[np.float64],
+    length: NDArray[np.float64],
+    panels: NDArray[np.intp],
+    reach: float,
+    per_range: float,
+    after: float,
+) -> NDArray[np.int64]:
+    """How many points lie within ``reach + per_range * range + after`` (Euclidean, in
+    that order of sums) of each of ``panels``: a point counts for every panel it is
+    that close to."""
+    n = points.shape[0]
+    x = np.ascontiguousarray(points[:, 0])
+    y = np.ascontiguousarray(points[:, 1])
+    close = np.empty(n, dtype=np.bool_)
+    counts = np.zeros(panels.shape[0], dtype=np.int64)
+    for k in range(panels.shape[0]):
+        _close_to_jit(
+            x, y, ranges, panels[k], a, direction, normal, length, reach, per_range, close, after
+        )
+        c = 0
+        for p in range(n):
+            c += close[p]
+        counts[k] = c
     return counts
 
 
@@ -1121,6 +1154,9 @@ icp_stages: Callable[..., Any] = njit(cache=True, nogil=True)(_icp_stages)
 _close_to_jit: Callable[..., None] = njit(cache=True, nogil=True)(_close_to)
 within: Callable[..., Any] = njit(cache=True, nogil=True)(_within)
 reach_counts: Callable[..., NDArray[np.int64]] = njit(cache=True, nogil=True)(_reach_counts)
+panel_reach_counts: Callable[..., NDArray[np.int64]] = njit(cache=True, nogil=True)(
+    _panel_reach_counts
+)
 window_scores: Callable[..., NDArray[np.float64]] = njit(cache=True, nogil=True)(_window_scores)
 first_hits: Callable[..., Any] = njit(cache=True, nogil=True)(_first_hits)
 field_pyramid: Callable[..., NDArray[np.float64]] = njit(cache=True, nogil=True)(_field_pyramid)

@@ -346,11 +346,10 @@ def window_may_fix(
     if near.size == 0:
         return False
     r = np.hypot(points_scanner[:, 0], points_scanner[:, 1])
-    reach = move + r * (tol + margin_rad) + gate_m
-    # Distance from each return (at the prior) to each panel segment.
-    t, across = panels.project(prior.pose.scanner_to_mine(points_scanner), near)
-    beyond = np.maximum(np.maximum(-t, t - panels.length[near][None, :]), 0.0)
-    per_panel = (beyond**2 + across**2 <= (reach**2)[:, None]).sum(axis=0)
+    # Returns (at the prior) within reach of each panel segment.
+    per_panel = panels.panel_reach_counts(
+        prior.pose.scanner_to_mine(points_scanner), r, move, tol + margin_rad, gate_m, subset=near
+    )
     owner = panels.beacon[near]
     enough = 0
     for b in np.unique(owner[per_panel > 0]):
