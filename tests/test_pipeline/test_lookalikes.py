@@ -127,3 +127,61 @@ def test_a_later_pose_the_same_as_a_set_aside_one_is_skipped_if_that_one_is_kept
     )
     assert [(v.supported, v.pose) for v in lean] == [(v.supported, v.pose) for v in every]
     assert _choose(lean, cfg)[1] == _choose(every, cfg)[1] == "one_beacon"
+
+
+def test_look_alikes_out_of_reach_of_a_second_beacon_are_not_refined(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """One-beacon starts whose returns leave no second beacon enough within reach are
+    set aside unrefined once the poses kept settle the choice: fewer ICP runs, the same
+    choice as refining every start (a reach too wide to leave any out)."""
+    from dataclasses import replace
+
+    from mast.pipeline import verification
+
+    cfg = LocatorConfig(range_sigma_m=MODEL.range_sigma_m, survey_sigma_m=0.0)
+    every_reach = replace(cfg.verification, look_alike_reach_m=1e6)
+    runs = {"lean": 0, "every": 0}
+    real = verification.icp_point_to_line
+    counting = ["lean"]
+
+    def icp(*a, **k):  # type: ignore[no-untyped-def]
+        runs[counting[0]] += 1
+        return real(*a, **k)
+
+    monkeypatch.setattr(verification, "icp_point_to_line", icp)
+    compared = 0
+    for k, (scene, shot) in enumerate(owed_poses(MODEL, 8, 1)):
+        survey = minewide_survey(
+            scene.survey,
+            [s.pose for s in scene.shots],
+            copies=100,
+            clearance_m=MODEL.range_max_m + 10.0,
+            rng=np.random.default_rng(k),
+        )
+        sim = simulate_scan(scene.world, shot.pose, MODEL, rng=np.random.default_rng([k, 3]))
+        index, panels = _survey_index(survey, sim.scan.range_max_m)
+        seg = segment_scan(sim.scan, cfg.segmentation)
+        ident = identify_panels(seg, index.representatives, cfg.identification)
+        hyps = pose_hypotheses(ident, seg, index, cfg.hypotheses)
+        chosen: dict[str, object] = {}
+        for name, vcfg in (("lean", cfg.verification), ("every", every_reach)):
+            counting[0] = name
+            kept = verify(
+                hyps,
+                sim.scan,
+                panels,
+                index,
+                ident,
+                seg,
+                cfg.noise,
+                vcfg,
+                settled=lambda kept: _settled(kept, cfg),
+                min_beacons=2,
+            )
+            best, reason, _ = _choose(kept, cfg)
+            chosen[name] = (reason, None if best is None else (best.pose, best.supported))
+        assert chosen["lean"] == chosen["every"]
+        compared += best is not None
+    assert compared >= 4
+    assert runs["lean"] < runs["every"]
