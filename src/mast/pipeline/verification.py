@@ -149,18 +149,20 @@ class VerificationConfig:
         near-short return weighs ``log(near_probability)`` in the beam
         likelihood, as a through-beam weighs ``log(through_probability)``.
     look_alike_reach_m, look_alike_reach_rad : float
-        How far ICP is taken to carry a one-beacon hypothesis' start (a corner
-        matched to one beacon of its design, a look-alike where the mine repeats
-        it): a beacon with fewer than ``2 * min_panel_points`` returns within
-        this reach of its panels at the start (a return at range ``r`` moves by
-        ``reach_m + r * reach_rad``, plus the final gate) cannot be among the
-        refined pose's beacons. Such a start whose own beacon cannot is not
-        refined, and one that leaves fewer than two beacons is refined only if
-        the poses kept do not settle the choice without it (the caller's
-        ``settled``): on drive scans with two beacons in view, 7 of 18 ICP runs a
-        scan went to such look-alikes, which could change nothing. Of them, 1
-        start in 1 651 so set aside had refined to two beacons' returns (an
-        ICP that slid 2.5 m and 42 degrees, onto the pose already kept).
+        How far ICP is taken to carry a one-beacon hypothesis' start (a corner,
+        or one beacon's two corners, matched to one beacon of its design: a
+        look-alike wherever the mine repeats it). A beacon with fewer than
+        ``2 * min_panel_points`` returns within this reach of its panels at the
+        start (a return at range ``r`` moves by ``reach_m + r * reach_rad``,
+        plus the final gate) cannot be among the refined pose's beacons. Such a
+        start whose own beacon cannot is not refined, and one that leaves fewer
+        than two beacons is refined only if the poses kept do not settle the
+        choice without it (the caller's ``settled``). On drive scans with two
+        beacons in view, 7 of 18 ICP runs a scan went to such look-alikes,
+        which could change nothing; of them, 1 start in 1 651 so set aside had
+        refined to two beacons' returns (an ICP that slid 2.5 m and 42 degrees,
+        onto the pose already kept). Against a 200-beacon survey of repeated
+        designs, 1 306 of 2 191 such starts are left unrefined (20 scans).
     """
 
     min_panel_points: int = 3
@@ -996,7 +998,7 @@ def verify(
             near = panels.near(start.position, reach)
             if near.size == 0:
                 return
-            if h.kind == "single":
+            if h.kind in ("single", "pair") and len(h.beacons) < min_beacons:
                 may = _in_reach(start, pts, ranges, panels, near, final_gate, cfg)
                 if not set(h.beacons) <= may:
                     return  # its beacon cannot gather the returns to support any pose
