@@ -304,3 +304,29 @@ def test_beam_check_kernel_matches_the_reference() -> None:
                     assert g.log_likelihood == pytest.approx(c.log_likelihood, rel=1e-12, abs=1e-9)
                     near_seen += c.near
     assert near_seen > 0  # returns just short of a panel were counted and compared
+
+
+def test_first_same_kernel_matches_the_reference() -> None:
+    import math
+
+    from mast.core.pose import Pose2D
+    from mast.pipeline.verification import VerificationConfig, _PoseList
+
+    rng = np.random.default_rng(5)
+    cfg = VerificationConfig()
+    poses = _PoseList(cfg)
+    base = np.array([7000.0, 6800.0, 1.0])
+    for k in range(60):
+        poses.add(Pose2D(*(base + rng.normal(0.0, [0.03, 0.03, 0.004]))))
+        if k % 7 == 3:
+            poses.forget(k)
+    poses.add(Pose2D(7000.0, 6800.0, 2 * math.pi - 1e-4))  # the same across north
+    found = 0
+    for _ in range(2000):
+        q = Pose2D(*(base + rng.normal(0.0, [0.05, 0.05, 0.006])))
+        got = poses.first_same(q)
+        assert got == poses._first_same_reference(q)
+        found += got is not None
+    wrapped = Pose2D(7000.0, 6800.0, 1e-4)
+    assert poses.first_same(wrapped) == poses._first_same_reference(wrapped) == 60
+    assert 0 < found < 2000

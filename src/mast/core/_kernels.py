@@ -22,6 +22,7 @@ __all__ = [
     "beam_checks",
     "field_pyramid",
     "first_hits",
+    "first_same",
     "icp_stages",
     "line_fits",
     "near_pose",
@@ -367,6 +368,29 @@ def _panel_reach_counts(
             c += close[p]
         counts[k] = c
     return counts
+
+
+def _first_same(
+    poses: NDArray[np.float64],
+    size: int,
+    easting: float,
+    northing: float,
+    azimuth: float,
+    within_m: float,
+    within_rad: float,
+) -> int:
+    """The first of ``poses[:size]`` (rows E, N, azimuth) within ``within_m`` and
+    ``within_rad`` (both strictly) of the pose given, or -1: ``hypot`` of the offsets,
+    and the azimuth difference wrapped as ``pose.wrap_angles`` does (a row of NaN is
+    never the same)."""
+    two_pi = 2.0 * math.pi
+    for i in range(size):
+        d = math.hypot(poses[i, 0] - easting, poses[i, 1] - northing)
+        a = poses[i, 2] - azimuth
+        da = abs(a - two_pi * np.rint(a / two_pi))
+        if d < within_m and da < within_rad:
+            return i
+    return -1
 
 
 def _icp_stages(
@@ -1154,6 +1178,7 @@ icp_stages: Callable[..., Any] = njit(cache=True, nogil=True)(_icp_stages)
 _close_to_jit: Callable[..., None] = njit(cache=True, nogil=True)(_close_to)
 within: Callable[..., Any] = njit(cache=True, nogil=True)(_within)
 reach_counts: Callable[..., NDArray[np.int64]] = njit(cache=True, nogil=True)(_reach_counts)
+first_same: Callable[..., int] = njit(cache=True, nogil=True)(_first_same)
 panel_reach_counts: Callable[..., NDArray[np.int64]] = njit(cache=True, nogil=True)(
     _panel_reach_counts
 )

@@ -32,6 +32,7 @@ from functools import partial
 import numpy as np
 from numpy.typing import NDArray
 
+from mast.core._kernels import first_same
 from mast.core.geometry import PanelSet, first_hits
 from mast.core.index import SurveyIndex
 from mast.core.noise import NoiseModel
@@ -860,7 +861,21 @@ class _PoseList:
         self._enr[k] = np.nan
 
     def first_same(self, pose: Pose2D) -> int | None:
-        """Position of the first pose the same as ``pose``, or None."""
+        """Position of the first pose the same as ``pose``, or None (compiled:
+        :func:`mast.core._kernels.first_same`; :meth:`_first_same_reference` in numpy)."""
+        at = first_same(
+            self._enr,
+            self.size,
+            pose.easting,
+            pose.northing,
+            pose.azimuth,
+            self.cfg.duplicate_m,
+            self.cfg.duplicate_rad,
+        )
+        return None if at < 0 else int(at)
+
+    def _first_same_reference(self, pose: Pose2D) -> int | None:
+        """:meth:`first_same` in numpy (the tests compare the two)."""
         e = self._enr[: self.size]
         d = np.hypot(e[:, 0] - pose.easting, e[:, 1] - pose.northing)
         da = np.abs(wrap_angles(e[:, 2] - pose.azimuth))
