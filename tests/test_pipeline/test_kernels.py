@@ -210,7 +210,7 @@ def test_within_kernel_matches_the_reference() -> None:
     assert not np.all(panels.within(pts, 0.05)[0])
 
 
-def test_reach_counts_kernel_matches_the_reference() -> None:
+def test_reach_tallies_kernel_matches_the_reference() -> None:
     panels = PanelSet.from_survey(paper_scene().survey)
     rng = np.random.default_rng(3)
     lo, hi = panels.a.min(axis=0) - 1.0, panels.a.max(axis=0) + 1.0
@@ -218,32 +218,23 @@ def test_reach_counts_kernel_matches_the_reference() -> None:
     ranges = rng.uniform(0.0, 30.0, size=len(pts))
     seen = 0
     for subset in (None, np.arange(len(panels))[1::2], np.zeros(0, dtype=np.intp)):
-        for reach, per_range in ((0.0, 0.0), (0.05, 0.0), (0.3, 0.01), (1.0, 0.05)):
-            got = panels.reach_counts(pts, ranges, reach, per_range, subset=subset)
-            ref = panels._reach_counts_reference(pts, ranges, reach, per_range, subset=subset)
-            np.testing.assert_array_equal(got, ref)
-            seen += int(got.sum())
-    # a point near two panels of one beacon counts once for it: never more than all points
-    every = panels.reach_counts(pts, ranges, 1e6, 0.0)
-    np.testing.assert_array_equal(every, np.full(len(panels.ids), len(pts)))
-    assert seen > 0
-
-
-def test_panel_reach_counts_kernel_matches_the_reference() -> None:
-    panels = PanelSet.from_survey(paper_scene().survey)
-    rng = np.random.default_rng(4)
-    lo, hi = panels.a.min(axis=0) - 1.0, panels.a.max(axis=0) + 1.0
-    pts = np.vstack([rng.uniform(lo, hi, size=(3000, 2)), panels.a, panels.b])
-    ranges = rng.uniform(0.0, 30.0, size=len(pts))
-    seen = 0
-    for subset in (None, np.arange(len(panels))[::3], np.zeros(0, dtype=np.intp)):
-        for reach, per_range, after in ((0.0, 0.0, 0.0), (0.05, 0.0, 0.04), (0.3, 0.02, 0.04)):
-            got = panels.panel_reach_counts(pts, ranges, reach, per_range, after, subset=subset)
-            ref = panels._panel_reach_counts_reference(
+        for reach, per_range, after in (
+            (0.0, 0.0, 0.0),
+            (0.05, 0.0, 0.04),
+            (0.3, 0.01, 0.0),
+            (1.0, 0.05, 0.04),
+        ):
+            got = panels.reach_tallies(pts, ranges, reach, per_range, after, subset=subset)
+            ref = panels._reach_tallies_reference(
                 pts, ranges, reach, per_range, after, subset=subset
             )
-            np.testing.assert_array_equal(got, ref)
-            seen += int(got.sum())
+            np.testing.assert_array_equal(got[0], ref[0])
+            np.testing.assert_array_equal(got[1], ref[1])
+            seen += int(got[1].sum())
+    # a point near two panels of one beacon counts once for it, and once for each panel
+    per_panel, per_beacon = panels.reach_tallies(pts, ranges, 1e6, 0.0)
+    np.testing.assert_array_equal(per_beacon, np.full(len(panels.ids), len(pts)))
+    np.testing.assert_array_equal(per_panel, np.full(len(panels), len(pts)))
     assert seen > 0
 
 

@@ -27,10 +27,9 @@ __all__ = [
     "line_fits",
     "near_pose",
     "nearest_within",
-    "panel_reach_counts",
     "partition_dp",
     "penalty",
-    "reach_counts",
+    "reach_tallies",
     "segment_run",
     "window_picks",
     "window_scores",
@@ -293,7 +292,7 @@ def _close_to(
         close[p] = over * over + s * s <= r * r
 
 
-def _reach_counts(
+def _reach_tallies(
     points: NDArray[np.float64],
     ranges: NDArray[np.float64],
     a: NDArray[np.float64],
@@ -304,17 +303,20 @@ def _reach_counts(
     panels: NDArray[np.intp],
     reach: float,
     per_range: float,
+    after: float,
     beacons: int,
-) -> NDArray[np.int64]:
-    """How many points lie within ``reach + per_range * range`` (Euclidean) of any panel
-    of each beacon, among ``panels``; a point counts once for a beacon however many of
-    its panels it is near. ``beacon[q]`` is panel ``q``'s beacon (``0 <= beacon <
-    beacons``), ``ranges`` each point's range. ``PanelSet._reach_counts_reference``
+) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+    """Points within ``reach + per_range * range + after`` (Euclidean, in that order of
+    sums) of each of ``panels`` (a point counts for every panel it is that close to),
+    and of any panel of each beacon (a point counts once for a beacon, however many of
+    its panels it is near). ``beacon[q]`` is panel ``q``'s beacon (``0 <= beacon <
+    beacons``), ``ranges`` each point's range. ``PanelSet._reach_tallies_reference``
     without its (points x panels) arrays."""
     n = points.shape[0]
     x = np.ascontiguousarray(points[:, 0])
     y = np.ascontiguousarray(points[:, 1])
-    counts = np.zeros(beacons, dtype=np.int64)
+    per_panel = np.zeros(panels.shape[0], dtype=np.int64)
+    per_beacon = np.zeros(beacons, dtype=np.int64)
     close = np.empty(n, dtype=np.bool_)
     mark = np.zeros(n, dtype=np.bool_)
     done = np.zeros(panels.shape[0], dtype=np.bool_)
@@ -328,46 +330,29 @@ def _reach_counts(
                 continue
             done[m] = True
             _close_to_jit(
-                x, y, ranges, panels[m], a, direction, normal, length, reach, per_range, close
+                x,
+                y,
+                ranges,
+                panels[m],
+                a,
+                direction,
+                normal,
+                length,
+                reach,
+                per_range,
+                close,
+                after,
             )
+            c = 0
             for p in range(n):
+                c += close[p]
                 mark[p] |= close[p]
+            per_panel[m] = c
         c = 0
         for p in range(n):
             c += mark[p]
-        counts[b] = c
-    return counts
-
-
-def _panel_reach_counts(
-    points: NDArray[np.float64],
-    ranges: NDArray[np.float64],
-    a: NDArray[np.float64],
-    direction: NDArray[np.float64],
-    normal: NDArray[np.float64],
-    length: NDArray[np.float64],
-    panels: NDArray[np.intp],
-    reach: float,
-    per_range: float,
-    after: float,
-) -> NDArray[np.int64]:
-    """How many points lie within ``reach + per_range * range + after`` (Euclidean, in
-    that order of sums) of each of ``panels``: a point counts for every panel it is
-    that close to."""
-    n = points.shape[0]
-    x = np.ascontiguousarray(points[:, 0])
-    y = np.ascontiguousarray(points[:, 1])
-    close = np.empty(n, dtype=np.bool_)
-    counts = np.zeros(panels.shape[0], dtype=np.int64)
-    for k in range(panels.shape[0]):
-        _close_to_jit(
-            x, y, ranges, panels[k], a, direction, normal, length, reach, per_range, close, after
-        )
-        c = 0
-        for p in range(n):
-            c += close[p]
-        counts[k] = c
-    return counts
+        per_beacon[b] = c
+    return per_panel, per_beacon
 
 
 def _first_same(
@@ -1177,11 +1162,8 @@ _associate_jit = associate
 icp_stages: Callable[..., Any] = njit(cache=True, nogil=True)(_icp_stages)
 _close_to_jit: Callable[..., None] = njit(cache=True, nogil=True)(_close_to)
 within: Callable[..., Any] = njit(cache=True, nogil=True)(_within)
-reach_counts: Callable[..., NDArray[np.int64]] = njit(cache=True, nogil=True)(_reach_counts)
+reach_tallies: Callable[..., Any] = njit(cache=True, nogil=True)(_reach_tallies)
 first_same: Callable[..., int] = njit(cache=True, nogil=True)(_first_same)
-panel_reach_counts: Callable[..., NDArray[np.int64]] = njit(cache=True, nogil=True)(
-    _panel_reach_counts
-)
 window_scores: Callable[..., NDArray[np.float64]] = njit(cache=True, nogil=True)(_window_scores)
 first_hits: Callable[..., Any] = njit(cache=True, nogil=True)(_first_hits)
 field_pyramid: Callable[..., NDArray[np.float64]] = njit(cache=True, nogil=True)(_field_pyramid)

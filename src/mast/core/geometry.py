@@ -251,26 +251,28 @@ class PanelSet:
             reached |= np.any(close, axis=0)
         return near, panels[reached]
 
-    def reach_counts(
+    def reach_tallies(
         self,
         points_mine: NDArray[np.float64],
         ranges: NDArray[np.float64],
         reach_m: float,
         per_range: float,
+        after_m: float = 0.0,
         *,
         subset: NDArray[np.intp] | None = None,
-    ) -> NDArray[np.int64]:
-        """For each beacon (position in :attr:`ids`), how many points lie within
-        ``reach_m + per_range * range`` of any of its panels (of ``subset``), ``ranges``
-        being each point's range; a point counts once for a beacon. Compiled
-        (:func:`mast.core._kernels.reach_counts`); :meth:`_reach_counts_reference` is
-        the same in numpy."""
-        from mast.core._kernels import reach_counts
+    ) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+        """How many points lie within ``reach_m + per_range * range + after_m`` of each
+        panel (of ``subset``; a point counts for every panel it is that close to), and
+        of any panel of each beacon (by position in :attr:`ids`; a point counts once
+        for a beacon); ``ranges`` is each point's range. Compiled
+        (:func:`mast.core._kernels.reach_tallies`); :meth:`_reach_tallies_reference`
+        is the same in numpy."""
+        from mast.core._kernels import reach_tallies
 
         panels = np.arange(len(self)) if subset is None else subset
         if points_mine.shape[0] == 0 or panels.size == 0:
-            return np.zeros(len(self.ids), dtype=np.int64)
-        return reach_counts(
+            return np.zeros(panels.size, dtype=np.int64), np.zeros(len(self.ids), dtype=np.int64)
+        per_panel, per_beacon = reach_tallies(
             np.ascontiguousarray(points_mine, dtype=float).reshape(-1, 2),
             np.ascontiguousarray(ranges, dtype=float),
             self.a,
@@ -281,10 +283,12 @@ class PanelSet:
             np.ascontiguousarray(panels, dtype=np.intp),
             float(reach_m),
             float(per_range),
+            float(after_m),
             len(self.ids),
         )
+        return per_panel, per_beacon
 
-    def panel_reach_counts(
+    def _reach_tallies_reference(
         self,
         points_mine: NDArray[np.float64],
         ranges: NDArray[np.float64],
@@ -293,71 +297,20 @@ class PanelSet:
         after_m: float = 0.0,
         *,
         subset: NDArray[np.intp] | None = None,
-    ) -> NDArray[np.int64]:
-        """For each panel (of ``subset``), how many points lie within ``reach_m +
-        per_range * range + after_m`` of it, ``ranges`` being each point's range; a
-        point counts for every panel it is that close to. Compiled
-        (:func:`mast.core._kernels.panel_reach_counts`);
-        :meth:`_panel_reach_counts_reference` is the same in numpy."""
-        from mast.core._kernels import panel_reach_counts
-
+    ) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+        """:meth:`reach_tallies` in numpy (the tests compare the two)."""
         panels = np.arange(len(self)) if subset is None else subset
+        per_beacon = np.zeros(len(self.ids), dtype=np.int64)
         if points_mine.shape[0] == 0 or panels.size == 0:
-            return np.zeros(panels.size, dtype=np.int64)
-        return panel_reach_counts(
-            np.ascontiguousarray(points_mine, dtype=float).reshape(-1, 2),
-            np.ascontiguousarray(ranges, dtype=float),
-            self.a,
-            self.direction,
-            self.normal,
-            self.length,
-            np.ascontiguousarray(panels, dtype=np.intp),
-            float(reach_m),
-            float(per_range),
-            float(after_m),
-        )
-
-    def _panel_reach_counts_reference(
-        self,
-        points_mine: NDArray[np.float64],
-        ranges: NDArray[np.float64],
-        reach_m: float,
-        per_range: float,
-        after_m: float = 0.0,
-        *,
-        subset: NDArray[np.intp] | None = None,
-    ) -> NDArray[np.int64]:
-        """:meth:`panel_reach_counts` in numpy (the tests compare the two)."""
-        panels = np.arange(len(self)) if subset is None else subset
-        if points_mine.shape[0] == 0 or panels.size == 0:
-            return np.zeros(panels.size, dtype=np.int64)
+            return np.zeros(panels.size, dtype=np.int64), per_beacon
         reach = reach_m + np.asarray(ranges, dtype=float) * per_range + after_m
         t, s = self.project(points_mine, panels)
         beyond = np.maximum(np.maximum(-t, t - self.length[panels][None, :]), 0.0)
-        counts: NDArray[np.int64] = (beyond**2 + s**2 <= (reach**2)[:, None]).sum(axis=0)
-        return counts
-
-    def _reach_counts_reference(
-        self,
-        points_mine: NDArray[np.float64],
-        ranges: NDArray[np.float64],
-        reach_m: float,
-        per_range: float,
-        *,
-        subset: NDArray[np.intp] | None = None,
-    ) -> NDArray[np.int64]:
-        """:meth:`reach_counts` in numpy (the tests compare the two)."""
-        panels = np.arange(len(self)) if subset is None else subset
-        counts = np.zeros(len(self.ids), dtype=np.int64)
-        if points_mine.shape[0] == 0 or panels.size == 0:
-            return counts
-        t, s = self.project(points_mine, panels)
-        over = np.maximum(np.maximum(-t, t - self.length[panels][None, :]), 0.0)
-        reach = reach_m + per_range * np.asarray(ranges, dtype=float)
-        close = over**2 + s**2 <= (reach**2)[:, None]
-        for b in np.unique(self.beacon[panels]):
-            counts[b] = int(np.any(close[:, self.beacon[panels] == b], axis=1).sum())
-        return counts
+        close = beyond**2 + s**2 <= (reach**2)[:, None]
+        owner = self.beacon[panels]
+        for b in np.unique(owner):
+            per_beacon[b] = int(np.any(close[:, owner == b], axis=1).sum())
+        return close.sum(axis=0).astype(np.int64), per_beacon
 
     def associate(
         self,

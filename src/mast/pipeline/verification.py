@@ -1062,7 +1062,7 @@ def _in_reach(
     ``gate_m``, of their panels (among ``near``). A return at range ``r`` moves by at
     most ``reach_m + r * reach_rad`` when the pose moves by ``reach_m`` and turns by
     ``reach_rad``."""
-    counts = panels.reach_counts(
+    _, counts = panels.reach_tallies(
         start.scanner_to_mine(pts),
         ranges,
         cfg.look_alike_reach_m + gate_m,
