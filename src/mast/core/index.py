@@ -277,16 +277,24 @@ class SurveyIndex:
         """Key of a node edge (2 or 3) of a beacon of ``beacon_id``'s design."""
         return self.design_of(beacon_id) * len(NODE_EDGES) + edge - NODE_EDGES[0]
 
-    def have_pairs(self, keys_a: NDArray[np.int64], keys_b: NDArray[np.int64]) -> NDArray[np.bool_]:
-        """Whether any surveyed edge pair within reach has each pair of keys (either order):
-        a scan's node pairs of designs never surveyed near each other need no look-up."""
+    def _buckets_of(
+        self, keys_a: NDArray[np.int64], keys_b: NDArray[np.int64]
+    ) -> tuple[NDArray[np.intp], NDArray[np.bool_]]:
+        """For each pair of keys (either order), the position of its bucket in
+        ``_codes`` (or of a neighbour) and whether it has one. The index must hold a
+        pair."""
         code = _key_pair_code(
             np.minimum(keys_a, keys_b), np.maximum(keys_a, keys_b), len(self.designs)
         )
-        if self._codes.size == 0:
-            return np.zeros(code.shape, dtype=bool)
         at = np.minimum(np.searchsorted(self._codes, code), self._codes.size - 1)
-        return np.asarray(self._codes[at] == code)
+        return at, np.asarray(self._codes[at] == code)
+
+    def have_pairs(self, keys_a: NDArray[np.int64], keys_b: NDArray[np.int64]) -> NDArray[np.bool_]:
+        """Whether any surveyed edge pair within reach has each pair of keys (either order):
+        a scan's node pairs of designs never surveyed near each other need no look-up."""
+        if self._codes.size == 0:
+            return np.zeros(np.broadcast(keys_a, keys_b).shape, dtype=bool)
+        return self._buckets_of(keys_a, keys_b)[1]
 
     def pair_counts(
         self,
@@ -301,11 +309,7 @@ class SurveyIndex:
         count = np.zeros(np.shape(keys_a), dtype=np.intp)
         if self._codes.size == 0 or count.size == 0:
             return count
-        code = _key_pair_code(
-            np.minimum(keys_a, keys_b), np.maximum(keys_a, keys_b), len(self.designs)
-        )
-        at = np.minimum(np.searchsorted(self._codes, code), self._codes.size - 1)
-        found = self._codes[at] == code
+        at, found = self._buckets_of(keys_a, keys_b)
         start, stop = self._starts[at], np.where(found, self._starts[at + 1], self._starts[at])
         lo = _first_at_least(self._pair_d, start, stop, distance_m - tolerance_m, strict=False)
         hi = _first_at_least(self._pair_d, start, stop, distance_m + tolerance_m, strict=True)
