@@ -18,19 +18,30 @@ from numba import njit
 from numpy.typing import NDArray
 
 __all__ = [
+    "adjust_rounds",
     "associate",
+    "beacon_statistics",
     "beam_checks",
+    "bound",
     "field_pyramid",
     "first_hits",
     "first_same",
+    "gauss_newton",
+    "group_residuals",
     "icp_stages",
+    "information",
     "line_fits",
     "near_pose",
     "nearest_within",
     "partition_dp",
     "penalty",
+    "range_rows",
+    "ray_association",
     "reach_tallies",
+    "robust_gate",
     "segment_run",
+    "standardised",
+    "survey_shares",
     "window_picks",
     "window_scores",
     "within",
@@ -1137,6 +1148,688 @@ def _beam_checks(
     return counts, ll
 
 
+def _range_rows(
+    easting: float,
+    northing: float,
+    azimuth: float,
+    angles: NDArray[np.float64],
+    normals: NDArray[np.float64],
+    offsets: NDArray[np.float64],
+    rho: NDArray[np.float64],
+    jac: NDArray[np.float64],
+) -> None:
+    """``adjustment.range_model`` in place: the predicted range of each beam to its
+    line ``n . x = c`` (``rho``) and its Jacobian d rho / d (E, N, A) (``jac``; d rho /
+    d phi is minus its azimuth column)."""
+    for i in range(angles.shape[0]):
+        bearing = azimuth - angles[i]
+        ux, uy = math.sin(bearing), math.cos(bearing)
+        nx, ny = normals[i, 0], normals[i, 1]
+        nu = nx * ux + ny * uy
+        r = (offsets[i] - (nx * easting + ny * northing)) / nu
+        rho[i] = r
+        jac[i, 0] = -nx / nu
+        jac[i, 1] = -ny / nu
+        jac[i, 2] = -r * (nx * uy - ny * ux) / nu
+
+
+def _lu_solve(m: NDArray[np.float64], rhs: NDArray[np.float64]) -> bool:
+    """Solve ``m x = rhs`` (a small square ``m``, any number of right-hand columns) in
+    place in ``rhs`` by LU with partial pivoting (LAPACK's ``dgesv``); False, and
+    ``rhs`` left undefined, when a pivot is exactly zero (where ``numpy.linalg.solve``
+    raises ``LinAlgError``)."""
+    a = m.copy()
+    k = a.shape[0]
+    k_rhs = rhs.shape[1]
+    for c in range(k):
+        p = c
+        for r in range(c + 1, k):
+            if abs(a[r, c]) > abs(a[p, c]):
+                p = r
+        if a[p, c] == 0.0:
+            return False
+        if p != c:
+            for q in range(k):
+                a[c, q], a[p, q] = a[p, q], a[c, q]
+            for q in range(k_rhs):
+                rhs[c, q], rhs[p, q] = rhs[p, q], rhs[c, q]
+        for r in range(c + 1, k):
+            f = a[r, c] / a[c, c]
+            for q in range(c + 1, k):
+                a[r, q] -= f * a[c, q]
+            for q in range(k_rhs):
+                rhs[r, q] -= f * rhs[c, q]
+    for q in range(k_rhs):
+        for r in range(k - 1, -1, -1):
+            acc = rhs[r, q]
+            for s in range(r + 1, k):
+                acc -= a[r, s] * rhs[s, q]
+            rhs[r, q] = acc / a[r, r]
+    return True
+
+
+def _normal_equations(
+    jac: NDArray[np.float64],
+    residual: NDArray[np.float64],
+    weight: NDArray[np.float64],
+    normal: NDArray[np.float64],
+    rhs: NDArray[np.float64],
+) -> None:
+    """``G^T W G`` into ``normal`` (3 x 3) and ``G^T W v`` into ``rhs`` (3 x 1)."""
+    normal[:, :] = 0.0
+    rhs[:, :] = 0.0
+    for i in range(jac.shape[0]):
+        g0, g1, g2 = jac[i, 0], jac[i, 1], jac[i, 2]
+        w = weight[i]
+        wv = w * residual[i]
+        rhs[0, 0] += g0 * wv
+        rhs[1, 0] += g1 * wv
+        rhs[2, 0] += g2 * wv
+        w0, w1, w2 = w * g0, w * g1, w * g2
+        normal[0, 0] += g0 * w0
+        normal[0, 1] += g0 * w1
+        normal[0, 2] += g0 * w2
+        normal[1, 1] += g1 * w1
+        normal[1, 2] += g1 * w2
+        normal[2, 2] += g2 * w2
+    normal[1, 0] = normal[0, 1]
+    normal[2, 0] = normal[0, 2]
+    normal[2, 1] = normal[1, 2]
+
+
+def _gauss_newton(
+    easting: float,
+    northing: float,
+    azimuth: float,
+    angles: NDArray[np.float64],
+    ranges: NDArray[np.float64],
+    normals: NDArray[np.float64],
+    offsets: NDArray[np.float64],
+    variance_scale: NDArray[np.float64],
+    range_sigma: float,
+    angle_sigma: float,
+    max_iterations: int,
+) -> tuple[
+    float,
+    float,
+    float,
+    int,
+    bool,
+    float,
+    NDArray[np.float64],
+    NDArray[np.float64],
+    NDArray[np.float64],
+    NDArray[np.float64],
+]:
+    """The iterations and statistics of ``adjustment._adjust_pose_reference``:
+    ``(E, N, A, iterations, solved, v^T W v, residuals, variances, jacobian,
+    cofactor)``.
+
+    Gauss-Newton on ``v = r - rho`` with weights ``1 / sigma_i^2``, ``sigma_i^2 =
+    (sigma_r^2 + (d rho / d phi sigma_phi)^2) * scale_i``, from the given pose until
+    the step is below the coordinates' rounding (or ``max_iterations``); then the
+    residuals, variances, Jacobian and ``(G^T W G)^-1`` at the solution. ``solved`` is
+    False when a normal matrix is exactly singular (the rest is then undefined).
+    """
+    n = angles.shape[0]
+    rho = np.empty(n)
+    jac = np.empty((n, 3))
+    var = np.empty(n)
+    weight = np.empty(n)
+    v = np.empty(n)
+    normal = np.empty((3, 3))
+    rhs = np.empty((3, 1))
+    e, nn, az = easting, northing, azimuth
+    rs2 = range_sigma**2
+    it = 0
+    done = max_iterations <= 0
+    chi2 = 0.0
+    while True:
+        _range_rows_jit(e, nn, az, angles, normals, offsets, rho, jac)
+        chi2 = 0.0
+        for i in range(n):
+            d = -jac[i, 2] * angle_sigma
+            var[i] = (rs2 + d * d) * variance_scale[i]
+            weight[i] = 1.0 / var[i]
+            v[i] = ranges[i] - rho[i]
+            chi2 += v[i] * (weight[i] * v[i])
+        _normal_equations_jit(jac, v, weight, normal, rhs)
+        if done:
+            break  # the statistics at the last pose
+        it += 1
+        if not _lu_solve_jit(normal, rhs):
+            return e, nn, az, it, False, chi2, v, var, jac, normal
+        e = e + rhs[0, 0]
+        nn = nn + rhs[1, 0]
+        az = (az + rhs[2, 0]) % (2 * math.pi)
+        tol_m = max(1e-11, 4 * np.spacing(max(abs(e), abs(nn), 1.0)))
+        done = it >= max_iterations or (
+            math.hypot(rhs[0, 0], rhs[1, 0]) < tol_m and abs(rhs[2, 0]) < 1e-13
+        )
+    cofactor = np.eye(3)
+    solved = _lu_solve_jit(normal, cofactor)
+    return e, nn, az, it, solved, chi2, v, var, jac, cofactor
+
+
+def _ray_association(
+    easting: float,
+    northing: float,
+    azimuth: float,
+    angles: NDArray[np.float64],
+    ranges: NDArray[np.float64],
+    valid: NDArray[np.bool_],
+    seg_a: NDArray[np.float64],
+    seg_b: NDArray[np.float64],
+    normals: NDArray[np.float64],
+    owner: NDArray[np.intp],
+    cofactor: NDArray[np.float64],
+    gate_m: float,
+    gate_sigmas: float,
+    range_sigma: float,
+    angle_sigma: float,
+    survey_sigma: float,
+    min_incidence: float,
+    jump: float,
+) -> tuple[NDArray[np.intp], NDArray[np.intp], NDArray[np.bool_]]:
+    """``adjustment._ray_association_reference`` beam by beam: the valid beams whose
+    ray from the pose first meets one of the segments (:func:`_first_hits`' test and
+    tie rule), within the gate of that crossing and not within ``min_incidence`` of
+    grazing; which segment; and whether the beam is at its owner's silhouette
+    (``edges.at_silhouette``). The gate is ``gate_m`` when ``cofactor`` is not 3 x 3,
+    else ``gate_sigmas`` standard deviations of the range about its surveyed panel
+    with the pose's own uncertainty along the beam (``g^T Q g``, when finite)."""
+    n = angles.shape[0]
+    origin = np.array([easting, northing])
+    ex, ey, wx, wy, w_x_e = _crossing_terms_jit(origin, seg_a, seg_b)
+    hit_t = np.empty(n)
+    hit_row = np.full(n, -1, dtype=np.intp)
+    ray_owner = np.full(n, -1, dtype=np.intp)
+    ux = np.empty(n)
+    uy = np.empty(n)
+    for i in range(n):
+        if not valid[i]:
+            continue
+        bearing = azimuth - angles[i]
+        ux[i], uy[i] = math.sin(bearing), math.cos(bearing)
+        bt, bj = _first_crossing_jit(ux[i], uy[i], ex, ey, wx, wy, w_x_e)
+        if bj >= 0:
+            hit_t[i] = bt
+            hit_row[i] = bj
+            ray_owner[i] = owner[bj]
+    with_pose = cofactor.shape[0] == 3 and cofactor.shape[1] == 3
+    rs2, ss2 = range_sigma**2, survey_sigma**2
+    beams = np.empty(n, dtype=np.intp)
+    rows = np.empty(n, dtype=np.intp)
+    edge = np.zeros(n, dtype=np.bool_)
+    got = 0
+    for i in range(n):
+        j = hit_row[i]
+        if j < 0:
+            continue
+        nx, ny = normals[j, 0], normals[j, 1]
+        nu = nx * ux[i] + ny * uy[i]
+        gate = gate_m
+        if with_pose:
+            rho = (nx * seg_a[j, 0] + ny * seg_a[j, 1] - (nx * easting + ny * northing)) / nu
+            g0, g1 = -nx / nu, -ny / nu
+            g2 = -rho * (nx * uy[i] - ny * ux[i]) / nu
+            pred = 0.0
+            for r in range(3):
+                gr = g0 if r == 0 else (g1 if r == 1 else g2)
+                pred += gr * (cofactor[r, 0] * g0 + cofactor[r, 1] * g1 + cofactor[r, 2] * g2)
+            d = g2 * angle_sigma
+            var = rs2 + d * d + ss2
+            if math.isfinite(pred):
+                var += pred
+            gate = gate_sigmas * math.sqrt(var)
+        t = hit_t[i]
+        if not (abs(ranges[i] - t) <= gate and abs(nu) > min_incidence):
+            continue
+        beams[got] = i
+        rows[got] = j
+        for nb in (i - 1, i + 1):
+            if 0 <= nb < n and valid[nb] and ray_owner[nb] != owner[j] and ranges[nb] - t > jump:
+                edge[got] = True
+        got += 1
+    return beams[:got], rows[:got], edge[:got]
+
+
+def _robust_gate(
+    easting: float,
+    northing: float,
+    azimuth: float,
+    angles: NDArray[np.float64],
+    ranges: NDArray[np.float64],
+    normals: NDArray[np.float64],
+    offsets: NDArray[np.float64],
+    cofactor: NDArray[np.float64],
+    scale: float,
+    range_sigma: float,
+    angle_sigma: float,
+    gate_sigmas: float,
+) -> NDArray[np.bool_]:
+    """``adjustment._robust_inliers``' test, return by return: ``|r - rho|`` within
+    ``gate_sigmas`` times ``scale`` standard deviations of the range and of its
+    prediction (``g^T Q g``), never below the floor ``1e-7 (1 + |rho|)``."""
+    n = angles.shape[0]
+    rho = np.empty(n)
+    jac = np.empty((n, 3))
+    _range_rows_jit(easting, northing, azimuth, angles, normals, offsets, rho, jac)
+    out = np.empty(n, dtype=np.bool_)
+    rs2 = range_sigma**2
+    for i in range(n):
+        g0, g1, g2 = jac[i, 0], jac[i, 1], jac[i, 2]
+        pred = 0.0
+        for r in range(3):
+            gr = g0 if r == 0 else (g1 if r == 1 else g2)
+            pred += gr * (cofactor[r, 0] * g0 + cofactor[r, 1] * g1 + cofactor[r, 2] * g2)
+        d = -g2 * angle_sigma
+        sig = math.sqrt(rs2 + d * d + pred)
+        floor = 1e-7 * (1.0 + abs(rho[i]))
+        out[i] = abs(ranges[i] - rho[i]) <= gate_sigmas * max(scale * sig, floor)
+    return out
+
+
+def _beacon_statistics(
+    jac: NDArray[np.float64],
+    residuals: NDArray[np.float64],
+    sigmas: NDArray[np.float64],
+    lever: NDArray[np.float64],
+    beacon: NDArray[np.intp],
+    panel: NDArray[np.intp],
+    ids: NDArray[np.intp],
+    survey_variance: float,
+    max_condition: float,
+) -> tuple[NDArray[np.float64], NDArray[np.intp], NDArray[np.bool_]]:
+    """``integrity._beacon_tests_reference``' statistics, beacon by beacon of ``ids``:
+    ``T_b`` (``d^T C^-1 d`` by the Woodbury identity of ``linalg.grouped_quadratic_form``,
+    divided by the others' reference variance when above 1), its returns, and whether
+    the beacon could be tested (the others determine the pose: ``G^T W G`` finite with
+    a condition number at most ``max_condition``; ``C`` not singular)."""
+    n = jac.shape[0]
+    m = ids.shape[0]
+    stat = np.zeros(m)
+    count = np.zeros(m, dtype=np.intp)
+    tested = np.zeros(m, dtype=np.bool_)
+    w = np.empty(n)
+    for i in range(n):
+        w[i] = 1.0 / sigmas[i] ** 2
+    normal = np.empty((3, 3))
+    rhs = np.empty((3, 1))
+    for q in range(m):
+        b = ids[q]
+        normal[:, :] = 0.0
+        rhs[:, :] = 0.0
+        n_rest = 0
+        for i in range(n):
+            if beacon[i] == b:
+                continue
+            n_rest += 1
+            wi = w[i]
+            wv = wi * residuals[i]
+            for r in range(3):
+                rhs[r, 0] += jac[i, r] * wv
+                for c in range(3):
+                    normal[r, c] += jac[i, r] * (wi * jac[i, c])
+        finite = True
+        for r in range(3):
+            for c in range(3):
+                if not math.isfinite(normal[r, c]):
+                    finite = False
+        if not finite or np.linalg.cond(normal) > max_condition:
+            continue  # the others alone do not determine the pose: no test
+        q_rest = np.eye(3)
+        if not _lu_solve_jit(normal, q_rest):
+            continue
+        delta = np.zeros(3)
+        for r in range(3):
+            for c in range(3):
+                delta[r] += q_rest[r, c] * rhs[c, 0]
+        # The beacon's returns, and one column of levers per panel among them.
+        panels_of = np.unique(panel[beacon == b])
+        k = 3 + panels_of.shape[0]
+        y = np.zeros(k)
+        kk = np.zeros((k, k))
+        dwd = 0.0
+        n_mine = 0
+        col = np.zeros(k)
+        for i in range(n):
+            if beacon[i] != b:
+                continue
+            n_mine += 1
+            d = residuals[i] - (jac[i, 0] * delta[0] + jac[i, 1] * delta[1] + jac[i, 2] * delta[2])
+            col[:] = 0.0
+            col[0], col[1], col[2] = jac[i, 0], jac[i, 1], jac[i, 2]
+            col[3 + np.searchsorted(panels_of, panel[i])] = lever[i]
+            wi = w[i]
+            dwd += d * (wi * d)
+            for r in range(k):
+                y[r] += col[r] * (wi * d)
+                for c in range(k):
+                    kk[r, c] += col[r] * (wi * col[c])
+        mm = np.zeros((k, k))
+        mm[:3, :3] = q_rest
+        for r in range(3, k):
+            mm[r, r] = survey_variance
+        lhs = np.eye(k) + mm @ kk
+        z = (mm @ y).reshape(k, 1)
+        if not _lu_solve_jit(lhs, z):
+            continue
+        t = dwd
+        for r in range(k):
+            t -= y[r] * z[r, 0]
+        if n_rest > 3:
+            misfit = 0.0
+            for i in range(n):
+                if beacon[i] == b:
+                    continue
+                vr = residuals[i] - (
+                    jac[i, 0] * delta[0] + jac[i, 1] * delta[1] + jac[i, 2] * delta[2]
+                )
+                misfit += vr * (w[i] * vr)
+            t /= max(1.0, misfit / (n_rest - 3))
+        stat[q] = t
+        count[q] = n_mine
+        tested[q] = True
+    return stat, count, tested
+
+
+def _information(
+    easting: float,
+    northing: float,
+    azimuth: float,
+    angles: NDArray[np.float64],
+    normals: NDArray[np.float64],
+    offsets: NDArray[np.float64],
+    range_sigma: float,
+    angle_sigma: float,
+) -> NDArray[np.float64]:
+    """``bounds._information_reference``: ``sum g g^T / sigma^2`` of the range rows."""
+    n = angles.shape[0]
+    rho = np.empty(n)
+    jac = np.empty((n, 3))
+    _range_rows_jit(easting, northing, azimuth, angles, normals, offsets, rho, jac)
+    out = np.zeros((3, 3))
+    rs2 = range_sigma**2
+    for i in range(n):
+        d = -jac[i, 2] * angle_sigma
+        w = 1.0 / (rs2 + d * d)
+        for r in range(3):
+            for c in range(3):
+                out[r, c] += jac[i, r] * (jac[i, c] * w)
+    return out
+
+
+def _standardised(
+    jac: NDArray[np.float64],
+    cofactor: NDArray[np.float64],
+    sigmas: NDArray[np.float64],
+    residuals: NDArray[np.float64],
+) -> NDArray[np.float64]:
+    """``integrity._standardised_reference``: Baarda's ``w_i = v_i / sigma_vi``, with
+    ``sigma_vi^2 = sigma_i^2 - g_i Q g_i^T`` (at least 1e-30)."""
+    n = jac.shape[0]
+    out = np.empty(n)
+    for i in range(n):
+        g0, g1, g2 = jac[i, 0], jac[i, 1], jac[i, 2]
+        pred = 0.0
+        for r in range(3):
+            gr = g0 if r == 0 else (g1 if r == 1 else g2)
+            pred += gr * (cofactor[r, 0] * g0 + cofactor[r, 1] * g1 + cofactor[r, 2] * g2)
+        out[i] = residuals[i] / math.sqrt(max(sigmas[i] ** 2 - pred, 1e-30))
+    return out
+
+
+def _group_residuals(
+    keys: NDArray[np.intp], v: NDArray[np.float64], w: NDArray[np.float64]
+) -> tuple[NDArray[np.intp], NDArray[np.intp], NDArray[np.float64], NDArray[np.float64]]:
+    """Per group of returns sharing a key: the keys (sorted), the returns' count, the
+    RMS of ``v`` and the largest ``|w|`` (``integrity._groups_reference``)."""
+    names = np.unique(keys)
+    m = names.shape[0]
+    count = np.zeros(m, dtype=np.intp)
+    ss = np.zeros(m)
+    largest = np.zeros(m)
+    for i in range(keys.shape[0]):
+        g = np.searchsorted(names, keys[i])
+        count[g] += 1
+        ss[g] += v[i] * v[i]
+        largest[g] = max(largest[g], abs(w[i]))
+    rms = np.sqrt(ss / count)
+    return names, count, rms, largest
+
+
+def _survey_shares(
+    easting: float,
+    northing: float,
+    azimuth: float,
+    angles: NDArray[np.float64],
+    normals: NDArray[np.float64],
+    jac: NDArray[np.float64],
+    sigmas: NDArray[np.float64],
+    cofactor: NDArray[np.float64],
+    panel: NDArray[np.intp],
+    survey_variance: float,
+) -> NDArray[np.float64]:
+    """``adjustment._survey_covariance_reference``: ``sum_p K_p l_p (K_p l_p)^T`` times
+    the survey variance, ``K = Q G^T W`` the estimator, ``l_i = 1 / |n . u_i|`` the
+    levers of panel ``p``'s returns."""
+    names = np.unique(panel)
+    cols = np.zeros((names.shape[0], 3))
+    for i in range(angles.shape[0]):
+        bearing = azimuth - angles[i]
+        lever = 1.0 / abs(normals[i, 0] * math.sin(bearing) + normals[i, 1] * math.cos(bearing))
+        scale = lever / sigmas[i] ** 2
+        p = np.searchsorted(names, panel[i])
+        for r in range(3):
+            cols[p, r] += (
+                cofactor[r, 0] * jac[i, 0] + cofactor[r, 1] * jac[i, 1] + cofactor[r, 2] * jac[i, 2]
+            ) * scale
+    out = np.zeros((3, 3))
+    for p in range(names.shape[0]):
+        for r in range(3):
+            for c in range(3):
+                out[r, c] += survey_variance * (cols[p, r] * cols[p, c])
+    return out
+
+
+def _adjust_rounds(
+    easting: float,
+    northing: float,
+    azimuth: float,
+    angles: NDArray[np.float64],
+    ranges: NDArray[np.float64],
+    valid: NDArray[np.bool_],
+    seg_a: NDArray[np.float64],
+    seg_b: NDArray[np.float64],
+    normals: NDArray[np.float64],
+    owner: NDArray[np.intp],
+    gate_sigmas: float,
+    range_sigma: float,
+    angle_sigma: float,
+    survey_sigma: float,
+    min_incidence: float,
+    jump: float,
+    silhouette_variance: float,
+    mad_quantile: float,
+    max_rounds: int,
+    max_iterations: int,
+    max_condition: float,
+) -> tuple[
+    int,
+    int,
+    NDArray[np.intp],
+    NDArray[np.intp],
+    NDArray[np.float64],
+    tuple[
+        float,
+        float,
+        float,
+        int,
+        bool,
+        float,
+        NDArray[np.float64],
+        NDArray[np.float64],
+        NDArray[np.float64],
+        NDArray[np.float64],
+    ],
+]:
+    """The rounds of ``adjustment._adjust_on_panels_reference``: ``(code, returns,
+    beams, rows, variance scales, adjustment)``, the adjustment as
+    :func:`_gauss_newton` returns it.
+
+    Each round casts every beam from the current pose (:func:`_ray_association`),
+    drops returns beyond the robust gate of the last round's adjustment
+    (:func:`_robust_gate`, its scale the median absolute standardised residual over
+    ``mad_quantile``, at most 1), weights those at a silhouette by
+    ``silhouette_variance`` and adjusts, until the returns and their weights repeat.
+    ``code`` is 0 for an adjustment, 1 when fewer than four returns are left
+    (``returns`` says how many), 2 when the adjustment does not determine the pose
+    (a singular normal matrix, a cofactor not finite, or its correlation matrix's
+    condition number above ``max_condition``)."""
+    no_cofactor = np.zeros((0, 0))
+    e, nn, az = easting, northing, azimuth
+    have = False
+    used = np.zeros(0, dtype=np.intp)
+    used_rows = np.zeros(0, dtype=np.intp)
+    used_scale = np.zeros(0)
+    empty = np.zeros(0)
+    adj = (e, nn, az, 0, False, 0.0, empty, empty, np.zeros((0, 3)), no_cofactor)
+    gate_m = gate_sigmas * math.hypot(range_sigma, survey_sigma)
+    for _ in range(max_rounds):
+        cof = adj[9] if have else no_cofactor
+        beams, rows, edge = _ray_association_jit(
+            e,
+            nn,
+            az,
+            angles,
+            ranges,
+            valid,
+            seg_a,
+            seg_b,
+            normals,
+            owner,
+            cof,
+            gate_m,
+            gate_sigmas,
+            range_sigma,
+            angle_sigma,
+            survey_sigma,
+            min_incidence,
+            jump,
+        )
+        m = beams.shape[0]
+        b_angles = np.empty(m)
+        b_ranges = np.empty(m)
+        b_normals = np.empty((m, 2))
+        b_offsets = np.empty(m)
+        for i in range(m):
+            j = rows[i]
+            b_angles[i] = angles[beams[i]]
+            b_ranges[i] = ranges[beams[i]]
+            b_normals[i, 0] = normals[j, 0]
+            b_normals[i, 1] = normals[j, 1]
+            b_offsets[i] = normals[j, 0] * seg_a[j, 0] + normals[j, 1] * seg_a[j, 1]
+        if have:
+            v, var = adj[6], adj[7]
+            scale = 1.0
+            if v.shape[0]:
+                std = np.empty(v.shape[0])
+                for i in range(v.shape[0]):
+                    std[i] = abs(v[i] / math.sqrt(var[i]))
+                scale = min(1.0, np.median(std) / mad_quantile)
+            good = _robust_gate_jit(
+                adj[0],
+                adj[1],
+                adj[2],
+                b_angles,
+                b_ranges,
+                b_normals,
+                b_offsets,
+                adj[9],
+                scale,
+                range_sigma,
+                angle_sigma,
+                gate_sigmas,
+            )
+            beams, rows, edge = beams[good], rows[good], edge[good]
+            b_angles, b_ranges = b_angles[good], b_ranges[good]
+            b_normals, b_offsets = b_normals[good], b_offsets[good]
+            m = beams.shape[0]
+        weights = np.ones(m)
+        for i in range(m):
+            if edge[i]:
+                weights[i] = silhouette_variance
+        if have and m == used.shape[0]:
+            same = True
+            for i in range(m):
+                if beams[i] != used[i] or weights[i] != used_scale[i]:
+                    same = False
+                    break
+            if same:
+                break
+        if m < 4:
+            return 1, m, used, used_rows, used_scale, adj
+        adj = _gauss_newton_jit(
+            e,
+            nn,
+            az,
+            b_angles,
+            b_ranges,
+            b_normals,
+            b_offsets,
+            weights,
+            range_sigma,
+            angle_sigma,
+            max_iterations,
+        )
+        q = adj[9]
+        ok = adj[4]
+        for r in range(3):
+            for c in range(3):
+                if not math.isfinite(q[r, c]):
+                    ok = False
+        if ok:
+            d = np.empty(3)
+            for r in range(3):
+                d[r] = math.sqrt(abs(q[r, r]))
+                if d[r] == 0.0:
+                    d[r] = 1.0
+            corr = np.empty((3, 3))
+            for r in range(3):
+                for c in range(3):
+                    corr[r, c] = q[r, c] / (d[r] * d[c])
+            ok = np.linalg.cond(corr) <= max_condition
+        if not ok:
+            return 2, m, used, used_rows, used_scale, adj
+        have = True
+        used, used_rows, used_scale = beams, rows, weights
+        e, nn, az = adj[0], adj[1], adj[2]
+    return 0, used.shape[0], used, used_rows, used_scale, adj
+
+
+def _bound(info: NDArray[np.float64], max_condition: float) -> NDArray[np.float64]:
+    """``bounds._bound_reference``: ``info^-1``, or ``inf`` on the diagonal (0 off it)
+    when ``info`` is not finite, singular, its inverse not finite, or its condition
+    number above ``max_condition``."""
+    out = np.eye(3)
+    fail = np.zeros((3, 3))
+    for r in range(3):
+        fail[r, r] = np.inf
+        for c in range(3):
+            if not math.isfinite(info[r, c]):
+                return fail
+    if not _lu_solve_jit(info, out):
+        return fail
+    for r in range(3):
+        for c in range(3):
+            if not math.isfinite(out[r, c]):
+                return fail
+    if np.linalg.cond(info) > max_condition:
+        return fail
+    return out
+
+
 #: Compiled on first use (numba's own types; mypy sees plain callables).
 #: ``error_model="numpy"``: no division-by-zero checks in the loop (every divisor is
 #: positive), so that it vectorises.
@@ -1174,3 +1867,20 @@ _near_pose_jit = near_pose
 _recount_jit: Callable[..., None] = njit(cache=True, nogil=True)(_recount)
 _suppress_jit: Callable[..., None] = njit(cache=True, nogil=True)(_suppress)
 window_picks: Callable[..., Any] = njit(cache=True, nogil=True)(_window_picks)
+_range_rows_jit: Callable[..., None] = njit(cache=True, nogil=True)(_range_rows)
+range_rows = _range_rows_jit
+_lu_solve_jit: Callable[..., bool] = njit(cache=True, nogil=True)(_lu_solve)
+_normal_equations_jit: Callable[..., None] = njit(cache=True, nogil=True)(_normal_equations)
+gauss_newton: Callable[..., Any] = njit(cache=True, nogil=True)(_gauss_newton)
+ray_association: Callable[..., Any] = njit(cache=True, nogil=True)(_ray_association)
+robust_gate: Callable[..., NDArray[np.bool_]] = njit(cache=True, nogil=True)(_robust_gate)
+beacon_statistics: Callable[..., Any] = njit(cache=True, nogil=True)(_beacon_statistics)
+information: Callable[..., NDArray[np.float64]] = njit(cache=True, nogil=True)(_information)
+standardised: Callable[..., NDArray[np.float64]] = njit(cache=True, nogil=True)(_standardised)
+group_residuals: Callable[..., Any] = njit(cache=True, nogil=True)(_group_residuals)
+survey_shares: Callable[..., NDArray[np.float64]] = njit(cache=True, nogil=True)(_survey_shares)
+_ray_association_jit = ray_association
+_robust_gate_jit = robust_gate
+_gauss_newton_jit = gauss_newton
+adjust_rounds: Callable[..., Any] = njit(cache=True, nogil=True)(_adjust_rounds)
+bound: Callable[..., NDArray[np.float64]] = njit(cache=True, nogil=True)(_bound)

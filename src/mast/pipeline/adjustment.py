@@ -17,10 +17,20 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import lru_cache
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
+from mast.core._kernels import (
+    adjust_rounds,
+    gauss_newton,
+    range_rows,
+    ray_association,
+    robust_gate,
+    survey_shares,
+)
 from mast.core.geometry import PanelSet, first_hits
 from mast.core.noise import NoiseModel
 from mast.core.pose import Pose2D
@@ -38,6 +48,8 @@ __all__ = [
     "survey_covariance",
 ]
 
+#: Most Gauss-Newton iterations of one adjustment.
+MAX_GAUSS_NEWTON_ITERATIONS = 20
 #: Beams closer than this to grazing a panel (|n . u| below) carry no usable range.
 MIN_INCIDENCE_COS = math.sin(math.radians(2.0))
 
@@ -60,6 +72,11 @@ class ErrorEllipse:
     confidence: float
 
 
+def _floats(a: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``a`` as a C-contiguous float64 array (what the kernels are compiled for)."""
+    return np.ascontiguousarray(a, dtype=np.float64)
+
+
 def range_model(
     pose: Pose2D,
     angles_rad: NDArray[np.float64],
@@ -76,6 +93,20 @@ def range_model(
     d_phi : ndarray, shape (n,)
         d rho / d phi (equal to minus the azimuth column).
     """
+    angles, nrm, off = _floats(angles_rad), _floats(normals), _floats(offsets)
+    rho = np.empty(angles.size)
+    jac = np.empty((angles.size, 3))
+    range_rows(pose.easting, pose.northing, pose.azimuth, angles, nrm, off, rho, jac)
+    return rho, jac, -jac[:, 2]
+
+
+def _range_model_reference(
+    pose: Pose2D,
+    angles_rad: NDArray[np.float64],
+    normals: NDArray[np.float64],
+    offsets: NDArray[np.float64],
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """:func:`range_model` in numpy, the compiled kernel's reference."""
     u = pose.beam_directions(angles_rad)
     u_a = np.stack([u[:, 1], -u[:, 0]], axis=1)  # du/dA = (cos(A - phi), -sin(A - phi))
     nu = np.einsum("ij,ij->i", normals, u)
@@ -199,7 +230,7 @@ def adjust_pose(
     *,
     noise: NoiseModel,
     variance_scale: NDArray[np.float64] | None = None,
-    max_iterations: int = 20,
+    max_iterations: int = MAX_GAUSS_NEWTON_ITERATIONS,
 ) -> Adjustment:
     """Weighted least squares for (E, N, A) from ranges to known lines.
 
@@ -223,11 +254,71 @@ def adjust_pose(
         When the normal matrix is singular (degenerate geometry).
     """
     n = angles_rad.size
+    scale = np.ones(n) if variance_scale is None else _floats(variance_scale)
+    return _adjustment_of(
+        gauss_newton(
+            pose.easting,
+            pose.northing,
+            pose.azimuth,
+            _floats(angles_rad),
+            _floats(ranges_m),
+            _floats(normals),
+            _floats(offsets),
+            scale,
+            noise.range_sigma_m,
+            noise.angle_sigma_rad,
+            max_iterations,
+        )
+    )
+
+
+def _adjustment_of(gn: tuple[Any, ...]) -> Adjustment:
+    """The :class:`Adjustment` of :func:`mast.core._kernels.gauss_newton`'s outputs.
+
+    Raises
+    ------
+    numpy.linalg.LinAlgError
+        When a normal matrix was singular.
+    """
+    e, nn, az, it, solved, chi2, v, var, jac, q = gn
+    if not solved:
+        raise np.linalg.LinAlgError("Singular matrix")
+    dof = v.size - 3
+    s0 = chi2 / dof if dof > 0 else math.nan
+    lo, hi = _chi2_bounds(dof)
+    # Surveying practice: when the global test passes, the a-priori precisions
+    # stand (sigma_0 = 1); when it rejects high, they were too optimistic and
+    # the covariance is scaled by the a-posteriori reference variance.
+    cov: NDArray[np.float64] = q * s0 if s0 > hi else q.copy()
+    return Adjustment(Pose2D(e, nn, az), q, cov, s0, dof, lo, hi, v, np.sqrt(var), it, jac)
+
+
+@lru_cache(maxsize=4096)
+def _chi2_bounds(dof: int) -> tuple[float, float]:
+    """Two-sided 95 % acceptance bounds of the reference variance on ``dof`` degrees of freedom."""
+    if dof <= 0:
+        return 0.0, math.inf
+    return chi2_ppf(0.025, dof) / dof, chi2_ppf(0.975, dof) / dof
+
+
+def _adjust_pose_reference(
+    pose: Pose2D,
+    angles_rad: NDArray[np.float64],
+    ranges_m: NDArray[np.float64],
+    normals: NDArray[np.float64],
+    offsets: NDArray[np.float64],
+    *,
+    noise: NoiseModel,
+    variance_scale: NDArray[np.float64] | None = None,
+    max_iterations: int = MAX_GAUSS_NEWTON_ITERATIONS,
+) -> Adjustment:
+    """:func:`adjust_pose` in numpy, the compiled kernel's reference."""
+    n = angles_rad.size
     scale = 1.0 if variance_scale is None else variance_scale
     p = pose
     it = 0
     for it in range(1, max_iterations + 1):  # noqa: B007 - the count is reported
-        rho, jac, d_phi = range_model(p, angles_rad, normals, offsets)
+        rho, jac, d_phi = _range_model_reference(p, angles_rad, normals, offsets)
         var = noise.variance(d_phi) * scale
         w = 1.0 / var
         v = ranges_m - rho
@@ -242,7 +333,7 @@ def adjust_pose(
         tol_m = max(1e-11, 4 * np.spacing(max(abs(p.easting), abs(p.northing), 1.0)))
         if math.hypot(delta[0], delta[1]) < tol_m and abs(delta[2]) < 1e-13:
             break
-    rho, jac, d_phi = range_model(p, angles_rad, normals, offsets)
+    rho, jac, d_phi = _range_model_reference(p, angles_rad, normals, offsets)
     var = noise.variance(d_phi) * scale
     w = 1.0 / var
     v = ranges_m - rho
@@ -250,11 +341,7 @@ def adjust_pose(
     Q: NDArray[np.float64] = np.asarray(np.linalg.inv(N), dtype=np.float64)
     dof = n - 3
     s0 = float(v @ (w * v) / dof) if dof > 0 else math.nan
-    lo = chi2_ppf(0.025, dof) / dof if dof > 0 else 0.0
-    hi = chi2_ppf(0.975, dof) / dof if dof > 0 else math.inf
-    # Surveying practice: when the global test passes, the a-priori precisions
-    # stand (sigma_0 = 1); when it rejects high, they were too optimistic and
-    # the covariance is scaled by the a-posteriori reference variance.
+    lo, hi = _chi2_bounds(dof)
     cov: NDArray[np.float64] = Q * s0 if s0 > hi else Q.copy()
     return Adjustment(p, Q, cov, s0, dof, lo, hi, v, np.sqrt(var), it, jac)
 
@@ -327,6 +414,43 @@ def _ray_association(
     be gated out exactly when it carries the most information. Beams within
     2 degrees of grazing are left out.
     """
+    beams, rows, edge = ray_association(
+        pose.easting,
+        pose.northing,
+        pose.azimuth,
+        _floats(scan.angles_rad),
+        _floats(scan.ranges_m),
+        scan.valid,
+        _floats(panels.a[keep]),
+        _floats(panels.b[keep]),
+        _floats(panels.normal[keep]),
+        panels.beacon[keep],
+        _NO_COFACTOR if pose_cofactor is None else _floats(pose_cofactor),
+        gate_sigmas * noise.gate_sigma_m,
+        gate_sigmas,
+        noise.range_sigma_m,
+        noise.angle_sigma_rad,
+        noise.survey_sigma_m,
+        MIN_INCIDENCE_COS,
+        jump_m(noise.range_sigma_m),
+    )
+    return beams, keep[rows], edge
+
+
+#: What :func:`mast.core._kernels.ray_association` takes for "no pose uncertainty yet".
+_NO_COFACTOR = np.zeros((0, 0))
+
+
+def _ray_association_reference(
+    scan: Scan,
+    pose: Pose2D,
+    panels: PanelSet,
+    keep: NDArray[np.intp],
+    noise: NoiseModel,
+    gate_sigmas: float,
+    pose_cofactor: NDArray[np.float64] | None,
+) -> tuple[NDArray[np.intp], NDArray[np.intp], NDArray[np.bool_]]:
+    """:func:`_ray_association` in numpy, the compiled kernel's reference."""
     beams = np.flatnonzero(scan.valid)
     dirs = pose.beam_directions(scan.angles_rad[beams])
     t, j = first_hits(pose.position, dirs, panels.a[keep], panels.b[keep])
@@ -341,7 +465,7 @@ def _ray_association(
     gate = np.full(beams.size, gate_sigmas * noise.gate_sigma_m)
     if pose_cofactor is not None and beams.size:
         offsets = np.einsum("ij,ij->i", nrm, panels.a[pk])
-        _rho, jac, d_phi = range_model(pose, scan.angles_rad[beams], nrm, offsets)
+        _rho, jac, d_phi = _range_model_reference(pose, scan.angles_rad[beams], nrm, offsets)
         pred = np.einsum("ij,jk,ik->i", jac, pose_cofactor, jac)
         var = noise.gate_variance(d_phi) + np.where(np.isfinite(pred), pred, 0.0)
         gate = gate_sigmas * np.sqrt(var)
@@ -380,7 +504,38 @@ def _robust_inliers(
     if std.size:
         mad = float(np.median(np.abs(std))) / norm_ppf(0.75)  # about the prediction, 0
         scale = min(1.0, mad)
-    rho, jac, d_phi = range_model(adj.pose, angles_rad, normals, offsets)
+    return robust_gate(
+        adj.pose.easting,
+        adj.pose.northing,
+        adj.pose.azimuth,
+        _floats(angles_rad),
+        _floats(ranges_m),
+        _floats(normals),
+        _floats(offsets),
+        adj.cofactor,
+        scale,
+        noise.range_sigma_m,
+        noise.angle_sigma_rad,
+        gate_sigmas,
+    )
+
+
+def _robust_inliers_reference(
+    adj: Adjustment,
+    angles_rad: NDArray[np.float64],
+    ranges_m: NDArray[np.float64],
+    normals: NDArray[np.float64],
+    offsets: NDArray[np.float64],
+    noise: NoiseModel,
+    gate_sigmas: float,
+) -> NDArray[np.bool_]:
+    """:func:`_robust_inliers` in numpy, the compiled kernel's reference."""
+    std = adj.residuals_m / adj.sigmas_m
+    scale = 1.0
+    if std.size:
+        mad = float(np.median(np.abs(std))) / norm_ppf(0.75)  # about the prediction, 0
+        scale = min(1.0, mad)
+    rho, jac, d_phi = _range_model_reference(adj.pose, angles_rad, normals, offsets)
     pred = np.einsum("ij,jk,ik->i", jac, adj.cofactor, jac)
     sig = np.sqrt(noise.variance(d_phi) + pred)
     floor = 1e-7 * (1.0 + np.abs(rho))
@@ -421,18 +576,70 @@ def adjust_on_panels(
     (Observations, Adjustment), or a sentence saying why the panels seen do
     not determine the pose.
     """
+    code, count, used, rows, scale, gn = adjust_rounds(
+        pose.easting,
+        pose.northing,
+        pose.azimuth,
+        _floats(scan.angles_rad),
+        _floats(scan.ranges_m),
+        scan.valid,
+        _floats(panels.a[keep]),
+        _floats(panels.b[keep]),
+        _floats(panels.normal[keep]),
+        panels.beacon[keep],
+        gate_sigmas,
+        noise.range_sigma_m,
+        noise.angle_sigma_rad,
+        noise.survey_sigma_m,
+        MIN_INCIDENCE_COS,
+        jump_m(noise.range_sigma_m),
+        SILHOUETTE_VARIANCE,
+        norm_ppf(0.75),
+        MAX_ASSOCIATION_ROUNDS,
+        MAX_GAUSS_NEWTON_ITERATIONS,
+        MAX_CONDITION,
+    )
+    if code == 1:
+        return f"only {count} returns on the panels"
+    if code == 2:
+        return "the panels seen do not constrain all of E, N and azimuth"
+    used_panels = keep[rows]
+    nrm = panels.normal[used_panels]
+    obs = Observations(
+        used,
+        scan.angles_rad[used],
+        scan.ranges_m[used],
+        nrm,
+        np.einsum("ij,ij->i", nrm, panels.a[used_panels]),
+        used_panels,
+        panels.beacon[used_panels],
+        scale,
+    )
+    return obs, _adjustment_of(gn)
+
+
+def _adjust_on_panels_reference(
+    scan: Scan,
+    pose: Pose2D,
+    panels: PanelSet,
+    keep: NDArray[np.intp],
+    *,
+    noise: NoiseModel,
+    gate_sigmas: float,
+) -> tuple[Observations, Adjustment] | str:
+    """:func:`adjust_on_panels` in numpy, the compiled kernel's reference."""
     adj: Adjustment | None = None
     used = np.zeros(0, dtype=np.intp)
     used_panels = np.zeros(0, dtype=np.intp)
     used_scale = np.zeros(0)
     for _ in range(MAX_ASSOCIATION_ROUNDS):
-        beams, pk, edge = _ray_association(
+        beams, pk, edge = _ray_association_reference(
             scan, pose, panels, keep, noise, gate_sigmas, None if adj is None else adj.cofactor
         )
         nrm = panels.normal[pk]
         offsets = np.einsum("ij,ij->i", nrm, panels.a[pk])
         if adj is not None:
-            good = _robust_inliers(
+            good = _robust_inliers_reference(
                 adj, scan.angles_rad[beams], scan.ranges_m[beams], nrm, offsets, noise, gate_sigmas
             )
             beams, pk, nrm, offsets, edge = (
@@ -448,7 +655,7 @@ def adjust_on_panels(
         if beams.size < 4:
             return f"only {beams.size} returns on the panels"
         try:
-            adj = adjust_pose(
+            adj = _adjust_pose_reference(
                 pose,
                 scan.angles_rad[beams],
                 scan.ranges_m[beams],
@@ -491,11 +698,27 @@ def survey_covariance(
     ``sigma_s / |n . u|`` together; through the estimator ``K = Q G^T W`` that
     adds ``K S K^T`` to the noise covariance (S: those shared range errors).
     """
+    return survey_shares(
+        adj.pose.easting,
+        adj.pose.northing,
+        adj.pose.azimuth,
+        _floats(obs.angles_rad),
+        _floats(obs.normals),
+        adj.jacobian,
+        adj.sigmas_m,
+        adj.cofactor,
+        np.ascontiguousarray(obs.panel, dtype=np.intp),
+        survey_sigma_m**2,
+    )
+
+
+def _survey_covariance_reference(
+    adj: Adjustment, obs: Observations, survey_sigma_m: float
+) -> NDArray[np.float64]:
+    """:func:`survey_covariance` in numpy, the compiled kernel's reference."""
     lever = obs.survey_levers(adj.pose)
     k = adj.cofactor @ (adj.jacobian / (adj.sigmas_m**2)[:, None]).T  # (3, n)
-    out = np.zeros((3, 3))
-    for p in np.unique(obs.panel):
-        sel = obs.panel == p
-        col = k[:, sel] @ lever[sel]
-        out += survey_sigma_m**2 * np.outer(col, col)
-    return out
+    # Each panel's column K_p l_p, all panels at once: (3, panels).
+    _, at = np.unique(obs.panel, return_inverse=True)
+    cols = np.stack([np.bincount(at.reshape(-1), weights=row * lever) for row in k])
+    return np.asarray(survey_sigma_m**2 * (cols @ cols.T))

@@ -18,6 +18,7 @@ import math
 import numpy as np
 from numpy.typing import NDArray
 
+from mast.core import _kernels
 from mast.core.beacon import Survey
 from mast.core.geometry import PanelSet, first_hits
 from mast.core.noise import NoiseModel
@@ -55,6 +56,27 @@ def information(
         Noise of a range and of a beam angle (the angle term enters through
         ``d rho / d phi``, as in the adjustment).
     """
+    return _kernels.information(
+        pose.easting,
+        pose.northing,
+        pose.azimuth,
+        np.ascontiguousarray(angles_rad, dtype=np.float64),
+        np.ascontiguousarray(normals, dtype=np.float64),
+        np.ascontiguousarray(offsets, dtype=np.float64),
+        noise.range_sigma_m,
+        noise.angle_sigma_rad,
+    )
+
+
+def _information_reference(
+    pose: Pose2D,
+    angles_rad: NDArray[np.float64],
+    normals: NDArray[np.float64],
+    offsets: NDArray[np.float64],
+    *,
+    noise: NoiseModel,
+) -> NDArray[np.float64]:
+    """:func:`information` in numpy, the compiled kernel's reference."""
     _, jac, d_phi = range_model(pose, angles_rad, normals, offsets)
     var = noise.variance(d_phi)
     info: NDArray[np.float64] = jac.T @ (jac / var[:, None])
@@ -64,13 +86,22 @@ def information(
 def bound_of(info: NDArray[np.float64]) -> NDArray[np.float64]:
     """The covariance bound ``info^-1``; ``inf`` on the diagonal when the pose is not
     determined (singular or ill-conditioned information)."""
+    return _kernels.bound(np.ascontiguousarray(info, dtype=np.float64), MAX_CONDITION)
+
+
+#: Condition number of the information beyond which the pose is not determined.
+MAX_CONDITION = 1e14
+
+
+def _bound_reference(info: NDArray[np.float64]) -> NDArray[np.float64]:
+    """:func:`bound_of` in numpy, the compiled kernel's reference."""
     if not np.all(np.isfinite(info)):
         return np.diag([math.inf] * 3)
     try:
         out: NDArray[np.float64] = np.asarray(np.linalg.inv(info), dtype=np.float64)
     except np.linalg.LinAlgError:
         return np.diag([math.inf] * 3)
-    if not np.all(np.isfinite(out)) or np.linalg.cond(info) > 1e14:
+    if not np.all(np.isfinite(out)) or np.linalg.cond(info) > MAX_CONDITION:
         return np.diag([math.inf] * 3)
     return out
 

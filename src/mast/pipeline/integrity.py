@@ -24,10 +24,12 @@ P. J. G. Teunissen, *Testing Theory*, Delft, 2000 (w-test, group tests).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 from numpy.typing import NDArray
 
+from mast.core._kernels import beacon_statistics, group_residuals, standardised
 from mast.core.linalg import grouped_quadratic_form
 from mast.core.noise import NoiseModel
 from mast.core.quantiles import chi2_isf, norm_ppf
@@ -51,6 +53,11 @@ W_TEST_ALPHA = 0.001
 
 def standardised_residuals(adj: Adjustment) -> NDArray[np.float64]:
     """Baarda's ``w_i = v_i / sigma_vi`` with ``sigma_vi^2 = sigma_i^2 - g_i Q g_i^T``."""
+    return standardised(adj.jacobian, adj.cofactor, adj.sigmas_m, adj.residuals_m)
+
+
+def _standardised_reference(adj: Adjustment) -> NDArray[np.float64]:
+    """:func:`standardised_residuals` in numpy, the compiled kernel's reference."""
     g = adj.jacobian
     qvv = adj.sigmas_m**2 - np.einsum("ij,jk,ik->i", g, adj.cofactor, g)
     return np.asarray(adj.residuals_m / np.sqrt(np.maximum(qvv, 1e-30)), dtype=float)
@@ -109,7 +116,59 @@ def beacon_tests(
     noise: NoiseModel,
     alpha: float = W_TEST_ALPHA,
 ) -> list[BeaconTest]:
-    """Leave-one-beacon-out tests for every beacon with returns (needs two or more)."""
+    """Leave-one-beacon-out tests for every beacon with returns (needs two or more).
+
+    Each beacon in turn: the others' fit, linearised at the joint solution (the
+    best-determined pose, where the linear model holds best: a weak beacon left
+    alone may fit a pose far enough off for a relinearised prediction to fail the
+    test by itself), when the others alone determine the pose; the left-out
+    beacon's misclosures ``d`` against it, and ``T_b = d^T C^-1 d`` with ``C =
+    diag(sigma^2) + G_b Q_(-b) G_b^T`` plus the survey's share (a panel's surveyed
+    position errs once for all its returns, ``sigma_s / |n . u|`` each), from the
+    low-rank parts of ``C`` (:func:`~mast.core.linalg.grouped_quadratic_form`), never
+    forming it. The others' own misfit, when larger than the a-priori precisions
+    allow for (unmodelled range bias, mixed pixels), widens the test as it widens
+    theirs. Compiled (:func:`mast.core._kernels.beacon_statistics`).
+    """
+    ids = np.unique(obs.beacon)
+    if ids.size < 2:
+        return []
+    stat, count, tested = beacon_statistics(
+        np.ascontiguousarray(adj.jacobian),
+        np.ascontiguousarray(adj.residuals_m),
+        np.ascontiguousarray(adj.sigmas_m),
+        np.ascontiguousarray(obs.survey_levers(adj.pose)),
+        np.ascontiguousarray(obs.beacon, dtype=np.intp),
+        np.ascontiguousarray(obs.panel, dtype=np.intp),
+        ids.astype(np.intp),
+        noise.survey_sigma_m**2,
+        MAX_TEST_CONDITION,
+    )
+    return [
+        BeaconTest(int(b), float(t), int(n), _critical(alpha / ids.size, int(n)))
+        for b, t, n, ok in zip(ids, stat, count, tested, strict=True)
+        if ok
+    ]
+
+
+#: Condition number of the other beacons' normal matrix beyond which they do not
+#: determine the pose alone (the beacon is then not tested).
+MAX_TEST_CONDITION = 1e14
+
+
+@lru_cache(maxsize=4096)
+def _critical(alpha: float, dof: int) -> float:
+    return chi2_isf(alpha, dof)
+
+
+def _beacon_tests_reference(
+    obs: Observations,
+    adj: Adjustment,
+    *,
+    noise: NoiseModel,
+    alpha: float = W_TEST_ALPHA,
+) -> list[BeaconTest]:
+    """:func:`beacon_tests` in numpy, the compiled kernel's reference."""
     ids = np.unique(obs.beacon)
     if ids.size < 2:
         return []
@@ -124,7 +183,7 @@ def beacon_tests(
         # where the linear model holds best (a weak beacon left alone may fit a pose
         # far enough off for a relinearised prediction to fail the test by itself).
         n_rest = g[rest].T @ (w[rest, None] * g[rest])
-        if not np.all(np.isfinite(n_rest)) or np.linalg.cond(n_rest) > 1e14:
+        if not np.all(np.isfinite(n_rest)) or np.linalg.cond(n_rest) > MAX_TEST_CONDITION:
             continue  # the others alone do not determine the pose: no test
         q_rest = np.linalg.inv(n_rest)
         delta = q_rest @ (g[rest].T @ (w[rest] * v[rest]))
@@ -242,8 +301,33 @@ class Residuals:
     beacon_tests: dict[str, BeaconTest]
 
 
-def _group(v: NDArray[np.float64], w: NDArray[np.float64]) -> GroupResiduals:
-    return GroupResiduals(int(v.size), float(np.sqrt(np.mean(v**2))), float(np.max(np.abs(w))))
+def _groups(
+    keys: NDArray[np.intp], v: NDArray[np.float64], w: NDArray[np.float64]
+) -> tuple[NDArray[np.intp], list[GroupResiduals]]:
+    """The residuals of each group of returns sharing a key: the keys, sorted, and
+    their returns' count, RMS of ``v`` and largest ``|w|``."""
+    names, count, rms, largest = group_residuals(np.ascontiguousarray(keys, dtype=np.intp), v, w)
+    return names, [
+        GroupResiduals(int(c), float(r), float(m))
+        for c, r, m in zip(count, rms, largest, strict=True)
+    ]
+
+
+def _groups_reference(
+    keys: NDArray[np.intp], v: NDArray[np.float64], w: NDArray[np.float64]
+) -> tuple[NDArray[np.intp], list[GroupResiduals]]:
+    """:func:`_groups` in numpy, the compiled kernel's reference."""
+    names, at = np.unique(keys, return_inverse=True)
+    at = at.reshape(-1)
+    count = np.bincount(at, minlength=names.size)
+    rms = np.sqrt(np.bincount(at, weights=v * v, minlength=names.size) / count)
+    order = np.argsort(at, kind="stable")
+    starts = np.concatenate(([0], np.cumsum(count)[:-1]))
+    largest = np.maximum.reduceat(np.abs(w[order]), starts)
+    return names, [
+        GroupResiduals(int(c), float(r), float(m))
+        for c, r, m in zip(count, rms, largest, strict=True)
+    ]
 
 
 def residual_summary(
@@ -262,14 +346,14 @@ def residual_summary(
     the beacon tests of ``obs`` and ``adj`` when already computed.
     """
     v, w = adj.residuals_m, standardised_residuals(adj)
-    per_beacon = {
-        ids[b]: _group(v[obs.beacon == b], w[obs.beacon == b]) for b in np.unique(obs.beacon)
-    }
+    beacons, by_beacon = _groups(obs.beacon, v, w)
+    per_beacon = {ids[b]: g for b, g in zip(beacons, by_beacon, strict=True)}
+    panels, by_panel = _groups(obs.panel, v, w)
+    owner = np.zeros(int(panels.max()) + 1 if panels.size else 0, dtype=np.intp)
+    owner[obs.panel] = obs.beacon  # a panel's returns all belong to its one beacon
     per_panel = {
-        (ids[int(obs.beacon[obs.panel == k][0])], int(panel_numbers[k])): _group(
-            v[obs.panel == k], w[obs.panel == k]
-        )
-        for k in np.unique(obs.panel)
+        (ids[int(owner[k])], int(panel_numbers[k])): g
+        for k, g in zip(panels, by_panel, strict=True)
     }
     if tests is None:
         tests = beacon_tests(obs, adj, noise=noise)
