@@ -273,27 +273,44 @@ def identify_panels(
     # for its shortest panels): a corner is tested in full only against the designs it
     # may match, so a survey of a thousand designs costs little more than one of three.
     survey_theta = survey_sigma_m * math.sqrt(2.0) * math.hypot(1.0, 1.0) / lengths.min(axis=1)
-    for corner in segmentation.corners:
+    corners = segmentation.corners
+    if corners:
+        # Every corner against every design at once (corners x designs).
+        sig_theta = np.array(
+            [
+                math.hypot(segs[c.first].sigma_direction, segs[c.second].sigma_direction)
+                for c in corners
+            ]
+        )
+        defl = np.array([c.deflection for c in corners])[:, None, None]
+        loosest = np.maximum(
+            config.min_deflection_tol_rad,
+            config.sigmas * np.hypot(sig_theta[:, None], survey_theta[None, :]),
+        )
+        off = np.minimum(
+            np.abs(wrap_angles(defl - deflections)), np.abs(wrap_angles(defl + deflections))
+        ).min(axis=2)
+        may = off <= loosest * (1 + 1e-9) + 1e-12
+    for q, corner in enumerate(corners):
+        designs = np.flatnonzero(may[q]).tolist()
+        if not designs:
+            continue
         a, b = segs[corner.first], segs[corner.second]
         ext = _CornerExtent.of(corner, a, b, segmentation.noise_m, survey_sigma_m, config.sigmas)
         if ext.near_a < -ext.tol or ext.near_b < -ext.tol:
             continue  # the lines meet inside a segment: not a corner of two panels
-        sig_theta = math.hypot(a.sigma_direction, b.sigma_direction)
-        loosest = np.maximum(
-            config.min_deflection_tol_rad, config.sigmas * np.hypot(sig_theta, survey_theta)
-        )
-        off = np.minimum(
-            np.abs(wrap_angles(corner.deflection - deflections)),
-            np.abs(wrap_angles(corner.deflection + deflections)),
-        ).min(axis=1)
-        for k in np.flatnonzero(off <= loosest * (1 + 1e-9) + 1e-12).tolist():
+        for k in designs:
             nodes.extend(_test_corner(corner, a, b, beacons[k], ext, survey_sigma_m, config))
     singles: list[SingleMatch] = []
     noise = segmentation.noise_m
     tol = config.sigmas * (noise + survey_sigma_m)
-    for seg in segs:
-        lo = lengths - seg.spacing_start - seg.spacing_end - tol
-        fits = (lo <= seg.length) & (seg.length <= lengths + tol)
-        for k, panel in np.argwhere(fits).tolist():
-            singles.append(SingleMatch(beacons[k].id, panel + 1, seg.index))
+    if segs:
+        # Every segment against every design's panels at once (segments x designs x 3).
+        length = np.array([g.length for g in segs])[:, None, None]
+        start = np.array([g.spacing_start for g in segs])[:, None, None]
+        end = np.array([g.spacing_end for g in segs])[:, None, None]
+        lo = lengths[None] - start - end - tol
+        fits = (lo <= length) & (length <= lengths[None] + tol)
+        for q, k, panel in np.argwhere(fits).tolist():
+            singles.append(SingleMatch(beacons[k].id, panel + 1, segs[q].index))
     return PanelIdentification(tuple(nodes), tuple(singles))
