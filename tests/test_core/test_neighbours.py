@@ -8,7 +8,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.spatial import cKDTree
 
-from mast.core.neighbours import PointGrid
+from mast.core.neighbours import BearingIndex, PointGrid
 
 
 def _check(points: np.ndarray, query: np.ndarray, cell: float, gate: float) -> None:
@@ -67,3 +67,47 @@ def test_an_empty_grid_finds_nothing() -> None:
     dist, idx = PointGrid.build(np.zeros((0, 2)), 0.3).query(np.ones((3, 2)), 0.3)
     assert np.all(np.isinf(dist))
     assert np.all(idx == 0)
+
+
+@settings(max_examples=80, deadline=None)
+@given(
+    n=st.integers(0, 400),
+    m=st.integers(0, 300),
+    seed=st.integers(0, 2**32 - 1),
+    spread=st.sampled_from([0.5, 10.0, 300.0]),
+    gate=st.sampled_from([0.01, 0.06, 0.3, 2.0]),
+    offset=st.sampled_from([0.0, 3.0, 50.0]),
+)
+def test_bearing_index_matches_the_grid_and_the_kd_tree(
+    n: int, m: int, seed: int, spread: float, gate: float, offset: float
+) -> None:
+    # Scan-like sets round the origin (a scanner's returns), some across the -pi / pi
+    # cut behind it, some off to one side; queries on and next to the points too.
+    rng = np.random.default_rng(seed)
+    centre = np.array([offset, rng.uniform(-offset, offset)])
+    points = centre + rng.uniform(-spread, spread, (n, 2))
+    query = centre + rng.uniform(-1.2 * spread, 1.2 * spread, (m, 2))
+    if n:
+        pick = points[rng.integers(0, n, min(n, 50))]
+        query = np.vstack([query, pick, pick + rng.normal(0, gate, pick.shape), [[0.0, 0.0]]])
+    by_bearing = BearingIndex.build(points).query(query, gate)
+    by_grid = PointGrid.build(points, max(gate, 0.05)).query(query, gate)
+    np.testing.assert_array_equal(by_bearing[0], by_grid[0])
+    np.testing.assert_array_equal(by_bearing[1], by_grid[1])
+    if n:
+        ref_d, _ = cKDTree(points).query(query, distance_upper_bound=gate)
+        np.testing.assert_array_equal(np.isfinite(by_bearing[0]), np.isfinite(ref_d))
+    else:
+        assert np.all(np.isinf(by_bearing[0]))
+
+
+def test_bearing_index_searches_across_the_cut_behind_the_scanner() -> None:
+    # Points just either side of bearing pi (behind the scanner), queried from both sides.
+    ang = np.array([np.pi - 1e-4, -np.pi + 1e-4, np.pi, 0.5])
+    points = 10.0 * np.column_stack([np.cos(ang), np.sin(ang)])
+    query = np.array([[-10.0, 0.001], [-10.0, -0.001], [-10.0, 0.0], [-9.99, 0.0]])
+    by_bearing = BearingIndex.build(points).query(query, 0.06)
+    by_grid = PointGrid.build(points, 0.3).query(query, 0.06)
+    np.testing.assert_array_equal(by_bearing[0], by_grid[0])
+    np.testing.assert_array_equal(by_bearing[1], by_grid[1])
+    assert np.all(np.isfinite(by_bearing[0]))

@@ -32,7 +32,9 @@ __all__ = [
     "information",
     "line_fits",
     "near_pose",
+    "nearest_by_bearing",
     "nearest_within",
+    "odometry_fit",
     "partition_dp",
     "penalty",
     "range_rows",
@@ -1830,6 +1832,170 @@ def _bound(info: NDArray[np.float64], max_condition: float) -> NDArray[np.float6
     return out
 
 
+def _odometry_fit(
+    scan_points: NDArray[np.float64],
+    dx: float,
+    dy: float,
+    dtheta: float,
+    points: NDArray[np.float64],
+    bearing: NDArray[np.float64],
+    order: NDArray[np.intp],
+    normals: NDArray[np.float64],
+    gates: NDArray[np.float64],
+    max_iterations: int,
+    min_matches: int,
+) -> tuple[float, float, float, int, float, NDArray[np.float64]]:
+    """The point-to-plane ICP of ``odometry._scan_to_scan_reference``: ``(dx, dy,
+    dtheta, matches, sum of squared residuals, J^T J)`` at the end, ``matches`` 0 when
+    fewer than ``min_matches`` returns were matched on the way.
+
+    ``scan_points`` are moved by the motion and matched to the nearest keyframe
+    return (``points``, by bearing as :func:`_nearest_by_bearing` reads them) within each
+    gate in turn, up to ``max_iterations`` least-squares steps a gate (LAPACK's
+    ``gelsd``, numpy's cut-off), until a step is below 1e-5 m and 1e-6 rad; the
+    residuals and Jacobian are those of the last gate at the final motion."""
+    n = scan_points.shape[0]
+    moved = np.empty((n, 2))
+    x0, x1, x2 = dx, dy, dtheta
+    info = np.zeros((3, 3))
+    n_gates = gates.shape[0]
+    for g in range(n_gates + 1):
+        final = g == n_gates
+        gate = gates[n_gates - 1] if final else gates[g]
+        for _ in range(1 if final else max_iterations):
+            c, s_ = math.cos(x2), math.sin(x2)
+            for i in range(n):
+                px, py = scan_points[i, 0], scan_points[i, 1]
+                moved[i, 0] = px * c + py * -s_ + x0
+                moved[i, 1] = px * s_ + py * c + x1
+            dist, j = _nearest_by_bearing_jit(moved, points, bearing, order, gate)
+            k = 0
+            for i in range(n):
+                if math.isfinite(dist[i]):
+                    k += 1
+            if k < min_matches:
+                return x0, x1, x2, 0, 0.0, info
+            jac = np.empty((k, 3))
+            rhs = np.empty(k)
+            r = 0
+            for i in range(n):
+                if not math.isfinite(dist[i]):
+                    continue
+                q = j[i]
+                nrx, nry = normals[q, 0], normals[q, 1]
+                rhs[r] = -((moved[i, 0] - points[q, 0]) * nrx + (moved[i, 1] - points[q, 1]) * nry)
+                relx, rely = moved[i, 0] - x0, moved[i, 1] - x1
+                jac[r, 0] = nrx
+                jac[r, 1] = nry
+                jac[r, 2] = nry * relx - nrx * rely
+                r += 1
+            if final:
+                sse = 0.0
+                for i in range(k):
+                    sse += rhs[i] * rhs[i]
+                for a in range(3):
+                    for b in range(3):
+                        acc = 0.0
+                        for i in range(k):
+                            acc += jac[i, a] * jac[i, b]
+                        info[a, b] = acc
+                return x0, x1, x2, k, sse, info
+            step = np.linalg.lstsq(jac, rhs, rcond=np.finfo(np.float64).eps * max(k, 3))[0]
+            x0 += step[0]
+            x1 += step[1]
+            x2 += step[2]
+            if math.hypot(step[0], step[1]) < 1e-5 and abs(step[2]) < 1e-6:
+                break
+    return x0, x1, x2, 0, 0.0, info
+
+
+def _walk_left(sorted_values: NDArray[np.float64], value: float, guess: int) -> int:
+    """``searchsorted(sorted_values, value, side="left")``, walked from ``guess``: a few
+    steps where consecutive queries move little (a scan's beams, in order)."""
+    p = guess
+    n = sorted_values.shape[0]
+    while p > 0 and sorted_values[p - 1] >= value:
+        p -= 1
+    while p < n and sorted_values[p] < value:
+        p += 1
+    return p
+
+
+def _walk_right(sorted_values: NDArray[np.float64], value: float, guess: int) -> int:
+    """``searchsorted(sorted_values, value, side="right")``, walked from ``guess``."""
+    p = guess
+    n = sorted_values.shape[0]
+    while p > 0 and sorted_values[p - 1] > value:
+        p -= 1
+    while p < n and sorted_values[p] <= value:
+        p += 1
+    return p
+
+
+def _nearest_by_bearing(
+    query: NDArray[np.float64],
+    points: NDArray[np.float64],
+    bearing: NDArray[np.float64],
+    order: NDArray[np.intp],
+    gate: float,
+) -> tuple[NDArray[np.float64], NDArray[np.intp]]:
+    """:func:`_nearest_within`'s answers (the same distances, indices and tie rule)
+    through the points' bearings from the origin, sorted (``bearing``; ``order`` the
+    points in that order): a point nearer than ``gate`` to a query point at range
+    ``r > gate`` lies within ``asin(gate / r)`` of its bearing, so only that window is
+    searched (a scan's returns, one a beam: a few beams' worth); a query point within
+    ``gate`` of the origin is compared with every point. The window's ends are walked
+    from the previous query's, which a scan's next beam barely moves."""
+    m = query.shape[0]
+    n = points.shape[0]
+    dist = np.full(m, np.inf)
+    idx = np.full(m, n, dtype=np.intp)
+    g2 = gate * gate
+    left = 0
+    right = 0
+    for i in range(m):
+        qx, qy = query[i, 0], query[i, 1]
+        if not (math.isfinite(qx) and math.isfinite(qy)):
+            continue
+        r = math.hypot(qx, qy)
+        # (first, last) spans of sorted positions to search, two when the window
+        # wraps across -pi / pi
+        a0, b0, a1, b1 = 0, n, 0, 0
+        if r > gate * (1.0 + 1e-9):
+            # widened by far more than the rounding of the bearings: extra candidates
+            # are harmless, every one's distance is computed exactly
+            half = math.asin(gate / r) * (1.0 + 1e-9) + 1e-12
+            t = math.atan2(qy, qx)
+            lo, hi = t - half, t + half
+            if lo < -math.pi:
+                b0 = _walk_right_jit(bearing, hi, 0)
+                a1 = _walk_left_jit(bearing, lo + 2.0 * math.pi, n)
+                b1 = n
+            elif hi > math.pi:
+                a0 = _walk_left_jit(bearing, lo, n)
+                b1 = _walk_right_jit(bearing, hi - 2.0 * math.pi, 0)
+            else:
+                left = _walk_left_jit(bearing, lo, left)
+                right = _walk_right_jit(bearing, hi, max(right, left))
+                a0, b0 = left, right
+        best = g2
+        bj = -1
+        for span in range(2):
+            first, last = (a0, b0) if span == 0 else (a1, b1)
+            for s in range(first, last):
+                k = order[s]
+                dx = points[k, 0] - qx
+                dy = points[k, 1] - qy
+                d2 = dx * dx + dy * dy
+                if d2 < best or (d2 == best and bj >= 0 and k < bj):
+                    best = d2
+                    bj = k
+        if bj >= 0:
+            dist[i] = math.sqrt(best)
+            idx[i] = bj
+    return dist, idx
+
+
 #: Compiled on first use (numba's own types; mypy sees plain callables).
 #: ``error_model="numpy"``: no division-by-zero checks in the loop (every divisor is
 #: positive), so that it vectorises.
@@ -1884,3 +2050,8 @@ _robust_gate_jit = robust_gate
 _gauss_newton_jit = gauss_newton
 adjust_rounds: Callable[..., Any] = njit(cache=True, nogil=True)(_adjust_rounds)
 bound: Callable[..., NDArray[np.float64]] = njit(cache=True, nogil=True)(_bound)
+_walk_left_jit: Callable[..., int] = njit(cache=True, nogil=True)(_walk_left)
+_walk_right_jit: Callable[..., int] = njit(cache=True, nogil=True)(_walk_right)
+nearest_by_bearing: Callable[..., Any] = njit(cache=True, nogil=True)(_nearest_by_bearing)
+_nearest_by_bearing_jit = nearest_by_bearing
+odometry_fit: Callable[..., Any] = njit(cache=True, nogil=True)(_odometry_fit)

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["PointGrid"]
+__all__ = ["BearingIndex", "PointGrid"]
 
 #: Most cells a grid holds: wider extents get wider cells (the search then
 #: looks at fewer, fuller cells; the answers are the same).
@@ -73,6 +73,46 @@ class PointGrid:
             self.nx,
             self.ny,
             self.start,
+            self.order,
+            float(gate),
+        )
+        return np.asarray(dist), np.asarray(idx)
+
+
+@dataclass(frozen=True, slots=True)
+class BearingIndex:
+    """Points sorted by their bearing from the origin, for nearest-neighbour queries
+    within a gate around a scanner: a point nearer than the gate to a query point at
+    range ``r`` lies within ``asin(gate / r)`` of its bearing. A scan's returns (one a
+    beam) then offer a few beams' worth of candidates a query, where a grid's cells as
+    wide as the widest gate hold a wall's metre of them. The answers are
+    :class:`PointGrid`'s (the tests compare both with the k-d tree)."""
+
+    points: NDArray[np.float64]
+    bearing: NDArray[np.float64]
+    order: NDArray[np.intp]
+
+    @classmethod
+    def build(cls, points: NDArray[np.float64]) -> BearingIndex:
+        """Index ``(n, 2)`` finite points by bearing from the origin."""
+        pts = np.ascontiguousarray(points, dtype=float).reshape(-1, 2)
+        bearing = np.arctan2(pts[:, 1], pts[:, 0])
+        order = np.argsort(bearing, kind="stable").astype(np.intp)
+        return cls(pts, np.ascontiguousarray(bearing[order]), order)
+
+    def __len__(self) -> int:
+        return int(self.points.shape[0])
+
+    def query(
+        self, query: NDArray[np.float64], gate: float
+    ) -> tuple[NDArray[np.float64], NDArray[np.intp]]:
+        """As :meth:`PointGrid.query`."""
+        from mast.core._kernels import nearest_by_bearing
+
+        dist, idx = nearest_by_bearing(
+            np.ascontiguousarray(query, dtype=float).reshape(-1, 2),
+            self.points,
+            self.bearing,
             self.order,
             float(gate),
         )

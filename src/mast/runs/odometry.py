@@ -38,7 +38,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-from mast.core.neighbours import PointGrid
+from mast.core._kernels import odometry_fit
+from mast.core.neighbours import BearingIndex, PointGrid
 from mast.core.scan import Scan
 
 __all__ = ["Keyframe", "Motion", "OdometryConfig", "keyframe", "recover_motion", "scan_to_scan"]
@@ -165,11 +166,18 @@ class _Field:
 class Keyframe:
     """A scan as a target for the next scans: its returns with their wall normals."""
 
-    grid: PointGrid
-    """The returns, binned for nearest-neighbour queries."""
+    index: BearingIndex
+    """The returns, by bearing from the scanner for nearest-neighbour queries."""
     normals: NDArray[np.float64]
     _fields: dict[float, _Field] = field(default_factory=dict, compare=False, repr=False)
     """Coarse likelihood fields of the returns, by cell size, built when first searched."""
+    _grids: dict[float, PointGrid] = field(default_factory=dict, compare=False, repr=False)
+
+    def grid(self, cell: float) -> PointGrid:
+        """The returns binned in cells of ``cell`` (the numpy reference's search)."""
+        if cell not in self._grids:
+            self._grids[cell] = PointGrid.build(self.points, cell)
+        return self._grids[cell]
 
     def coarse_field(self, res: float, reach_m: float) -> _Field:
         """The likelihood field of the returns within ``reach_m`` of the keyframe's scanner."""
@@ -180,10 +188,10 @@ class Keyframe:
 
     @property
     def points(self) -> NDArray[np.float64]:
-        return self.grid.points
+        return self.index.points
 
     def __len__(self) -> int:
-        return len(self.grid)
+        return len(self.index)
 
 
 def keyframe(scan: Scan, config: OdometryConfig | None = None) -> Keyframe:
@@ -192,7 +200,7 @@ def keyframe(scan: Scan, config: OdometryConfig | None = None) -> Keyframe:
     _, pts = scan.points()
     n = pts.shape[0]
     if n < 3:
-        return Keyframe(PointGrid.build(np.zeros((0, 2)), max(cfg.gates_m)), np.zeros((0, 2)))
+        return Keyframe(BearingIndex.build(np.zeros((0, 2))), np.zeros((0, 2)))
     # Runs of consecutive returns without a jump; a window never crosses one.
     step = np.hypot(*np.diff(pts, axis=0).T)
     r = np.hypot(pts[:, 0], pts[:, 1])
@@ -226,7 +234,7 @@ def keyframe(scan: Scan, config: OdometryConfig | None = None) -> Keyframe:
     lmax, lmin = tr / 2 + det, tr / 2 - det
     good = (k >= 5) & (lmin <= cfg.max_planarity * np.maximum(lmax, 1e-12))
     nrm = np.column_stack([-np.sin(ang), np.cos(ang)])
-    return Keyframe(PointGrid.build(pts[good], max(cfg.gates_m)), nrm[good])
+    return Keyframe(BearingIndex.build(pts[good]), nrm[good])
 
 
 @dataclass(frozen=True, slots=True)
@@ -284,13 +292,67 @@ def scan_to_scan(
     _, pts = scan.points()
     if len(key) < cfg.min_matches or pts.shape[0] < cfg.min_matches:
         return None
+    dx, dy, dtheta, n, sse, jtj = odometry_fit(
+        np.ascontiguousarray(pts, dtype=float),
+        *(float(g) for g in guess),
+        key.index.points,
+        key.index.bearing,
+        key.index.order,
+        np.ascontiguousarray(key.normals, dtype=float),
+        np.asarray(cfg.gates_m, dtype=float),
+        cfg.max_iterations,
+        cfg.min_matches,
+    )
+    if n < cfg.min_matches or n == 0:
+        return None
+    rms = math.sqrt(sse / n)
+    if rms > cfg.max_rms_m:
+        return None
+    s2 = max(sse / max(n - 3, 1), 2 * range_sigma_m**2)
+    return _motion(dx, dy, dtheta, jtj / (s2 * cfg.tempering), n, rms, cfg)
+
+
+def _motion(
+    dx: float,
+    dy: float,
+    dtheta: float,
+    info: NDArray[np.float64],
+    matches: int,
+    rms: float,
+    cfg: OdometryConfig,
+) -> Motion:
+    """The motion of a fit with information ``info`` and its covariance, floored."""
+    floor = np.diag([cfg.min_sigma_m**2, cfg.min_sigma_m**2, cfg.min_sigma_rad**2])
+    # A direction the walls do not constrain gets (almost) no information: its variance
+    # is large but finite, so that a pose graph can still be solved around it.
+    w, v = np.linalg.eigh(info)
+    w = np.maximum(w, 1e-6)
+    cov = (v / w) @ v.T + floor
+    wrapped = (float(dtheta) + math.pi) % (2 * math.pi) - math.pi
+    return Motion(float(dx), float(dy), wrapped, (cov + cov.T) / 2, matches, rms)
+
+
+def _scan_to_scan_reference(
+    key: Keyframe,
+    scan: Scan,
+    *,
+    guess: tuple[float, float, float] = (0.0, 0.0, 0.0),
+    range_sigma_m: float,
+    config: OdometryConfig | None = None,
+) -> Motion | None:
+    """:func:`scan_to_scan` in numpy, the compiled kernel's reference."""
+    cfg = config or OdometryConfig()
+    _, pts = scan.points()
+    if len(key) < cfg.min_matches or pts.shape[0] < cfg.min_matches:
+        return None
+    grid = key.grid(max(cfg.gates_m))
     x = np.array(guess, dtype=float)
     ok = np.zeros(0, dtype=bool)
     for gate in cfg.gates_m:
         for _ in range(cfg.max_iterations):
             c, s_ = math.cos(x[2]), math.sin(x[2])
             m = pts @ np.array([[c, s_], [-s_, c]]) + x[:2]
-            dist, j = key.grid.query(m, gate)
+            dist, j = grid.query(m, gate)
             ok = np.isfinite(dist)
             if np.count_nonzero(ok) < cfg.min_matches:
                 return None
@@ -304,7 +366,7 @@ def scan_to_scan(
                 break
     c, s_ = math.cos(x[2]), math.sin(x[2])
     m = pts @ np.array([[c, s_], [-s_, c]]) + x[:2]
-    dist, j = key.grid.query(m, cfg.gates_m[-1])
+    dist, j = grid.query(m, cfg.gates_m[-1])
     ok = np.isfinite(dist)
     n = int(np.count_nonzero(ok))
     if n < cfg.min_matches:
@@ -317,15 +379,7 @@ def scan_to_scan(
     rel = m[ok] - x[:2]
     jac = np.column_stack([nrm, nrm[:, 1] * rel[:, 0] - nrm[:, 0] * rel[:, 1]])
     s2 = max(float(res @ res) / max(n - 3, 1), 2 * range_sigma_m**2)
-    info = jac.T @ jac / (s2 * cfg.tempering)
-    floor = np.diag([cfg.min_sigma_m**2, cfg.min_sigma_m**2, cfg.min_sigma_rad**2])
-    # A direction the walls do not constrain gets (almost) no information: its variance
-    # is large but finite, so that a pose graph can still be solved around it.
-    w, v = np.linalg.eigh(info)
-    w = np.maximum(w, 1e-6)
-    cov = (v / w) @ v.T + floor
-    dtheta = (float(x[2]) + math.pi) % (2 * math.pi) - math.pi
-    return Motion(float(x[0]), float(x[1]), dtheta, (cov + cov.T) / 2, n, rms)
+    return _motion(x[0], x[1], x[2], jac.T @ jac / (s2 * cfg.tempering), n, rms, cfg)
 
 
 def recover_motion(
