@@ -1859,6 +1859,9 @@ def _odometry_fit(
     x0, x1, x2 = dx, dy, dtheta
     info = np.zeros((3, 3))
     n_gates = gates.shape[0]
+    # Each point's last nearest keyframe return lies within its distance then plus
+    # how far the point has moved since: the next search looks no further.
+    within = np.full(n, np.inf)
     for g in range(n_gates + 1):
         final = g == n_gates
         gate = gates[n_gates - 1] if final else gates[g]
@@ -1866,9 +1869,16 @@ def _odometry_fit(
             c, s_ = math.cos(x2), math.sin(x2)
             for i in range(n):
                 px, py = scan_points[i, 0], scan_points[i, 1]
-                moved[i, 0] = px * c + py * -s_ + x0
-                moved[i, 1] = px * s_ + py * c + x1
-            dist, j = _nearest_by_bearing_jit(moved, points, bearing, order, gate)
+                mx = px * c + py * -s_ + x0
+                my = px * s_ + py * c + x1
+                if math.isfinite(within[i]):
+                    within[i] += math.hypot(mx - moved[i, 0], my - moved[i, 1])
+                    within[i] = within[i] * (1.0 + 1e-9) + 1e-12  # rounding's share
+                moved[i, 0] = mx
+                moved[i, 1] = my
+            dist, j = _nearest_by_bearing_jit(moved, points, bearing, order, gate, within)
+            for i in range(n):
+                within[i] = dist[i]
             k = 0
             for i in range(n):
                 if math.isfinite(dist[i]):
@@ -1938,6 +1948,7 @@ def _nearest_by_bearing(
     bearing: NDArray[np.float64],
     order: NDArray[np.intp],
     gate: float,
+    within: NDArray[np.float64],
 ) -> tuple[NDArray[np.float64], NDArray[np.intp]]:
     """:func:`_nearest_within`'s answers (the same distances, indices and tie rule)
     through the points' bearings from the origin, sorted (``bearing``; ``order`` the
@@ -1945,7 +1956,12 @@ def _nearest_by_bearing(
     ``r > gate`` lies within ``asin(gate / r)`` of its bearing, so only that window is
     searched (a scan's returns, one a beam: a few beams' worth); a query point within
     ``gate`` of the origin is compared with every point. The window's ends are walked
-    from the previous query's, which a scan's next beam barely moves."""
+    from the previous query's, which a scan's next beam barely moves.
+
+    ``within`` (empty, or one a query point) is a distance the caller knows some
+    point to lie within (the last nearest's distance plus how far the query point
+    moved since): the window is then that radius's, where it is below the gate. The
+    nearest lies within it, so the answers are the same."""
     m = query.shape[0]
     n = points.shape[0]
     dist = np.full(m, np.inf)
@@ -1953,18 +1969,20 @@ def _nearest_by_bearing(
     g2 = gate * gate
     left = 0
     right = 0
+    known = within.shape[0] == m
     for i in range(m):
         qx, qy = query[i, 0], query[i, 1]
         if not (math.isfinite(qx) and math.isfinite(qy)):
             continue
         r = math.hypot(qx, qy)
+        reach = min(gate, within[i]) if known else gate
         # (first, last) spans of sorted positions to search, two when the window
         # wraps across -pi / pi
         a0, b0, a1, b1 = 0, n, 0, 0
-        if r > gate * (1.0 + 1e-9):
+        if r > reach * (1.0 + 1e-9):
             # widened by far more than the rounding of the bearings: extra candidates
             # are harmless, every one's distance is computed exactly
-            half = math.asin(gate / r) * (1.0 + 1e-9) + 1e-12
+            half = math.asin(reach / r) * (1.0 + 1e-9) + 1e-12
             t = math.atan2(qy, qx)
             lo, hi = t - half, t + half
             if lo < -math.pi:

@@ -115,5 +115,10 @@ class BearingIndex:
             self.bearing,
             self.order,
             float(gate),
+            _NOTHING_KNOWN,
         )
         return np.asarray(dist), np.asarray(idx)
+
+
+#: No distance known to hold a neighbour (:func:`mast.core._kernels.nearest_by_bearing`).
+_NOTHING_KNOWN = np.zeros(0)
