@@ -111,3 +111,21 @@ def test_bearing_index_searches_across_the_cut_behind_the_scanner() -> None:
     np.testing.assert_array_equal(by_bearing[0], by_grid[0])
     np.testing.assert_array_equal(by_bearing[1], by_grid[1])
     assert np.all(np.isfinite(by_bearing[0]))
+
+
+def test_a_known_bound_on_the_nearest_gives_the_same_answers() -> None:
+    from mast.core._kernels import nearest_by_bearing
+
+    rng = np.random.default_rng(7)
+    ang = np.sort(rng.uniform(-2.3, 2.3, 800))
+    points = rng.uniform(2.0, 20.0, 800)[:, None] * np.column_stack([np.cos(ang), np.sin(ang)])
+    query = points + rng.normal(0.0, 0.05, points.shape)
+    index = BearingIndex.build(points)
+    for gate in (0.06, 0.3):
+        dist, idx = index.query(query, gate)
+        assert np.isfinite(dist).sum() > 100
+        # a bound at or above the nearest's distance (inf: nothing known), or the gate
+        bound = np.where(np.isfinite(dist), dist + rng.uniform(0.0, 0.1, dist.size), np.inf)
+        got = nearest_by_bearing(query, index.points, index.bearing, index.order, gate, bound)
+        np.testing.assert_array_equal(got[0], dist)
+        np.testing.assert_array_equal(got[1], idx)
