@@ -1313,6 +1313,16 @@ def _gauss_newton(
     return e, nn, az, it, solved, chi2, v, var, jac, cofactor
 
 
+def _spread(g0: float, g1: float, g2: float, cofactor: NDArray[np.float64]) -> float:
+    """``g^T Q g``: the variance a pose of cofactor ``Q`` gives a predicted range whose
+    Jacobian row is ``g``."""
+    acc = 0.0
+    for r in range(3):
+        gr = g0 if r == 0 else (g1 if r == 1 else g2)
+        acc += gr * (cofactor[r, 0] * g0 + cofactor[r, 1] * g1 + cofactor[r, 2] * g2)
+    return acc
+
+
 def _ray_association(
     easting: float,
     northing: float,
@@ -1375,10 +1385,7 @@ def _ray_association(
             rho = (nx * seg_a[j, 0] + ny * seg_a[j, 1] - (nx * easting + ny * northing)) / nu
             g0, g1 = -nx / nu, -ny / nu
             g2 = -rho * (nx * uy[i] - ny * ux[i]) / nu
-            pred = 0.0
-            for r in range(3):
-                gr = g0 if r == 0 else (g1 if r == 1 else g2)
-                pred += gr * (cofactor[r, 0] * g0 + cofactor[r, 1] * g1 + cofactor[r, 2] * g2)
+            pred = _spread_jit(g0, g1, g2, cofactor)
             d = g2 * angle_sigma
             var = rs2 + d * d + ss2
             if math.isfinite(pred):
@@ -1421,10 +1428,7 @@ def _robust_gate(
     rs2 = range_sigma**2
     for i in range(n):
         g0, g1, g2 = jac[i, 0], jac[i, 1], jac[i, 2]
-        pred = 0.0
-        for r in range(3):
-            gr = g0 if r == 0 else (g1 if r == 1 else g2)
-            pred += gr * (cofactor[r, 0] * g0 + cofactor[r, 1] * g1 + cofactor[r, 2] * g2)
+        pred = _spread_jit(g0, g1, g2, cofactor)
         d = -g2 * angle_sigma
         sig = math.sqrt(rs2 + d * d + pred)
         floor = 1e-7 * (1.0 + abs(rho[i]))
@@ -1574,10 +1578,7 @@ def _standardised(
     out = np.empty(n)
     for i in range(n):
         g0, g1, g2 = jac[i, 0], jac[i, 1], jac[i, 2]
-        pred = 0.0
-        for r in range(3):
-            gr = g0 if r == 0 else (g1 if r == 1 else g2)
-            pred += gr * (cofactor[r, 0] * g0 + cofactor[r, 1] * g1 + cofactor[r, 2] * g2)
+        pred = _spread_jit(g0, g1, g2, cofactor)
         out[i] = residuals[i] / math.sqrt(max(sigmas[i] ** 2 - pred, 1e-30))
     return out
 
@@ -2052,6 +2053,7 @@ _recount_jit: Callable[..., None] = njit(cache=True, nogil=True)(_recount)
 _suppress_jit: Callable[..., None] = njit(cache=True, nogil=True)(_suppress)
 window_picks: Callable[..., Any] = njit(cache=True, nogil=True)(_window_picks)
 _range_rows_jit: Callable[..., None] = njit(cache=True, nogil=True)(_range_rows)
+_spread_jit: Callable[..., float] = njit(cache=True, nogil=True)(_spread)
 range_rows = _range_rows_jit
 _lu_solve_jit: Callable[..., bool] = njit(cache=True, nogil=True)(_lu_solve)
 _normal_equations_jit: Callable[..., None] = njit(cache=True, nogil=True)(_normal_equations)
