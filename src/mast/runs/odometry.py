@@ -5,7 +5,8 @@ component analysis over a window of about 0.3 m of consecutive returns, as
 the locator's segmentation fits its lines), are the target; the current
 scan's returns are fitted to them by point-to-plane ICP (Low 2004, the
 linearisation the locator's alignment uses), associating each return with
-its nearest keyframe return (a k-d tree). Fitting to the returns, not to long
+its nearest keyframe return (found by bearing: `mast.core.neighbours.BearingIndex`,
+the same answers as a k-d tree). Fitting to the returns, not to long
 straight segments, keeps the rock's roughness: that is what tells motion
 along a drift.
 
