@@ -1417,7 +1417,7 @@ def _robust_gate(
     angle_sigma: float,
     gate_sigmas: float,
 ) -> NDArray[np.bool_]:
-    """``adjustment._robust_inliers``' test, return by return: ``|r - rho|`` within
+    """``adjustment._robust_inliers_reference``' test, return by return: ``|r - rho|`` within
     ``gate_sigmas`` times ``scale`` standard deviations of the range and of its
     prediction (``g^T Q g``), never below the floor ``1e-7 (1 + |rho|)``."""
     n = angles.shape[0]
@@ -1647,6 +1647,7 @@ def _adjust_rounds(
     seg_b: NDArray[np.float64],
     normals: NDArray[np.float64],
     owner: NDArray[np.intp],
+    gate_m: float,
     gate_sigmas: float,
     range_sigma: float,
     angle_sigma: float,
@@ -1698,7 +1699,6 @@ def _adjust_rounds(
     used_scale = np.zeros(0)
     empty = np.zeros(0)
     adj = (e, nn, az, 0, False, 0.0, empty, empty, np.zeros((0, 3)), no_cofactor)
-    gate_m = gate_sigmas * math.hypot(range_sigma, survey_sigma)
     for _ in range(max_rounds):
         cof = adj[9] if have else no_cofactor
         beams, rows, edge = _ray_association_jit(

@@ -28,7 +28,6 @@ from mast.core._kernels import (
     gauss_newton,
     range_rows,
     ray_association,
-    robust_gate,
     survey_shares,
 )
 from mast.core.geometry import PanelSet, first_hits
@@ -482,7 +481,7 @@ def _ray_association_reference(
     return beams[ok], pk[ok], edge
 
 
-def _robust_inliers(
+def _robust_inliers_reference(
     adj: Adjustment,
     angles_rad: NDArray[np.float64],
     ranges_m: NDArray[np.float64],
@@ -497,39 +496,9 @@ def _robust_inliers(
     predicted range (``g^T Q g``, the pose's uncertainty seen along the beam),
     both scaled by 1.4826 times the median absolute standardised residual of
     the previous adjustment, capped at 1 (the a-priori precision): the test
-    tightens on clean data, and never below a numerical floor.
+    tightens on clean data, and never below a numerical floor. The numpy reference
+    of the robust gate in :func:`mast.core._kernels.adjust_rounds`.
     """
-    std = adj.residuals_m / adj.sigmas_m
-    scale = 1.0
-    if std.size:
-        mad = float(np.median(np.abs(std))) / norm_ppf(0.75)  # about the prediction, 0
-        scale = min(1.0, mad)
-    return robust_gate(
-        adj.pose.easting,
-        adj.pose.northing,
-        adj.pose.azimuth,
-        _floats(angles_rad),
-        _floats(ranges_m),
-        _floats(normals),
-        _floats(offsets),
-        adj.cofactor,
-        scale,
-        noise.range_sigma_m,
-        noise.angle_sigma_rad,
-        gate_sigmas,
-    )
-
-
-def _robust_inliers_reference(
-    adj: Adjustment,
-    angles_rad: NDArray[np.float64],
-    ranges_m: NDArray[np.float64],
-    normals: NDArray[np.float64],
-    offsets: NDArray[np.float64],
-    noise: NoiseModel,
-    gate_sigmas: float,
-) -> NDArray[np.bool_]:
-    """:func:`_robust_inliers` in numpy, the compiled kernel's reference."""
     std = adj.residuals_m / adj.sigmas_m
     scale = 1.0
     if std.size:
@@ -587,6 +556,7 @@ def adjust_on_panels(
         _floats(panels.b[keep]),
         _floats(panels.normal[keep]),
         panels.beacon[keep],
+        gate_sigmas * noise.gate_sigma_m,
         gate_sigmas,
         noise.range_sigma_m,
         noise.angle_sigma_rad,
