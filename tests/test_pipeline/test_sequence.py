@@ -149,3 +149,41 @@ def test_the_locator_object_is_the_one_chain_and_times_its_stages() -> None:
     assert near.stages_s["window"] > 0.0
     assert "hypotheses" not in near.stages_s  # the global hypotheses were not needed
     assert sum(near.stages_s.values()) <= near.elapsed_s
+
+
+def test_a_tracked_scan_is_segmented_only_when_a_corner_must_prove_a_beacon() -> None:
+    """Near the last fix the prior names the beacons: a pose whose beacons show two
+    panels' returns on their panels is fixed without segmenting the scan. When that is
+    not enough (here scans 44-47, a beacon with one panel's returns and its corner), the
+    scan is segmented and the same poses judged again with the corners; still tracked,
+    not lost to the global search."""
+    scene = drive_scene(0, scans=48)
+    sims = tuple(scene.iter_simulated())
+    tracker = SequenceLocator(scene.survey, config=_config(scene))
+    plain = []
+    for k, sim in enumerate(sims):
+        step = tracker.step(sim.scan)
+        fix = step.fix
+        if k == 0:
+            assert fix.ok
+            assert fix.segmentation is not None  # the global search: segmented
+            continue
+        assert step.tracked
+        if not fix.ok:  # scan 43: one beacon in view; segmented for the global search
+            assert fix.segmentation is not None
+            continue
+        assert fix.pose is not None
+        assert fix.chosen is not None
+        assert _off(fix.pose, sim.pose)[0] < 0.02
+        assert not step.track_lost
+        assert fix.chosen.hypothesis.kind == "prior"
+        if fix.segmentation is None:
+            assert fix.identification is None
+            assert "segmentation" not in fix.stages_s
+            plain.append(k)
+        else:
+            assert fix.identification is not None
+            assert fix.identification.nodes
+            assert k >= 44, k
+    assert len(plain) >= 40
+    assert set(range(44, 48)).isdisjoint(plain)

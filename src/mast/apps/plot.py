@@ -18,7 +18,7 @@ from __future__ import annotations
 import math
 import textwrap
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Literal
 
@@ -36,7 +36,8 @@ from mast.core.geometry import PanelSet
 from mast.core.pose import Pose2D, format_dms
 from mast.core.scan import Scan
 from mast.errors import InputError
-from mast.pipeline.locator import NO_FIX_REASONS, Fix
+from mast.pipeline.identification import NodeMatch
+from mast.pipeline.locator import NO_FIX_REASONS, Fix, segmented
 from mast.pipeline.segmentation import Segment
 
 __all__ = ["PLOT_SUFFIXES", "fix_figure", "plot_fix"]
@@ -93,6 +94,9 @@ def fix_figure(scan: Scan, survey: Survey, fix: Fix, *, title: str = "") -> Figu
     Its axes carry labels naming them: ``"scanner"``, ``"mine"`` and
     ``"closeup:<beacon id>"``.
     """
+    # A scan fixed near a prior was not segmented: its straight pieces are made now.
+    seg, ident = segmented(fix, scan, survey)
+    fix = replace(fix, segmentation=seg, identification=ident)
     ok = fix.ok and fix.pose is not None and fix.adjustment is not None
     shown = [b for b in fix.beacons if b in survey][:MAX_CLOSEUPS] if ok else []
     if ok:
@@ -281,6 +285,14 @@ def _legend(ax: Axes, *, loc: LegendLoc = "best", fontsize: float = 8, table: bo
 # --------------------------------------------------------------------------- panels
 
 
+def _segments(fix: Fix) -> tuple[Segment, ...]:
+    return () if fix.segmentation is None else fix.segmentation.segments
+
+
+def _nodes(fix: Fix) -> tuple[NodeMatch, ...]:
+    return () if fix.identification is None else fix.identification.nodes
+
+
 def _identified(fix: Fix, survey: Survey) -> dict[int, tuple[str, int]]:
     """Segment index -> (beacon id, panel number) of the panels to mark in the scan.
 
@@ -293,13 +305,13 @@ def _identified(fix: Fix, survey: Survey) -> dict[int, tuple[str, int]]:
         beam_panel = dict(
             zip(fix.observations.tolist(), fix.observation_panels.tolist(), strict=True)
         )
-        for seg in fix.segmentation.segments:
+        for seg in _segments(fix):
             hits = [beam_panel[b] for b in seg.beams.tolist() if b in beam_panel]
             if hits:
                 k = max(set(hits), key=hits.count)
                 out[seg.index] = (panels.ids[panels.beacon[k]], int(panels.panel[k]))
         return out
-    for node in fix.identification.nodes:
+    for node in _nodes(fix):
         for s, p in zip(node.segments, node.panels, strict=True):
             out.setdefault(s, (node.beacon, p))
     return out
@@ -325,7 +337,7 @@ def _scanner_panel(
     _, pts = scan.points()
     if len(pts):
         ax.plot(pts[:, 0], pts[:, 1], ".", ms=2, color=_OTHER, label="returns", zorder=1)
-    segments = fix.segmentation.segments
+    segments = _segments(fix)
     ident = _identified(fix, survey)
     names = sorted({b for b, _ in ident.values()}, key=lambda b: (b not in fix.beacons, b))
     colours = _beacon_colours(names)
@@ -361,7 +373,7 @@ def _scanner_panel(
         ax.plot([], [], "-", lw=3.5, color="0.3", label=used)
     nodes = [
         n.node_scanner
-        for n in fix.identification.nodes
+        for n in _nodes(fix)
         if all(ident.get(g, ("",))[0] == n.beacon for g in n.segments)
     ]
     if nodes:
@@ -472,7 +484,7 @@ def _mine_panel(
     here = origin.local(pose.position) if pose is not None else centre
     used, excluded = set(fix.beacons), set(fix.excluded_beacons)
     if pose is None:  # no fix: the beacons the scan's corners were taken for
-        used = {n.beacon for n in fix.identification.nodes}
+        used = {n.beacon for n in _nodes(fix)}
     ids = _in_view(survey, view)
     crowded = len(ids) > 40
     first = {"used": True, "excluded": True, "other": True}

@@ -131,7 +131,7 @@ def _inputs_record(fix: Fix, scan: Scan | None, inputs: ReportInputs) -> dict[st
 def _corners(fix: Fix) -> list[tuple[str, int, int]]:
     """(beacon, edge, best option) of each identified corner of the beacons used, once each."""
     best: dict[tuple[str, int], int] = {}
-    for n in fix.identification.nodes:
+    for n in () if fix.identification is None else fix.identification.nodes:
         if n.beacon in fix.beacons:
             key = (n.beacon, n.edge)
             best[key] = min(best.get(key, n.option), n.option)
@@ -221,11 +221,17 @@ def fix_record(
     rec["outliers_removed"] = fix.outliers_removed
     rec["panels"] = {b: sorted(p) for b, p in fix.panels.items()}
     rec["points_used"] = fix.points_used
-    rec["segments"] = len(fix.segmentation.segments)
-    rec["identified"] = [
-        {"beacon": n.beacon, "edge": n.edge, "option": n.option, "segments": list(n.segments)}
-        for n in fix.identification.nodes
-    ]
+    # None for a scan fixed near a prior, which is not segmented (its corners not sought)
+    seg, ident = fix.segmentation, fix.identification
+    rec["segments"] = None if seg is None else len(seg.segments)
+    rec["identified"] = (
+        None
+        if ident is None
+        else [
+            {"beacon": n.beacon, "edge": n.edge, "option": n.option, "segments": list(n.segments)}
+            for n in ident.nodes
+        ]
+    )
     sim = fix.similarity
     if sim is not None:
         rec["similarity_scale"] = _r(sim.scale, 9)

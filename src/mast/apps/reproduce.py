@@ -127,7 +127,7 @@ def _run_shot(scene: Scene, k: int, draws: int, seed: int) -> ShotResult:
             sorted(
                 {
                     f"{n.beacon}e{n.edge}:{n.option}"
-                    for n in fix.identification.nodes
+                    for n in (() if fix.identification is None else fix.identification.nodes)
                     if n.beacon in fix.beacons
                 }
             )

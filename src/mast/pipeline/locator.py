@@ -42,7 +42,7 @@ from mast.pipeline.adjustment import (
     adjust_on_panels,
     survey_covariance,
 )
-from mast.pipeline.alignment import Similarity
+from mast.pipeline.alignment import IcpResult, Similarity
 from mast.pipeline.bounds import cramer_rao_bound
 from mast.pipeline.hypotheses import (
     Hypothesis,
@@ -196,8 +196,11 @@ class Fix:
     points_used: int
     reason: str | None
     detail: str
-    segmentation: Segmentation
-    identification: PanelIdentification
+    segmentation: Segmentation | None
+    """The scan's segments and corners; None for a scan fixed near a prior without them
+    (:func:`_prior_first`)."""
+    identification: PanelIdentification | None
+    """The corners and panels identified in the segmentation; None without it."""
     hypotheses: tuple[Hypothesis, ...]
     verified: tuple[Verified, ...]
     chosen: Verified | None
@@ -353,14 +356,22 @@ def _ranked_together(first: list[Verified], then: list[Verified]) -> list[Verifi
     return sorted([*first, *then], key=lambda v: v.rank, reverse=True)
 
 
-def _settled(verified: list[Verified], cfg: LocatorConfig) -> bool:
+def _settled(verified: list[Verified], cfg: LocatorConfig, corners: bool = True) -> bool:
     """Whether poses on fewer than ``min_beacons`` beacons' returns can no longer change
     what :func:`_choose` makes of ``verified``: it picks a best pose with ``min_beacons``
     beacons each identified by its own corner and proven by its beams
     (:func:`_proven_corners`). Then another pose competes only if it has
-    ``min_beacons`` supporting beacons, which those poses cannot have."""
+    ``min_beacons`` supporting beacons, which those poses cannot have. Without
+    ``corners`` (a prior's search on a scan not segmented, where no pose has a beacon
+    identified by its corner), a best pose from the prior with ``min_beacons`` beacons
+    that show their shape settles it too: another then competes only with
+    ``min_beacons`` supporting beacons or with a corner of its own."""
     best, _, _ = _choose(_admitted(verified, cfg), cfg)
-    return best is not None and len(_proven_corners(best, cfg)) >= cfg.min_beacons
+    if best is None:
+        return False
+    if len(_proven_corners(best, cfg)) >= cfg.min_beacons:
+        return True
+    return not corners and best.hypothesis.kind == "prior" and len(best.shaped) >= cfg.min_beacons
 
 
 def _proven_corners(v: Verified, cfg: LocatorConfig) -> list[str]:
@@ -437,6 +448,21 @@ class Locator:
         return _prior_first(scan, ready, cfg, confined, cfg)[0], False
 
 
+def segmented(fix: Fix, scan: Scan, survey: Survey) -> tuple[Segmentation, PanelIdentification]:
+    """The segmentation and identification of the scan ``fix`` was made from, made now
+    (with the fix's configuration) when the locator fixed it without them, near a
+    prior: for figures and maps, which show a scan's straight pieces."""
+    if fix.segmentation is not None and fix.identification is not None:
+        return fix.segmentation, fix.identification
+    cfg = fix.config
+    seg = fix.segmentation or segment_scan(scan, cfg.segmentation)
+    index, _ = _survey_index(survey, scan.range_max_m)
+    ident = identify_panels(
+        seg, index.representatives, cfg.identification, survey_sigma_m=cfg.noise.survey_sigma_m
+    )
+    return seg, ident
+
+
 def locate(scan: Scan, survey: Survey, *, config: LocatorConfig | None = None) -> Fix:
     """Fix the scanner's pose from one scan of surveyed beacons.
 
@@ -490,17 +516,49 @@ def _prior_first(
     fallback: LocatorConfig,
 ) -> tuple[Fix, bool]:
     """Each prior's own search in turn (``searched`` with that prior), then, when none
-    gives a fix, the global search under ``fallback``, all on one segmentation of the
-    scan against the survey's index and panels (``ready``); and whether a prior was
-    tried and gave no fix. A prediction's narrow window comes before the wide one
-    around it: the first costs a few grid poses, and a scan it does not fix is searched
-    as if it had not been tried. A window in which no pose could be fixed
-    (:func:`~mast.pipeline.tracking.window_may_fix`) is not searched."""
+    gives a fix, the global search under ``fallback``, against the survey's index and
+    panels (``ready``); and whether a prior was tried and gave no fix. A prediction's
+    narrow window comes before the wide one around it: the first costs a few grid
+    poses, and a scan it does not fix is searched as if it had not been tried. A window
+    in which no pose could be fixed (:func:`~mast.pipeline.tracking.window_may_fix`) is
+    not searched.
+
+    A prior's search runs first without segmenting the scan: the prior names the
+    beacons, and a pose whose beacons each show two panels' returns on their panels, no
+    more past their edges, and one of them its bend, needs no corner to be fixed
+    (:func:`~mast.pipeline.verification.verify` without ``ident``). Only when that gives
+    no fix is the scan segmented and its corners identified, and the same poses judged
+    again with a beacon's corner on its surveyed edge as proof of its shape (their ICP
+    kept from the first time); a later prior's search and the global one use that
+    segmentation. A corner only adds to what a search confirms without it, so every
+    prior's search is as it was with the corners alone, but a tracked scan that fixes
+    costs no segmentation.
+    """
     t0 = time.perf_counter()
     clock = _Clock()
-    with clock("segmentation"):
-        seg = segment_scan(scan, searched.segmentation)
+    seg: Segmentation | None = None
     ident: PanelIdentification | None = None
+    memo: dict[int, IcpResult] = {}
+
+    def tracked(
+        within: LocatorConfig,
+        batches: list[list[Hypothesis]],
+        segmented: Segmentation | None,
+        corners: PanelIdentification | None,
+    ) -> Fix | None:
+        # The best grid poses first; poses from other basins of the window only when
+        # those give no fix.
+        verified: tuple[Verified, ...] = ()
+        for batch in batches:
+            fix = _locate(
+                scan, ready, within, t0, clock, segmented,
+                from_prior=batch, before=verified, ident=corners, icp_memo=memo,
+            )  # fmt: skip
+            if fix.ok:
+                return fix
+            verified = fix.verified
+        return None
+
     if priors:
         _, panels = ready
         points = scan.points()[1]
@@ -520,20 +578,23 @@ def _prior_first(
             )
         if not may_fix:
             continue  # no pose in the window could be fixed: its search is skipped
-        if ident is None:
-            ident = _identified(seg, ready, searched, clock)
         with clock("window"):
             batches = prior_hypotheses(points, panels, prior, scan.range_max_m, within.tracking)
-        # The best grid poses first; poses from other basins of the window only when
-        # those give no fix.
-        verified: tuple[Verified, ...] = ()
-        for batch in batches:
-            fix = _locate(
-                scan, ready, within, t0, clock, seg, from_prior=batch, before=verified, ident=ident
-            )
-            if fix.ok:
+        if seg is None:
+            fix = tracked(within, batches, None, None)
+            if fix is not None:
                 return fix, False
-            verified = fix.verified
+            with clock("segmentation"):
+                seg = segment_scan(scan, searched.segmentation)
+            ident = _identified(seg, ready, searched, clock)
+            if not ident.nodes:
+                continue  # without a corner the search would be the same again
+        fix = tracked(within, batches, seg, ident)
+        if fix is not None:
+            return fix, False
+    if seg is None:
+        with clock("segmentation"):
+            seg = segment_scan(scan, searched.segmentation)
     return _locate(scan, ready, fallback, t0, clock, seg, ident=ident), bool(priors)
 
 
@@ -556,11 +617,12 @@ def _locate(
     cfg: LocatorConfig,
     t0: float,
     clock: _Clock,
-    seg: Segmentation,
+    seg: Segmentation | None,
     *,
     from_prior: list[Hypothesis] | None = None,
     before: tuple[Verified, ...] = (),
     ident: PanelIdentification | None = None,
+    icp_memo: dict[int, IcpResult] | None = None,
 ) -> Fix:
     """:func:`locate` from hypotheses of the prior's own search (``from_prior``, a
     batch of :func:`~mast.pipeline.tracking.prior_hypotheses`) or, without them, from the
@@ -570,7 +632,9 @@ def _locate(
     when it began, ``clock`` what each stage has taken so far. The poses an earlier
     batch verified (``before``) compete with this batch's. The prior's poses are
     verified against the identified corners too: a beacon whose corner the scan shows
-    is held to it, however the pose was found."""
+    is held to it, however the pose was found. Without ``seg`` (a prior's search on a
+    scan not segmented) no corner is identified; ``icp_memo`` keeps the hypotheses' ICP
+    for a second verification of the same ones."""
     noise = cfg.noise
     index, panels = ready
     found: dict[str, object] = {"config": cfg, "hypotheses": (), "verified": (), "chosen": None}
@@ -603,10 +667,12 @@ def _locate(
 
     # Stages 1-3: segments (given), identified panels, pose hypotheses.
     found["segmentation"] = seg
-    known = _identified(seg, ready, cfg, clock) if ident is None else ident
+    known = ident if ident is not None or seg is None else _identified(seg, ready, cfg, clock)
     found["identification"] = known
     if from_prior is not None:
         hyps = from_prior
+    elif seg is None or known is None:
+        raise ValueError("the global search needs the scan's segmentation")
     else:
         # Not narrowed by the prior here: ICP may carry a start from outside the window
         # into it, and a pose the global search finds inside must not be lost.
@@ -632,8 +698,9 @@ def _locate(
                 seg,
                 noise,
                 cfg.verification,
-                settled=lambda kept: _settled(kept, cfg),
+                settled=lambda kept: _settled(kept, cfg, corners=seg is not None),
                 min_beacons=cfg.min_beacons,
+                icp_memo=icp_memo,
             )
         return _admitted(kept, cfg)
 
@@ -643,13 +710,15 @@ def _locate(
     if not verified:
         where = "" if cfg.prior is None else f" within the prior {cfg.prior.pose}"
         reason, detail = "inconsistent", f"no pose hypothesis{where} is confirmed by the beams"
-        if from_prior is None and not known.nodes:
+        if seg is None or known is None:
+            pass  # a prior's search, its poses confirmed or not
+        elif from_prior is None and not known.nodes:
             reason = "no_beacon"
             detail = f"{len(seg.segments)} segments, no beacon corner identified"
         elif from_prior is None and not hyps:
             seen = sorted({b for n in known.nodes for b in index.beacons_like(n.beacon)})
             detail = f"no pose from the corners of beacons {', '.join(seen[:6])}"
-    if best is None and from_prior is None:
+    if best is None and from_prior is None and seg is not None:
         # Stage 3b, when the corners give no fix: two beacons' middle panels.
         with clock("hypotheses"):
             free = panel_hypotheses(seg, index, cfg.hypotheses)

@@ -708,14 +708,44 @@ def _may_support(counts: dict[tuple[str, int], int], cfg: VerificationConfig) ->
     )
 
 
+def _on_their_edges(
+    icp: IcpResult,
+    candidates: set[str],
+    index: SurveyIndex,
+    ident: PanelIdentification | None,
+    seg: Segmentation | None,
+    noise: NoiseModel,
+    cfg: VerificationConfig,
+) -> set[str]:
+    """The ``candidates`` one of whose edges an identified corner of the scan (of the
+    beacon's design) lands on at ``icp``'s pose, within ``gate_sigmas`` of the corner's
+    own uncertainty, the survey's and the range noise; none without a segmentation."""
+    node_ok: set[str] = set()
+    if ident is None or seg is None:
+        return node_ok
+    for node in ident.nodes:
+        design = index.design_of(node.beacon)
+        # The candidates of the node's design (not every look-alike in a mine's survey).
+        for b in sorted(candidates - node_ok):
+            if index.design_of(b) != design:
+                continue
+            mapped = icp.pose.scanner_to_mine(node.node_scanner[None, :])[0]
+            edge = index.survey[b].edges[node.edge - 1]
+            if math.dist(mapped, edge) <= cfg.gate_sigmas * math.hypot(
+                node_sigma(node, seg), noise.survey_sigma_m, noise.range_sigma_m
+            ):
+                node_ok.add(b)
+    return node_ok
+
+
 def _support(
     icp: IcpResult,
     counts: dict[tuple[str, int], int],
     points_mine: NDArray[np.float64],
     panels: PanelSet,
     index: SurveyIndex,
-    ident: PanelIdentification,
-    seg: Segmentation,
+    ident: PanelIdentification | None,
+    seg: Segmentation | None,
     checks: dict[str, BeamCheck],
     noise: NoiseModel,
     cfg: VerificationConfig,
@@ -736,13 +766,14 @@ def _support(
     identified corner lands on its edge, fit the panels better than a line:
     ``placed_support``), and no corner of the scan lands beside one of its node
     edges (:func:`_stray_corner`). When
-    ``tracked`` (a prior already says which beacon is where) no node is
+    ``tracked`` (a prior already says which beacon is where) no node need be
     identified and two panels carrying ``min_panel_points`` returns each that
     lie on them within their noise suffice, but they must still not run on
     past its nodes (a wrong prior must not let clutter, or a few returns of
     the right beacons, confirm a pose the beams do not prove); a stray corner
     beside an edge is not held against them (the prior, not a corner, names
-    the beacon).
+    the beacon). Without a segmentation (``seg`` and ``ident`` None: a scan
+    searched near a prior before it is segmented) no beacon has a node.
     """
     # Loosely: two panels with returns and as many in all as two panels need.
     per_beacon = _by_beacon(counts)
@@ -753,20 +784,7 @@ def _support(
         and _seen_from_front(index.survey[b].edges, icp.pose.position)
     }
     gate = cfg.gate_sigmas * noise.gate_sigma_m
-    gate_node = cfg.gate_sigmas * math.hypot(seg.noise_m * 3.0, noise.gate_sigma_m)
-    node_ok: set[str] = set()
-    for node in ident.nodes:
-        design = index.design_of(node.beacon)
-        # The candidates of the node's design (not every look-alike in a mine's survey).
-        for b in sorted(candidates - node_ok):
-            if index.design_of(b) != design:
-                continue
-            mapped = icp.pose.scanner_to_mine(node.node_scanner[None, :])[0]
-            edge = index.survey[b].edges[node.edge - 1]
-            if math.dist(mapped, edge) <= cfg.gate_sigmas * math.hypot(
-                node_sigma(node, seg), noise.survey_sigma_m, noise.range_sigma_m
-            ):
-                node_ok.add(b)
+    node_ok = _on_their_edges(icp, candidates, index, ident, seg, noise, cfg)
     # Identified by its corner or not, a beacon whose returns do not lie on its panels
     # within their noise is not read right at this pose (a look-alike 204 m away on a
     # long drive rested on such a corner).
@@ -793,9 +811,11 @@ def _support(
         n_on = int(on.sum())
         if n_on < 4:
             continue
-        edges_scanner = icp.pose.mine_to_scanner(index.survey[b].edges)
-        if not tracked and _stray_corner(edges_scanner, seg, gate_node, noise, cfg):
-            continue
+        if not tracked and seg is not None:
+            edges_scanner = icp.pose.mine_to_scanner(index.survey[b].edges)
+            gate_node = cfg.gate_sigmas * math.hypot(seg.noise_m * 3.0, noise.gate_sigma_m)
+            if _stray_corner(edges_scanner, seg, gate_node, noise, cfg):
+                continue
         chi_line, chi_beacon = _straight_and_fitted(
             points_mine[on], icp.residual_m[on], icp.pose.position, noise
         )
@@ -888,13 +908,14 @@ def verify(
     scan: Scan,
     panels: PanelSet,
     index: SurveyIndex,
-    ident: PanelIdentification,
-    seg: Segmentation,
+    ident: PanelIdentification | None,
+    seg: Segmentation | None,
     noise: NoiseModel,
     cfg: VerificationConfig,
     *,
     settled: Callable[[list[Verified]], bool] | None = None,
     min_beacons: int = 2,
+    icp_memo: dict[int, IcpResult] | None = None,
 ) -> list[Verified]:
     """Refine every hypothesis by ICP and keep those the beams confirm, best first.
 
@@ -919,6 +940,12 @@ def verify(
     aside unrefined when they leave fewer than ``min_beacons`` beacons enough
     (:func:`_in_reach`, ``look_alike_reach_m`` and ``look_alike_reach_rad``):
     refined, it would be set aside as above.
+
+    ``ident`` and ``seg`` are the scan's identified corners and segmentation; None for
+    a scan searched near a prior without them (then no beacon is held to a corner).
+    ``icp_memo``, when given, keeps each hypothesis' ICP result by its ``id``, so that
+    the same hypotheses verified again (with the corners, after a search without them)
+    are not refined twice.
     """
     _, pts = scan.points()
     final_gate = cfg.gate_sigmas * noise.gate_sigma_m
@@ -1022,7 +1049,11 @@ def verify(
                     return
             start_gate = min(cfg.max_start_gate_m, cfg.start_gate_sigmas * h.spread_m)
             wide = (start_gate,) if start_gate > gates[0] else ()
-            icp = icp_point_to_line(pts, start, panels, gates_m=(*wide, *gates), subset=near)
+            icp = None if icp_memo is None else icp_memo.get(id(h))
+            if icp is None:
+                icp = icp_point_to_line(pts, start, panels, gates_m=(*wide, *gates), subset=near)
+                if icp_memo is not None:
+                    icp_memo[id(h)] = icp
             if duplicate(icp.pose):
                 return  # converged onto a pose already confirmed
             counts = _panel_counts(icp, panels)

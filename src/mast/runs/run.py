@@ -25,6 +25,7 @@ from mast.apps.report import ReportInputs, fix_record
 from mast.core.beacon import Survey
 from mast.errors import OutputError
 from mast.io.atomic import atomic_open
+from mast.pipeline.segmentation import segment_scan
 from mast.runs.model import RunSummary, Trajectory
 from mast.runs.track import Node, RunTracker, Smoother, TrackConfig
 
@@ -196,7 +197,11 @@ def track_run(
                     if pose is not None and (
                         last_wall is None or math.dist(pose.position, last_wall) >= WALL_SPACING_M
                     ):
-                        walls[i] = _walls(step.fix.segmentation.segments)
+                        # a scan fixed near the last fix was not segmented: now it is
+                        cut = step.fix.segmentation or segment_scan(
+                            scan, step.fix.config.segmentation
+                        )
+                        walls[i] = _walls(cut.segments)
                         last_wall = pose.position
                     if progress is not None:
                         progress(summary.scans, summary.fixes)
