@@ -93,6 +93,12 @@ def test_a_drive_is_tracked_in_the_predicted_window() -> None:
             prior = step.fix.config.prior
             assert prior is not None
             radii.append(prior.radius_m)
+            # the prediction's window is narrow: its centre, refined by ICP, is the fix
+            chosen = step.fix.chosen
+            assert chosen is not None
+            assert chosen.hypothesis.similarity.pose().position.tolist() == (
+                prior.pose.position.tolist()
+            )
     wide = SEQ.prior(sims[0].pose, 0.04).radius_m
     assert max(radii) < 0.5 * wide
 

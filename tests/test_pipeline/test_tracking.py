@@ -18,6 +18,7 @@ from mast.pipeline.tracking import (
     _TiledField,
     _window_grid,
     _window_returns,
+    centre_hypotheses,
 )
 from mast.sim import drive_scene, paper_scene
 
@@ -205,3 +206,22 @@ def test_the_window_search_ranks_and_picks_its_poses_as_the_reference(
                 assert g.misfit == w.misfit
                 assert g.similarity.rotation_rad == w.similarity.rotation_rad
                 assert np.array_equal(g.similarity.translation, w.similarity.translation)
+
+
+def test_a_narrow_window_is_first_searched_from_its_centre_alone() -> None:
+    cfg = TrackingConfig()
+    for az in (0.0, 1.0, math.radians(359.99), 4.0):
+        pose = Pose2D(1234.5, -876.25, az)
+        hyps = centre_hypotheses(Prior(pose, 0.06, math.radians(1.1)), cfg)
+        assert len(hyps) == 1
+        (h,) = hyps
+        assert h.kind == "prior"
+        assert h.nodes == ()
+        start = h.similarity.pose()
+        assert (start.easting, start.northing) == (pose.easting, pose.northing)
+        assert math.remainder(start.azimuth - az, math.tau) == pytest.approx(0.0, abs=1e-15)
+    # A window wider than ICP's reach in either way, or without an azimuth bound: the grid.
+    pose = Pose2D(0.0, 0.0, 0.0)
+    assert centre_hypotheses(Prior(pose, cfg.direct_radius_m + 0.01, 0.01), cfg) == []
+    assert centre_hypotheses(Prior(pose, 0.05, cfg.direct_tolerance_rad + 0.01), cfg) == []
+    assert centre_hypotheses(Prior(pose, 0.05, None), cfg) == []

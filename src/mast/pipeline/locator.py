@@ -17,9 +17,10 @@ from __future__ import annotations
 import math
 import time
 from collections import OrderedDict
-from collections.abc import Iterable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field, replace
+from functools import partial
 
 import numpy as np
 from numpy.typing import NDArray
@@ -67,6 +68,7 @@ from mast.pipeline.tracking import (
     Prior,
     TrackingConfig,
     VehicleLimits,
+    centre_hypotheses,
     prior_hypotheses,
     window_may_fix,
 )
@@ -508,6 +510,26 @@ class _Clock:
             self.spent[stage] = self.spent.get(stage, 0.0) + time.perf_counter() - t0
 
 
+@dataclass(slots=True)
+class _Window:
+    """A prior's search: the hypotheses of ``within.prior``'s window in batches, the
+    window's centre (``first``, when narrow) before its grid's (made by ``grid`` the
+    first time they are needed, and kept for a second search of the same window)."""
+
+    within: LocatorConfig
+    first: list[Hypothesis]
+    grid: Callable[[], list[list[Hypothesis]]]
+    searched: list[list[Hypothesis]] | None = None
+
+    def batches(self, clock: _Clock) -> Iterator[list[Hypothesis]]:
+        if self.first:
+            yield self.first
+        if self.searched is None:
+            with clock("window"):
+                self.searched = self.grid()
+        yield from self.searched
+
+
 def _prior_first(
     scan: Scan,
     ready: tuple[SurveyIndex, PanelSet],
@@ -541,15 +563,15 @@ def _prior_first(
     memo: dict[int, IcpResult] = {}
 
     def tracked(
-        within: LocatorConfig,
-        batches: list[list[Hypothesis]],
+        window: _Window,
         segmented: Segmentation | None,
         corners: PanelIdentification | None,
     ) -> Fix | None:
-        # The best grid poses first; poses from other basins of the window only when
-        # those give no fix.
+        # The window's centre alone when it is narrow, then the best grid poses, then
+        # poses from other basins of the window, each only when those before give no fix.
         verified: tuple[Verified, ...] = ()
-        for batch in batches:
+        within = window.within
+        for batch in window.batches(clock):
             fix = _locate(
                 scan, ready, within, t0, clock, segmented,
                 from_prior=batch, before=verified, ident=corners, icp_memo=memo,
@@ -579,9 +601,13 @@ def _prior_first(
         if not may_fix:
             continue  # no pose in the window could be fixed: its search is skipped
         with clock("window"):
-            batches = prior_hypotheses(points, panels, prior, scan.range_max_m, within.tracking)
+            window = _Window(
+                within,
+                centre_hypotheses(prior, within.tracking),
+                partial(prior_hypotheses, points, panels, prior, scan.range_max_m, within.tracking),
+            )
         if seg is None:
-            fix = tracked(within, batches, None, None)
+            fix = tracked(window, None, None)
             if fix is not None:
                 return fix, False
             with clock("segmentation"):
@@ -589,7 +615,7 @@ def _prior_first(
             ident = _identified(seg, ready, searched, clock)
             if not ident.nodes:
                 continue  # without a corner the search would be the same again
-        fix = tracked(within, batches, seg, ident)
+        fix = tracked(window, seg, ident)
         if fix is not None:
             return fix, False
     if seg is None:

@@ -34,7 +34,14 @@ from mast.core.pose import Pose2D
 from mast.pipeline.alignment import Similarity
 from mast.pipeline.hypotheses import Hypothesis
 
-__all__ = ["Prior", "TrackingConfig", "VehicleLimits", "prior_hypotheses", "window_may_fix"]
+__all__ = [
+    "Prior",
+    "TrackingConfig",
+    "VehicleLimits",
+    "centre_hypotheses",
+    "prior_hypotheses",
+    "window_may_fix",
+]
 
 
 @dataclass(frozen=True, slots=True)
@@ -128,6 +135,12 @@ class TrackingConfig:
         panel scores like the panel: shared independent scenes noisy 0096 and
         0146, hostile 0046, the true pose ranked 8th to 14th, every pose above
         it within 0.4 m and 3.5 degrees of one wrong one).
+    direct_radius_m, direct_tolerance_rad : float
+        A window no wider than these (a constant-velocity prediction's, a few
+        centimetres and about a degree) is first searched by ICP from its centre
+        alone (:func:`centre_hypotheses`), the grid only when that gives no fix:
+        the window bounds where the vehicle can be, but the prediction itself is
+        usually a few millimetres off, well inside ICP's reach.
     """
 
     max_radius_m: float = 2.0
@@ -138,6 +151,8 @@ class TrackingConfig:
     candidates: int = 6
     distinct_m: float = 0.1
     other_basins_m: float = 0.4
+    direct_radius_m: float = 0.1
+    direct_tolerance_rad: float = math.radians(1.5)
 
 
 def _likelihood_field(
@@ -440,6 +455,18 @@ def _window_places(radius_m: float, step: float) -> tuple[NDArray[np.float64], N
     tx, ty = np.meshgrid(offs, offs, indexing="ij")
     inside: NDArray[np.bool_] = np.hypot(tx, ty) <= radius_m + 1e-9
     return offs, inside
+
+
+def centre_hypotheses(prior: Prior, config: TrackingConfig = TrackingConfig()) -> list[Hypothesis]:
+    """The prior's own pose as the one hypothesis, when its window is narrow enough to
+    be searched by ICP from there first (``direct_radius_m`` and
+    ``direct_tolerance_rad``); none otherwise."""
+    tol = prior.azimuth_tolerance_rad
+    if tol is None or prior.radius_m > config.direct_radius_m or tol > config.direct_tolerance_rad:
+        return []
+    pose = prior.pose
+    rot = math.remainder(math.pi / 2 - pose.azimuth, 2 * math.pi)
+    return [Hypothesis((), Similarity(1.0, rot, pose.position, 0.0), 0.0, "prior")]
 
 
 def prior_hypotheses(
