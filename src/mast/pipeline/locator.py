@@ -530,6 +530,20 @@ class _Window:
         yield from self.searched
 
 
+def _uncontested(fix: Fix, cfg: LocatorConfig) -> bool:
+    """Whether ``fix`` is the only pose its search confirmed (others are the same pose).
+
+    Without the scan's corners two readings a few centimetres and tenths of a degree
+    apart can both be confirmed, the wrong one by a stray return on a beacon's second
+    panel: on a long drive a tracked fix 20 mm and 0.33 degrees off, where the corners
+    put the other 5 mm and 0.02 degrees off. Such a scan is judged with its corners.
+    """
+    best = fix.chosen
+    return best is not None and all(
+        v is best or v.same_pose(best.pose, cfg.verification) for v in fix.verified
+    )
+
+
 def _prior_first(
     scan: Scan,
     ready: tuple[SurveyIndex, PanelSet],
@@ -548,13 +562,14 @@ def _prior_first(
     A prior's search runs first without segmenting the scan: the prior names the
     beacons, and a pose whose beacons each show two panels' returns on their panels, no
     more past their edges, and one of them its bend, needs no corner to be fixed
-    (:func:`~mast.pipeline.verification.verify` without ``ident``). Only when that gives
-    no fix is the scan segmented and its corners identified, and the same poses judged
-    again with a beacon's corner on its surveyed edge as proof of its shape (their ICP
-    kept from the first time); a later prior's search and the global one use that
-    segmentation. A corner only adds to what a search confirms without it, so every
-    prior's search is as it was with the corners alone, but a tracked scan that fixes
-    costs no segmentation.
+    (:func:`~mast.pipeline.verification.verify` without ``ident``) when no other pose is
+    confirmed (:func:`_uncontested`). Only when that gives no fix is the scan segmented
+    and its corners identified, and the same poses judged again with a beacon's corner
+    on its surveyed edge as proof of its shape (their ICP kept from the first time); a
+    later prior's search and the global one use that segmentation. A pose fixed without
+    corners is one the search with them confirms too (a corner only adds to a beacon's
+    support); a scan that search would fix is fixed by it, unless the first one does.
+    A tracked scan fixed in the first search costs no segmentation.
     """
     t0 = time.perf_counter()
     clock = _Clock()
@@ -576,8 +591,10 @@ def _prior_first(
                 scan, ready, within, t0, clock, segmented,
                 from_prior=batch, before=verified, ident=corners, icp_memo=memo,
             )  # fmt: skip
-            if fix.ok:
+            if fix.ok and (segmented is not None or _uncontested(fix, within)):
                 return fix
+            if fix.ok:
+                return None  # another pose was confirmed too: the corners must choose
             verified = fix.verified
         return None
 
