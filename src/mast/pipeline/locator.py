@@ -575,7 +575,7 @@ def _prior_first(
     clock = _Clock()
     seg: Segmentation | None = None
     ident: PanelIdentification | None = None
-    memo: dict[int, IcpResult] = {}
+    memo: dict[int, tuple[Hypothesis, IcpResult]] = {}
 
     def tracked(
         window: _Window,
@@ -665,7 +665,7 @@ def _locate(
     from_prior: list[Hypothesis] | None = None,
     before: tuple[Verified, ...] = (),
     ident: PanelIdentification | None = None,
-    icp_memo: dict[int, IcpResult] | None = None,
+    icp_memo: dict[int, tuple[Hypothesis, IcpResult]] | None = None,
 ) -> Fix:
     """:func:`locate` from hypotheses of the prior's own search (``from_prior``, a
     batch of :func:`~mast.pipeline.tracking.prior_hypotheses`) or, without them, from the

@@ -915,7 +915,7 @@ def verify(
     *,
     settled: Callable[[list[Verified]], bool] | None = None,
     min_beacons: int = 2,
-    icp_memo: dict[int, IcpResult] | None = None,
+    icp_memo: dict[int, tuple[Hypothesis, IcpResult]] | None = None,
 ) -> list[Verified]:
     """Refine every hypothesis by ICP and keep those the beams confirm, best first.
 
@@ -943,7 +943,8 @@ def verify(
 
     ``ident`` and ``seg`` are the scan's identified corners and segmentation; None for
     a scan searched near a prior without them (then no beacon is held to a corner).
-    ``icp_memo``, when given, keeps each hypothesis' ICP result by its ``id``, so that
+    ``icp_memo``, when given, keeps each hypothesis' ICP result by its ``id`` (with the
+    hypothesis, so that an id reused by a later object is not mistaken for it), so that
     the same hypotheses verified again (with the corners, after a search without them)
     are not refined twice.
     """
@@ -1049,11 +1050,13 @@ def verify(
                     return
             start_gate = min(cfg.max_start_gate_m, cfg.start_gate_sigmas * h.spread_m)
             wide = (start_gate,) if start_gate > gates[0] else ()
-            icp = None if icp_memo is None else icp_memo.get(id(h))
-            if icp is None:
+            kept_icp = None if icp_memo is None else icp_memo.get(id(h))
+            if kept_icp is not None and kept_icp[0] is h:
+                icp = kept_icp[1]
+            else:
                 icp = icp_point_to_line(pts, start, panels, gates_m=(*wide, *gates), subset=near)
                 if icp_memo is not None:
-                    icp_memo[id(h)] = icp
+                    icp_memo[id(h)] = (h, icp)
             if duplicate(icp.pose):
                 return  # converged onto a pose already confirmed
             counts = _panel_counts(icp, panels)
