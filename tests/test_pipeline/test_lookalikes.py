@@ -3,11 +3,14 @@ could still change the choice, and leaving them unjudged never does."""
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
 from mast.apps.bench.accuracy import ACCURACY_CONFIGS, owed_poses
 from mast.apps.bench.minewide import minewide_survey
+from mast.core.pose import Pose2D
 from mast.pipeline import locator
 from mast.pipeline.hypotheses import pose_hypotheses
 from mast.pipeline.identification import identify_panels
@@ -85,7 +88,6 @@ def test_a_later_pose_the_same_as_a_set_aside_one_is_skipped_if_that_one_is_kept
     """A pose set aside (one beacon's returns) and a later pose that refines to the same
     place with two beacons' returns: as when every pose is judged in turn, the later one
     is skipped when the earlier is kept, so setting aside never changes the choice."""
-    from dataclasses import replace
 
     from mast.pipeline import verification
 
@@ -135,7 +137,6 @@ def test_look_alikes_out_of_reach_of_a_second_beacon_are_not_refined(
     """One-beacon starts whose returns leave no second beacon enough within reach are
     set aside unrefined once the poses kept settle the choice: fewer ICP runs, the same
     choice as refining every start (a reach too wide to leave any out)."""
-    from dataclasses import replace
 
     from mast.pipeline import verification
 
@@ -185,3 +186,29 @@ def test_look_alikes_out_of_reach_of_a_second_beacon_are_not_refined(
         compared += best is not None
     assert compared >= 4
     assert runs["lean"] < runs["every"]
+
+
+def test_kept_icp_is_taken_only_for_the_very_hypothesis_it_was_made_for() -> None:
+    """``verify(icp_memo=...)`` reuses a hypothesis' ICP by its id; an id a freed
+    hypothesis left to another object must not hand that object the other's ICP."""
+    cfg = LocatorConfig(range_sigma_m=MODEL.range_sigma_m, survey_sigma_m=0.0)
+    scene, shot = next(iter(owed_poses(MODEL, 1, 0)))
+    sim = simulate_scan(scene.world, shot.pose, MODEL, rng=np.random.default_rng([0, 7]))
+    index, panels = _survey_index(scene.survey, sim.scan.range_max_m)
+    seg = segment_scan(sim.scan, cfg.segmentation)
+    ident = identify_panels(seg, index.representatives, cfg.identification)
+    hyps = pose_hypotheses(ident, seg, index, cfg.hypotheses)
+    args = (sim.scan, panels, index, ident, seg, cfg.noise, cfg.verification)
+    fresh = verify(hyps[:1], *args)
+    assert fresh
+    # The same hypothesis again: its ICP is taken from the memo, the same verdict.
+    memo: dict = {}
+    first = verify(hyps[:1], *args, icp_memo=memo)
+    assert memo[id(hyps[0])][0] is hyps[0]
+    again = verify(hyps[:1], *args, icp_memo=memo)
+    assert [v.pose for v in first] == [v.pose for v in again] == [v.pose for v in fresh]
+    # Another hypothesis filed under its id, with an ICP far off: not taken.
+    far = replace(memo[id(hyps[0])][1], pose=Pose2D(0.0, 0.0, 0.0))
+    memo[id(hyps[0])] = (hyps[1], far)
+    taken = verify(hyps[:1], *args, icp_memo=memo)
+    assert [v.pose for v in taken] == [v.pose for v in fresh]
