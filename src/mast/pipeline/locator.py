@@ -10,6 +10,9 @@ A short chain of the paper's stages (``mast.pipeline``), each in its own module:
 4. :func:`~mast.pipeline.verification.verify` — ICP and every beam's verdict;
 5. :func:`~mast.pipeline.adjustment.adjust_on_panels` — least squares, then
    :mod:`~mast.pipeline.integrity` (data snooping, beacon tests) and the global test.
+
+With a prior, stages 3-4 run first without stages 1-2: the prior names the beacons,
+and the scan is segmented only when its corners must decide (:func:`_prior_first`).
 """
 
 from __future__ import annotations

@@ -2,8 +2,9 @@
 
 With a prior pose (the previous scan's fix, or ``--near``), identification is
 not needed: every surveyed panel is where the prior says, to within the
-prior's radius and azimuth tolerance. The window's grid is searched (a
-correlative scan match against a likelihood field of the surveyed panels) by
+prior's radius and azimuth tolerance. A narrow window (a constant-velocity
+prediction's) is first searched by ICP from its centre alone. The window's grid is
+searched (a correlative scan match against a likelihood field of the surveyed panels) by
 branch and bound: each rotation's translations form a quadtree whose blocks are
 bounded from a max pyramid of the field, so the poses come out best first, as
 scoring them all would rank them, without scoring most of them. The best poses
