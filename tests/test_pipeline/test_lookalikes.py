@@ -16,7 +16,7 @@ from mast.pipeline.hypotheses import pose_hypotheses
 from mast.pipeline.identification import identify_panels
 from mast.pipeline.locator import LocatorConfig, _choose, _settled, _survey_index
 from mast.pipeline.segmentation import segment_scan
-from mast.pipeline.verification import verify
+from mast.pipeline.verification import Refinement, verify
 from mast.sim import simulate_scan
 
 MODEL = ACCURACY_CONFIGS[0]
@@ -204,11 +204,12 @@ def test_kept_icp_is_taken_only_for_the_very_hypothesis_it_was_made_for() -> Non
     # The same hypothesis again: its ICP is taken from the memo, the same verdict.
     memo: dict = {}
     first = verify(hyps[:1], *args, icp_memo=memo)
-    assert memo[id(hyps[0])][0] is hyps[0]
+    assert memo[id(hyps[0])].hypothesis is hyps[0]
+    assert memo[id(hyps[0])].checks is not None
     again = verify(hyps[:1], *args, icp_memo=memo)
     assert [v.pose for v in first] == [v.pose for v in again] == [v.pose for v in fresh]
     # Another hypothesis filed under its id, with an ICP far off: not taken.
-    far = replace(memo[id(hyps[0])][1], pose=Pose2D(0.0, 0.0, 0.0))
-    memo[id(hyps[0])] = (hyps[1], far)
+    far = replace(memo[id(hyps[0])].icp, pose=Pose2D(0.0, 0.0, 0.0))
+    memo[id(hyps[0])] = Refinement(hyps[1], far, memo[id(hyps[0])].checks)
     taken = verify(hyps[:1], *args, icp_memo=memo)
     assert [v.pose for v in taken] == [v.pose for v in fresh]

@@ -46,7 +46,7 @@ from mast.pipeline.adjustment import (
     adjust_on_panels,
     survey_covariance,
 )
-from mast.pipeline.alignment import IcpResult, Similarity
+from mast.pipeline.alignment import Similarity
 from mast.pipeline.bounds import cramer_rao_bound
 from mast.pipeline.hypotheses import (
     Hypothesis,
@@ -75,7 +75,7 @@ from mast.pipeline.tracking import (
     prior_hypotheses,
     window_may_fix,
 )
-from mast.pipeline.verification import VerificationConfig, Verified, verify
+from mast.pipeline.verification import Refinement, VerificationConfig, Verified, verify
 
 __all__ = [
     "NO_FIX_REASONS",
@@ -578,7 +578,7 @@ def _prior_first(
     clock = _Clock()
     seg: Segmentation | None = None
     ident: PanelIdentification | None = None
-    memo: dict[int, tuple[Hypothesis, IcpResult]] = {}
+    memo: dict[int, Refinement] = {}
 
     def tracked(
         window: _Window,
@@ -668,7 +668,7 @@ def _locate(
     from_prior: list[Hypothesis] | None = None,
     before: tuple[Verified, ...] = (),
     ident: PanelIdentification | None = None,
-    icp_memo: dict[int, tuple[Hypothesis, IcpResult]] | None = None,
+    icp_memo: dict[int, Refinement] | None = None,
 ) -> Fix:
     """:func:`locate` from hypotheses of the prior's own search (``from_prior``, a
     batch of :func:`~mast.pipeline.tracking.prior_hypotheses`) or, without them, from the

@@ -27,7 +27,6 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
-from functools import partial
 
 import numpy as np
 from numpy.typing import NDArray
@@ -46,7 +45,7 @@ from mast.pipeline.hypotheses import Hypothesis, corner_covariance, node_sigma
 from mast.pipeline.identification import PanelIdentification
 from mast.pipeline.segmentation import Segmentation
 
-__all__ = ["BeamCheck", "VerificationConfig", "Verified", "check_beams", "verify"]
+__all__ = ["BeamCheck", "Refinement", "VerificationConfig", "Verified", "check_beams", "verify"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -750,6 +749,7 @@ def _support(
     noise: NoiseModel,
     cfg: VerificationConfig,
     tracked: bool = False,
+    kept: Refinement | None = None,
 ) -> tuple[tuple[str, ...], tuple[str, ...], tuple[str, ...], tuple[str, ...]]:
     """Beacons that confirm a pose, the cornered and the shaped beacons, and the beacons
     refused only because their returns do not lie on their panels within their noise.
@@ -773,8 +773,19 @@ def _support(
     the right beacons, confirm a pose the beams do not prove); a stray corner
     beside an edge is not held against them (the prior, not a corner, names
     the beacon). Without a segmentation (``seg`` and ``ident`` None: a scan
-    searched near a prior before it is segmented) no beacon has a node.
+    searched near a prior before it is segmented) no beacon has a node. ``kept``
+    holds the beacons' tests at this pose from an earlier judgement of it, and keeps
+    those made now.
     """
+    in_place_memo: dict[str, bool] = {} if kept is None else kept.in_place
+    fitted_memo: dict[str, tuple[float, float]] = {} if kept is None else kept.fitted
+    runs_memo: dict[tuple[str, bool], bool] = {} if kept is None else kept.runs_on
+
+    def in_place(b: str) -> bool:
+        if b not in in_place_memo:
+            in_place_memo[b] = _in_place(icp, points_mine, panels, b, noise, cfg)
+        return in_place_memo[b]
+
     # Loosely: two panels with returns and as many in all as two panels need.
     per_beacon = _by_beacon(counts)
     candidates = {
@@ -788,7 +799,7 @@ def _support(
     # Identified by its corner or not, a beacon whose returns do not lie on its panels
     # within their noise is not read right at this pose (a look-alike 204 m away on a
     # long drive rested on such a corner).
-    misfit = {b for b in node_ok if not _in_place(icp, points_mine, panels, b, noise, cfg)}
+    misfit = {b for b in node_ok if not in_place(b)}
     node_ok -= misfit
     supported = set(node_ok)
     shaped = set(node_ok)
@@ -816,27 +827,36 @@ def _support(
             gate_node = cfg.gate_sigmas * math.hypot(seg.noise_m * 3.0, noise.gate_sigma_m)
             if _stray_corner(edges_scanner, seg, gate_node, noise, cfg):
                 continue
-        chi_line, chi_beacon = _straight_and_fitted(
-            points_mine[on], icp.residual_m[on], icp.pose.position, noise
-        )
+        if b not in fitted_memo:
+            fitted_memo[b] = _straight_and_fitted(
+                points_mine[on], icp.residual_m[on], icp.pose.position, noise
+            )
+        chi_line, chi_beacon = fitted_memo[b]
         bent = _shows_a_bend(chi_line, chi_beacon, cfg.straight_alpha)
-        in_place = _in_place(icp, points_mine, panels, b, noise, cfg)
+        lies = in_place(b)
         # Where another beacon's identified corner already lands on its surveyed edge,
         # the pose is fixed to millimetres by it: this beacon need only lie where the
         # pose puts it, its returns on its panels within their noise and no straighter
         # than its shape (a small beacon's bend can be inside the noise).
-        placed = cfg.placed_support and bool(node_ok) and in_place and chi_line > chi_beacon
+        placed = cfg.placed_support and bool(node_ok) and lies and chi_line > chi_beacon
         if not (bent or placed or tracked):
             continue
         # Without a node of its own, a beacon's returns must lie on its panels within
         # their noise: bent or not, rock beside a panel read as its neighbour does not
         # (a tracked pose 5 cm off on a long drive, issue 31).
-        if not in_place:
+        if not lies:
             misfit.add(b)
             continue
+
         # Past a short outer panel's free end the wall may stand in the middle panel's
         # line (the beacon lies on its panels within their noise: checked above).
-        over = partial(_runs_on, points_mine, panels, mine, counts, b, gate, noise, cfg)
+        def over(to_free_ends: bool, b: str = b, mine: NDArray[np.intp] = mine) -> bool:
+            if (b, to_free_ends) not in runs_memo:
+                runs_memo[(b, to_free_ends)] = _runs_on(
+                    points_mine, panels, mine, counts, b, gate, noise, cfg, to_free_ends
+                )
+            return runs_memo[(b, to_free_ends)]
+
         if not over(False) or (cfg.wall_past_free_ends and not over(True)):
             supported.add(b)
             if bent:
@@ -850,6 +870,21 @@ def _support(
 
 
 @dataclass(eq=False, slots=True)
+class Refinement:
+    """A hypothesis' ICP, and the beams' checks and each beacon's tests at its pose once
+    they are made (whether its returns lie on its panels, its straight-line and panel
+    fits, whether they run on past its edges): kept for a second verification of the
+    same hypothesis (:func:`verify`'s ``icp_memo``), where only the corners differ."""
+
+    hypothesis: Hypothesis
+    icp: IcpResult
+    checks: dict[str, BeamCheck] | None = None
+    in_place: dict[str, bool] = field(default_factory=dict)
+    fitted: dict[str, tuple[float, float]] = field(default_factory=dict)
+    runs_on: dict[tuple[str, bool], bool] = field(default_factory=dict)
+
+
+@dataclass(eq=False, slots=True)
 class _Refined:
     """A start refined by ICP; judged by the beams only when some hypothesis needs it."""
 
@@ -859,6 +894,7 @@ class _Refined:
     may_support: frozenset[str]
     near: NDArray[np.intp]  # the panels in reach of the start
     verified: Verified | None = None
+    kept: Refinement | None = None  # its entry in the caller's memo
 
 
 @dataclass(eq=False, slots=True)
@@ -915,7 +951,7 @@ def verify(
     *,
     settled: Callable[[list[Verified]], bool] | None = None,
     min_beacons: int = 2,
-    icp_memo: dict[int, tuple[Hypothesis, IcpResult]] | None = None,
+    icp_memo: dict[int, Refinement] | None = None,
 ) -> list[Verified]:
     """Refine every hypothesis by ICP and keep those the beams confirm, best first.
 
@@ -943,10 +979,10 @@ def verify(
 
     ``ident`` and ``seg`` are the scan's identified corners and segmentation; None for
     a scan searched near a prior without them (then no beacon is held to a corner).
-    ``icp_memo``, when given, keeps each hypothesis' ICP result by its ``id`` (with the
-    hypothesis, so that an id reused by a later object is not mistaken for it), so that
-    the same hypotheses verified again (with the corners, after a search without them)
-    are not refined twice.
+    ``icp_memo``, when given, keeps each hypothesis' ICP result and the beams' checks at
+    its pose by its ``id`` (with the hypothesis, so that an id reused by a later object
+    is not mistaken for it), so that the same hypotheses verified again (with the
+    corners, after a search without them) are neither refined nor checked twice.
     """
     _, pts = scan.points()
     final_gate = cfg.gate_sigmas * noise.gate_sigma_m
@@ -962,7 +998,12 @@ def verify(
         """``r`` judged by the beams, under the hypothesis it was refined for."""
         if r.verified is None:
             h0, icp = r.hypothesis, r.icp
-            checks = check_beams(scan, icp.pose, panels, noise, cfg, subset=r.near)
+            if r.kept is not None and r.kept.checks is not None:
+                checks = r.kept.checks
+            else:
+                checks = check_beams(scan, icp.pose, panels, noise, cfg, subset=r.near)
+                if r.kept is not None:
+                    r.kept.checks = checks
             points_mine = icp.pose.scanner_to_mine(pts)
             supported, cornered, shaped, refused = _support(
                 icp,
@@ -976,6 +1017,7 @@ def verify(
                 noise,
                 cfg,
                 tracked=h0.kind == "prior",
+                kept=r.kept,
             )
             r.verified = Verified(h0, icp, r.counts, supported, checks, cornered, shaped, refused)
         return r.verified
@@ -1050,17 +1092,18 @@ def verify(
                     return
             start_gate = min(cfg.max_start_gate_m, cfg.start_gate_sigmas * h.spread_m)
             wide = (start_gate,) if start_gate > gates[0] else ()
-            kept_icp = None if icp_memo is None else icp_memo.get(id(h))
-            if kept_icp is not None and kept_icp[0] is h:
-                icp = kept_icp[1]
+            kept = None if icp_memo is None else icp_memo.get(id(h))
+            if kept is not None and kept.hypothesis is h:
+                icp = kept.icp
             else:
                 icp = icp_point_to_line(pts, start, panels, gates_m=(*wide, *gates), subset=near)
+                kept = None
                 if icp_memo is not None:
-                    icp_memo[id(h)] = (h, icp)
+                    kept = icp_memo[id(h)] = Refinement(h, icp)
             if duplicate(icp.pose):
                 return  # converged onto a pose already confirmed
             counts = _panel_counts(icp, panels)
-            refined = _Refined(h, icp, counts, _may_support(counts, cfg), near)
+            refined = _Refined(h, icp, counts, _may_support(counts, cfg), near, kept=kept)
             done.append(refined)
             done_poses.add(icp.pose)
         if not set(h.beacons) <= refined.may_support:
