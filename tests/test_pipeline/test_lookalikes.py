@@ -10,16 +10,39 @@ import pytest
 
 from mast.apps.bench.accuracy import ACCURACY_CONFIGS, owed_poses
 from mast.apps.bench.minewide import minewide_survey
+from mast.core.geometry import PanelSet
+from mast.core.index import SurveyIndex
 from mast.core.pose import Pose2D
 from mast.pipeline import locator
-from mast.pipeline.hypotheses import pose_hypotheses
-from mast.pipeline.identification import identify_panels
+from mast.pipeline.hypotheses import Hypothesis, pose_hypotheses
+from mast.pipeline.identification import PanelIdentification, identify_panels
 from mast.pipeline.locator import LocatorConfig, _choose, _settled, _survey_index
-from mast.pipeline.segmentation import segment_scan
+from mast.pipeline.segmentation import Segmentation, segment_scan
 from mast.pipeline.verification import Refinement, verify
-from mast.sim import simulate_scan
+from mast.sim import SimulatedScan, simulate_scan
 
 MODEL = ACCURACY_CONFIGS[0]
+
+
+def _first_owed_scan() -> tuple[
+    LocatorConfig,
+    SimulatedScan,
+    SurveyIndex,
+    PanelSet,
+    Segmentation,
+    PanelIdentification,
+    list[Hypothesis],
+]:
+    """The accuracy benchmark's first owed scan, segmented, identified and its pose
+    hypotheses made."""
+    cfg = LocatorConfig(range_sigma_m=MODEL.range_sigma_m, survey_sigma_m=0.0)
+    scene, shot = next(iter(owed_poses(MODEL, 1, 0)))
+    sim = simulate_scan(scene.world, shot.pose, MODEL, rng=np.random.default_rng([0, 7]))
+    index, panels = _survey_index(scene.survey, sim.scan.range_max_m)
+    seg = segment_scan(sim.scan, cfg.segmentation)
+    ident = identify_panels(seg, index.representatives, cfg.identification)
+    hyps = pose_hypotheses(ident, seg, index, cfg.hypotheses)
+    return cfg, sim, index, panels, seg, ident, hyps
 
 
 def test_leaving_one_beacon_poses_unjudged_never_changes_the_choice() -> None:
@@ -91,13 +114,7 @@ def test_a_later_pose_the_same_as_a_set_aside_one_is_skipped_if_that_one_is_kept
 
     from mast.pipeline import verification
 
-    cfg = LocatorConfig(range_sigma_m=MODEL.range_sigma_m, survey_sigma_m=0.0)
-    scene, shot = next(iter(owed_poses(MODEL, 1, 0)))
-    sim = simulate_scan(scene.world, shot.pose, MODEL, rng=np.random.default_rng([0, 7]))
-    index, panels = _survey_index(scene.survey, sim.scan.range_max_m)
-    seg = segment_scan(sim.scan, cfg.segmentation)
-    ident = identify_panels(seg, index.representatives, cfg.identification)
-    hyps = pose_hypotheses(ident, seg, index, cfg.hypotheses)
+    cfg, sim, index, panels, seg, ident, hyps = _first_owed_scan()
     first = hyps[0]
     moved = replace(
         first,
@@ -191,13 +208,7 @@ def test_look_alikes_out_of_reach_of_a_second_beacon_are_not_refined(
 def test_kept_icp_is_taken_only_for_the_very_hypothesis_it_was_made_for() -> None:
     """``verify(icp_memo=...)`` reuses a hypothesis' ICP by its id; an id a freed
     hypothesis left to another object must not hand that object the other's ICP."""
-    cfg = LocatorConfig(range_sigma_m=MODEL.range_sigma_m, survey_sigma_m=0.0)
-    scene, shot = next(iter(owed_poses(MODEL, 1, 0)))
-    sim = simulate_scan(scene.world, shot.pose, MODEL, rng=np.random.default_rng([0, 7]))
-    index, panels = _survey_index(scene.survey, sim.scan.range_max_m)
-    seg = segment_scan(sim.scan, cfg.segmentation)
-    ident = identify_panels(seg, index.representatives, cfg.identification)
-    hyps = pose_hypotheses(ident, seg, index, cfg.hypotheses)
+    cfg, sim, index, panels, seg, ident, hyps = _first_owed_scan()
     args = (sim.scan, panels, index, ident, seg, cfg.noise, cfg.verification)
     fresh = verify(hyps[:1], *args)
     assert fresh
