@@ -193,3 +193,40 @@ def test_a_tracked_scan_is_segmented_only_when_a_corner_must_prove_a_beacon() ->
             assert k >= 44, k
     assert len(plain) >= 40
     assert set(range(44, 48)).isdisjoint(plain)
+
+
+def test_a_second_judgement_with_corners_equals_a_fresh_one() -> None:
+    """The search with corners after the one without reuses each pose's ICP, beam checks
+    and beacon tests (``verify(icp_memo=...)``): it must judge as a fresh search with
+    the corners does."""
+    from mast.pipeline.identification import identify_panels
+    from mast.pipeline.locator import _survey_index
+    from mast.pipeline.segmentation import segment_scan
+    from mast.pipeline.tracking import Prior, prior_hypotheses
+    from mast.pipeline.verification import verify
+
+    scene = drive_scene(0, scans=48)
+    cfg = _config(scene)
+    compared = 0
+    for sim in tuple(scene.iter_simulated())[40:48]:  # 44-47 need their corners
+        scan = sim.scan
+        index, panels = _survey_index(scene.survey, scan.range_max_m)
+        prior = Prior(sim.pose, 0.3, math.radians(4.0))
+        batches = prior_hypotheses(scan.points()[1], panels, prior, scan.range_max_m)
+        seg = segment_scan(scan, cfg.segmentation)
+        ident = identify_panels(seg, index.representatives, cfg.identification)
+        for batch in batches:
+            memo: dict = {}
+            common = (scan, panels, index)
+            verify(batch, *common, None, None, cfg.noise, cfg.verification, icp_memo=memo)
+            again = verify(batch, *common, ident, seg, cfg.noise, cfg.verification, icp_memo=memo)
+            fresh = verify(batch, *common, ident, seg, cfg.noise, cfg.verification)
+            assert [
+                (v.pose, v.supported, v.cornered, v.shaped, v.misfit, v.log_likelihood)
+                for v in again
+            ] == [
+                (v.pose, v.supported, v.cornered, v.shaped, v.misfit, v.log_likelihood)
+                for v in fresh
+            ]
+            compared += len(fresh)
+    assert compared >= 8

@@ -104,7 +104,9 @@ NO_FIX_REASONS: dict[str, str] = {
     "rejected": "the adjusted fix fails its global test: the returns do not fit the beacons",
 }
 
-#: The stages a fix's time is split into (:attr:`Fix.stages_s`), in the order they run.
+#: The stages a fix's time is split into (:attr:`Fix.stages_s`), in the order of a global
+#: search (with a prior, the window and verification come first, segmentation after
+#: them when the corners must decide).
 STAGES: dict[str, str] = {
     "segmentation": "the scan cut into straight lines",
     "window": "a prior's window: the bound on what it can fix, and its grid search",
@@ -572,7 +574,11 @@ def _prior_first(
     later prior's search and the global one use that segmentation. A pose fixed without
     corners is one the search with them confirms too (a corner only adds to a beacon's
     support); a scan that search would fix is fixed by it, unless the first one does.
-    A tracked scan fixed in the first search costs no segmentation.
+    A tracked scan fixed in the first search costs no segmentation. Two limits of the
+    first search: a narrow window's centre is one hypothesis, so its fix has no other
+    pose to be contested by; and poses on one beacon's returns are left unjudged once
+    the best pose has two beacons that show their shape (:func:`_settled`), so one with
+    an identified corner, which the corners would let compete, is not seen.
     """
     t0 = time.perf_counter()
     clock = _Clock()
@@ -633,8 +639,8 @@ def _prior_first(
             with clock("segmentation"):
                 seg = segment_scan(scan, searched.segmentation)
             ident = _identified(seg, ready, searched, clock)
-            if not ident.nodes:
-                continue  # without a corner the search would be the same again
+        # With the segmentation (corners or none), as every prior's search was before the
+        # first search came: the poses judged already cost only their corners' part.
         fix = tracked(window, seg, ident)
         if fix is not None:
             return fix, False
@@ -671,7 +677,8 @@ def _locate(
     icp_memo: dict[int, Refinement] | None = None,
 ) -> Fix:
     """:func:`locate` from hypotheses of the prior's own search (``from_prior``, a
-    batch of :func:`~mast.pipeline.tracking.prior_hypotheses`) or, without them, from the
+    batch of :func:`~mast.pipeline.tracking.prior_hypotheses`, or the window's centre,
+    :func:`~mast.pipeline.tracking.centre_hypotheses`) or, without them, from the
     global ones (kept inside the prior's window, if there is one), on the scan's
     segmentation ``seg`` (made once for both) and its identification ``ident`` (made
     here when not given), against the survey's index and panels (``ready``); ``t0`` is
