@@ -36,7 +36,6 @@ from mast.core.geometry import PanelSet
 from mast.core.pose import Pose2D, format_dms
 from mast.core.scan import Scan
 from mast.errors import InputError
-from mast.pipeline.identification import NodeMatch
 from mast.pipeline.locator import NO_FIX_REASONS, Fix, segmented
 from mast.pipeline.segmentation import Segment
 
@@ -285,14 +284,6 @@ def _legend(ax: Axes, *, loc: LegendLoc = "best", fontsize: float = 8, table: bo
 # --------------------------------------------------------------------------- panels
 
 
-def _segments(fix: Fix) -> tuple[Segment, ...]:
-    return () if fix.segmentation is None else fix.segmentation.segments
-
-
-def _nodes(fix: Fix) -> tuple[NodeMatch, ...]:
-    return () if fix.identification is None else fix.identification.nodes
-
-
 def _identified(fix: Fix, survey: Survey) -> dict[int, tuple[str, int]]:
     """Segment index -> (beacon id, panel number) of the panels to mark in the scan.
 
@@ -305,13 +296,13 @@ def _identified(fix: Fix, survey: Survey) -> dict[int, tuple[str, int]]:
         beam_panel = dict(
             zip(fix.observations.tolist(), fix.observation_panels.tolist(), strict=True)
         )
-        for seg in _segments(fix):
+        for seg in fix.segments:
             hits = [beam_panel[b] for b in seg.beams.tolist() if b in beam_panel]
             if hits:
                 k = max(set(hits), key=hits.count)
                 out[seg.index] = (panels.ids[panels.beacon[k]], int(panels.panel[k]))
         return out
-    for node in _nodes(fix):
+    for node in fix.nodes:
         for s, p in zip(node.segments, node.panels, strict=True):
             out.setdefault(s, (node.beacon, p))
     return out
@@ -337,7 +328,7 @@ def _scanner_panel(
     _, pts = scan.points()
     if len(pts):
         ax.plot(pts[:, 0], pts[:, 1], ".", ms=2, color=_OTHER, label="returns", zorder=1)
-    segments = _segments(fix)
+    segments = fix.segments
     ident = _identified(fix, survey)
     names = sorted({b for b, _ in ident.values()}, key=lambda b: (b not in fix.beacons, b))
     colours = _beacon_colours(names)
@@ -373,7 +364,7 @@ def _scanner_panel(
         ax.plot([], [], "-", lw=3.5, color="0.3", label=used)
     nodes = [
         n.node_scanner
-        for n in _nodes(fix)
+        for n in fix.nodes
         if all(ident.get(g, ("",))[0] == n.beacon for g in n.segments)
     ]
     if nodes:
@@ -484,7 +475,7 @@ def _mine_panel(
     here = origin.local(pose.position) if pose is not None else centre
     used, excluded = set(fix.beacons), set(fix.excluded_beacons)
     if pose is None:  # no fix: the beacons the scan's corners were taken for
-        used = {n.beacon for n in _nodes(fix)}
+        used = {n.beacon for n in fix.nodes}
     ids = _in_view(survey, view)
     crowded = len(ids) > 40
     first = {"used": True, "excluded": True, "other": True}

@@ -131,7 +131,7 @@ def _inputs_record(fix: Fix, scan: Scan | None, inputs: ReportInputs) -> dict[st
 def _corners(fix: Fix) -> list[tuple[str, int, int]]:
     """(beacon, edge, best option) of each identified corner of the beacons used, once each."""
     best: dict[tuple[str, int], int] = {}
-    for n in () if fix.identification is None else fix.identification.nodes:
+    for n in fix.nodes:
         if n.beacon in fix.beacons:
             key = (n.beacon, n.edge)
             best[key] = min(best.get(key, n.option), n.option)

@@ -125,11 +125,7 @@ def _run_shot(scene: Scene, k: int, draws: int, seed: int) -> ShotResult:
         )
         opts = " ".join(
             sorted(
-                {
-                    f"{n.beacon}e{n.edge}:{n.option}"
-                    for n in (() if fix.identification is None else fix.identification.nodes)
-                    if n.beacon in fix.beacons
-                }
+                {f"{n.beacon}e{n.edge}:{n.option}" for n in fix.nodes if n.beacon in fix.beacons}
             )
         )
     noisy = replace(shot.scanner, range_sigma_m=NOISE_M)

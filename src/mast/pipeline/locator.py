@@ -56,6 +56,7 @@ from mast.pipeline.hypotheses import (
 )
 from mast.pipeline.identification import (
     IdentificationConfig,
+    NodeMatch,
     PanelIdentification,
     identify_panels,
 )
@@ -66,7 +67,7 @@ from mast.pipeline.integrity import (
     residual_summary,
     snoop,
 )
-from mast.pipeline.segmentation import Segmentation, SegmentationConfig, segment_scan
+from mast.pipeline.segmentation import Segment, Segmentation, SegmentationConfig, segment_scan
 from mast.pipeline.tracking import (
     Prior,
     TrackingConfig,
@@ -234,6 +235,16 @@ class Fix:
     @property
     def ok(self) -> bool:
         return self.status == "fix"
+
+    @property
+    def segments(self) -> tuple[Segment, ...]:
+        """The scan's straight pieces (none for a scan fixed without its segmentation)."""
+        return () if self.segmentation is None else self.segmentation.segments
+
+    @property
+    def nodes(self) -> tuple[NodeMatch, ...]:
+        """The identified corners (none for a scan fixed without its segmentation)."""
+        return () if self.identification is None else self.identification.nodes
 
     @property
     def similarity(self) -> Similarity | None:
@@ -455,14 +466,19 @@ class Locator:
         return _prior_first(scan, ready, cfg, confined, cfg)[0], False
 
 
+def segmentation_of(fix: Fix, scan: Scan) -> Segmentation:
+    """The segmentation of the scan ``fix`` was made from, made now (with the fix's
+    configuration) when the locator fixed it without one, near a prior: for maps,
+    which draw a scan's straight pieces."""
+    return fix.segmentation or segment_scan(scan, fix.config.segmentation)
+
+
 def segmented(fix: Fix, scan: Scan, survey: Survey) -> tuple[Segmentation, PanelIdentification]:
-    """The segmentation and identification of the scan ``fix`` was made from, made now
-    (with the fix's configuration) when the locator fixed it without them, near a
-    prior: for figures and maps, which show a scan's straight pieces."""
+    """:func:`segmentation_of` and the identification of its corners: for figures."""
     if fix.segmentation is not None and fix.identification is not None:
         return fix.segmentation, fix.identification
     cfg = fix.config
-    seg = fix.segmentation or segment_scan(scan, cfg.segmentation)
+    seg = segmentation_of(fix, scan)
     index, _ = _survey_index(survey, scan.range_max_m)
     ident = identify_panels(
         seg, index.representatives, cfg.identification, survey_sigma_m=cfg.noise.survey_sigma_m

@@ -25,7 +25,7 @@ from mast.apps.report import ReportInputs, fix_record
 from mast.core.beacon import Survey
 from mast.errors import OutputError
 from mast.io.atomic import atomic_open
-from mast.pipeline.segmentation import segment_scan
+from mast.pipeline.locator import segmentation_of
 from mast.runs.model import RunSummary, Trajectory
 from mast.runs.track import Node, RunTracker, Smoother, TrackConfig
 
@@ -198,10 +198,7 @@ def track_run(
                         last_wall is None or math.dist(pose.position, last_wall) >= WALL_SPACING_M
                     ):
                         # a scan fixed near the last fix was not segmented: now it is
-                        cut = step.fix.segmentation or segment_scan(
-                            scan, step.fix.config.segmentation
-                        )
-                        walls[i] = _walls(cut.segments)
+                        walls[i] = _walls(segmentation_of(step.fix, scan).segments)
                         last_wall = pose.position
                     if progress is not None:
                         progress(summary.scans, summary.fixes)
