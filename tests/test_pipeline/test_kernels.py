@@ -228,14 +228,42 @@ def test_reach_tallies_kernel_matches_the_reference() -> None:
             ref = panels._reach_tallies_reference(
                 pts, ranges, reach, per_range, after, subset=subset
             )
-            np.testing.assert_array_equal(got[0], ref[0])
-            np.testing.assert_array_equal(got[1], ref[1])
-            seen += int(got[1].sum())
+            for g, r in zip(got, ref, strict=True):
+                np.testing.assert_array_equal(g, r)
+            seen += int(got[2].sum())
     # a point near two panels of one beacon counts once for it, and once for each panel
-    per_panel, per_beacon = panels.reach_tallies(pts, ranges, 1e6, 0.0)
+    per_panel, beacons, per_beacon = panels.reach_tallies(pts, ranges, 1e6, 0.0)
+    np.testing.assert_array_equal(beacons, np.arange(len(panels.ids)))
     np.testing.assert_array_equal(per_beacon, np.full(len(panels.ids), len(pts)))
     np.testing.assert_array_equal(per_panel, np.full(len(panels), len(pts)))
     assert seen > 0
+
+
+def test_near_many_is_near_of_each_position() -> None:
+    """The batched look-up (a k-d tree query for a mine's survey, a distance table for a
+    small one) gives each position the panels :meth:`PanelSet.near` gives it, in order."""
+    from mast.core.beacon import Beacon, Survey
+
+    small = paper_scene().survey
+    rng = np.random.default_rng(8)
+    shapes = [b.edges - b.centroid for b in small]
+    big = Survey(
+        [
+            Beacon(f"C{k}", shapes[k % len(shapes)] + rng.uniform(-400.0, 400.0, size=2))
+            for k in range(400)
+        ]
+    )
+    for survey in (small, big):
+        panels = PanelSet.from_survey(survey)
+        lo, hi = panels.a.min(axis=0), panels.a.max(axis=0)
+        positions = rng.uniform(lo, hi, size=(50, 2))
+        for radius in (0.0, 5.0, 40.0):
+            got = panels.near_many(positions, radius)
+            assert len(got) == len(positions)
+            for p, g in zip(positions, got, strict=True):
+                np.testing.assert_array_equal(g, panels.near(p, radius))
+        assert panels.near_many(np.zeros((0, 2)), 10.0) == []
+    assert sum(g.size for g in PanelSet.from_survey(big).near_many(positions, 40.0)) > 0
 
 
 def test_first_hits_kernel_matches_the_reference() -> None:

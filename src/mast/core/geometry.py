@@ -184,6 +184,37 @@ class PanelSet:
         d = np.hypot(mid[:, 0] - position[0], mid[:, 1] - position[1])
         return np.flatnonzero(d <= radius_m + 0.5 * self.length)
 
+    def near_many(self, positions: NDArray[np.float64], radius_m: float) -> list[NDArray[np.intp]]:
+        """:meth:`near` of each of ``positions`` (shape (k, 2)), the same panels in the
+        same order, looked up together: one query of the k-d tree for all of them."""
+        pos = np.asarray(positions, dtype=float).reshape(-1, 2)
+        if pos.shape[0] == 0:
+            return []
+        mid = self._mid
+        if len(self) <= _NEAR_SCAN_PANELS:
+            d = np.hypot(mid[None, :, 0] - pos[:, 0, None], mid[None, :, 1] - pos[:, 1, None])
+            close = d <= radius_m + 0.5 * self.length[None, :]
+            return [np.flatnonzero(row) for row in close]
+        half = 0.5 * float(self.length.max())
+        balls = self._mid_tree.query_ball_point(pos, radius_m + half)
+        sizes = np.array([len(b) for b in balls], dtype=np.intp)
+        found = np.fromiter(
+            (k for ball in balls for k in ball), dtype=np.intp, count=int(sizes.sum())
+        )
+        owner = np.repeat(np.arange(pos.shape[0]), sizes)
+        d = np.hypot(mid[found, 0] - pos[owner, 0], mid[found, 1] - pos[owner, 1])
+        keep = d <= radius_m + 0.5 * self.length[found]
+        # By position, then panel: each position's panels in increasing order.
+        order = np.lexsort((found, owner))
+        found, owner, keep = found[order], owner[order], keep[order]
+        ends = np.cumsum(sizes)
+        return [
+            chunk[inside]
+            for chunk, inside in zip(
+                np.split(found, ends[:-1]), np.split(keep, ends[:-1]), strict=True
+            )
+        ]
+
     def project(
         self, points_mine: NDArray[np.float64], panels: NDArray[np.intp]
     ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
@@ -260,33 +291,37 @@ class PanelSet:
         after_m: float = 0.0,
         *,
         subset: NDArray[np.intp] | None = None,
-    ) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+    ) -> tuple[NDArray[np.int64], NDArray[np.intp], NDArray[np.int64]]:
         """How many points lie within ``reach_m + per_range * range + after_m`` of each
         panel (of ``subset``; a point counts for every panel it is that close to), and
-        of any panel of each beacon (by position in :attr:`ids`; a point counts once
-        for a beacon); ``ranges`` is each point's range. Compiled
+        of any panel of each beacon (a point counts once for a beacon); ``ranges`` is
+        each point's range. Returns the panels' tallies, the beacons of ``subset``'s
+        panels (their positions in :attr:`ids`, increasing) and theirs: the cost is
+        the panels', not the survey's. Compiled
         (:func:`mast.core._kernels.reach_tallies`); :meth:`_reach_tallies_reference`
         is the same in numpy."""
         from mast.core._kernels import reach_tallies
 
         panels = np.arange(len(self)) if subset is None else subset
+        beacons, owner = np.unique(self.beacon[panels], return_inverse=True)
         if points_mine.shape[0] == 0 or panels.size == 0:
-            return np.zeros(panels.size, dtype=np.int64), np.zeros(len(self.ids), dtype=np.int64)
+            none = np.zeros(beacons.size, dtype=np.int64)
+            return np.zeros(panels.size, dtype=np.int64), beacons, none
         per_panel, per_beacon = reach_tallies(
             np.ascontiguousarray(points_mine, dtype=float).reshape(-1, 2),
             np.ascontiguousarray(ranges, dtype=float),
-            self.a,
-            self.direction,
-            self.normal,
-            self.length,
-            self.beacon,
-            np.ascontiguousarray(panels, dtype=np.intp),
+            self.a[panels],
+            self.direction[panels],
+            self.normal[panels],
+            self.length[panels],
+            owner.astype(np.intp),
+            np.arange(panels.size, dtype=np.intp),
             float(reach_m),
             float(per_range),
             float(after_m),
-            len(self.ids),
+            beacons.size,
         )
-        return per_panel, per_beacon
+        return per_panel, beacons, per_beacon
 
     def _reach_tallies_reference(
         self,
@@ -297,20 +332,21 @@ class PanelSet:
         after_m: float = 0.0,
         *,
         subset: NDArray[np.intp] | None = None,
-    ) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+    ) -> tuple[NDArray[np.int64], NDArray[np.intp], NDArray[np.int64]]:
         """:meth:`reach_tallies` in numpy (the tests compare the two)."""
         panels = np.arange(len(self)) if subset is None else subset
-        per_beacon = np.zeros(len(self.ids), dtype=np.int64)
+        beacons = np.unique(self.beacon[panels])
+        per_beacon = np.zeros(beacons.size, dtype=np.int64)
         if points_mine.shape[0] == 0 or panels.size == 0:
-            return np.zeros(panels.size, dtype=np.int64), per_beacon
+            return np.zeros(panels.size, dtype=np.int64), beacons, per_beacon
         reach = reach_m + np.asarray(ranges, dtype=float) * per_range + after_m
         t, s = self.project(points_mine, panels)
         beyond = np.maximum(np.maximum(-t, t - self.length[panels][None, :]), 0.0)
         close = beyond**2 + s**2 <= (reach**2)[:, None]
         owner = self.beacon[panels]
-        for b in np.unique(owner):
-            per_beacon[b] = int(np.any(close[:, owner == b], axis=1).sum())
-        return close.sum(axis=0).astype(np.int64), per_beacon
+        for k, b in enumerate(beacons):
+            per_beacon[k] = int(np.any(close[:, owner == b], axis=1).sum())
+        return close.sum(axis=0).astype(np.int64), beacons, per_beacon
 
     def associate(
         self,

@@ -28,6 +28,7 @@ import itertools
 import math
 from collections.abc import Iterator
 from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -273,9 +274,10 @@ def pose_hypotheses(
     # identifies many nodes, few of them of designs surveyed near each other).
     cov = functools.cache(lambda k: node_covariance(nodes[k], segmentation))
     seen = functools.cache(lambda k: _PanelsSeen.of(nodes[k], segmentation))
-    # (node i, node j, beacon of i, beacon of j (survey positions), edge of i, edge of j, spread)
-    Found = tuple[int, int, int, int, NDArray[np.float64], NDArray[np.float64], float]
-    found: list[tuple[tuple[bool, int, float], Found]] = []
+    # Per node pair, the survey's readings of it that fit: whether one beacon's two
+    # edges, the nodes' Table 1 options, the misfit, the nodes, their beacons (survey
+    # positions), edges and the spread (arrays, one row per reading).
+    found: list[tuple[NDArray[Any], ...]] = []
     # Only node pairs whose designs and edges are surveyed within reach of each other.
     keys = np.array([index.node_key(n.beacon, n.edge) for n in nodes], dtype=np.int64)
     first, second = np.triu_indices(len(nodes), 1)
@@ -324,29 +326,41 @@ def pose_hypotheses(
             s_rot, math.pi
         )
         misfit = np.maximum(mis_d, mis_r)
-        options = a.option + b.option
-        for k in np.flatnonzero(mis_r <= 1.0).tolist():
+        fits = np.flatnonzero(mis_r <= 1.0)
+        if fits.size:
+            rows = np.full(fits.size, 1, dtype=np.intp)
             found.append(
                 (
-                    (bool(one[k]), options, float(misfit[k])),
-                    (i, j, int(ba[k]), int(bb[k]), edge_a[k], edge_b[k], float(spread[k])),
+                    one[fits],
+                    rows * (a.option + b.option),
+                    misfit[fits],
+                    rows * i,
+                    rows * j,
+                    ba[fits],
+                    bb[fits],
+                    edge_a[fits],
+                    edge_b[fits],
+                    spread[fits],
                 )
             )
     # Prefer two beacons to one beacon's two edges (every look-alike of a beacon shows
     # the same two edges; two beacons' relative place is the mine's own), then nodes
-    # identified with more panels (lower Table 1 option); only those kept are solved
-    # (a mine's look-alikes past the cap never are).
-    found.sort(key=lambda f: f[0])
+    # identified with more panels (lower Table 1 option), then the better fit, in the
+    # order found on a tie; only those kept are solved (a mine's look-alikes past the
+    # cap never are).
     pairs = []
-    for (_, _, misfit_k), (i, j, ka, kb, edge_a, edge_b, spread_k) in found[
-        : config.max_pair_hypotheses
-    ]:
-        na = _renamed(nodes[i], index.beacon_id(ka))
-        nb = _renamed(nodes[j], index.beacon_id(kb))
-        sim = similarity_transform(
-            np.array([na.node_scanner, nb.node_scanner]), np.array([edge_a, edge_b])
+    if found:
+        one_k, opt_k, mis_k, i_k, j_k, ka_k, kb_k, ea_k, eb_k, sp_k = (
+            np.concatenate(column) for column in zip(*found, strict=True)
         )
-        pairs.append(Hypothesis((na, nb), sim, misfit_k, "pair", spread_k))
+        order = np.lexsort((mis_k, opt_k, one_k))[: config.max_pair_hypotheses]
+        for k in order.tolist():
+            na = _renamed(nodes[int(i_k[k])], index.beacon_id(int(ka_k[k])))
+            nb = _renamed(nodes[int(j_k[k])], index.beacon_id(int(kb_k[k])))
+            sim = similarity_transform(
+                np.array([na.node_scanner, nb.node_scanner]), np.array([ea_k[k], eb_k[k]])
+            )
+            pairs.append(Hypothesis((na, nb), sim, float(mis_k[k]), "pair", float(sp_k[k])))
 
     # Single nodes take turns (lowest Table 1 option first), so that one corner's
     # many look-alikes in a mine-wide survey cannot crowd out another corner's beacon.

@@ -363,7 +363,7 @@ def window_may_fix(
         return False
     r = np.hypot(points_scanner[:, 0], points_scanner[:, 1])
     # Returns (at the prior) within reach of each panel segment.
-    per_panel, _ = panels.reach_tallies(
+    per_panel, _, _ = panels.reach_tallies(
         prior.pose.scanner_to_mine(points_scanner), r, move, tol + margin_rad, gate_m, subset=near
     )
     owner = panels.beacon[near]

@@ -247,6 +247,9 @@ def check_beams(
     b = panels.b[sel] - cfg.edge_margin_m * panels.direction[sel]
     sigma = noise.gate_sigma_m
     span = _span(scan)
+    # The subset's beacons numbered from 0: the tallies cost the panels checked, not the
+    # survey's size.
+    beacons, owner = np.unique(panels.beacon[sel], return_inverse=True)
     counts, ll = beam_checks(
         np.asarray(pose.position, dtype=float),
         pose.azimuth,
@@ -258,8 +261,8 @@ def check_beams(
         np.ascontiguousarray(a),
         np.ascontiguousarray(b),
         np.ascontiguousarray(panels.normal[sel]),
-        np.ascontiguousarray(panels.beacon[sel], dtype=np.intp),
-        len(panels.ids),
+        owner.astype(np.intp),
+        beacons.size,
         math.sin(math.radians(cfg.min_check_incidence_deg)),
         cfg.gate_sigmas * sigma,
         sigma,
@@ -271,7 +274,7 @@ def check_beams(
     out: dict[str, BeamCheck] = {}
     for k in np.flatnonzero(counts.sum(axis=1)):
         hit_n, occ_n, thr_n, mis_n, near_n = (int(c) for c in counts[k])
-        out[panels.ids[k]] = BeamCheck(hit_n, occ_n, thr_n, mis_n, float(ll[k]), near_n)
+        out[panels.ids[beacons[k]]] = BeamCheck(hit_n, occ_n, thr_n, mis_n, float(ll[k]), near_n)
     return out
 
 
@@ -1065,12 +1068,18 @@ def verify(
     # not settle the choice.
     deferred: list[tuple[int, Hypothesis]] = []
     ranges = np.hypot(pts[:, 0], pts[:, 1])
+    # Every start's panels in reach, looked up at once (a mine's look-alikes are many).
+    starts = [h.similarity.pose() for h in hypotheses]
+    nears = panels.near_many(
+        np.array([h.similarity.translation for h in hypotheses], dtype=float).reshape(-1, 2),
+        reach,
+    )
 
     def refine(seq: int, h: Hypothesis, last: bool) -> None:
         """Refine ``h`` by ICP and keep it, set it aside or defer it (not ``last``:
         before every hypothesis has been refined once)."""
         aside = settled is not None and not last
-        start = h.similarity.pose()
+        start = starts[seq]
         at = done_poses.first_same(start)
         again = None if at is None else done[at]
         if again is not None:
@@ -1080,7 +1089,7 @@ def verify(
                 return
             refined = again
         else:
-            near = panels.near(start.position, reach)
+            near = nears[seq]
             if near.size == 0:
                 return
             if h.kind in ("single", "pair") and len(h.beacons) < min_beacons:
@@ -1139,14 +1148,14 @@ def _in_reach(
     ``gate_m``, of their panels (among ``near``). A return at range ``r`` moves by at
     most ``reach_m + r * reach_rad`` when the pose moves by ``reach_m`` and turns by
     ``reach_rad``."""
-    _, counts = panels.reach_tallies(
+    _, beacons, counts = panels.reach_tallies(
         start.scanner_to_mine(pts),
         ranges,
         cfg.look_alike_reach_m + gate_m,
         math.tan(cfg.look_alike_reach_rad),
         subset=near,
     )
-    return frozenset(panels.ids[b] for b in np.flatnonzero(counts >= 2 * cfg.min_panel_points))
+    return frozenset(panels.ids[b] for b in beacons[counts >= 2 * cfg.min_panel_points])
 
 
 def _ranked(out: list[Verified], sequence: dict[int, int]) -> list[Verified]:
