@@ -239,6 +239,44 @@ def test_reach_tallies_kernel_matches_the_reference() -> None:
     assert seen > 0
 
 
+def test_beacons_in_reach_of_many_starts_are_in_reach_of_each() -> None:
+    """The look-alikes' bound for every start in one compiled call (each beacon tested on
+    the beams pointing its way, counting stopped once it has enough) finds the beacons
+    ``_in_reach`` finds for each start alone: starts on a real scan's truth, near it,
+    far off, turned round, and scans starting anywhere in the turn."""
+    from mast.pipeline.verification import VerificationConfig, _beacons_in_reach, _in_reach
+
+    scene = paper_scene()
+    panels = PanelSet.from_survey(scene.survey)
+    cfg = VerificationConfig()
+    rng = np.random.default_rng(12)
+    found = 0
+    for k, shot in enumerate(scene.shots[:4]):
+        scan = simulate_scan(scene.world, shot.pose, shot.scanner, rng=rng).scan
+        beams, pts = scan.points()
+        angles = scan.angles_rad[beams]
+        if k % 2:  # the same returns, their beams' angles a turn on
+            angles = angles + 2.0 * math.pi
+        ranges = np.hypot(pts[:, 0], pts[:, 1])
+        starts = [shot.pose]
+        for _ in range(40):
+            off = rng.normal(0.0, [0.3, 0.3, 0.05]) * rng.choice([0.1, 1.0, 30.0])
+            starts.append(
+                Pose2D(
+                    shot.pose.easting + off[0],
+                    shot.pose.northing + off[1],
+                    (shot.pose.azimuth + off[2] + rng.choice([0.0, math.pi])) % math.tau,
+                )
+            )
+        nears = [panels.near(p.position, scan.range_max_m + 1.0) for p in starts]
+        got = _beacons_in_reach(starts, nears, pts, angles, ranges, panels, 0.05, cfg)
+        for start, near, g in zip(starts, nears, got, strict=True):
+            assert g == _in_reach(start, pts, ranges, panels, near, 0.05, cfg)
+            found += len(g)
+    assert found > 0
+    assert _beacons_in_reach([], [], pts, angles, ranges, panels, 0.05, cfg) == []
+
+
 def test_near_many_is_near_of_each_position() -> None:
     """The batched look-up (a k-d tree query for a mine's survey, a distance table for a
     small one) gives each position the panels :meth:`PanelSet.near` gives it, in order."""

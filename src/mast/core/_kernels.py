@@ -21,6 +21,7 @@ __all__ = [
     "adjust_rounds",
     "associate",
     "beacon_statistics",
+    "beacons_in_reach",
     "beam_checks",
     "bound",
     "field_pyramid",
@@ -366,6 +367,114 @@ def _reach_tallies(
             c += mark[p]
         per_beacon[b] = c
     return per_panel, per_beacon
+
+
+def _beacons_in_reach(
+    points: NDArray[np.float64],
+    angles: NDArray[np.float64],
+    ranges: NDArray[np.float64],
+    starts: NDArray[np.float64],
+    near_ptr: NDArray[np.intp],
+    near: NDArray[np.intp],
+    a: NDArray[np.float64],
+    direction: NDArray[np.float64],
+    normal: NDArray[np.float64],
+    length: NDArray[np.float64],
+    beacon: NDArray[np.intp],
+    centre: NDArray[np.float64],
+    radius: NDArray[np.float64],
+    reach: float,
+    per_range: float,
+    need: int,
+) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+    """For each start pose (rows E, N, azimuth), the beacons with at least ``need``
+    returns within ``reach + per_range * range`` of their panels among the start's
+    ``near[near_ptr[h]:near_ptr[h + 1]]`` (a return counts once for a beacon): the
+    beacons ``verification._in_reach`` finds, for every start in one call.
+
+    ``points`` are the returns in the scanner frame, ``angles`` their beams' angles
+    (increasing, a turn at most), ``ranges`` their ranges; ``beacon[q]`` is panel
+    ``q``'s beacon, whose panels all lie within ``radius`` of ``centre`` (indexed by
+    beacon). Each beacon is tested only on the beams pointing its way, and counting
+    stops at ``need``: a return at bearing ``d`` off the direction of a centre ``D``
+    away lies at least ``D sin(d)`` from it (``d`` up to a right angle; beyond, at
+    least ``D``), so when ``D`` exceeds ``g = radius + reach + per_range * (the
+    farthest range)``, a return more than ``asin(g / D)`` off that direction is farther
+    than its reach from every panel of the beacon. A point's mine-frame place is
+    ``Pose2D.scanner_to_mine``'s arithmetic. Returns the beacons found, start after
+    start, and where each start's begin (``ptr[h]:ptr[h + 1]``).
+    """
+    k_starts = starts.shape[0]
+    n = points.shape[0]
+    ptr = np.zeros(k_starts + 1, dtype=np.intp)
+    found = np.empty(max(near.shape[0], 1), dtype=np.intp)
+    got = 0
+    far = 0.0
+    for i in range(n):
+        far = max(far, ranges[i])
+    two_pi = 2.0 * math.pi
+    lo_hi = np.empty((3, 2), dtype=np.intp)
+    for h in range(k_starts):
+        e, nn, az = starts[h, 0], starts[h, 1], starts[h, 2]
+        sa, ca = math.sin(az), math.cos(az)
+        rotation = math.pi / 2 - az
+        first, last = near_ptr[h], near_ptr[h + 1]
+        for j in range(first, last):
+            b = beacon[near[j]]
+            repeat = False
+            for jj in range(first, j):
+                if beacon[near[jj]] == b:
+                    repeat = True
+                    break
+            if repeat:
+                continue  # this beacon was counted at its first panel
+            dx, dy = centre[b, 0] - e, centre[b, 1] - nn
+            dist = math.hypot(dx, dy)
+            grow = radius[b] + reach + per_range * far
+            windows = 0
+            if dist <= grow:
+                lo_hi[0, 0], lo_hi[0, 1] = 0, n
+                windows = 1
+            else:
+                half = math.asin(grow / dist) + 1e-9
+                # The beam angle of the centre's direction, a turn at most above the first
+                # beam's (the beams span a turn at most).
+                bearing = math.atan2(dy, dx) - rotation
+                bearing = angles[0] + (bearing - angles[0]) % two_pi
+                for shift in (-two_pi, 0.0, two_pi):
+                    lo = np.searchsorted(angles, bearing - half + shift, side="left")
+                    hi = np.searchsorted(angles, bearing + half + shift, side="right")
+                    if hi > lo:
+                        lo_hi[windows, 0], lo_hi[windows, 1] = lo, hi
+                        windows += 1
+            count = 0
+            for w in range(windows):
+                for p in range(lo_hi[w, 0], lo_hi[w, 1]):
+                    x, y = points[p, 0], points[p, 1]
+                    mx = sa * x - ca * y + e
+                    my = ca * x + sa * y + nn
+                    r = reach + per_range * ranges[p]
+                    for jj in range(j, last):
+                        q = near[jj]
+                        if beacon[q] != b:
+                            continue
+                        rx = mx - a[q, 0]
+                        ry = my - a[q, 1]
+                        t = rx * direction[q, 0] + ry * direction[q, 1]
+                        s = rx * normal[q, 0] + ry * normal[q, 1]
+                        over = max(max(-t, t - length[q]), 0.0)
+                        if over * over + s * s <= r * r:
+                            count += 1
+                            break
+                    if count >= need:
+                        break
+                if count >= need:
+                    break
+            if count >= need:
+                found[got] = b
+                got += 1
+        ptr[h + 1] = got
+    return found[:got], ptr
 
 
 def _first_same(
@@ -2041,6 +2150,7 @@ icp_stages: Callable[..., Any] = njit(cache=True, nogil=True)(_icp_stages)
 _close_to_jit: Callable[..., None] = njit(cache=True, nogil=True)(_close_to)
 within: Callable[..., Any] = njit(cache=True, nogil=True)(_within)
 reach_tallies: Callable[..., Any] = njit(cache=True, nogil=True)(_reach_tallies)
+beacons_in_reach: Callable[..., Any] = njit(cache=True, nogil=True)(_beacons_in_reach)
 first_same: Callable[..., int] = njit(cache=True, nogil=True)(_first_same)
 window_scores: Callable[..., NDArray[np.float64]] = njit(cache=True, nogil=True)(_window_scores)
 first_hits: Callable[..., Any] = njit(cache=True, nogil=True)(_first_hits)

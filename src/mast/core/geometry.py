@@ -323,6 +323,25 @@ class PanelSet:
         )
         return per_panel, beacons, per_beacon
 
+    @functools.cached_property
+    def discs(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Per beacon (by position in :attr:`ids`), a disc holding all its panels: the
+        middle of their ends' box, and the farthest end's distance from it (a hair
+        more, against rounding)."""
+        centre = np.zeros((len(self.ids), 2))
+        radius = np.zeros(len(self.ids))
+        ends = np.concatenate([self.a, self.b])
+        owner = np.concatenate([self.beacon, self.beacon])
+        lo = np.full((len(self.ids), 2), np.inf)
+        hi = np.full((len(self.ids), 2), -np.inf)
+        np.minimum.at(lo, owner, ends)
+        np.maximum.at(hi, owner, ends)
+        seen = np.isfinite(lo[:, 0])
+        centre[seen] = 0.5 * (lo[seen] + hi[seen])
+        far = np.hypot(*(ends - centre[owner]).T)
+        np.maximum.at(radius, owner, far)
+        return centre, radius * (1.0 + 1e-9) + 1e-9
+
     def _reach_tallies_reference(
         self,
         points_mine: NDArray[np.float64],

@@ -987,7 +987,8 @@ def verify(
     is not mistaken for it), so that the same hypotheses verified again (with the
     corners, after a search without them) are neither refined nor checked twice.
     """
-    _, pts = scan.points()
+    beams, pts = scan.points()
+    angles = scan.angles_rad[beams]
     final_gate = cfg.gate_sigmas * noise.gate_sigma_m
     gates = (*cfg.coarse_gates_m, final_gate)
     reach = scan.range_max_m + 1.0
@@ -1068,11 +1069,33 @@ def verify(
     # not settle the choice.
     deferred: list[tuple[int, Hypothesis]] = []
     ranges = np.hypot(pts[:, 0], pts[:, 1])
-    # Every start's panels in reach, looked up at once (a mine's look-alikes are many).
+    # Every start's panels in reach, looked up at once (a mine's look-alikes are many),
+    # and the beacons that could gather returns at each one-beacon start's refined pose.
     starts = [h.similarity.pose() for h in hypotheses]
     nears = panels.near_many(
         np.array([h.similarity.translation for h in hypotheses], dtype=float).reshape(-1, 2),
         reach,
+    )
+    one_beacon = [
+        seq
+        for seq, h in enumerate(hypotheses)
+        if h.kind in ("single", "pair") and len(h.beacons) < min_beacons
+    ]
+    in_reach = dict(
+        zip(
+            one_beacon,
+            _beacons_in_reach(
+                [starts[k] for k in one_beacon],
+                [nears[k] for k in one_beacon],
+                pts,
+                angles,
+                ranges,
+                panels,
+                final_gate,
+                cfg,
+            ),
+            strict=True,
+        )
     )
 
     def refine(seq: int, h: Hypothesis, last: bool) -> None:
@@ -1093,7 +1116,7 @@ def verify(
             if near.size == 0:
                 return
             if h.kind in ("single", "pair") and len(h.beacons) < min_beacons:
-                may = _in_reach(start, pts, ranges, panels, near, final_gate, cfg)
+                may = in_reach[seq]
                 if not set(h.beacons) <= may:
                     return  # its beacon cannot gather the returns to support any pose
                 if aside and len(may) < min_beacons:
@@ -1133,6 +1156,48 @@ def verify(
     return _ranked(out, sequence)
 
 
+def _beacons_in_reach(
+    starts: list[Pose2D],
+    nears: list[NDArray[np.intp]],
+    pts: NDArray[np.float64],
+    angles: NDArray[np.float64],
+    ranges: NDArray[np.float64],
+    panels: PanelSet,
+    gate_m: float,
+    cfg: VerificationConfig,
+) -> list[frozenset[str]]:
+    """:func:`_in_reach` of every start (its panels in reach ``nears``) in one compiled
+    call (:func:`mast.core._kernels.beacons_in_reach`): each beacon tested only on the
+    beams pointing its way (``angles``, increasing), and only until it has enough. The
+    tests compare the two."""
+    from mast.core._kernels import beacons_in_reach
+
+    if not starts:
+        return []
+    centre, radius = panels.discs
+    sizes = np.array([n.size for n in nears], dtype=np.intp)
+    found, ptr = beacons_in_reach(
+        np.ascontiguousarray(pts, dtype=float).reshape(-1, 2),
+        np.ascontiguousarray(angles, dtype=float),
+        np.ascontiguousarray(ranges, dtype=float),
+        np.array([(p.easting, p.northing, p.azimuth) for p in starts], dtype=float),
+        np.concatenate([[0], np.cumsum(sizes)]).astype(np.intp),
+        np.concatenate(nears).astype(np.intp),
+        panels.a,
+        panels.direction,
+        panels.normal,
+        panels.length,
+        panels.beacon,
+        centre,
+        radius,
+        cfg.look_alike_reach_m + gate_m,
+        math.tan(cfg.look_alike_reach_rad),
+        2 * cfg.min_panel_points,
+    )
+    ids = panels.ids
+    return [frozenset(ids[b] for b in found[ptr[k] : ptr[k + 1]]) for k in range(len(starts))]
+
+
 def _in_reach(
     start: Pose2D,
     pts: NDArray[np.float64],
@@ -1147,7 +1212,8 @@ def _in_reach(
     ``look_alike_reach_m`` and ``look_alike_reach_rad`` of the start, and the gate
     ``gate_m``, of their panels (among ``near``). A return at range ``r`` moves by at
     most ``reach_m + r * reach_rad`` when the pose moves by ``reach_m`` and turns by
-    ``reach_rad``."""
+    ``reach_rad``. The reference of :func:`_beacons_in_reach`, which verification
+    uses."""
     _, beacons, counts = panels.reach_tallies(
         start.scanner_to_mine(pts),
         ranges,
