@@ -192,6 +192,7 @@ def test_icp_kernel_matches_the_reference() -> None:
             0.0, abs=1e-11
         )
         np.testing.assert_array_equal(got.panel, ref.panel)
+        np.testing.assert_allclose(got.residual_m, ref.residual_m, rtol=0.0, atol=1e-9)
     assert converged >= len(cases) // 2
 
 

@@ -29,6 +29,7 @@ __all__ = [
     "first_same",
     "gauss_newton",
     "group_residuals",
+    "icp_refine",
     "icp_stages",
     "information",
     "line_fits",
@@ -602,6 +603,80 @@ def _icp_stages(
                 converged = True
                 break
     return e, nn, az, total, converged
+
+
+def _icp_refine(
+    points: NDArray[np.float64],
+    easting: float,
+    northing: float,
+    azimuth: float,
+    a: NDArray[np.float64],
+    direction: NDArray[np.float64],
+    normal: NDArray[np.float64],
+    length: NDArray[np.float64],
+    panels: NDArray[np.intp],
+    gates: NDArray[np.float64],
+    max_iterations: int,
+    tolerance_m: float,
+    tolerance_rad: float,
+) -> tuple[float, float, float, int, bool, NDArray[np.intp], NDArray[np.float64]]:
+    """``alignment.icp_point_to_line`` in one call: the returns and ``panels`` within
+    twice the widest gate (plus 5 cm) of each other at the start
+    (:func:`_within`), :func:`_icp_stages` on them, and every return associated at the
+    pose reached within the last gate (:func:`_associate`; residual NaN for none).
+    A return's mine-frame place is :func:`_icp_stages`' arithmetic.
+
+    Returns ``(E, N, azimuth, iterations, converged, panel, residual)``.
+    """
+    n = points.shape[0]
+    m = np.empty((n, 2))
+    sa, ca = math.sin(azimuth), math.cos(azimuth)
+    for i in range(n):
+        x, y = points[i, 0], points[i, 1]
+        m[i, 0] = sa * x - ca * y + easting
+        m[i, 1] = ca * x + sa * y + northing
+    widest = gates[0]
+    for k in range(gates.shape[0]):
+        widest = max(widest, gates[k])
+    near, reached = _within_jit(m, a, direction, normal, length, panels, 2.0 * widest + 0.05)
+    count = 0
+    for i in range(n):
+        if near[i]:
+            count += 1
+    close = np.empty((count, 2))
+    c = 0
+    for i in range(n):
+        if near[i]:
+            close[c, 0] = points[i, 0]
+            close[c, 1] = points[i, 1]
+            c += 1
+    e, nn, az, total, converged = _icp_stages_jit(
+        close,
+        easting,
+        northing,
+        azimuth,
+        a,
+        direction,
+        normal,
+        length,
+        panels[reached],
+        gates,
+        max_iterations,
+        tolerance_m,
+        tolerance_rad,
+    )
+    sa, ca = math.sin(az), math.cos(az)
+    for i in range(n):
+        x, y = points[i, 0], points[i, 1]
+        m[i, 0] = sa * x - ca * y + e
+        m[i, 1] = ca * x + sa * y + nn
+    panel, dist = _associate_jit(
+        m, a, direction, normal, length, panels, gates[gates.shape[0] - 1 :]
+    )
+    for i in range(n):
+        if panel[i] < 0:
+            dist[i] = np.nan
+    return e, nn, az, total, converged, panel, dist
 
 
 def _window_scores(
@@ -2147,8 +2222,11 @@ beam_checks: Callable[..., Any] = njit(cache=True, nogil=True)(_beam_checks)
 associate: Callable[..., Any] = njit(cache=True, nogil=True)(_associate)
 _associate_jit = associate
 icp_stages: Callable[..., Any] = njit(cache=True, nogil=True)(_icp_stages)
+_icp_stages_jit = icp_stages
 _close_to_jit: Callable[..., None] = njit(cache=True, nogil=True)(_close_to)
 within: Callable[..., Any] = njit(cache=True, nogil=True)(_within)
+_within_jit = within
+icp_refine: Callable[..., Any] = njit(cache=True, nogil=True)(_icp_refine)
 reach_tallies: Callable[..., Any] = njit(cache=True, nogil=True)(_reach_tallies)
 beacons_in_reach: Callable[..., Any] = njit(cache=True, nogil=True)(_beacons_in_reach)
 first_same: Callable[..., int] = njit(cache=True, nogil=True)(_first_same)

@@ -149,16 +149,13 @@ def icp_point_to_line(
         The last stage stops when a step moves the pose less than this; the
         pose is a start for the adjustment, which iterates to full precision.
 
-    The iterations are compiled (:func:`mast.core._kernels.icp_stages`);
+    Compiled end to end (:func:`mast.core._kernels.icp_refine`);
     :func:`_icp_reference` is the same in numpy (the tests compare the two).
     """
-    from mast.core._kernels import icp_stages
+    from mast.core._kernels import icp_refine
 
-    near, reached = panels.within(
-        pose.scanner_to_mine(points_scanner), 2.0 * max(gates_m) + 0.05, subset=subset
-    )
-    e, n, az, total, converged = icp_stages(
-        np.ascontiguousarray(points_scanner[near], dtype=float).reshape(-1, 2),
+    e, n, az, total, converged, panel, resid = icp_refine(
+        np.ascontiguousarray(points_scanner, dtype=float).reshape(-1, 2),
         pose.easting,
         pose.northing,
         pose.azimuth,
@@ -166,17 +163,15 @@ def icp_point_to_line(
         panels.direction,
         panels.normal,
         panels.length,
-        np.ascontiguousarray(reached, dtype=np.intp),
+        np.arange(len(panels)) if subset is None else np.ascontiguousarray(subset, dtype=np.intp),
         np.asarray(gates_m, dtype=float),
         max_iterations,
         tolerance_m,
         tolerance_rad,
     )
-    p = Pose2D(float(e), float(n), float(az))
-    m = p.scanner_to_mine(points_scanner)
-    panel, dist = panels.associate(m, gates_m[-1], subset=subset)
-    resid = np.where(panel >= 0, dist, np.nan)
-    return IcpResult(p, int(total), bool(converged), panel, resid)
+    return IcpResult(
+        Pose2D(float(e), float(n), float(az)), int(total), bool(converged), panel, resid
+    )
 
 
 def _icp_reference(
