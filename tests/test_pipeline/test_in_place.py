@@ -1,6 +1,7 @@
 """Whether a beacon's returns lie on its surveyed panels within their noise."""
 
 import math
+from dataclasses import replace
 
 import numpy as np
 
@@ -44,3 +45,39 @@ def test_a_beam_grazing_its_panel_carries_no_range_to_misfit_with() -> None:
     # Within 2 degrees of grazing the footprint spreads along the whole panel (the
     # adjustment leaves such beams out too): its return is not held against the beacon.
     assert _case(0.08, grazing=True)
+
+
+def test_the_compiled_test_is_the_numpy_one_on_scans() -> None:
+    """``_in_place`` (compiled) and ``_in_place_reference`` (numpy) agree for every
+    beacon at poses ICP reaches from the truth and from starts around it."""
+    from mast.pipeline.alignment import icp_point_to_line
+    from mast.pipeline.verification import _in_place_reference
+    from mast.sim import paper_scene, simulate_scan
+
+    scene = paper_scene()
+    panels = PanelSet.from_survey(scene.survey)
+    rng = np.random.default_rng(5)
+    cfg = VerificationConfig()
+    said = {True: 0, False: 0}
+    for shot in scene.shots[:6]:
+        scanner = replace(shot.scanner, range_sigma_m=0.01)
+        scan = simulate_scan(scene.world, shot.pose, scanner, rng=rng).scan
+        pts = scan.points()[1]
+        for _ in range(6):
+            off = rng.normal(0.0, [0.05, 0.05, 0.01])
+            start = Pose2D(
+                shot.pose.easting + off[0],
+                shot.pose.northing + off[1],
+                (shot.pose.azimuth + off[2]) % math.tau,
+            )
+            icp = icp_point_to_line(pts, start, panels, gates_m=(0.15, 0.05))
+            mine = icp.pose.scanner_to_mine(pts)
+            for beacon in scene.survey.ids:
+                # About the scanner's noise, and a noise too small for its returns.
+                sigma = float(rng.choice([0.012, 0.002]))
+                noise = NoiseModel(range_sigma_m=sigma, angle_sigma_rad=1e-4, survey_sigma_m=0.0)
+                got = _in_place(icp, mine, panels, beacon, noise, cfg)
+                assert got == _in_place_reference(icp, mine, panels, beacon, noise, cfg)
+                said[got] += 1
+    assert said[True] > 0, said
+    assert said[False] > 0, said

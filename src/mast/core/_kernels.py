@@ -31,6 +31,7 @@ __all__ = [
     "group_residuals",
     "icp_refine",
     "icp_stages",
+    "in_place_chi",
     "information",
     "line_fits",
     "near_pose",
@@ -677,6 +678,84 @@ def _icp_refine(
         if panel[i] < 0:
             dist[i] = np.nan
     return e, nn, az, total, converged, panel, dist
+
+
+def _in_place_chi(
+    points: NDArray[np.float64],
+    origin: NDArray[np.float64],
+    panel_of: NDArray[np.intp],
+    residual: NDArray[np.float64],
+    mine: NDArray[np.intp],
+    number: NDArray[np.intp],
+    a: NDArray[np.float64],
+    direction: NDArray[np.float64],
+    normal: NDArray[np.float64],
+    length: NDArray[np.float64],
+    edge_margin: float,
+    jump: float,
+    min_cos: float,
+    range_sigma: float,
+    angle_sigma: float,
+    floor: float,
+    survey_sigma: float,
+) -> tuple[float, int]:
+    """``verification._in_place_reference``'s chi-square and its count of returns: the
+    returns matched (``panel_of``, residuals ``residual``) to a beacon's panels
+    (``mine``; ``number`` holds every panel's number on its beacon), less those at its
+    silhouette (a neighbouring return, off the beacon, more than ``jump`` farther from
+    ``origin``), within ``edge_margin`` of its free ends, or within ``min_cos`` of
+    grazing, each residual weighed by the noise across its own panel."""
+    n = points.shape[0]
+    ours = np.zeros(n, dtype=np.bool_)
+    first, last = number[mine[0]], number[mine[0]]
+    for j in range(mine.shape[0]):
+        first = min(first, number[mine[j]])
+        last = max(last, number[mine[j]])
+    for i in range(n):
+        q = panel_of[i]
+        if q < 0:
+            continue
+        for j in range(mine.shape[0]):
+            if mine[j] == q:
+                ours[i] = True
+                break
+    chi = 0.0
+    count = 0
+    ox, oy = origin[0], origin[1]
+    for i in range(n):
+        if not ours[i]:
+            continue
+        rx, ry = points[i, 0] - ox, points[i, 1] - oy
+        rho = math.hypot(rx, ry)
+        edge = False
+        for j in (i - 1, i + 1):
+            if (
+                j >= 0
+                and j < n
+                and not ours[j]
+                and math.hypot(points[j, 0] - ox, points[j, 1] - oy) - rho > jump
+            ):
+                edge = True
+        if edge:
+            continue
+        q = panel_of[i]
+        t = (points[i, 0] - a[q, 0]) * direction[q, 0] + (points[i, 1] - a[q, 1]) * direction[q, 1]
+        if number[q] == first and t < edge_margin:
+            continue
+        if number[q] == last and t > length[q] - edge_margin:
+            continue
+        d = rho if rho > 0.0 else 1.0
+        cos_n = abs((rx / d) * normal[q, 0] + (ry / d) * normal[q, 1])
+        if not cos_n > min_cos:
+            continue
+        across = range_sigma * max(cos_n, floor)
+        spread = rho * angle_sigma
+        var = across * across + spread * spread * (1.0 - cos_n * cos_n)
+        den = var + survey_sigma * survey_sigma
+        # A noiseless model (numpy's division gives inf or NaN): the test fails.
+        chi += residual[i] * residual[i] / den if den > 0.0 else math.inf
+        count += 1
+    return chi, count
 
 
 def _window_scores(
@@ -2227,6 +2306,7 @@ _close_to_jit: Callable[..., None] = njit(cache=True, nogil=True)(_close_to)
 within: Callable[..., Any] = njit(cache=True, nogil=True)(_within)
 _within_jit = within
 icp_refine: Callable[..., Any] = njit(cache=True, nogil=True)(_icp_refine)
+in_place_chi: Callable[..., Any] = njit(cache=True, nogil=True)(_in_place_chi)
 reach_tallies: Callable[..., Any] = njit(cache=True, nogil=True)(_reach_tallies)
 beacons_in_reach: Callable[..., Any] = njit(cache=True, nogil=True)(_beacons_in_reach)
 first_same: Callable[..., int] = njit(cache=True, nogil=True)(_first_same)

@@ -323,6 +323,17 @@ class PanelSet:
         )
         return per_panel, beacons, per_beacon
 
+    def of_beacon(self, number: int) -> NDArray[np.intp]:
+        """The panels of beacon ``number`` (its position in :attr:`ids`), in order."""
+        order, starts = self._by_beacon
+        return order[starts[number] : starts[number + 1]]
+
+    @functools.cached_property
+    def _by_beacon(self) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+        order = np.argsort(self.beacon, kind="stable").astype(np.intp)
+        counts = np.bincount(self.beacon, minlength=len(self.ids))
+        return order, np.concatenate([[0], np.cumsum(counts)]).astype(np.intp)
+
     @functools.cached_property
     def discs(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """Per beacon (by position in :attr:`ids`), a disc holding all its panels: the

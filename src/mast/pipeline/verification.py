@@ -568,8 +568,43 @@ def _in_place(
     out: there a beam may as well meet the rock the beacon is mounted on; so are
     beams within 2 degrees of grazing their panel; and so are
     returns at the beacon's silhouette (the next return, off the beacon, lies more than
-    a jump behind: :mod:`mast.pipeline.edges`), which may be mixed pixels.
+    a jump behind: :mod:`mast.pipeline.edges`), which may be mixed pixels. Compiled
+    (:func:`mast.core._kernels.in_place_chi`); :func:`_in_place_reference` is the same
+    in numpy.
     """
+    from mast.core._kernels import in_place_chi
+
+    chi, count = in_place_chi(
+        np.ascontiguousarray(points_mine, dtype=float).reshape(-1, 2),
+        np.asarray(icp.pose.position, dtype=float),
+        np.ascontiguousarray(icp.panel, dtype=np.intp),
+        np.ascontiguousarray(icp.residual_m, dtype=float),
+        panels.of_beacon(panels.number[beacon]),
+        panels.panel,
+        panels.a,
+        panels.direction,
+        panels.normal,
+        panels.length,
+        cfg.edge_margin_m,
+        jump_m(noise.range_sigma_m),
+        MIN_INCIDENCE_COS,
+        noise.range_sigma_m,
+        noise.angle_sigma_rad,
+        cfg.grazing_noise_floor,
+        noise.survey_sigma_m,
+    )
+    return count > 0 and chi2_sf(chi, count) > cfg.straight_alpha
+
+
+def _in_place_reference(
+    icp: IcpResult,
+    points_mine: NDArray[np.float64],
+    panels: PanelSet,
+    beacon: str,
+    noise: NoiseModel,
+    cfg: VerificationConfig,
+) -> bool:
+    """:func:`_in_place` in numpy (the tests compare the two)."""
     mine = np.flatnonzero(panels.beacon == panels.number[beacon])
     numbers = panels.panel[mine]
     ours = np.isin(icp.panel, mine)
