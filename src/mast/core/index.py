@@ -11,6 +11,7 @@ edge pairs of that length by bisection.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
 from typing import Any
@@ -295,6 +296,49 @@ class SurveyIndex:
         if self._codes.size == 0:
             return np.zeros(np.broadcast(keys_a, keys_b).shape, dtype=bool)
         return self._buckets_of(keys_a, keys_b)[1]
+
+    @functools.cached_property
+    def key_pairs(self) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+        """The pairs of keys ``(low, high)``, ``low <= high``, that have a bucket: the
+        (design, edge) pairs surveyed within reach of each other."""
+        width = max(len(self.designs) * len(NODE_EDGES), 1)
+        low, high = np.divmod(self._codes, width)
+        return low.astype(np.int64), high.astype(np.int64)
+
+    def pairs_to_look_up(
+        self, keys: NDArray[np.int64]
+    ) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+        """The pairs ``i < j`` of ``keys`` (a scan's node keys) whose keys have a bucket
+        (:meth:`have_pairs`), in the order of ``numpy.triu_indices``: found from the
+        buckets of the keys present, so that a survey of many designs, whose every corner
+        is read as a node of many of them, costs the pairs that can be looked up, not
+        every pair of nodes."""
+        keys = np.asarray(keys, dtype=np.int64)
+        empty = np.zeros(0, dtype=np.intp)
+        if self._codes.size == 0 or keys.size < 2:
+            return empty, empty
+        width = max(len(self.designs) * len(NODE_EDGES), 1)
+        low, high = self.key_pairs
+        present = np.zeros(width, dtype=bool)
+        present[keys] = True
+        both = present[low] & present[high]
+        low, high = low[both], high[both]
+        # Nodes grouped by key: ``order[first[k]:first[k + 1]]`` hold key k.
+        order = np.argsort(keys, kind="stable").astype(np.intp)
+        first = np.searchsorted(keys[order], np.arange(width + 1)).astype(np.intp)
+        size_a = first[low + 1] - first[low]
+        size_b = first[high + 1] - first[high]
+        # Every node of the low key with every node of the high key, bucket by bucket.
+        per = size_a * size_b
+        bucket = np.repeat(np.arange(low.size), per)
+        offset = np.arange(bucket.size) - np.repeat(np.cumsum(per) - per, per)
+        a = order[first[low[bucket]] + offset // size_b[bucket]]
+        b = order[first[high[bucket]] + offset % size_b[bucket]]
+        keep = (low[bucket] != high[bucket]) | (a < b)
+        a, b = a[keep], b[keep]
+        i, j = np.minimum(a, b), np.maximum(a, b)
+        at = np.lexsort((j, i))
+        return i[at].astype(np.intp), j[at].astype(np.intp)
 
     def pair_counts(
         self,

@@ -280,9 +280,24 @@ def pose_hypotheses(
     found: list[tuple[NDArray[Any], ...]] = []
     # Only node pairs whose designs and edges are surveyed within reach of each other.
     keys = np.array([index.node_key(n.beacon, n.edge) for n in nodes], dtype=np.int64)
-    first, second = np.triu_indices(len(nodes), 1)
-    looked_up = index.have_pairs(keys[first], keys[second])
-    for i, j in zip(first[looked_up].tolist(), second[looked_up].tolist(), strict=True):
+    first, second = index.pairs_to_look_up(keys)
+    # Only pairs the survey holds an edge pair for at their distance (the tolerance a
+    # hair wider than the one below, so none it takes is left out): with many designs
+    # a scan's corners are read as nodes of many, and few of their pairs fit.
+    if first.size:
+        xy = np.array([n.node_scanner for n in nodes], dtype=float).reshape(-1, 2)
+        gap = xy[second] - xy[first]
+        dist = np.hypot(gap[:, 0], gap[:, 1])
+        u = gap / np.where(dist > 0, dist, 1.0)[:, None]
+        covs = np.zeros((len(nodes), 2, 2))
+        for k in np.union1d(first, second).tolist():
+            covs[k] = cov(k)
+        both = covs[first] + covs[second]
+        var = np.einsum("ki,kij,kj->k", u, both, u) + 2 * survey_sigma_m**2
+        tol = config.sigmas * np.sqrt(np.maximum(var, 0.0)) * (1.0 + 1e-9) + 1e-12
+        held = index.pair_counts(keys[first], keys[second], dist, tol) > 0
+        first, second = first[held], second[held]
+    for i, j in zip(first.tolist(), second.tolist(), strict=True):
         a, b = nodes[i], nodes[j]
         shared = bool(set(a.segments) & set(b.segments))
         if shared and a.beacon != b.beacon:
@@ -432,16 +447,32 @@ def panel_hypotheses(
     ]
     if not apart:
         return []
-    designs = [c[1].tolist() for c in cands]
-    combos = [
-        (at, k_a, k_b)
-        for at, (i, j, _) in enumerate(apart)
-        for k_a in designs[i]
-        for k_b in designs[j]
-    ]
-    owner, ka_all, kb_all = (np.array(c, dtype=np.int64) for c in zip(*combos, strict=True))
-    near = index.have_pairs(keys[ka_all], keys[kb_all])
-    owner, ka_all, kb_all = owner[near], ka_all[near], kb_all[near]
+    # Each pair's designs (those of the first candidate, then of the second, in
+    # increasing order) whose middle panels' edges are surveyed within reach of each
+    # other: found from the index's pairs of keys, not from every pair of designs (a
+    # mine of many designs fits a segment to hundreds of them).
+    design_of_key = np.full(int(keys.max(initial=0)) + 1, -1, dtype=np.int64)
+    design_of_key[keys] = np.arange(keys.size)
+    low, high = index.key_pairs
+    known = (low < design_of_key.size) & (high < design_of_key.size)
+    d_low, d_high = design_of_key[low[known]], design_of_key[high[known]]
+    pair_ok = (d_low >= 0) & (d_high >= 0)
+    d_low, d_high = d_low[pair_ok], d_high[pair_ok]
+    owners, kas, kbs = [], [], []
+    for at, (i, j, _) in enumerate(apart):
+        in_i = np.zeros(keys.size, dtype=bool)
+        in_j = np.zeros(keys.size, dtype=bool)
+        in_i[cands[i][1]] = True
+        in_j[cands[j][1]] = True
+        forward = in_i[d_low] & in_j[d_high]
+        backward = in_i[d_high] & in_j[d_low] & (d_low != d_high)
+        k_a = np.concatenate([d_low[forward], d_high[backward]])
+        k_b = np.concatenate([d_high[forward], d_low[backward]])
+        by = np.lexsort((k_b, k_a))
+        owners.append(np.full(by.size, at, dtype=np.int64))
+        kas.append(k_a[by])
+        kbs.append(k_b[by])
+    owner, ka_all, kb_all = np.concatenate(owners), np.concatenate(kas), np.concatenate(kbs)
     # Each candidate pair's tolerance, and how many surveyed pairs lie within it (one
     # search for all): only those with any are looked up one by one.
     seg_len = np.array([c[0].length for c in cands])
