@@ -387,9 +387,24 @@ def pose_hypotheses(
                 yield h
 
     per_node = [singles_of(k) for k in sorted(range(len(nodes)), key=lambda k: nodes[k].option)]
-    turns = itertools.chain.from_iterable(itertools.zip_longest(*per_node))
-    singles = itertools.islice((h for h in turns if h is not None), config.max_single_hypotheses)
+    singles = itertools.islice(_taking_turns(per_node), config.max_single_hypotheses)
     return pairs + list(singles)
+
+
+def _taking_turns(sources: list[Iterator[Hypothesis]]) -> Iterator[Hypothesis]:
+    """The first of each source, then the second of each, and so on, leaving out sources
+    that have run dry; each item made only when it is asked for (a scan read as
+    thousands of nodes of a mine's many designs makes a few dozen singles, not one
+    from every node first)."""
+    active = list(sources)
+    while active:
+        still = []
+        for source in active:
+            item = next(source, None)
+            if item is not None:
+                yield item
+                still.append(source)
+        active = still
 
 
 def panel_hypotheses(

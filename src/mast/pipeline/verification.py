@@ -760,8 +760,11 @@ def _on_their_edges(
     node_ok: set[str] = set()
     if ident is None or seg is None:
         return node_ok
+    designs = {index.design_of(b) for b in candidates}
     for node in ident.nodes:
         design = index.design_of(node.beacon)
+        if design not in designs:
+            continue  # no candidate is of its design (a survey of many designs)
         # The candidates of the node's design (not every look-alike in a mine's survey).
         for b in sorted(candidates - node_ok):
             if index.design_of(b) != design:
