@@ -502,6 +502,21 @@ def _first_same(
     return -1
 
 
+def _to_mine(
+    points: NDArray[np.float64],
+    easting: float,
+    northing: float,
+    azimuth: float,
+    out: NDArray[np.float64],
+) -> None:
+    """Scanner-frame ``points`` placed in the mine frame by the pose, into ``out``."""
+    sa, ca = math.sin(azimuth), math.cos(azimuth)
+    for i in range(points.shape[0]):
+        x, y = points[i, 0], points[i, 1]
+        out[i, 0] = sa * x - ca * y + easting
+        out[i, 1] = ca * x + sa * y + northing
+
+
 def _icp_stages(
     points: NDArray[np.float64],
     easting: float,
@@ -542,11 +557,7 @@ def _icp_stages(
         gate = gates[stage : stage + 1]
         for _ in range(max_iterations):
             total += 1
-            sa, ca = math.sin(az), math.cos(az)
-            for i in range(n):
-                x, y = points[i, 0], points[i, 1]
-                m[i, 0] = sa * x - ca * y + e
-                m[i, 1] = ca * x + sa * y + nn
+            _to_mine_jit(points, e, nn, az, m)
             panel, dist = _associate_jit(m, a, direction, normal, length, panels, gate)
             same = True
             for i in range(n):
@@ -631,11 +642,7 @@ def _icp_refine(
     """
     n = points.shape[0]
     m = np.empty((n, 2))
-    sa, ca = math.sin(azimuth), math.cos(azimuth)
-    for i in range(n):
-        x, y = points[i, 0], points[i, 1]
-        m[i, 0] = sa * x - ca * y + easting
-        m[i, 1] = ca * x + sa * y + northing
+    _to_mine_jit(points, easting, northing, azimuth, m)
     widest = gates[0]
     for k in range(gates.shape[0]):
         widest = max(widest, gates[k])
@@ -666,11 +673,7 @@ def _icp_refine(
         tolerance_m,
         tolerance_rad,
     )
-    sa, ca = math.sin(az), math.cos(az)
-    for i in range(n):
-        x, y = points[i, 0], points[i, 1]
-        m[i, 0] = sa * x - ca * y + e
-        m[i, 1] = ca * x + sa * y + nn
+    _to_mine_jit(points, e, nn, az, m)
     panel, dist = _associate_jit(
         m, a, direction, normal, length, panels, gates[gates.shape[0] - 1 :]
     )
@@ -2300,6 +2303,7 @@ _first_crossing_jit: Callable[..., Any] = njit(cache=True, nogil=True)(_first_cr
 beam_checks: Callable[..., Any] = njit(cache=True, nogil=True)(_beam_checks)
 associate: Callable[..., Any] = njit(cache=True, nogil=True)(_associate)
 _associate_jit = associate
+_to_mine_jit: Callable[..., None] = njit(cache=True, nogil=True)(_to_mine)
 icp_stages: Callable[..., Any] = njit(cache=True, nogil=True)(_icp_stages)
 _icp_stages_jit = icp_stages
 _close_to_jit: Callable[..., None] = njit(cache=True, nogil=True)(_close_to)
