@@ -411,6 +411,8 @@ def _beacons_in_reach(
     ptr = np.zeros(k_starts + 1, dtype=np.intp)
     found = np.empty(max(near.shape[0], 1), dtype=np.intp)
     got = 0
+    if n == 0:
+        return found[:0], ptr  # no return is in reach of anything
     far = 0.0
     for i in range(n):
         far = max(far, ranges[i])
@@ -1386,10 +1388,52 @@ def _beam_checks(
     counts = np.zeros((owners, 5), dtype=np.intp)
     ll = np.zeros(owners)
     ex, ey, wx, wy, w_x_e = _crossing_terms_jit(origin, seg_a, seg_b)
+    # Each beam's first crossing, segment by segment over the beams within the angle the
+    # segment spans from the origin (a hair wider): a beam outside it cannot cross it.
+    # Segments in order and a strictly nearer crossing only, so a tie goes to the first
+    # segment, as in :func:`_first_crossing`.
+    first_t = np.full(n, np.inf)
+    first_j = np.full(n, -1, dtype=np.intp)
+    lo_hi = np.empty((3, 2), dtype=np.intp)
+    two_pi = 2.0 * math.pi
+    for k in range(ex.shape[0]):
+        ax, ay = wx[k], wy[k]  # the segment's ends seen from the origin
+        bx, by = ax + ex[k], ay + ey[k]
+        span = math.atan2(ax * by - ay * bx, ax * bx + ay * by)  # from end a to end b
+        windows = 0
+        if abs(span) >= math.pi - 1e-6 or (ax == 0.0 and ay == 0.0) or (bx == 0.0 and by == 0.0):
+            lo_hi[0, 0], lo_hi[0, 1] = 0, n
+            windows = 1
+        else:
+            # A beam's mine-frame direction is (sin(azimuth - angle), cos(azimuth - angle)):
+            # its angle is azimuth - (the direction's bearing from north, clockwise).
+            at_a = azimuth - math.atan2(ax, ay)
+            lo_angle = at_a + min(span, 0.0) - 1e-9
+            hi_angle = at_a + max(span, 0.0) + 1e-9
+            base = angles[0] + (lo_angle - angles[0]) % two_pi
+            width = hi_angle - lo_angle
+            for shift in (-two_pi, 0.0, two_pi):
+                lo = np.searchsorted(angles, base + shift, side="left")
+                hi = np.searchsorted(angles, base + width + shift, side="right")
+                if hi > lo:
+                    lo_hi[windows, 0], lo_hi[windows, 1] = lo, hi
+                    windows += 1
+        for w in range(windows):
+            for i in range(lo_hi[w, 0], lo_hi[w, 1]):
+                bearing = azimuth - angles[i]
+                dx, dy = math.sin(bearing), math.cos(bearing)
+                den = dx * ey[k] - dy * ex[k]
+                if den == 0.0:
+                    continue
+                tt = w_x_e[k] / den
+                s = (wx[k] * dy - wy[k] * dx) / den
+                if tt > 1e-12 and s >= 0.0 and s <= 1.0 and tt < first_t[i]:
+                    first_t[i] = tt
+                    first_j[i] = k
     for i in range(n):
+        bt, bj = first_t[i], first_j[i]
         bearing = azimuth - angles[i]
         dx, dy = math.sin(bearing), math.cos(bearing)
-        bt, bj = _first_crossing_jit(dx, dy, ex, ey, wx, wy, w_x_e)
         if bj < 0 or bt > range_max or bt < range_min:
             continue
         if abs(normals[bj, 0] * dx + normals[bj, 1] * dy) <= min_sin:
