@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 import pytest
@@ -333,6 +334,21 @@ def test_first_hits_kernel_matches_the_reference() -> None:
     assert np.all(empty_j == -1)
 
 
+def _assert_same_checks(got: dict[str, Any], ref: dict[str, Any]) -> None:
+    """The compiled beam checks give the reference's verdicts, beacon by beacon."""
+    assert got.keys() == ref.keys()
+    for b, c in ref.items():
+        g = got[b]
+        assert (g.hit, g.occluded, g.through, g.missing, g.near) == (
+            c.hit,
+            c.occluded,
+            c.through,
+            c.missing,
+            c.near,
+        )
+        assert g.log_likelihood == pytest.approx(c.log_likelihood, rel=1e-12, abs=1e-9)
+
+
 def test_beam_check_kernel_matches_the_reference() -> None:
     from mast.core.noise import NoiseModel
     from mast.pipeline.verification import (
@@ -354,18 +370,8 @@ def test_beam_check_kernel_matches_the_reference() -> None:
                 noise = NoiseModel(range_sigma_m=0.01)
                 got = check_beams(scan, pose, panels, noise, cfg, subset=subset)
                 ref = _check_beams_reference(scan, pose, panels, noise, cfg, subset=subset)
-                assert got.keys() == ref.keys()
-                for b, c in ref.items():
-                    g = got[b]
-                    assert (g.hit, g.occluded, g.through, g.missing, g.near) == (
-                        c.hit,
-                        c.occluded,
-                        c.through,
-                        c.missing,
-                        c.near,
-                    )
-                    assert g.log_likelihood == pytest.approx(c.log_likelihood, rel=1e-12, abs=1e-9)
-                    near_seen += c.near
+                _assert_same_checks(got, ref)
+                near_seen += sum(c.near for c in ref.values())
     assert near_seen > 0  # returns just short of a panel were counted and compared
 
 
@@ -399,19 +405,9 @@ def test_beam_checks_by_the_angle_each_panel_spans_are_the_reference(turn: float
                 shot.pose.northing + dy,
                 (shot.pose.azimuth + turn + da) % math.tau,
             )
-            got = check_beams(scan, pose, panels, noise, cfg)
             ref = _check_beams_reference(scan, pose, panels, noise, cfg)
-            assert got.keys() == ref.keys()
-            for b, c in ref.items():
-                g = got[b]
-                assert (g.hit, g.occluded, g.through, g.missing, g.near) == (
-                    c.hit,
-                    c.occluded,
-                    c.through,
-                    c.missing,
-                    c.near,
-                )
-                hits += c.hit
+            _assert_same_checks(check_beams(scan, pose, panels, noise, cfg), ref)
+            hits += sum(c.hit for c in ref.values())
     assert hits > 0
 
 
