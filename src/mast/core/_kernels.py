@@ -30,7 +30,6 @@ __all__ = [
     "gauss_newton",
     "group_residuals",
     "icp_refine",
-    "icp_stages",
     "in_place_chi",
     "information",
     "line_fits",
@@ -218,15 +217,52 @@ def _first_crossing(
     bt = np.inf
     bj = -1
     for k in range(ex.shape[0]):
-        den = dx * ey[k] - dy * ex[k]
-        if den == 0.0:
-            continue
-        tt = w_x_e[k] / den
-        s = (wx[k] * dy - wy[k] * dx) / den
-        if tt > 1e-12 and s >= 0.0 and s <= 1.0 and tt < bt:
+        tt = _crossing_jit(dx, dy, k, ex, ey, wx, wy, w_x_e)
+        if tt < bt:
             bt = tt
             bj = k
     return bt, bj
+
+
+def _crossing(
+    dx: float,
+    dy: float,
+    k: int,
+    ex: NDArray[np.float64],
+    ey: NDArray[np.float64],
+    wx: NDArray[np.float64],
+    wy: NDArray[np.float64],
+    w_x_e: NDArray[np.float64],
+) -> float:
+    """Distance along the ray ``(dx, dy)`` to segment ``k`` (:func:`_crossing_terms`),
+    ``inf`` when it does not cross it ahead of the origin."""
+    den = dx * ey[k] - dy * ex[k]
+    if den == 0.0:
+        return np.inf
+    tt: float = w_x_e[k] / den
+    s = (wx[k] * dy - wy[k] * dx) / den
+    if tt > 1e-12 and s >= 0.0 and s <= 1.0:
+        return tt
+    return np.inf
+
+
+def _beam_windows(
+    angles: NDArray[np.float64], lo_angle: float, width: float, lo_hi: NDArray[np.intp]
+) -> int:
+    """The runs of ``angles`` (increasing, a turn at most) within ``[lo_angle, lo_angle +
+    width]`` turned by any whole number of turns, into ``lo_hi`` (rows start, stop);
+    returns how many. ``width`` is under half a turn."""
+    two_pi = 2.0 * math.pi
+    # The interval's start, a turn at most above the first beam's angle.
+    base = angles[0] + (lo_angle - angles[0]) % two_pi
+    windows = 0
+    for shift in (-two_pi, 0.0, two_pi):
+        lo = np.searchsorted(angles, base + shift, side="left")
+        hi = np.searchsorted(angles, base + width + shift, side="right")
+        if hi > lo:
+            lo_hi[windows, 0], lo_hi[windows, 1] = lo, hi
+            windows += 1
+    return windows
 
 
 def _first_hits(
@@ -416,7 +452,6 @@ def _beacons_in_reach(
     far = 0.0
     for i in range(n):
         far = max(far, ranges[i])
-    two_pi = 2.0 * math.pi
     lo_hi = np.empty((3, 2), dtype=np.intp)
     for h in range(k_starts):
         e, nn, az = starts[h, 0], starts[h, 1], starts[h, 2]
@@ -441,16 +476,9 @@ def _beacons_in_reach(
                 windows = 1
             else:
                 half = math.asin(grow / dist) + 1e-9
-                # The beam angle of the centre's direction, a turn at most above the first
-                # beam's (the beams span a turn at most).
+                # The beam angle of the centre's direction, and the beams either side.
                 bearing = math.atan2(dy, dx) - rotation
-                bearing = angles[0] + (bearing - angles[0]) % two_pi
-                for shift in (-two_pi, 0.0, two_pi):
-                    lo = np.searchsorted(angles, bearing - half + shift, side="left")
-                    hi = np.searchsorted(angles, bearing + half + shift, side="right")
-                    if hi > lo:
-                        lo_hi[windows, 0], lo_hi[windows, 1] = lo, hi
-                        windows += 1
+                windows = _beam_windows_jit(angles, bearing - half, 2.0 * half, lo_hi)
             count = 0
             for w in range(windows):
                 for p in range(lo_hi[w, 0], lo_hi[w, 1]):
@@ -645,9 +673,7 @@ def _icp_refine(
     n = points.shape[0]
     m = np.empty((n, 2))
     _to_mine_jit(points, easting, northing, azimuth, m)
-    widest = gates[0]
-    for k in range(gates.shape[0]):
-        widest = max(widest, gates[k])
+    widest = gates.max()
     near, reached = _within_jit(m, a, direction, normal, length, panels, 2.0 * widest + 0.05)
     count = 0
     for i in range(n):
@@ -1395,7 +1421,6 @@ def _beam_checks(
     first_t = np.full(n, np.inf)
     first_j = np.full(n, -1, dtype=np.intp)
     lo_hi = np.empty((3, 2), dtype=np.intp)
-    two_pi = 2.0 * math.pi
     for k in range(ex.shape[0]):
         ax, ay = wx[k], wy[k]  # the segment's ends seen from the origin
         bx, by = ax + ex[k], ay + ey[k]
@@ -1409,25 +1434,12 @@ def _beam_checks(
             # its angle is azimuth - (the direction's bearing from north, clockwise).
             at_a = azimuth - math.atan2(ax, ay)
             lo_angle = at_a + min(span, 0.0) - 1e-9
-            hi_angle = at_a + max(span, 0.0) + 1e-9
-            base = angles[0] + (lo_angle - angles[0]) % two_pi
-            width = hi_angle - lo_angle
-            for shift in (-two_pi, 0.0, two_pi):
-                lo = np.searchsorted(angles, base + shift, side="left")
-                hi = np.searchsorted(angles, base + width + shift, side="right")
-                if hi > lo:
-                    lo_hi[windows, 0], lo_hi[windows, 1] = lo, hi
-                    windows += 1
+            windows = _beam_windows_jit(angles, lo_angle, abs(span) + 2e-9, lo_hi)
         for w in range(windows):
             for i in range(lo_hi[w, 0], lo_hi[w, 1]):
                 bearing = azimuth - angles[i]
-                dx, dy = math.sin(bearing), math.cos(bearing)
-                den = dx * ey[k] - dy * ex[k]
-                if den == 0.0:
-                    continue
-                tt = w_x_e[k] / den
-                s = (wx[k] * dy - wy[k] * dx) / den
-                if tt > 1e-12 and s >= 0.0 and s <= 1.0 and tt < first_t[i]:
+                tt = _crossing_jit(math.sin(bearing), math.cos(bearing), k, ex, ey, wx, wy, w_x_e)
+                if tt < first_t[i]:
                     first_t[i] = tt
                     first_j[i] = k
     for i in range(n):
@@ -2343,13 +2355,14 @@ segment_run: Callable[..., NDArray[np.intp]] = njit(cache=True, nogil=True)(_seg
 line_fits: Callable[..., NDArray[np.float64]] = njit(cache=True, nogil=True)(_line_fits)
 nearest_within: Callable[..., Any] = njit(cache=True, nogil=True)(_nearest_within)
 _crossing_terms_jit: Callable[..., Any] = njit(cache=True, nogil=True)(_crossing_terms)
+_crossing_jit: Callable[..., float] = njit(cache=True, nogil=True)(_crossing)
+_beam_windows_jit: Callable[..., int] = njit(cache=True, nogil=True)(_beam_windows)
 _first_crossing_jit: Callable[..., Any] = njit(cache=True, nogil=True)(_first_crossing)
 beam_checks: Callable[..., Any] = njit(cache=True, nogil=True)(_beam_checks)
 associate: Callable[..., Any] = njit(cache=True, nogil=True)(_associate)
 _associate_jit = associate
 _to_mine_jit: Callable[..., None] = njit(cache=True, nogil=True)(_to_mine)
-icp_stages: Callable[..., Any] = njit(cache=True, nogil=True)(_icp_stages)
-_icp_stages_jit = icp_stages
+_icp_stages_jit: Callable[..., Any] = njit(cache=True, nogil=True)(_icp_stages)
 _close_to_jit: Callable[..., None] = njit(cache=True, nogil=True)(_close_to)
 within: Callable[..., Any] = njit(cache=True, nogil=True)(_within)
 _within_jit = within

@@ -112,9 +112,14 @@ def _pairs_within(
     return ii[keep], jj[keep], d[keep]
 
 
+def _key_width(designs: int) -> int:
+    """How many (design, edge) keys there are: the base of :func:`_key_pair_code`."""
+    return max(designs * len(NODE_EDGES), 1)
+
+
 def _key_pair_code(ka: Any, kb: Any, designs: int) -> Any:
     """One number for the ordered pair of (design, edge) keys ``(ka, kb)`` (ints or arrays)."""
-    return ka * max(designs * len(NODE_EDGES), 1) + kb
+    return ka * _key_width(designs) + kb
 
 
 def _first_at_least(
@@ -301,7 +306,7 @@ class SurveyIndex:
     def key_pairs(self) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
         """The pairs of keys ``(low, high)``, ``low <= high``, that have a bucket: the
         (design, edge) pairs surveyed within reach of each other."""
-        width = max(len(self.designs) * len(NODE_EDGES), 1)
+        width = _key_width(len(self.designs))
         low, high = np.divmod(self._codes, width)
         return low.astype(np.int64), high.astype(np.int64)
 
@@ -317,7 +322,7 @@ class SurveyIndex:
         empty = np.zeros(0, dtype=np.intp)
         if self._codes.size == 0 or keys.size < 2:
             return empty, empty
-        width = max(len(self.designs) * len(NODE_EDGES), 1)
+        width = _key_width(len(self.designs))
         low, high = self.key_pairs
         present = np.zeros(width, dtype=bool)
         present[keys] = True

@@ -343,14 +343,13 @@ def pose_hypotheses(
         misfit = np.maximum(mis_d, mis_r)
         fits = np.flatnonzero(mis_r <= 1.0)
         if fits.size:
-            rows = np.full(fits.size, 1, dtype=np.intp)
             found.append(
                 (
                     one[fits],
-                    rows * (a.option + b.option),
+                    np.full(fits.size, a.option + b.option),
                     misfit[fits],
-                    rows * i,
-                    rows * j,
+                    np.full(fits.size, i),
+                    np.full(fits.size, j),
                     ba[fits],
                     bb[fits],
                     edge_a[fits],
