@@ -37,6 +37,7 @@ __all__ = [
     "nearest_by_bearing",
     "nearest_within",
     "odometry_fit",
+    "overrun_counts",
     "partition_dp",
     "penalty",
     "range_rows",
@@ -45,6 +46,7 @@ __all__ = [
     "robust_gate",
     "segment_run",
     "standardised",
+    "straight_and_fitted_chi",
     "survey_shares",
     "window_picks",
     "window_scores",
@@ -709,6 +711,157 @@ def _icp_refine(
         if panel[i] < 0:
             dist[i] = np.nan
     return e, nn, az, total, converged, panel, dist
+
+
+def _overrun_counts(
+    points: NDArray[np.float64],
+    a: NDArray[np.float64],
+    direction: NDArray[np.float64],
+    normal: NDArray[np.float64],
+    length: NDArray[np.float64],
+    number: NDArray[np.intp],
+    mine: NDArray[np.intp],
+    gate: float,
+    margin: float,
+    overrun_reach: float,
+    slope_sigmas: float,
+    sigma: float,
+    to_free_ends: bool,
+) -> NDArray[np.int64]:
+    """``verification._overrun_reference``'s counts, one per panel of ``mine`` (a
+    beacon's panels; ``number`` holds every panel's number on its beacon): the returns
+    within ``gate`` of a panel's line past its nodes, on no panel of the beacon, over
+    the reach past each end, less an end's returns whose line drifts across the panel's
+    (more than ``slope_sigmas`` standard deviations of its slope for noise ``sigma``).
+    Returns beyond the reach of every panel, which the reference leaves out first, are
+    never in a band past an end, so every return is looked at here."""
+    n, m = points.shape[0], mine.shape[0]
+    t = np.empty((m, n))
+    s = np.empty((m, n))
+    near_any = np.zeros(n, dtype=np.bool_)
+    first, last = number[mine[0]], number[mine[0]]
+    for c in range(m):
+        q = mine[c]
+        first = min(first, number[q])
+        last = max(last, number[q])
+        ax, ay = a[q, 0], a[q, 1]
+        dx, dy = direction[q, 0], direction[q, 1]
+        nx, ny = normal[q, 0], normal[q, 1]
+        ln = length[q]
+        for i in range(n):
+            rx = points[i, 0] - ax
+            ry = points[i, 1] - ay
+            tc = rx * dx + ry * dy
+            sc = rx * nx + ry * ny
+            t[c, i] = tc
+            s[c, i] = sc
+            if abs(sc) <= gate and tc >= -gate and tc <= ln + gate:
+                near_any[i] = True
+    # The outer panels' lengths (the last of a number, as the reference's dict keeps).
+    first_len = last_len = 0.0
+    for c in range(m):
+        if number[mine[c]] == first:
+            first_len = length[mine[c]]
+        if number[mine[c]] == last:
+            last_len = length[mine[c]]
+    counts = np.zeros(m, dtype=np.int64)
+    for c in range(m):
+        q = mine[c]
+        lk = length[q]
+        k = number[q]
+        count = 0
+        for side in range(2):  # past the far end, then before the near one
+            if side == 0:
+                if k == last:
+                    continue
+                neighbour = k + 1
+            else:
+                if k == first:
+                    continue
+                neighbour = k - 1
+            past_by = overrun_reach
+            if to_free_ends and neighbour in (first, last):
+                past_by = min(overrun_reach, first_len if neighbour == first else last_len)
+            # The stretch of the line beyond this end, open at both ends.
+            t_lo, t_hi = (lk, lk + past_by) if side == 0 else (-past_by, 0.0)
+            ends = 0
+            past = 0
+            total = 0.0
+            for i in range(n):
+                tc = t[c, i]
+                if t_lo < tc < t_hi and abs(s[c, i]) <= gate and not near_any[i]:
+                    ends += 1
+                    total += tc
+                    if tc > lk + margin or tc < -margin:
+                        past += 1
+            if past >= 3:
+                mean = total / ends
+                spread = 0.0
+                cross = 0.0
+                for i in range(n):
+                    tc = t[c, i]
+                    if t_lo < tc < t_hi and abs(s[c, i]) <= gate and not near_any[i]:
+                        tt = tc - mean
+                        spread += tt * tt
+                        cross += tt * s[c, i]
+                slope = cross / spread if spread > 0 else 0.0
+                if abs(slope) > slope_sigmas * sigma / math.sqrt(max(spread, 1e-30)):
+                    continue  # another surface crossing the band
+            count += past
+        counts[c] = count
+    return counts
+
+
+def _straight_and_fitted_chi(
+    points: NDArray[np.float64],
+    on: NDArray[np.bool_],
+    residual: NDArray[np.float64],
+    origin: NDArray[np.float64],
+    range_sigma: float,
+    angle_sigma: float,
+    survey_sigma: float,
+) -> tuple[float, float]:
+    """``verification._straight_and_fitted_reference`` on the returns where ``on``: the
+    chi-squares of their offsets from their one total-least-squares line and of their
+    residuals from their panels, each weighed by the noise across that line."""
+    mx = 0.0
+    my = 0.0
+    m = 0
+    for i in range(points.shape[0]):
+        if on[i]:
+            mx += points[i, 0]
+            my += points[i, 1]
+            m += 1
+    mx /= m
+    my /= m
+    vxx = 0.0
+    vyy = 0.0
+    vxy = 0.0
+    for i in range(points.shape[0]):
+        if on[i]:
+            cx, cy = points[i, 0] - mx, points[i, 1] - my
+            vxx += cx * cx
+            vyy += cy * cy
+            vxy += cx * cy
+    _, dx, dy = _major_axis_jit(vxx, vyy, vxy)
+    nx, ny = -dy, dx
+    floor = (0.1 * range_sigma) ** 2
+    chi_line = 0.0
+    chi_beacon = 0.0
+    for i in range(points.shape[0]):
+        if not on[i]:
+            continue
+        rx, ry = points[i, 0] - origin[0], points[i, 1] - origin[1]
+        rho = math.hypot(rx, ry)
+        d = rho if rho > 0.0 else 1.0
+        cos_n = (rx / d) * nx + (ry / d) * ny
+        spread = rho * angle_sigma
+        var = (range_sigma * cos_n) ** 2 + spread * spread * (1.0 - cos_n * cos_n)
+        var = max(var, floor)
+        off = (points[i, 0] - mx) * nx + (points[i, 1] - my) * ny
+        chi_line += off * off / var
+        chi_beacon += residual[i] * residual[i] / (var + survey_sigma * survey_sigma)
+    return chi_line, chi_beacon
 
 
 def _in_place_chi(
@@ -2368,6 +2521,8 @@ within: Callable[..., Any] = njit(cache=True, nogil=True)(_within)
 _within_jit = within
 icp_refine: Callable[..., Any] = njit(cache=True, nogil=True)(_icp_refine)
 in_place_chi: Callable[..., Any] = njit(cache=True, nogil=True)(_in_place_chi)
+overrun_counts: Callable[..., NDArray[np.int64]] = njit(cache=True, nogil=True)(_overrun_counts)
+straight_and_fitted_chi: Callable[..., Any] = njit(cache=True, nogil=True)(_straight_and_fitted_chi)
 reach_tallies: Callable[..., Any] = njit(cache=True, nogil=True)(_reach_tallies)
 beacons_in_reach: Callable[..., Any] = njit(cache=True, nogil=True)(_beacons_in_reach)
 first_same: Callable[..., int] = njit(cache=True, nogil=True)(_first_same)

@@ -406,6 +406,42 @@ def _overrun(
 ) -> dict[int, int]:
     """Returns continuing each panel's line past its nodes, on no other panel of the beacon.
 
+    Past a node the next panel turns away: returns that run on along a panel's line
+    there belong to a longer surface (a wall, a shelf, a door frame) that merely
+    resembles the beacon where it is. Compiled (:func:`mast.core._kernels.overrun_counts`);
+    :func:`_overrun_reference` is the same in numpy, and says it in full.
+    """
+    from mast.core._kernels import overrun_counts
+
+    counts = overrun_counts(
+        np.ascontiguousarray(points_mine, dtype=float).reshape(-1, 2),
+        panels.a,
+        panels.direction,
+        panels.normal,
+        panels.length,
+        panels.panel,
+        np.ascontiguousarray(beacon_panels, dtype=np.intp),
+        float(gate_m),
+        2.0 * gate_m + cfg.edge_margin_m,
+        cfg.overrun_reach_m,
+        cfg.overrun_slope_sigmas,
+        float(sigma_m),
+        bool(to_free_ends),
+    )
+    return dict(zip(beacon_panels.tolist(), counts.tolist(), strict=True))
+
+
+def _overrun_reference(
+    points_mine: NDArray[np.float64],
+    panels: PanelSet,
+    beacon_panels: NDArray[np.intp],
+    gate_m: float,
+    sigma_m: float,
+    cfg: VerificationConfig,
+    to_free_ends: bool = False,
+) -> dict[int, int]:
+    """:func:`_overrun` in numpy (the tests compare the two).
+
     Past a node the next panel turns away: returns that run on along a
     panel's line there belong to a longer surface — a wall, a shelf, a door
     frame — that merely resembles the beacon where it is. The free ends (e1
@@ -523,19 +559,44 @@ def _incidence(
 
 def _straight_and_fitted(
     points: NDArray[np.float64],
+    on: NDArray[np.bool_],
     to_panels_m: NDArray[np.float64],
     origin: NDArray[np.float64],
     noise: NoiseModel,
 ) -> tuple[float, float]:
-    """Chi-squares of a beacon's returns about one straight line and about its panels.
+    """Chi-squares of a beacon's returns (``points`` where ``on``; ``to_panels_m`` their
+    offsets from its panels, one per point) about one straight line and about its panels.
 
     Each offset is weighed by the noise a return really has across the line:
     the range noise projected on the line's normal (``sigma_r * |n . u|`` for
     a beam along ``u`` from ``origin``) and the angle noise on its tangent
     (``rho * sigma_phi * |n x u|``), so an oblique panel's returns are judged
     as tightly as they lie. The panels' offsets also carry the survey's
-    variance.
+    variance. Compiled (:func:`mast.core._kernels.straight_and_fitted_chi`);
+    :func:`_straight_and_fitted_reference` is the same in numpy on the returns on.
     """
+    from mast.core._kernels import straight_and_fitted_chi
+
+    chi_line, chi_beacon = straight_and_fitted_chi(
+        np.ascontiguousarray(points, dtype=float).reshape(-1, 2),
+        np.ascontiguousarray(on, dtype=np.bool_),
+        np.ascontiguousarray(to_panels_m, dtype=float),
+        np.asarray(origin, dtype=float),
+        noise.range_sigma_m,
+        noise.angle_sigma_rad,
+        noise.survey_sigma_m,
+    )
+    return float(chi_line), float(chi_beacon)
+
+
+def _straight_and_fitted_reference(
+    points: NDArray[np.float64],
+    to_panels_m: NDArray[np.float64],
+    origin: NDArray[np.float64],
+    noise: NoiseModel,
+) -> tuple[float, float]:
+    """:func:`_straight_and_fitted` in numpy, on the returns on the beacon (the tests
+    compare the two)."""
     centre = points.mean(axis=0)
     q = points - centre
     _, vecs = np.linalg.eigh(q.T @ q)
@@ -850,7 +911,9 @@ def _support(
     candidates = {
         b for b in candidates if sum(c >= cfg.min_panel_points for c in per_beacon[b]) >= 2
     }
-    beacon_no = panels.number
+    # Each return's beacon (its position in the survey), -1 for none.
+    matched = icp.panel >= 0
+    beacon_of = np.where(matched, panels.beacon[np.where(matched, icp.panel, 0)], -1)
     for b in candidates - node_ok:
         # Rock read as a beacon has more rock right in front of it; a beacon with
         # something standing against it still shows its three panels around it.
@@ -858,9 +921,9 @@ def _support(
         three = sum(c >= cfg.min_panel_points for c in per_beacon[b]) >= 3
         if check.near > cfg.max_near_share * (check.hit + check.near) and not three:
             continue
-        mine = np.flatnonzero(panels.beacon == beacon_no[b])
-        on = np.isin(icp.panel, mine)
-        n_on = int(on.sum())
+        mine = panels.of_beacon(panels.number[b])
+        on = beacon_of == panels.number[b]
+        n_on = int(np.count_nonzero(on))
         if n_on < 4:
             continue
         if not tracked and seg is not None:
@@ -870,7 +933,7 @@ def _support(
                 continue
         if b not in fitted_memo:
             fitted_memo[b] = _straight_and_fitted(
-                points_mine[on], icp.residual_m[on], icp.pose.position, noise
+                points_mine, on, icp.residual_m, icp.pose.position, noise
             )
         chi_line, chi_beacon = fitted_memo[b]
         bent = _shows_a_bend(chi_line, chi_beacon, cfg.straight_alpha)
