@@ -63,7 +63,7 @@ def _penalty(n: int) -> float:
     return 4.0 * math.log(max(n, 2)) + 12.0
 
 
-def _partition_dp(
+def _piece_costs(
     sx: NDArray[np.float64],
     sy: NDArray[np.float64],
     sxx: NDArray[np.float64],
@@ -73,28 +73,26 @@ def _partition_dp(
     uyy: NDArray[np.float64],
     uxy: NDArray[np.float64],
     var: float,
-    pen: float,
     w: int,
-) -> NDArray[np.intp]:
-    """Optimal partition's back-pointers: ``last[j]`` is where the piece ending at
-    ``j`` (exclusive) starts, for every ``j`` in 1..n.
+) -> NDArray[np.float64]:
+    """Every candidate piece's cost without the penalty: ``out[j, k]`` for the piece
+    ending at ``j`` (exclusive) that starts at ``j - min(j, w) + k``, for ``k <
+    min(j, w)``.
 
-    The cost of a piece is that of ``segmentation._partition_reference`` (its
-    total-least-squares SSE in range-noise units across its line, plus the
-    penalty, plus 4 per return of a piece of one or two); the line's normal comes
-    from the scatter matrix by the half-angle identities instead of ``arctan2``,
-    ``sin`` and ``cos``. Ties go to the shortest piece, as ``argmin`` does there.
+    The cost is that of ``segmentation._partition_reference`` (the piece's
+    total-least-squares SSE in range-noise units across its line); the line's normal
+    comes from the scatter matrix by the half-angle identities instead of ``arctan2``,
+    ``sin`` and ``cos``. A piece's cost depends only on the cumulative moments at its
+    two ends, so one table serves the run and every piece of it partitioned again.
     """
     n = sx.shape[0] - 1
-    best = np.empty(n + 1)
-    best[0] = -pen
-    last = np.zeros(n + 1, dtype=np.intp)
-    cost = np.empty(w)  # cost[k]: the piece from j - top + k to j, without the small-piece term
+    out = np.empty((n + 1, w))
     for j in range(1, n + 1):
         top = min(j, w)
         i0 = j - top
         sxj, syj, sxxj, syyj, sxyj = sx[j], sy[j], sxx[j], syy[j], sxy[j]
         uxxj, uyyj, uxyj = uxx[j], uyy[j], uxy[j]
+        cost = out[j]
         # Branch-free over the piece starts, in increasing order, so that the compiler
         # runs four at a time; IEEE division and square root round the same either way.
         for k in range(top):
@@ -123,11 +121,31 @@ def _partition_dp(
                 + 0.5 * (1.0 + c2) * (uyyj - uyy[i])
             ) / m
             nu2 = nu2 if nu2 >= 0.05 else 0.05
-            cost[k] = sse / (var * nu2) + pen
+            cost[k] = sse / (var * nu2)
+    return out
+
+
+def _best_pointers(
+    costs: NDArray[np.float64], lo: int, hi: int, pen: float, w: int, w_costs: int
+) -> NDArray[np.intp]:
+    """Optimal partition's back-pointers of the returns ``lo:hi`` of a run whose piece
+    costs are ``costs`` (:func:`_piece_costs`, pieces of at most ``w_costs``): ``last[j]``
+    is where the piece ending at ``lo + j`` (exclusive) starts, less ``lo``, for every
+    ``j`` in 1..hi - lo, pieces of at most ``w`` returns, each paying ``pen`` and 4 per
+    return of a piece of one or two. Ties go to the shortest piece, as ``argmin`` does
+    in ``segmentation._partition_reference``."""
+    n = hi - lo
+    best = np.empty(n + 1)
+    best[0] = -pen
+    last = np.zeros(n + 1, dtype=np.intp)
+    for j in range(1, n + 1):
+        top = min(j, w)
+        row = costs[lo + j]
+        end = min(lo + j, w_costs)  # the row's entry of the piece of length d is end - d
         bj = math.inf
         arg = j - 1
         for d in range(1, top + 1):  # shortest piece first: ties go to it
-            total = cost[top - d]
+            total = row[end - d] + pen
             if d < 3:
                 total += 4.0 * d
             total = best[j - d] + total
@@ -137,6 +155,27 @@ def _partition_dp(
         best[j] = bj
         last[j] = arg
     return last
+
+
+def _partition_dp(
+    sx: NDArray[np.float64],
+    sy: NDArray[np.float64],
+    sxx: NDArray[np.float64],
+    syy: NDArray[np.float64],
+    sxy: NDArray[np.float64],
+    uxx: NDArray[np.float64],
+    uyy: NDArray[np.float64],
+    uxy: NDArray[np.float64],
+    var: float,
+    pen: float,
+    w: int,
+) -> NDArray[np.intp]:
+    """Optimal partition's back-pointers: ``last[j]`` is where the piece ending at
+    ``j`` (exclusive) starts, for every ``j`` in 1..n (:func:`_piece_costs`, then
+    :func:`_best_pointers`): ``segmentation._partition_reference`` compiled."""
+    n = sx.shape[0] - 1
+    costs = _piece_costs_jit(sx, sy, sxx, syy, sxy, uxx, uyy, uxy, var, w)
+    return _best_pointers_jit(costs, 0, n, pen, w, w)
 
 
 def _associate(
@@ -1355,16 +1394,23 @@ def _piece_sse_nu2(points: NDArray[np.float64], lo: int, hi: int) -> tuple[float
     return (sse if hi - lo >= 3 else 0.0), acc / (hi - lo)
 
 
-def _partition_run(points: NDArray[np.float64], var: float, max_piece: int) -> NDArray[np.intp]:
-    """``segmentation._partition_impl`` compiled: the optimal partition of one run,
-    cuts that only the cap on piece length made undone; pieces as (start, end) rows."""
-    n = points.shape[0]
-    mom = _run_moments_jit(points)
+def _partition_run(
+    points: NDArray[np.float64],
+    costs: NDArray[np.float64],
+    w_costs: int,
+    lo: int,
+    hi: int,
+    var: float,
+    max_piece: int,
+) -> NDArray[np.intp]:
+    """``segmentation._partition_impl`` compiled, for the returns ``lo:hi`` of a run
+    whose piece costs are ``costs`` (:func:`_piece_costs`): their optimal partition,
+    cuts that only the cap on piece length made undone; pieces as (start, end) rows,
+    from ``lo``."""
+    n = hi - lo
     w = min(n, max_piece)
     pen = _penalty_jit(n)
-    last = _partition_dp_jit(
-        mom[0], mom[1], mom[2], mom[3], mom[4], mom[5], mom[6], mom[7], var, pen, w
-    )
+    last = _best_pointers_jit(costs, lo, hi, pen, w, w_costs)
     k = 0
     e = n
     while e > 0:
@@ -1382,9 +1428,9 @@ def _partition_run(points: NDArray[np.float64], var: float, max_piece: int) -> N
         a0, b0 = pieces[q, 0], pieces[q, 1]
         if m > 0 and b0 - out[m - 1, 0] > w:
             s0 = out[m - 1, 0]
-            sse_j, _ = _piece_sse_nu2_jit(points, s0, a0)
-            sse_p, _ = _piece_sse_nu2_jit(points, a0, b0)
-            sse_b, nu2_b = _piece_sse_nu2_jit(points, s0, b0)
+            sse_j, _ = _piece_sse_nu2_jit(points, lo + s0, lo + a0)
+            sse_p, _ = _piece_sse_nu2_jit(points, lo + a0, lo + b0)
+            sse_b, nu2_b = _piece_sse_nu2_jit(points, lo + s0, lo + b0)
             if (sse_b - sse_j - sse_p) / (var * max(nu2_b, 0.05)) <= pen:
                 out[m - 1, 1] = b0
                 continue
@@ -1398,14 +1444,18 @@ def _segment_run(
     points: NDArray[np.float64], var: float, min_points: int, max_piece: int
 ) -> NDArray[np.intp]:
     """One run's pieces: partitioned, then each piece partitioned again with the
-    penalty of its own length (``segmentation._partition`` then ``_refine``)."""
+    penalty of its own length (``segmentation._partition`` then ``_refine``), every
+    piece's cost from one table of the run's (:func:`_piece_costs`)."""
     n = points.shape[0]
-    first = _partition_run_jit(points, var, max_piece)
+    mom = _run_moments_jit(points)
+    w = min(n, max_piece)
+    costs = _piece_costs_jit(mom[0], mom[1], mom[2], mom[3], mom[4], mom[5], mom[6], mom[7], var, w)
+    first = _partition_run_jit(points, costs, w, 0, n, var, max_piece)
     parts = []
     for q in range(first.shape[0]):
         i, j = first[q, 0], first[q, 1]
         if j - i >= 2 * min_points and j - i < n:
-            sub = _partition_run_jit(points[i:j], var, max_piece)
+            sub = _partition_run_jit(points, costs, w, i, j, var, max_piece)
             for s in range(sub.shape[0]):
                 parts.append((i + sub[s, 0], i + sub[s, 1]))
         else:
@@ -2497,6 +2547,10 @@ partition_dp: Callable[..., NDArray[np.intp]] = njit(cache=True, nogil=True, err
     _partition_dp
 )
 _partition_dp_jit = partition_dp
+_piece_costs_jit: Callable[..., NDArray[np.float64]] = njit(
+    cache=True, nogil=True, error_model="numpy"
+)(_piece_costs)
+_best_pointers_jit: Callable[..., NDArray[np.intp]] = njit(cache=True, nogil=True)(_best_pointers)
 penalty: Callable[[int], float] = njit(cache=True, nogil=True)(_penalty)
 _penalty_jit = penalty
 _run_moments_jit: Callable[..., Any] = njit(cache=True, nogil=True)(_run_moments)

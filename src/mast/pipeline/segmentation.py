@@ -323,12 +323,19 @@ def _partition_reference(
 
 
 def _partition_impl(
-    points: NDArray[np.float64], var: float, max_piece: int
+    points: NDArray[np.float64],
+    var: float,
+    max_piece: int,
+    run: tuple[NDArray[np.float64], tuple[NDArray[np.float64], ...]] | None = None,
 ) -> list[tuple[int, int]]:
+    """:func:`_partition`, its pieces' costs from ``run`` when given: the unit beam
+    vectors and cumulative moments (:func:`_cumulative_moments`) of ``points`` taken
+    from those of the run they are part of (a piece's cost needs only the moments at
+    its two ends, so the run's serve every stretch of it)."""
     from mast.core._kernels import partition_dp, penalty
 
     n = points.shape[0]
-    u, moments = _cumulative_moments(points)
+    u, moments = _cumulative_moments(points) if run is None else run
     w = min(n, max_piece)
     pen = penalty(n)
     last = partition_dp(*moments, float(var), pen, w)
@@ -412,11 +419,18 @@ def _refine(
     two short panels far away (a few returns each) under a break the long
     run's walls cannot afford. Within one piece the choice is among its own
     returns, so a piece is split when the split pays the penalty of its length.
+    A piece's costs are read from the run's cumulative moments, as the compiled
+    :func:`mast.core._kernels.segment_run` reads them from its one table of the run's.
     """
     out: list[tuple[int, int]] = []
+    u, moments = _cumulative_moments(points)
     for i, j in pieces:
         if j - i >= 2 * min_points and j - i < points.shape[0]:
-            out.extend((i + a, i + b) for a, b in _partition(points[i:j], var))
+            # The piece's stretch of the run's moments: its costs are the run's own.
+            stretch = (u[i:j], tuple(m[i : j + 1] for m in moments))
+            with np.errstate(over="ignore", invalid="ignore"):
+                sub = _partition_impl(points[i:j], var, MAX_PIECE, stretch)
+            out.extend((i + a, i + b) for a, b in sub)
         else:
             out.append((i, j))
     return out
