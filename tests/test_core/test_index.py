@@ -119,3 +119,49 @@ def test_pair_counts_are_the_lengths_of_pair_rows(designs: int) -> None:
     assert got.tolist() == want
     assert sum(want) > 0
     assert want.count(0) > 0
+
+
+@pytest.mark.parametrize("designs", [1, 3, 40])
+def test_pairs_to_look_up_match_the_reference_and_a_walk(designs: int) -> None:
+    """The compiled pair walk gives the numpy reference's pairs in its order, with and
+    without the distance filter; unfiltered, they are every pair ``i < j`` whose keys have
+    a bucket; filtered, those whose distance is within the slack of their bucket's span."""
+    survey = _survey(90, designs, seed=designs)
+    index = SurveyIndex.from_survey(survey)
+    rng = np.random.default_rng(designs + 7)
+    ids = survey.ids
+    n = 60
+    keys = np.array(
+        [
+            index.node_key(ids[int(rng.integers(len(ids)))], int(rng.choice(NODE_EDGES)))
+            for _ in range(n)
+        ],
+        dtype=np.int64,
+    )
+    places = rng.uniform(0.0, 60.0, size=(n, 2))
+    slack = rng.choice([0.0, 0.05, 1.0], size=n)
+    everything = np.triu_indices(n, 1)
+    wanted = index.have_pairs(keys[everything[0]], keys[everything[1]])
+    plain = index.pairs_to_look_up(keys)
+    assert [x.tolist() for x in plain] == [
+        x.tolist() for x in index._pairs_to_look_up_reference(keys)
+    ]
+    assert plain[0].tolist() == everything[0][wanted].tolist()
+    assert plain[1].tolist() == everything[1][wanted].tolist()
+    got = index.pairs_to_look_up(keys, places, slack)
+    ref = index._pairs_to_look_up_reference(keys, places, slack)
+    assert [x.tolist() for x in got] == [x.tolist() for x in ref]
+    low, high = index.key_pairs
+    span_lo, span_hi = index.key_pair_spans
+    bucket = {(int(a), int(b)): q for q, (a, b) in enumerate(zip(low, high, strict=True))}
+    kept = set(zip(got[0].tolist(), got[1].tolist(), strict=True))
+    assert kept <= set(zip(plain[0].tolist(), plain[1].tolist(), strict=True))
+    for i, j in zip(plain[0].tolist(), plain[1].tolist(), strict=True):
+        q = bucket[(min(keys[i], keys[j]), max(keys[i], keys[j]))]
+        d = float(np.hypot(*(places[j] - places[i])))
+        tol = slack[i] + slack[j]
+        inside = span_lo[q] - tol + 1e-6 <= d <= span_hi[q] + tol - 1e-6
+        outside = d < span_lo[q] - tol - 1e-6 or d > span_hi[q] + tol + 1e-6
+        assert not (inside and (i, j) not in kept)
+        assert not (outside and (i, j) in kept)
+    assert 0 < len(kept) < plain[0].size

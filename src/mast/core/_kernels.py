@@ -32,6 +32,7 @@ __all__ = [
     "icp_refine",
     "in_place_chi",
     "information",
+    "key_pair_nodes",
     "line_fits",
     "near_pose",
     "nearest_by_bearing",
@@ -750,6 +751,65 @@ def _icp_refine(
         if panel[i] < 0:
             dist[i] = np.nan
     return e, nn, az, total, converged, panel, dist
+
+
+def _key_pair_walk(
+    order: NDArray[np.intp],
+    first: NDArray[np.intp],
+    low: NDArray[np.int64],
+    high: NDArray[np.int64],
+    places: NDArray[np.float64],
+    slack: NDArray[np.float64],
+    span_lo: NDArray[np.float64],
+    span_hi: NDArray[np.float64],
+    out_a: NDArray[np.intp],
+    out_b: NDArray[np.intp],
+    store: bool,
+) -> int:
+    """:func:`_key_pair_nodes`' pairs, counted, and stored in ``out_a``, ``out_b`` when
+    ``store``."""
+    total = 0
+    for q in range(low.shape[0]):
+        ka, kb = low[q], high[q]
+        for x in range(first[ka], first[ka + 1]):
+            a = order[x]
+            for y in range(first[kb], first[kb + 1]):
+                b = order[y]
+                if ka == kb and not a < b:
+                    continue
+                d = math.hypot(places[b, 0] - places[a, 0], places[b, 1] - places[a, 1])
+                tol = (slack[a] + slack[b]) * (1.0 + 1e-9) + 1e-9
+                if d + tol >= span_lo[q] and d - tol <= span_hi[q]:
+                    if store:
+                        out_a[total] = a
+                        out_b[total] = b
+                    total += 1
+    return total
+
+
+def _key_pair_nodes(
+    order: NDArray[np.intp],
+    first: NDArray[np.intp],
+    low: NDArray[np.int64],
+    high: NDArray[np.int64],
+    places: NDArray[np.float64],
+    slack: NDArray[np.float64],
+    span_lo: NDArray[np.float64],
+    span_hi: NDArray[np.float64],
+) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+    """``index.SurveyIndex._pairs_to_look_up_reference``'s node pairs before their sort:
+    for each pair of keys ``(low[q], high[q])``, every node of the low key (``order[
+    first[k]:first[k + 1]]`` hold key ``k``) with every node of the high key (each pair
+    once where the keys are the same), those ``places`` apart within ``slack[a] +
+    slack[b]`` (a hair more) of ``[span_lo[q], span_hi[q]]``; in that order, the low
+    key's node first. Counted first, then stored."""
+    none = np.zeros(0, dtype=np.intp)
+    args = (order, first, low, high, places, slack, span_lo, span_hi)
+    total = _key_pair_walk_jit(*args, none, none, False)
+    out_a = np.empty(total, dtype=np.intp)
+    out_b = np.empty(total, dtype=np.intp)
+    _key_pair_walk_jit(*args, out_a, out_b, True)
+    return out_a, out_b
 
 
 def _overrun_counts(
@@ -2575,6 +2635,8 @@ within: Callable[..., Any] = njit(cache=True, nogil=True)(_within)
 _within_jit = within
 icp_refine: Callable[..., Any] = njit(cache=True, nogil=True)(_icp_refine)
 in_place_chi: Callable[..., Any] = njit(cache=True, nogil=True)(_in_place_chi)
+_key_pair_walk_jit: Callable[..., int] = njit(cache=True, nogil=True)(_key_pair_walk)
+key_pair_nodes: Callable[..., Any] = njit(cache=True, nogil=True)(_key_pair_nodes)
 overrun_counts: Callable[..., NDArray[np.int64]] = njit(cache=True, nogil=True)(_overrun_counts)
 straight_and_fitted_chi: Callable[..., Any] = njit(cache=True, nogil=True)(_straight_and_fitted_chi)
 reach_tallies: Callable[..., Any] = njit(cache=True, nogil=True)(_reach_tallies)

@@ -263,6 +263,17 @@ class SurveyIndex:
         """One beacon of each design: identification tests these."""
         return [self.survey[group[0]] for group in self.designs]
 
+    @functools.cached_property
+    def middle_panels(self) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+        """Per design (by position in :attr:`designs`), its middle panel's length (edge 2
+        to edge 3 of its representative) and the key of its edge 2 (:meth:`node_key`)."""
+        reps = self.representatives
+        lengths = np.array([float(np.hypot(*(b.edges[2] - b.edges[1]))) for b in reps])
+        keys = np.array([self.node_key(b.id, 2) for b in reps], dtype=np.int64)
+        lengths.flags.writeable = False
+        keys.flags.writeable = False
+        return lengths, keys
+
     def design_of(self, beacon_id: str) -> int:
         return self._design_of[beacon_id]
 
@@ -310,14 +321,64 @@ class SurveyIndex:
         low, high = np.divmod(self._codes, width)
         return low.astype(np.int64), high.astype(np.int64)
 
+    @functools.cached_property
+    def key_pair_spans(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Per pair of keys of :attr:`key_pairs`, the shortest and the longest distance
+        of its surveyed edge pairs."""
+        if self._codes.size == 0:
+            return np.zeros(0), np.zeros(0)
+        starts = self._starts
+        return self._pair_d[starts[:-1]], self._pair_d[starts[1:] - 1]
+
     def pairs_to_look_up(
-        self, keys: NDArray[np.int64]
+        self,
+        keys: NDArray[np.int64],
+        places: NDArray[np.float64] | None = None,
+        slack_m: NDArray[np.float64] | None = None,
     ) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
         """The pairs ``i < j`` of ``keys`` (a scan's node keys) whose keys have a bucket
         (:meth:`have_pairs`), in the order of ``numpy.triu_indices``: found from the
         buckets of the keys present, so that a survey of many designs, whose every corner
         is read as a node of many of them, costs the pairs that can be looked up, not
-        every pair of nodes."""
+        every pair of nodes.
+
+        With ``places`` (each node's, shape (n, 2)) and ``slack_m`` (each node's share of
+        a tolerance), only the pairs ``places`` apart within ``slack_m[i] + slack_m[j]``
+        (a hair more) of some distance their bucket's surveyed pairs span."""
+        keys = np.asarray(keys, dtype=np.int64)
+        empty = np.zeros(0, dtype=np.intp)
+        if self._codes.size == 0 or keys.size < 2:
+            return empty, empty
+        width = _key_width(len(self.designs))
+        low, high = self.key_pairs
+        present = np.zeros(width, dtype=bool)
+        present[keys] = True
+        both = present[low] & present[high]
+        low, high = low[both], high[both]
+        from mast.core._kernels import key_pair_nodes
+
+        # Nodes grouped by key: ``order[first[k]:first[k + 1]]`` hold key k.
+        order = np.argsort(keys, kind="stable").astype(np.intp)
+        first = np.searchsorted(keys[order], np.arange(width + 1)).astype(np.intp)
+        if places is not None and slack_m is not None:
+            span_lo, span_hi = (np.ascontiguousarray(span[both]) for span in self.key_pair_spans)
+            xy = np.ascontiguousarray(places, dtype=float).reshape(-1, 2)
+            slack = np.ascontiguousarray(slack_m, dtype=float)
+        else:
+            span_lo = span_hi = np.zeros(low.size)
+            xy, slack = np.zeros((keys.size, 2)), np.full(keys.size, np.inf)
+        a, b = key_pair_nodes(order, first, low, high, xy, slack, span_lo, span_hi)
+        i, j = np.minimum(a, b), np.maximum(a, b)
+        at = np.lexsort((j, i))
+        return i[at].astype(np.intp), j[at].astype(np.intp)
+
+    def _pairs_to_look_up_reference(
+        self,
+        keys: NDArray[np.int64],
+        places: NDArray[np.float64] | None = None,
+        slack_m: NDArray[np.float64] | None = None,
+    ) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+        """:meth:`pairs_to_look_up` in numpy (the tests compare the two)."""
         keys = np.asarray(keys, dtype=np.int64)
         empty = np.zeros(0, dtype=np.intp)
         if self._codes.size == 0 or keys.size < 2:
@@ -340,6 +401,11 @@ class SurveyIndex:
         a = order[first[low[bucket]] + offset // size_b[bucket]]
         b = order[first[high[bucket]] + offset % size_b[bucket]]
         keep = (low[bucket] != high[bucket]) | (a < b)
+        if places is not None and slack_m is not None:
+            span_lo, span_hi = (span[both] for span in self.key_pair_spans)
+            d = np.hypot(places[b, 0] - places[a, 0], places[b, 1] - places[a, 1])
+            tol = (slack_m[a] + slack_m[b]) * (1.0 + 1e-9) + 1e-9
+            keep &= (d + tol >= span_lo[bucket]) & (d - tol <= span_hi[bucket])
         a, b = a[keep], b[keep]
         i, j = np.minimum(a, b), np.maximum(a, b)
         at = np.lexsort((j, i))

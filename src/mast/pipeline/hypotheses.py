@@ -26,7 +26,7 @@ from __future__ import annotations
 import functools
 import itertools
 import math
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -185,6 +185,12 @@ def node_sigma(node: NodeMatch, segmentation: Segmentation) -> float:
     return major_sigma(node_covariance(node, segmentation))
 
 
+def _largest_eigenvalues(covs: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Each 2x2 covariance's largest eigenvalue (never below 0), shape (n,)."""
+    a, b, c = covs[:, 0, 0], covs[:, 0, 1], covs[:, 1, 1]
+    return np.maximum(0.5 * (a + c) + np.hypot(0.5 * (a - c), b), 0.0)
+
+
 def major_sigma(cov: NDArray[np.float64]) -> float:
     """Square root of a 2x2 covariance's largest eigenvalue (the ellipse's semi-major axis)."""
     (a, b), (_, c) = cov.tolist()
@@ -271,8 +277,18 @@ def pose_hypotheses(
     """
     nodes = identification.nodes
     # Covariances and panels of the nodes that are looked up (a survey of many designs
-    # identifies many nodes, few of them of designs surveyed near each other).
-    cov = functools.cache(lambda k: node_covariance(nodes[k], segmentation))
+    # identifies many nodes, few of them of designs surveyed near each other). A node's
+    # covariance is its corner's: one per corner, however many designs read it.
+    corner_covs: dict[tuple[tuple[int, ...], bytes], NDArray[np.float64]] = {}
+
+    def corner_cov(k: int) -> NDArray[np.float64]:
+        n = nodes[k]
+        at = (tuple(n.segments), n.node_scanner.tobytes())
+        if at not in corner_covs:
+            corner_covs[at] = node_covariance(n, segmentation)
+        return corner_covs[at]
+
+    cov = functools.cache(corner_cov)
     seen = functools.cache(lambda k: _PanelsSeen.of(nodes[k], segmentation))
     # Per node pair, the survey's readings of it that fit: whether one beacon's two
     # edges, the nodes' Table 1 options, the misfit, the nodes, their beacons (survey
@@ -280,18 +296,20 @@ def pose_hypotheses(
     found: list[tuple[NDArray[Any], ...]] = []
     # Only node pairs whose designs and edges are surveyed within reach of each other.
     keys = np.array([index.node_key(n.beacon, n.edge) for n in nodes], dtype=np.int64)
-    first, second = index.pairs_to_look_up(keys)
+    xy = np.array([n.node_scanner for n in nodes], dtype=float).reshape(-1, 2)
+    covs = np.array([cov(k) for k in range(len(nodes))], dtype=float).reshape(-1, 2, 2)
+    # Each node's share of the widest distance tolerance below (the square root of a sum
+    # is at most the sum of the square roots): only pairs about as far apart as some
+    # surveyed pair of their keys are formed at all.
+    share = config.sigmas * np.sqrt(_largest_eigenvalues(covs) + survey_sigma_m**2)
+    first, second = index.pairs_to_look_up(keys, xy, share)
     # Only pairs the survey holds an edge pair for at their distance (the tolerance a
     # hair wider than the one below, so none it takes is left out): with many designs
     # a scan's corners are read as nodes of many, and few of their pairs fit.
     if first.size:
-        xy = np.array([n.node_scanner for n in nodes], dtype=float).reshape(-1, 2)
         gap = xy[second] - xy[first]
         dist = np.hypot(gap[:, 0], gap[:, 1])
         u = gap / np.where(dist > 0, dist, 1.0)[:, None]
-        covs = np.zeros((len(nodes), 2, 2))
-        for k in np.union1d(first, second).tolist():
-            covs[k] = cov(k)
         both = covs[first] + covs[second]
         var = np.einsum("ki,kij,kj->k", u, both, u) + 2 * survey_sigma_m**2
         tol = config.sigmas * np.sqrt(np.maximum(var, 0.0)) * (1.0 + 1e-9) + 1e-12
@@ -385,17 +403,22 @@ def pose_hypotheses(
             if h is not None:
                 yield h
 
-    per_node = [singles_of(k) for k in sorted(range(len(nodes)), key=lambda k: nodes[k].option)]
+    per_node = (singles_of(k) for k in sorted(range(len(nodes)), key=lambda k: nodes[k].option))
     singles = itertools.islice(_taking_turns(per_node), config.max_single_hypotheses)
     return pairs + list(singles)
 
 
-def _taking_turns(sources: list[Iterator[Hypothesis]]) -> Iterator[Hypothesis]:
+def _taking_turns(sources: Iterable[Iterator[Hypothesis]]) -> Iterator[Hypothesis]:
     """The first of each source, then the second of each, and so on, leaving out sources
-    that have run dry; each item made only when it is asked for (a scan read as
-    thousands of nodes of a mine's many designs makes a few dozen singles, not one
-    from every node first)."""
-    active = list(sources)
+    that have run dry; each item, and each source, made only when it is asked for (a
+    scan read as thousands of nodes of a mine's many designs makes a few dozen singles,
+    not one from every node first)."""
+    active = []
+    for source in sources:  # the first round takes the sources as they come
+        item = next(source, None)
+        if item is not None:
+            yield item
+            active.append(source)
     while active:
         still = []
         for source in active:
@@ -430,8 +453,7 @@ def panel_hypotheses(
     only the design pairs surveyed within reach of each other are looked up.
     """
     reps = index.representatives
-    lengths = np.array([float(np.hypot(*(b.edges[2] - b.edges[1]))) for b in reps])
-    keys = np.array([index.node_key(b.id, 2) for b in reps], dtype=np.int64)
+    lengths, keys = index.middle_panels
     order = sorted(
         range(len(segmentation.segments)), key=lambda i: (-len(segmentation.segments[i]), i)
     )
@@ -470,16 +492,27 @@ def panel_hypotheses(
     low, high = index.key_pairs
     known = (low < design_of_key.size) & (high < design_of_key.size)
     d_low, d_high = design_of_key[low[known]], design_of_key[high[known]]
+    # Only design pairs both of whose designs some candidate may be (the others match
+    # no pair of candidates below): a mine of many designs surveys many such pairs.
+    fit_any = np.zeros(keys.size, dtype=bool)
+    for _, fits in cands:
+        fit_any[fits] = True
     pair_ok = (d_low >= 0) & (d_high >= 0)
+    pair_ok[pair_ok] = fit_any[d_low[pair_ok]] & fit_any[d_high[pair_ok]]
     d_low, d_high = d_low[pair_ok], d_high[pair_ok]
+    span_lo, span_hi = (span[known][pair_ok] for span in index.key_pair_spans)
     owners, kas, kbs = [], [], []
-    for at, (i, j, _) in enumerate(apart):
+    for at, (i, j, ds) in enumerate(apart):
         in_i = np.zeros(keys.size, dtype=bool)
         in_j = np.zeros(keys.size, dtype=bool)
         in_i[cands[i][1]] = True
         in_j[cands[j][1]] = True
-        forward = in_i[d_low] & in_j[d_high]
-        backward = in_i[d_high] & in_j[d_low] & (d_low != d_high)
+        # Only design pairs with a surveyed pair at about the candidates' distance: at
+        # least as far from it as the widest reach below lets any of them be.
+        far = _widest_reach(cands[i], cands[j], lengths, config.sigmas * segmentation.noise_m)
+        spanned = (span_lo <= ds + far) & (span_hi >= ds - far)
+        forward = in_i[d_low] & in_j[d_high] & spanned
+        backward = in_i[d_high] & in_j[d_low] & (d_low != d_high) & spanned
         k_a = np.concatenate([d_low[forward], d_high[backward]])
         k_b = np.concatenate([d_high[forward], d_low[backward]])
         by = np.lexsort((k_b, k_a))
@@ -525,6 +558,23 @@ def panel_hypotheses(
                 found.append(h)
     found.sort(key=lambda h: h.misfit)
     return found[: config.max_panel_hypotheses]
+
+
+def _widest_reach(
+    a: tuple[Segment, NDArray[np.intp]],
+    b: tuple[Segment, NDArray[np.intp]],
+    lengths: NDArray[np.float64],
+    noise_m: float,
+) -> float:
+    """At least the reach :func:`panel_hypotheses` gives two candidate middle panels
+    (segment and designs each) for any of their designs (``lengths``: the designs'
+    middle panels' lengths), a hair more against rounding."""
+    total = noise_m
+    for seg, fits in (a, b):
+        la = lengths[fits]
+        off = max(abs(seg.length - float(la.min())), abs(seg.length - float(la.max())))
+        total += 0.5 * float(la.max()) + 0.5 * off + seg.spacing_start + seg.spacing_end
+    return total * (1.0 + 1e-9) + 1e-9
 
 
 def _panel_pair(

@@ -26,6 +26,7 @@ diagnosis; a lone segment is too ambiguous to start a hypothesis).
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Iterable
 from dataclasses import dataclass
@@ -121,6 +122,14 @@ class SingleMatch:
 class PanelIdentification:
     nodes: tuple[NodeMatch, ...]
     singles: tuple[SingleMatch, ...]
+
+    @functools.cached_property
+    def nodes_by_beacon(self) -> dict[str, tuple[NodeMatch, ...]]:
+        """The nodes taken for each beacon, in their order."""
+        groups: dict[str, list[NodeMatch]] = {}
+        for node in self.nodes:
+            groups.setdefault(node.beacon, []).append(node)
+        return {b: tuple(nodes) for b, nodes in groups.items()}
 
 
 def _extent_from_node(seg: Segment, node: NDArray[np.float64], before: bool) -> tuple[float, float]:

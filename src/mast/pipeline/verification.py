@@ -821,21 +821,23 @@ def _on_their_edges(
     node_ok: set[str] = set()
     if ident is None or seg is None:
         return node_ok
+    by_beacon = ident.nodes_by_beacon
     designs = {index.design_of(b) for b in candidates}
-    for node in ident.nodes:
-        design = index.design_of(node.beacon)
-        if design not in designs:
-            continue  # no candidate is of its design (a survey of many designs)
-        # The candidates of the node's design (not every look-alike in a mine's survey).
-        for b in sorted(candidates - node_ok):
-            if index.design_of(b) != design:
-                continue
-            mapped = icp.pose.scanner_to_mine(node.node_scanner[None, :])[0]
-            edge = index.survey[b].edges[node.edge - 1]
-            if math.dist(mapped, edge) <= cfg.gate_sigmas * math.hypot(
-                node_sigma(node, seg), noise.survey_sigma_m, noise.range_sigma_m
-            ):
-                node_ok.add(b)
+    # Only the nodes of a candidate's design (a survey of many designs reads each corner
+    # as a node of many); whether a candidate is taken does not depend on their order.
+    for design in sorted(designs):
+        mine = (n for b in index.designs[design] for n in by_beacon.get(b, ()))
+        for node in mine:
+            # The candidates of the node's design (not every look-alike in a mine's survey).
+            for b in sorted(candidates - node_ok):
+                if index.design_of(b) != design:
+                    continue
+                mapped = icp.pose.scanner_to_mine(node.node_scanner[None, :])[0]
+                edge = index.survey[b].edges[node.edge - 1]
+                if math.dist(mapped, edge) <= cfg.gate_sigmas * math.hypot(
+                    node_sigma(node, seg), noise.survey_sigma_m, noise.range_sigma_m
+                ):
+                    node_ok.add(b)
     return node_ok
 
 
