@@ -234,3 +234,36 @@ def test_information_and_bound_kernels_match_the_references() -> None:
     ):
         np.testing.assert_array_equal(bounds.bound_of(bad), nowhere)
         np.testing.assert_array_equal(bounds._bound_reference(bad), nowhere)
+
+
+@pytest.mark.parametrize(
+    ("first_deg", "span_deg", "beams"), [(-135.0, 270.0, 1081), (-180.0, 359.8, 1800)]
+)
+def test_beams_left_out_of_the_ray_association_cross_no_segment(
+    first_deg: float, span_deg: float, beams: int
+) -> None:
+    """The ray association casts only the beams pointing within the angle some segment
+    subtends (kernels._beams_toward): every beam left out meets no segment, from poses
+    of any azimuth, segments near and far, in front and behind, and across the scan's
+    seam."""
+    from mast.core import _kernels as kernels
+
+    rng = np.random.default_rng(5)
+    angles = np.radians(first_deg + span_deg * np.arange(beams) / (beams - 1))
+    left_out = 0
+    for _ in range(300):
+        e, n = rng.uniform(-5.0, 5.0, 2)
+        azimuth = float(rng.uniform(-2 * math.pi, 2 * math.pi))
+        k = int(rng.integers(1, 10))
+        a = rng.uniform(-12.0, 12.0, (k, 2))
+        b = a + rng.normal(0.0, rng.choice([0.05, 0.5, 3.0]), (k, 2))
+        cast = kernels._beams_toward_jit(e, n, azimuth, angles, a, b)
+        ex, ey, wx, wy, w_x_e = kernels._crossing_terms_jit(np.array([e, n]), a, b)
+        for i in np.flatnonzero(~cast):
+            bearing = azimuth - angles[i]
+            _, j = kernels._first_crossing_jit(
+                math.sin(bearing), math.cos(bearing), ex, ey, wx, wy, w_x_e
+            )
+            assert j == -1
+        left_out += int((~cast).sum())
+    assert left_out > 0

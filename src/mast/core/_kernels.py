@@ -1908,6 +1908,36 @@ def _spread(g0: float, g1: float, g2: float, cofactor: NDArray[np.float64]) -> f
     return acc
 
 
+def _beams_toward(
+    easting: float,
+    northing: float,
+    azimuth: float,
+    angles: NDArray[np.float64],
+    seg_a: NDArray[np.float64],
+    seg_b: NDArray[np.float64],
+) -> NDArray[np.bool_]:
+    """Whether each beam (``angles``, increasing, a turn at most) from the pose points
+    within the angle a segment ``seg_a[k]``-``seg_b[k]`` subtends, widened by a
+    nanoradian against rounding: a ray outside every one crosses none
+    (:func:`_crossing`). Every beam where a segment subtends half a turn or more."""
+    n = angles.shape[0]
+    cast = np.zeros(n, dtype=np.bool_)
+    lo_hi = np.empty((3, 2), dtype=np.intp)
+    for k in range(seg_a.shape[0]):
+        # A mine-frame direction (dx, dy) is the beam at angle azimuth - atan2(dx, dy).
+        at_a = azimuth - math.atan2(seg_a[k, 0] - easting, seg_a[k, 1] - northing)
+        at_b = azimuth - math.atan2(seg_b[k, 0] - easting, seg_b[k, 1] - northing)
+        turn = (at_b - at_a + math.pi) % (2.0 * math.pi) - math.pi
+        width = abs(turn) + 2e-9
+        if not width < math.pi - 1e-6:
+            cast[:] = True
+            return cast
+        windows = _beam_windows_jit(angles, min(at_a, at_a + turn) - 1e-9, width, lo_hi)
+        for w in range(windows):
+            cast[lo_hi[w, 0] : lo_hi[w, 1]] = True
+    return cast
+
+
 def _ray_association(
     easting: float,
     northing: float,
@@ -1943,8 +1973,9 @@ def _ray_association(
     ray_owner = np.full(n, -1, dtype=np.intp)
     ux = np.empty(n)
     uy = np.empty(n)
+    cast = _beams_toward_jit(easting, northing, azimuth, angles, seg_a, seg_b)
     for i in range(n):
-        if not valid[i]:
+        if not (valid[i] and cast[i]):
             continue
         bearing = azimuth - angles[i]
         ux[i], uy[i] = math.sin(bearing), math.cos(bearing)
@@ -2625,6 +2656,7 @@ _crossing_terms_jit: Callable[..., Any] = njit(cache=True, nogil=True)(_crossing
 _crossing_jit: Callable[..., float] = njit(cache=True, nogil=True)(_crossing)
 _beam_windows_jit: Callable[..., int] = njit(cache=True, nogil=True)(_beam_windows)
 _first_crossing_jit: Callable[..., Any] = njit(cache=True, nogil=True)(_first_crossing)
+_beams_toward_jit: Callable[..., Any] = njit(cache=True, nogil=True)(_beams_toward)
 beam_checks: Callable[..., Any] = njit(cache=True, nogil=True)(_beam_checks)
 associate: Callable[..., Any] = njit(cache=True, nogil=True)(_associate)
 _associate_jit = associate
