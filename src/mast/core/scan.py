@@ -55,6 +55,9 @@ class Scan:
     stamp_ns: int = 0
     frame_id: str = "laser"
     _valid: NDArray[np.bool_] = field(init=False, repr=False)
+    _points: tuple[NDArray[np.intp], NDArray[np.float64]] | None = field(
+        init=False, repr=False, default=None
+    )
 
     def __post_init__(self) -> None:
         angles = _frozen(self.angles_rad)
@@ -192,8 +195,16 @@ class Scan:
             Beam indices of the valid returns.
         points_scanner : ndarray, shape (m, 2)
             ``x = r cos(phi)``, ``y = r sin(phi)``, metres.
+
+        Both are read-only and computed once per scan (every stage reads them).
         """
-        idx = np.flatnonzero(self._valid)
-        r = self.ranges_m[idx]
-        a = self.angles_rad[idx]
-        return idx, np.stack([r * np.cos(a), r * np.sin(a)], axis=-1)
+        if self._points is None:
+            idx = np.flatnonzero(self._valid)
+            r = self.ranges_m[idx]
+            a = self.angles_rad[idx]
+            pts = np.stack([r * np.cos(a), r * np.sin(a)], axis=-1)
+            idx.setflags(write=False)
+            pts.setflags(write=False)
+            object.__setattr__(self, "_points", (idx, pts))
+        assert self._points is not None
+        return self._points
