@@ -506,7 +506,7 @@ def _runs(
     noise_guess = config.noise_m
     run_ids = np.zeros(beams.size, dtype=np.intp)
     if beams.size > 1:
-        with np.errstate(invalid="ignore", divide="ignore"):
+        with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
             dmax = r[:-1] * np.sin(dphi) / np.sin(np.maximum(lam - dphi, 1e-6))
         dmax = dmax + 3.0 * (noise_guess if noise_guess is not None else 0.0)
         brk = (gap_beams > config.max_gap_beams + 1) | (step > dmax) | (dphi >= lam)
