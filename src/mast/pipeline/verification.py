@@ -824,10 +824,16 @@ def _on_their_edges(
     by_beacon = ident.nodes_by_beacon
     designs = {index.design_of(b) for b in candidates}
     # Only the nodes of a candidate's design (a survey of many designs reads each corner
-    # as a node of many); whether a candidate is taken does not depend on their order.
+    # as a node of many), found from whichever is fewer, the design's beacons (a mine of
+    # repeated designs has thousands) or the beacons the nodes name; whether a candidate
+    # is taken does not depend on their order.
     for design in sorted(designs):
-        mine = (n for b in index.designs[design] for n in by_beacon.get(b, ()))
-        for node in mine:
+        members = index.designs[design]
+        if len(members) <= len(by_beacon):
+            named = [b for b in members if b in by_beacon]
+        else:
+            named = [b for b in by_beacon if index.design_of(b) == design]
+        for node in (n for b in named for n in by_beacon[b]):
             # The candidates of the node's design (not every look-alike in a mine's survey).
             for b in sorted(candidates - node_ok):
                 if index.design_of(b) != design:
