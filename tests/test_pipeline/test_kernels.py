@@ -252,7 +252,7 @@ def test_beacons_in_reach_of_many_starts_are_in_reach_of_each() -> None:
     panels = PanelSet.from_survey(scene.survey)
     cfg = VerificationConfig()
     rng = np.random.default_rng(12)
-    found = 0
+    found = shorter = 0
     for k, shot in enumerate(scene.shots[:4]):
         scan = simulate_scan(scene.world, shot.pose, shot.scanner, rng=rng).scan
         beams, pts = scan.points()
@@ -272,10 +272,29 @@ def test_beacons_in_reach_of_many_starts_are_in_reach_of_each() -> None:
             )
         nears = [panels.near(p.position, scan.range_max_m + 1.0) for p in starts]
         got = _beacons_in_reach(starts, nears, pts, angles, ranges, panels, 0.05, cfg)
+        # Cut short: the same answers to "are its own beacons all in it" and "has it
+        # enough", with one own beacon, two (one repeated) or none.
+        ids = scene.survey.ids
+        owns = [
+            [ids[int(rng.integers(len(ids)))] for _ in range(int(rng.integers(0, 3)))]
+            for _ in starts
+        ]
+        owns[0] = [ids[0], ids[0]]
+        for enough in (1, 2, 3):
+            short = _beacons_in_reach(
+                starts, nears, pts, angles, ranges, panels, 0.05, cfg, owns=owns, enough=enough
+            )
+            for own, full, cut in zip(owns, got, short, strict=True):
+                assert cut <= full
+                assert (set(own) <= cut) == (set(own) <= full)
+                if set(own) <= full:
+                    assert (len(cut) >= enough) == (len(full) >= enough)
+                    shorter += len(cut) < len(full)
         for start, near, g in zip(starts, nears, got, strict=True):
             assert g == _in_reach(start, pts, ranges, panels, near, 0.05, cfg)
             found += len(g)
     assert found > 0
+    assert shorter > 0
     assert _beacons_in_reach([], [], pts, angles, ranges, panels, 0.05, cfg) == []
     none = np.zeros((0, 2))
     away = [Pose2D(p.easting + 100.0, p.northing, p.azimuth) for p in starts[:3]]

@@ -449,6 +449,93 @@ def _reach_tallies(
     return per_panel, per_beacon
 
 
+def _beacon_gathers(
+    b: int,
+    j: int,
+    last: int,
+    e: float,
+    nn: float,
+    az: float,
+    points: NDArray[np.float64],
+    angles: NDArray[np.float64],
+    ranges: NDArray[np.float64],
+    near: NDArray[np.intp],
+    a: NDArray[np.float64],
+    direction: NDArray[np.float64],
+    normal: NDArray[np.float64],
+    length: NDArray[np.float64],
+    beacon: NDArray[np.intp],
+    centre: NDArray[np.float64],
+    radius: NDArray[np.float64],
+    reach: float,
+    per_range: float,
+    far: float,
+    need: int,
+    lo_hi: NDArray[np.intp],
+) -> bool:
+    """Whether beacon ``b`` (its panels among ``near[j:last]``, the first at ``j``) has
+    ``need`` returns within reach from the start ``(e, nn, az)``: :func:`_beacons_in_reach`'s
+    test of one beacon (``far`` the farthest range, ``lo_hi`` room for the windows)."""
+    n = points.shape[0]
+    sa, ca = math.sin(az), math.cos(az)
+    rotation = math.pi / 2 - az
+    dx, dy = centre[b, 0] - e, centre[b, 1] - nn
+    dist = math.hypot(dx, dy)
+    grow = radius[b] + reach + per_range * far
+    # The beam angle of the centre's direction, and the beams either side.
+    bearing = math.atan2(dy, dx) - rotation
+    windows = 0
+    if dist <= grow:
+        lo_hi[0, 0], lo_hi[0, 1] = 0, n
+        windows = 1
+    else:
+        half = math.asin(grow / dist) + 1e-9
+        windows = _beam_windows_jit(angles, bearing - half, 2.0 * half, lo_hi)
+    # Each window's returns from the beam nearest the centre's direction outwards, one
+    # side then the other: a beacon that has enough has them there, and counting stops
+    # once it has (the count does not depend on the order).
+    two_pi = 2.0 * math.pi
+    towards = np.searchsorted(angles, angles[0] + (bearing - angles[0]) % two_pi)
+    # The beacon's panels, in their order among ``near``.
+    mine = np.empty(last - j, dtype=np.intp)
+    panels = 0
+    for jj in range(j, last):
+        if beacon[near[jj]] == b:
+            mine[panels] = near[jj]
+            panels += 1
+    count = 0
+    for w in range(windows):
+        lo, hi = lo_hi[w, 0], lo_hi[w, 1]
+        up = min(max(towards, lo), hi - 1)
+        down = up - 1
+        upwards = True
+        while up < hi or down >= lo:
+            if up < hi and (upwards or down < lo):
+                p = up
+                up += 1
+            else:
+                p = down
+                down -= 1
+            upwards = not upwards
+            x, y = points[p, 0], points[p, 1]
+            mx = sa * x - ca * y + e
+            my = ca * x + sa * y + nn
+            r = reach + per_range * ranges[p]
+            for m in range(panels):
+                q = mine[m]
+                rx = mx - a[q, 0]
+                ry = my - a[q, 1]
+                t = rx * direction[q, 0] + ry * direction[q, 1]
+                s = rx * normal[q, 0] + ry * normal[q, 1]
+                over = max(max(-t, t - length[q]), 0.0)
+                if over * over + s * s <= r * r:
+                    count += 1
+                    break
+            if count >= need:
+                return True
+    return False
+
+
 def _beacons_in_reach(
     points: NDArray[np.float64],
     angles: NDArray[np.float64],
@@ -466,11 +553,20 @@ def _beacons_in_reach(
     reach: float,
     per_range: float,
     need: int,
+    own_ptr: NDArray[np.intp],
+    own: NDArray[np.intp],
+    stop_at: int,
 ) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
     """For each start pose (rows E, N, azimuth), the beacons with at least ``need``
     returns within ``reach + per_range * range`` of their panels among the start's
     ``near[near_ptr[h]:near_ptr[h + 1]]`` (a return counts once for a beacon): the
     beacons ``verification._in_reach`` finds, for every start in one call.
+
+    With ``stop_at`` > 0, each start's own beacons ``own[own_ptr[h]:own_ptr[h + 1]]``
+    are tested first and the search stops at the first of them that falls short (it is
+    left out) or once ``stop_at`` beacons are found: then whether the own beacons are
+    all among those found, and whether at least ``stop_at`` are, is what the whole set
+    would say.
 
     ``points`` are the returns in the scanner frame, ``angles`` their beams' angles
     (increasing, a turn at most), ``ranges`` their ranges; ``beacon[q]`` is panel
@@ -497,56 +593,45 @@ def _beacons_in_reach(
     lo_hi = np.empty((3, 2), dtype=np.intp)
     for h in range(k_starts):
         e, nn, az = starts[h, 0], starts[h, 1], starts[h, 2]
-        sa, ca = math.sin(az), math.cos(az)
-        rotation = math.pi / 2 - az
         first, last = near_ptr[h], near_ptr[h + 1]
-        for j in range(first, last):
+        done = False
+        if stop_at > 0:
+            for o in range(own_ptr[h], own_ptr[h + 1]):
+                b = own[o]
+                j = first
+                while j < last and beacon[near[j]] != b:
+                    j += 1
+                if j == last or not _beacon_gathers_jit(
+                    b, j, last, e, nn, az, points, angles, ranges, near, a, direction,
+                    normal, length, beacon, centre, radius, reach, per_range, far, need, lo_hi,
+                ):  # fmt: skip
+                    done = True  # an own beacon falls short: the rest cannot matter
+                    break
+                found[got] = b
+                got += 1
+            if got - ptr[h] >= stop_at:
+                done = True
+        j = first
+        while not done and j < last:
             b = beacon[near[j]]
             repeat = False
             for jj in range(first, j):
                 if beacon[near[jj]] == b:
                     repeat = True
                     break
-            if repeat:
-                continue  # this beacon was counted at its first panel
-            dx, dy = centre[b, 0] - e, centre[b, 1] - nn
-            dist = math.hypot(dx, dy)
-            grow = radius[b] + reach + per_range * far
-            windows = 0
-            if dist <= grow:
-                lo_hi[0, 0], lo_hi[0, 1] = 0, n
-                windows = 1
-            else:
-                half = math.asin(grow / dist) + 1e-9
-                # The beam angle of the centre's direction, and the beams either side.
-                bearing = math.atan2(dy, dx) - rotation
-                windows = _beam_windows_jit(angles, bearing - half, 2.0 * half, lo_hi)
-            count = 0
-            for w in range(windows):
-                for p in range(lo_hi[w, 0], lo_hi[w, 1]):
-                    x, y = points[p, 0], points[p, 1]
-                    mx = sa * x - ca * y + e
-                    my = ca * x + sa * y + nn
-                    r = reach + per_range * ranges[p]
-                    for jj in range(j, last):
-                        q = near[jj]
-                        if beacon[q] != b:
-                            continue
-                        rx = mx - a[q, 0]
-                        ry = my - a[q, 1]
-                        t = rx * direction[q, 0] + ry * direction[q, 1]
-                        s = rx * normal[q, 0] + ry * normal[q, 1]
-                        over = max(max(-t, t - length[q]), 0.0)
-                        if over * over + s * s <= r * r:
-                            count += 1
-                            break
-                    if count >= need:
-                        break
-                if count >= need:
-                    break
-            if count >= need:
+            if stop_at > 0:
+                for o in range(own_ptr[h], own_ptr[h + 1]):
+                    if own[o] == b:
+                        repeat = True  # tested first
+            if not repeat and _beacon_gathers_jit(
+                b, j, last, e, nn, az, points, angles, ranges, near, a, direction, normal,
+                length, beacon, centre, radius, reach, per_range, far, need, lo_hi,
+            ):  # fmt: skip
                 found[got] = b
                 got += 1
+                if stop_at > 0 and got - ptr[h] >= stop_at:
+                    done = True
+            j += 1
         ptr[h + 1] = got
     return found[:got], ptr
 
@@ -2657,6 +2742,7 @@ _crossing_jit: Callable[..., float] = njit(cache=True, nogil=True)(_crossing)
 _beam_windows_jit: Callable[..., int] = njit(cache=True, nogil=True)(_beam_windows)
 _first_crossing_jit: Callable[..., Any] = njit(cache=True, nogil=True)(_first_crossing)
 _beams_toward_jit: Callable[..., Any] = njit(cache=True, nogil=True)(_beams_toward)
+_beacon_gathers_jit: Callable[..., bool] = njit(cache=True, nogil=True)(_beacon_gathers)
 beam_checks: Callable[..., Any] = njit(cache=True, nogil=True)(_beam_checks)
 associate: Callable[..., Any] = njit(cache=True, nogil=True)(_associate)
 _associate_jit = associate

@@ -25,7 +25,7 @@ S. Thrun, W. Burgard and D. Fox, *Probabilistic Robotics*, 2005, sec. 6.3
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -1202,6 +1202,10 @@ def verify(
                 panels,
                 final_gate,
                 cfg,
+                # Only whether its own beacons are in it, and whether there are
+                # min_beacons, is asked of each set (in ``refine``).
+                owns=[hypotheses[k].beacons for k in one_beacon],
+                enough=min_beacons,
             ),
             strict=True,
         )
@@ -1274,17 +1278,32 @@ def _beacons_in_reach(
     panels: PanelSet,
     gate_m: float,
     cfg: VerificationConfig,
+    owns: Sequence[Sequence[str]] | None = None,
+    enough: int = 0,
 ) -> list[frozenset[str]]:
     """:func:`_in_reach` of every start (its panels in reach ``nears``) in one compiled
     call (:func:`mast.core._kernels.beacons_in_reach`): each beacon tested only on the
     beams pointing its way (``angles``, increasing), and only until it has enough. The
-    tests compare the two."""
+    tests compare the two.
+
+    With ``owns`` (each start's own beacons) and ``enough`` > 0, a start's set is cut
+    short where the rest cannot change whether its own beacons are all in it, nor
+    whether it has ``enough``: its own beacons are tested first, and the search stops
+    at the first that falls short or at ``enough`` beacons."""
     from mast.core._kernels import beacons_in_reach
 
     if not starts:
         return []
     centre, radius = panels.discs
     sizes = np.array([n.size for n in nears], dtype=np.intp)
+    number = panels.number
+    own_lists = [sorted({number[b] for b in own}) for own in owns] if owns else []
+    own_ptr = np.zeros(len(starts) + 1, dtype=np.intp)
+    if owns is not None and enough > 0:
+        own_ptr[1:] = np.cumsum([len(o) for o in own_lists])
+    else:
+        enough = 0
+    own = np.array([b for o in own_lists for b in o] if enough else [], dtype=np.intp)
     found, ptr = beacons_in_reach(
         np.ascontiguousarray(pts, dtype=float).reshape(-1, 2),
         np.ascontiguousarray(angles, dtype=float),
@@ -1302,6 +1321,9 @@ def _beacons_in_reach(
         cfg.look_alike_reach_m + gate_m,
         math.tan(cfg.look_alike_reach_rad),
         2 * cfg.min_panel_points,
+        own_ptr,
+        own,
+        enough,
     )
     ids = panels.ids
     return [frozenset(ids[b] for b in found[ptr[k] : ptr[k + 1]]) for k in range(len(starts))]
