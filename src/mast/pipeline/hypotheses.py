@@ -197,25 +197,31 @@ def major_sigma(cov: NDArray[np.float64]) -> float:
     return math.sqrt(max(0.5 * (a + c) + math.hypot(0.5 * (a - c), b), 0.0))
 
 
-def _single_hypothesis(
-    node: NodeMatch, seen: _PanelsSeen, beacon: str, seg: Segmentation, index: SurveyIndex
-) -> Hypothesis | None:
+def _single_hypotheses(
+    node: NodeMatch,
+    seen: _PanelsSeen,
+    beacons: Iterable[str],
+    node_sigma_m: float,
+    index: SurveyIndex,
+) -> Iterator[Hypothesis]:
     """The pose one node and its identified panels (``seen``) imply on their own, the
-    node taken for ``beacon``."""
+    node taken for each of ``beacons`` in turn (made as each is asked for);
+    ``node_sigma_m`` is the node's :func:`node_sigma`."""
     if seen.panel.size == 0:
-        return None
-    node = _renamed(node, beacon)
-    rots = seen.rotations(index, np.array([index.number(beacon)]))[0]
+        return
     w = 1.0 / np.maximum(seen.sigma, 1e-9) ** 2
-    ref = float(rots[0])
-    rot = ref + float(np.sum(w * wrap_angles(rots - ref)) / np.sum(w))
     sigma_rot = 1.0 / math.sqrt(float(np.sum(w)))
-    spread = node_sigma(node, seg) + 2.0 * float(np.hypot(*node.node_scanner)) * sigma_rot
-    c, s = math.cos(rot), math.sin(rot)
-    edge = index.survey[beacon].edges[node.edge - 1]
-    t = edge - np.array([[c, -s], [s, c]]) @ node.node_scanner
-    sim = Similarity(1.0, _wrap(rot), np.asarray(t, dtype=float), 0.0)
-    return Hypothesis((node,), sim, 0.0, "single", spread)
+    spread = node_sigma_m + 2.0 * float(np.hypot(*node.node_scanner)) * sigma_rot
+    for beacon in beacons:
+        named = _renamed(node, beacon)
+        rots = seen.rotations(index, np.array([index.number(beacon)]))[0]
+        ref = float(rots[0])
+        rot = ref + float(np.sum(w * wrap_angles(rots - ref)) / np.sum(w))
+        c, s = math.cos(rot), math.sin(rot)
+        edge = index.survey[beacon].edges[named.edge - 1]
+        t = edge - np.array([[c, -s], [s, c]]) @ named.node_scanner
+        sim = Similarity(1.0, _wrap(rot), np.asarray(t, dtype=float), 0.0)
+        yield Hypothesis((named,), sim, 0.0, "single", spread)
 
 
 def _renamed(node: NodeMatch, beacon: str) -> NodeMatch:
@@ -398,10 +404,8 @@ def pose_hypotheses(
     # many look-alikes in a mine-wide survey cannot crowd out another corner's beacon.
     # Made lazily: a whole mine's look-alikes past the cap are never computed.
     def singles_of(k: int) -> Iterator[Hypothesis]:
-        for b in index.beacons_like(nodes[k].beacon):
-            h = _single_hypothesis(nodes[k], seen(k), b, segmentation, index)
-            if h is not None:
-                yield h
+        beacons = index.beacons_like(nodes[k].beacon)
+        yield from _single_hypotheses(nodes[k], seen(k), beacons, major_sigma(cov(k)), index)
 
     per_node = (singles_of(k) for k in sorted(range(len(nodes)), key=lambda k: nodes[k].option))
     singles = itertools.islice(_taking_turns(per_node), config.max_single_hypotheses)
