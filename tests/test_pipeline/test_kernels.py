@@ -454,3 +454,18 @@ def test_first_same_kernel_matches_the_reference() -> None:
     wrapped = Pose2D(7000.0, 6800.0, 1e-4)
     assert poses.first_same(wrapped) == poses._first_same_reference(wrapped) == 60
     assert 0 < found < 2000
+
+
+def test_tallies_are_numpy_unique_of_the_matched() -> None:
+    """The panels' tallies of an ICP's matches (kernels.tallies) are numpy.unique's of the
+    entries >= 0, with their counts: none, all unmatched, one, and many repeated."""
+    from mast.core._kernels import tallies
+
+    rng = np.random.default_rng(3)
+    cases = [np.zeros(0, dtype=np.intp), np.full(5, -1, dtype=np.intp), np.array([7])]
+    cases += [rng.integers(-1, k, size=n).astype(np.intp) for k, n in ((3, 40), (500, 300))]
+    for values in cases:
+        want = np.unique(values[values >= 0], return_counts=True)
+        got = tallies(values)
+        for g, w in zip(got, want, strict=True):
+            np.testing.assert_array_equal(g, w)

@@ -49,6 +49,7 @@ __all__ = [
     "standardised",
     "straight_and_fitted_chi",
     "survey_shares",
+    "tallies",
     "window_picks",
     "window_scores",
     "within",
@@ -836,6 +837,24 @@ def _icp_refine(
         if panel[i] < 0:
             dist[i] = np.nan
     return e, nn, az, total, converged, panel, dist
+
+
+def _tallies(values: NDArray[np.intp]) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+    """The values ``>= 0`` of ``values``, each once in increasing order, and how many
+    times each occurs: ``numpy.unique(values[values >= 0], return_counts=True)``."""
+    kept = np.sort(values[values >= 0])
+    n = kept.shape[0]
+    distinct = np.empty(n, dtype=np.intp)
+    counts = np.empty(n, dtype=np.intp)
+    got = 0
+    for i in range(n):
+        if got > 0 and kept[i] == distinct[got - 1]:
+            counts[got - 1] += 1
+        else:
+            distinct[got] = kept[i]
+            counts[got] = 1
+            got += 1
+    return distinct[:got], counts[:got]
 
 
 def _key_pair_walk(
@@ -2753,6 +2772,7 @@ within: Callable[..., Any] = njit(cache=True, nogil=True)(_within)
 _within_jit = within
 icp_refine: Callable[..., Any] = njit(cache=True, nogil=True)(_icp_refine)
 in_place_chi: Callable[..., Any] = njit(cache=True, nogil=True)(_in_place_chi)
+tallies: Callable[..., Any] = njit(cache=True, nogil=True)(_tallies)
 _key_pair_walk_jit: Callable[..., int] = njit(cache=True, nogil=True)(_key_pair_walk)
 key_pair_nodes: Callable[..., Any] = njit(cache=True, nogil=True)(_key_pair_nodes)
 overrun_counts: Callable[..., NDArray[np.int64]] = njit(cache=True, nogil=True)(_overrun_counts)

@@ -781,8 +781,10 @@ def _beams_favour(check: BeamCheck, cfg: VerificationConfig) -> bool:
 
 def _panel_counts(icp: IcpResult, panels: PanelSet) -> dict[tuple[str, int], int]:
     """Returns matched to each (beacon, panel) at the refined pose."""
+    from mast.core._kernels import tallies
+
     counts: dict[tuple[str, int], int] = {}
-    idx, n = np.unique(icp.panel[icp.panel >= 0], return_counts=True)
+    idx, n = tallies(icp.panel)
     for k, c in zip(idx, n, strict=True):
         counts[(panels.ids[panels.beacon[k]], int(panels.panel[k]))] = int(c)
     return counts
