@@ -117,6 +117,20 @@ def _key_width(designs: int) -> int:
     return max(designs * len(NODE_EDGES), 1)
 
 
+def _no_pairs() -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+    empty = np.zeros(0, dtype=np.intp)
+    return empty, empty
+
+
+def _in_triu_order(
+    a: NDArray[np.intp], b: NDArray[np.intp]
+) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+    """Node pairs ``(a, b)`` as ``(i, j)``, ``i < j``, in the order of ``numpy.triu_indices``."""
+    i, j = np.minimum(a, b), np.maximum(a, b)
+    at = np.lexsort((j, i))
+    return i[at].astype(np.intp), j[at].astype(np.intp)
+
+
 def _key_pair_code(ka: Any, kb: Any, designs: int) -> Any:
     """One number for the ordered pair of (design, edge) keys ``(ka, kb)`` (ints or arrays)."""
     return ka * _key_width(designs) + kb
@@ -345,21 +359,14 @@ class SurveyIndex:
         With ``places`` (each node's, shape (n, 2)) and ``slack_m`` (each node's share of
         a tolerance), only the pairs ``places`` apart within ``slack_m[i] + slack_m[j]``
         (a hair more) of some distance their bucket's surveyed pairs span."""
-        keys = np.asarray(keys, dtype=np.int64)
-        empty = np.zeros(0, dtype=np.intp)
-        if self._codes.size == 0 or keys.size < 2:
-            return empty, empty
-        width = _key_width(len(self.designs))
-        low, high = self.key_pairs
-        present = np.zeros(width, dtype=bool)
-        present[keys] = True
-        both = present[low] & present[high]
-        low, high = low[both], high[both]
         from mast.core._kernels import key_pair_nodes
 
-        # Nodes grouped by key: ``order[first[k]:first[k + 1]]`` hold key k.
-        order = np.argsort(keys, kind="stable").astype(np.intp)
-        first = np.searchsorted(keys[order], np.arange(width + 1)).astype(np.intp)
+        keys = np.asarray(keys, dtype=np.int64)
+        grouped = self._keys_present(keys)
+        if grouped is None:
+            return _no_pairs()
+        order, first, both = grouped
+        low, high = (k[both] for k in self.key_pairs)
         if places is not None and slack_m is not None:
             span_lo, span_hi = (np.ascontiguousarray(span[both]) for span in self.key_pair_spans)
             xy = np.ascontiguousarray(places, dtype=float).reshape(-1, 2)
@@ -367,10 +374,22 @@ class SurveyIndex:
         else:
             span_lo = span_hi = np.zeros(low.size)
             xy, slack = np.zeros((keys.size, 2)), np.full(keys.size, np.inf)
-        a, b = key_pair_nodes(order, first, low, high, xy, slack, span_lo, span_hi)
-        i, j = np.minimum(a, b), np.maximum(a, b)
-        at = np.lexsort((j, i))
-        return i[at].astype(np.intp), j[at].astype(np.intp)
+        return _in_triu_order(*key_pair_nodes(order, first, low, high, xy, slack, span_lo, span_hi))
+
+    def _keys_present(
+        self, keys: NDArray[np.int64]
+    ) -> tuple[NDArray[np.intp], NDArray[np.intp], NDArray[np.bool_]] | None:
+        """The nodes grouped by key (``order[first[k]:first[k + 1]]`` hold key ``k``) and
+        which of :attr:`key_pairs` have both keys among ``keys``; None when no pair can."""
+        if self._codes.size == 0 or keys.size < 2:
+            return None
+        width = _key_width(len(self.designs))
+        low, high = self.key_pairs
+        present = np.zeros(width, dtype=bool)
+        present[keys] = True
+        order = np.argsort(keys, kind="stable").astype(np.intp)
+        first = np.searchsorted(keys[order], np.arange(width + 1)).astype(np.intp)
+        return order, first, present[low] & present[high]
 
     def _pairs_to_look_up_reference(
         self,
@@ -380,18 +399,11 @@ class SurveyIndex:
     ) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
         """:meth:`pairs_to_look_up` in numpy (the tests compare the two)."""
         keys = np.asarray(keys, dtype=np.int64)
-        empty = np.zeros(0, dtype=np.intp)
-        if self._codes.size == 0 or keys.size < 2:
-            return empty, empty
-        width = _key_width(len(self.designs))
-        low, high = self.key_pairs
-        present = np.zeros(width, dtype=bool)
-        present[keys] = True
-        both = present[low] & present[high]
-        low, high = low[both], high[both]
-        # Nodes grouped by key: ``order[first[k]:first[k + 1]]`` hold key k.
-        order = np.argsort(keys, kind="stable").astype(np.intp)
-        first = np.searchsorted(keys[order], np.arange(width + 1)).astype(np.intp)
+        grouped = self._keys_present(keys)
+        if grouped is None:
+            return _no_pairs()
+        order, first, both = grouped
+        low, high = (k[both] for k in self.key_pairs)
         size_a = first[low + 1] - first[low]
         size_b = first[high + 1] - first[high]
         # Every node of the low key with every node of the high key, bucket by bucket.
@@ -406,10 +418,7 @@ class SurveyIndex:
             d = np.hypot(places[b, 0] - places[a, 0], places[b, 1] - places[a, 1])
             tol = (slack_m[a] + slack_m[b]) * (1.0 + 1e-9) + 1e-9
             keep &= (d + tol >= span_lo[bucket]) & (d - tol <= span_hi[bucket])
-        a, b = a[keep], b[keep]
-        i, j = np.minimum(a, b), np.maximum(a, b)
-        at = np.lexsort((j, i))
-        return i[at].astype(np.intp), j[at].astype(np.intp)
+        return _in_triu_order(a[keep], b[keep])
 
     def pair_counts(
         self,

@@ -282,19 +282,17 @@ def pose_hypotheses(
         Standard deviation of a surveyed edge coordinate.
     """
     nodes = identification.nodes
-    # Covariances and panels of the nodes that are looked up (a survey of many designs
-    # identifies many nodes, few of them of designs surveyed near each other). A node's
-    # covariance is its corner's: one per corner, however many designs read it.
+    # Every node's covariance, which is its corner's: one computed per corner, however
+    # many designs read it (a survey of many designs identifies many nodes of each).
     corner_covs: dict[tuple[tuple[int, ...], bytes], NDArray[np.float64]] = {}
-
-    def corner_cov(k: int) -> NDArray[np.float64]:
-        n = nodes[k]
+    for n in nodes:
         at = (tuple(n.segments), n.node_scanner.tobytes())
         if at not in corner_covs:
             corner_covs[at] = node_covariance(n, segmentation)
-        return corner_covs[at]
-
-    cov = functools.cache(corner_cov)
+    covs = np.array(
+        [corner_covs[(tuple(n.segments), n.node_scanner.tobytes())] for n in nodes], dtype=float
+    ).reshape(-1, 2, 2)
+    # The panels of the nodes that are looked up.
     seen = functools.cache(lambda k: _PanelsSeen.of(nodes[k], segmentation))
     # Per node pair, the survey's readings of it that fit: whether one beacon's two
     # edges, the nodes' Table 1 options, the misfit, the nodes, their beacons (survey
@@ -303,7 +301,6 @@ def pose_hypotheses(
     # Only node pairs whose designs and edges are surveyed within reach of each other.
     keys = np.array([index.node_key(n.beacon, n.edge) for n in nodes], dtype=np.int64)
     xy = np.array([n.node_scanner for n in nodes], dtype=float).reshape(-1, 2)
-    covs = np.array([cov(k) for k in range(len(nodes))], dtype=float).reshape(-1, 2, 2)
     # Each node's share of the widest distance tolerance below (the square root of a sum
     # is at most the sum of the square roots): only pairs about as far apart as some
     # surveyed pair of their keys are formed at all.
@@ -332,7 +329,7 @@ def pose_hypotheses(
         if ds < config.min_node_separation_m:
             continue
         u = ds_vec / ds
-        s_d = math.sqrt(float(u @ (cov(i) + cov(j)) @ u) + 2 * survey_sigma_m**2)
+        s_d = math.sqrt(float(u @ (covs[i] + covs[j]) @ u) + 2 * survey_sigma_m**2)
         tol_d = config.sigmas * s_d
         ra, rb = index.pair_rows(a.beacon, a.edge, b.beacon, b.edge, ds, tol_d)
         ba, bb = index.row_beacon(ra), index.row_beacon(rb)
@@ -353,7 +350,7 @@ def pose_hypotheses(
         rot = np.arctan2(dm_vec[:, 1], dm_vec[:, 0]) - math.atan2(ds_vec[1], ds_vec[0])
         rot = wrap_angles(rot)
         v_perp = np.array([-u[1], u[0]])
-        s_rot = math.sqrt(float(v_perp @ (cov(i) + cov(j)) @ v_perp)) / dm
+        s_rot = math.sqrt(float(v_perp @ (covs[i] + covs[j]) @ v_perp)) / dm
         # Each surveyed beacon's own panel directions must agree with the pair's rotation.
         r_k = np.concatenate([seen(i).rotations(index, ba), seen(j).rotations(index, bb)], 1)
         s_k = np.concatenate([seen(i).sigma, seen(j).sigma])
@@ -361,7 +358,7 @@ def pose_hypotheses(
             config.min_rotation_tol_rad, config.sigmas * np.hypot(s_rot[:, None], s_k[None, :])
         )
         mis_r = (np.abs(wrap_angles(r_k - rot[:, None])) / tol).max(axis=1, initial=0.0)
-        spread = major_sigma(cov(i)) + 2.0 * float(np.hypot(*a.node_scanner)) * np.minimum(
+        spread = major_sigma(covs[i]) + 2.0 * float(np.hypot(*a.node_scanner)) * np.minimum(
             s_rot, math.pi
         )
         misfit = np.maximum(mis_d, mis_r)
@@ -405,7 +402,7 @@ def pose_hypotheses(
     # Made lazily: a whole mine's look-alikes past the cap are never computed.
     def singles_of(k: int) -> Iterator[Hypothesis]:
         beacons = index.beacons_like(nodes[k].beacon)
-        yield from _single_hypotheses(nodes[k], seen(k), beacons, major_sigma(cov(k)), index)
+        yield from _single_hypotheses(nodes[k], seen(k), beacons, major_sigma(covs[k]), index)
 
     per_node = (singles_of(k) for k in sorted(range(len(nodes)), key=lambda k: nodes[k].option))
     singles = itertools.islice(_taking_turns(per_node), config.max_single_hypotheses)
