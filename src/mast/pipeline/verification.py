@@ -835,16 +835,18 @@ def _on_their_edges(
             named = [b for b in members if b in by_beacon]
         else:
             named = [b for b in by_beacon if index.design_of(b) == design]
+        # The candidates of the design (not every look-alike in a mine's survey).
+        mine = sorted(b for b in candidates if index.design_of(b) == design)
         for node in (n for b in named for n in by_beacon[b]):
-            # The candidates of the node's design (not every look-alike in a mine's survey).
-            for b in sorted(candidates - node_ok):
-                if index.design_of(b) != design:
-                    continue
-                mapped = icp.pose.scanner_to_mine(node.node_scanner[None, :])[0]
-                edge = index.survey[b].edges[node.edge - 1]
-                if math.dist(mapped, edge) <= cfg.gate_sigmas * math.hypot(
-                    node_sigma(node, seg), noise.survey_sigma_m, noise.range_sigma_m
-                ):
+            left = [b for b in mine if b not in node_ok]
+            if not left:
+                break
+            mapped = icp.pose.scanner_to_mine(node.node_scanner[None, :])[0]
+            gate = cfg.gate_sigmas * math.hypot(
+                node_sigma(node, seg), noise.survey_sigma_m, noise.range_sigma_m
+            )
+            for b in left:
+                if math.dist(mapped, index.survey[b].edges[node.edge - 1]) <= gate:
                     node_ok.add(b)
     return node_ok
 
@@ -1298,14 +1300,13 @@ def _beacons_in_reach(
         return []
     centre, radius = panels.discs
     sizes = np.array([n.size for n in nears], dtype=np.intp)
+    if owns is None or enough <= 0:
+        owns, enough = [() for _ in starts], 0
     number = panels.number
-    own_lists = [sorted({number[b] for b in own}) for own in owns] if owns else []
+    own_lists = [sorted({number[b] for b in own}) for own in owns]
     own_ptr = np.zeros(len(starts) + 1, dtype=np.intp)
-    if owns is not None and enough > 0:
-        own_ptr[1:] = np.cumsum([len(o) for o in own_lists])
-    else:
-        enough = 0
-    own = np.array([b for o in own_lists for b in o] if enough else [], dtype=np.intp)
+    own_ptr[1:] = np.cumsum([len(o) for o in own_lists])
+    own = np.array([b for o in own_lists for b in o], dtype=np.intp)
     found, ptr = beacons_in_reach(
         np.ascontiguousarray(pts, dtype=float).reshape(-1, 2),
         np.ascontiguousarray(angles, dtype=float),
