@@ -2573,8 +2573,11 @@ def _odometry_fit(
     ``scan_points`` are moved by the motion and matched to the nearest keyframe
     return (``points``, by bearing as :func:`_nearest_by_bearing` reads them) within each
     gate in turn, up to ``max_iterations`` least-squares steps a gate (LAPACK's
-    ``gelsd``, numpy's cut-off), until a step is below 1e-5 m and 1e-6 rad; the
-    residuals and Jacobian are those of the last gate at the final motion."""
+    ``gelsd``, numpy's cut-off), until a step is below 1e-5 m and 1e-6 rad, or the
+    matches are a set met before in the gate (:func:`_matches_met`): the last one's, in
+    a coarse gate (whose work is done once the returns keep their matches), or an
+    earlier one's (matches flipping in a cycle, which no step ends). The residuals and
+    Jacobian are those of the last gate at the final motion."""
     n = scan_points.shape[0]
     moved = np.empty((n, 2))
     x0, x1, x2 = dx, dy, dtheta
@@ -2583,9 +2586,11 @@ def _odometry_fit(
     # Each point's last nearest keyframe return lies within its distance then plus
     # how far the point has moved since: the next search looks no further.
     within = np.full(n, np.inf)
+    seen = np.empty((max_iterations, n), dtype=np.intp)
     for g in range(n_gates + 1):
         final = g == n_gates
         gate = gates[n_gates - 1] if final else gates[g]
+        n_seen = 0
         for _ in range(1 if final else max_iterations):
             c, s_ = math.cos(x2), math.sin(x2)
             for i in range(n):
@@ -2600,6 +2605,12 @@ def _odometry_fit(
             dist, j = _nearest_by_bearing_jit(moved, points, bearing, order, gate, within)
             for i in range(n):
                 within[i] = dist[i]
+            if not final:
+                for i in range(n):
+                    seen[n_seen, i] = j[i] if math.isfinite(dist[i]) else -1
+                if _matches_met_jit(seen, n_seen, g < n_gates - 1):
+                    break
+                n_seen += 1
             k = 0
             for i in range(n):
                 if math.isfinite(dist[i]):
@@ -2638,6 +2649,29 @@ def _odometry_fit(
             if math.hypot(step[0], step[1]) < 1e-5 and abs(step[2]) < 1e-6:
                 break
     return x0, x1, x2, 0, 0.0, info
+
+
+def _matches_met(seen: NDArray[np.intp], last: int, coarse: bool) -> bool:
+    """Whether the matches ``seen[last]`` end an ICP gate: the same as the iteration
+    before's when ``coarse``, or the same as an earlier iteration's (not the one
+    before) in any gate. The last step was solved with the matches before; with the
+    same matches again a coarse gate has brought the returns to their walls, and a
+    finer one goes on to convergence. Matches met two or more iterations back come
+    round in a cycle (returns on the edge of their gate, or half-way between two
+    neighbours), which the steps never leave: the odometry's reference
+    (``odometry._scan_to_scan_reference``) stops there too."""
+    n = seen.shape[1]
+    for k in range(last - 1, -1, -1):
+        if k == last - 1 and not coarse:
+            continue
+        same = True
+        for i in range(n):
+            if seen[k, i] != seen[last, i]:
+                same = False
+                break
+        if same:
+            return True
+    return False
 
 
 def _walk_left(sorted_values: NDArray[np.float64], value: float, guess: int) -> int:
@@ -2809,6 +2843,7 @@ _gauss_newton_jit = gauss_newton
 adjust_rounds: Callable[..., Any] = njit(cache=True, nogil=True)(_adjust_rounds)
 bound: Callable[..., NDArray[np.float64]] = njit(cache=True, nogil=True)(_bound)
 _walk_left_jit: Callable[..., int] = njit(cache=True, nogil=True)(_walk_left)
+_matches_met_jit: Callable[..., bool] = njit(cache=True, nogil=True)(_matches_met)
 _walk_right_jit: Callable[..., int] = njit(cache=True, nogil=True)(_walk_right)
 nearest_by_bearing: Callable[..., Any] = njit(cache=True, nogil=True)(_nearest_by_bearing)
 _nearest_by_bearing_jit = nearest_by_bearing

@@ -349,12 +349,20 @@ def _scan_to_scan_reference(
     grid = key.grid(max(cfg.gates_m))
     x = np.array(guess, dtype=float)
     ok = np.zeros(0, dtype=bool)
-    for gate in cfg.gates_m:
+    for stage, gate in enumerate(cfg.gates_m):
+        coarse = stage < len(cfg.gates_m) - 1
+        seen: list[bytes] = []
         for _ in range(cfg.max_iterations):
             c, s_ = math.cos(x[2]), math.sin(x[2])
             m = pts @ np.array([[c, s_], [-s_, c]]) + x[:2]
             dist, j = grid.query(m, gate)
             ok = np.isfinite(dist)
+            # Matches met before end the gate: the last iteration's in a coarse gate (the
+            # returns have found their walls), an earlier one's in any (a cycle).
+            matched = np.where(ok, j, -1).astype(np.intp).tobytes()
+            if matched in seen[: len(seen) - 1] or (coarse and seen and seen[-1] == matched):
+                break
+            seen.append(matched)
             if np.count_nonzero(ok) < cfg.min_matches:
                 return None
             nrm = key.normals[j[ok]]
