@@ -469,3 +469,26 @@ def test_tallies_are_numpy_unique_of_the_matched() -> None:
         got = tallies(values)
         for g, w in zip(got, want, strict=True):
             np.testing.assert_array_equal(g, w)
+
+
+def test_pose_step_is_the_least_squares_solution_and_declines_when_singular() -> None:
+    from mast.core._kernels import _normal_step_jit
+    from mast.core.linalg import pose_step
+
+    rng = np.random.default_rng(5)
+    for n in (3, 10, 400):
+        # a pose step's columns: a panel's normal, and the normal across the range
+        ang = rng.uniform(-np.pi, np.pi, n)
+        r = rng.uniform(0.5, 30.0, n)
+        design = np.column_stack([np.cos(ang), np.sin(ang), r * rng.uniform(-1, 1, n)])
+        rhs = rng.normal(scale=0.01, size=n)
+        want = np.linalg.lstsq(design, rhs, rcond=None)[0]
+        np.testing.assert_allclose(pose_step(design, rhs), want, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(_normal_step_jit(design, rhs, n), want, rtol=0, atol=1e-12)
+    # every return on one line: the step along it is free; lstsq's minimum-norm answer
+    flat = np.column_stack([np.zeros(5), np.ones(5), np.arange(5.0)])
+    rhs = np.arange(5.0) * 0.01
+    assert np.isnan(_normal_step_jit(flat, rhs, 5)).all()
+    np.testing.assert_allclose(
+        pose_step(flat, rhs), np.linalg.lstsq(flat, rhs, rcond=None)[0], atol=1e-15
+    )

@@ -675,6 +675,44 @@ def _to_mine(
         out[i, 1] = ca * x + sa * y + northing
 
 
+def _normal_step(
+    design: NDArray[np.float64], rhs: NDArray[np.float64], k: int
+) -> NDArray[np.float64]:
+    """The least-squares solution of ``design[:k] @ x = rhs[:k]`` for three unknowns by
+    the normal equations, solved by cofactors; NaNs when they are near singular (the
+    determinant below 1e-9 of the diagonal's product), for the caller's LAPACK
+    ``lstsq`` to answer instead. A pose step's normal matrix is well conditioned (its
+    columns are metres, metres and metres-times-range: a condition number in the
+    thousands), so the answer is the SVD's to about 1e-12 of a step, at a twentieth of
+    its cost; :func:`mast.core.linalg.pose_step` is the same in numpy."""
+    a00 = a01 = a02 = a11 = a12 = a22 = b0 = b1 = b2 = 0.0
+    for r in range(k):
+        d0, d1, d2, y = design[r, 0], design[r, 1], design[r, 2], rhs[r]
+        a00 += d0 * d0
+        a01 += d0 * d1
+        a02 += d0 * d2
+        a11 += d1 * d1
+        a12 += d1 * d2
+        a22 += d2 * d2
+        b0 += d0 * y
+        b1 += d1 * y
+        b2 += d2 * y
+    c00 = a11 * a22 - a12 * a12
+    c01 = a02 * a12 - a01 * a22
+    c02 = a01 * a12 - a02 * a11
+    det = a00 * c00 + a01 * c01 + a02 * c02
+    out = np.full(3, np.nan)
+    if not abs(det) > 1e-9 * a00 * a11 * a22:
+        return out
+    c11 = a00 * a22 - a02 * a02
+    c12 = a01 * a02 - a00 * a12
+    c22 = a00 * a11 - a01 * a01
+    out[0] = (c00 * b0 + c01 * b1 + c02 * b2) / det
+    out[1] = (c01 * b0 + c11 * b1 + c12 * b2) / det
+    out[2] = (c02 * b0 + c12 * b1 + c22 * b2) / det
+    return out
+
+
 def _icp_stages(
     points: NDArray[np.float64],
     easting: float,
@@ -697,7 +735,8 @@ def _icp_stages(
     stop changing, closes a loop of matches met before in the stage, and
     otherwise takes the least-squares step of the linearised point-to-line
     problem (Low 2004) for a translation and a rotation about the scanner:
-    the same rules and the same LAPACK solver (``lstsq``) as the reference.
+    the same rules and the same solver as the reference (:func:`_normal_step`, and
+    LAPACK's ``lstsq`` where it declines).
     """
     n = points.shape[0]
     e, nn, az = easting, northing, azimuth
@@ -761,7 +800,9 @@ def _icp_stages(
                 design[r, 2] = normal[q, 1] * rx - normal[q, 0] * ry
                 rhs[r] = -dist[i]
                 r += 1
-            step = np.linalg.lstsq(design, rhs)[0]
+            step = _normal_step_jit(design, rhs, k_ok)
+            if not math.isfinite(step[0]):
+                step = np.linalg.lstsq(design, rhs)[0]
             omega = math.pi / 2 - az + step[2]
             e = e + step[0]
             nn = nn + step[1]
@@ -2572,11 +2613,12 @@ def _odometry_fit(
 
     ``scan_points`` are moved by the motion and matched to the nearest keyframe
     return (``points``, by bearing as :func:`_nearest_by_bearing` reads them) within each
-    gate in turn, up to ``max_iterations`` least-squares steps a gate (LAPACK's
-    ``gelsd``, numpy's cut-off), until a step is below 1e-5 m and 1e-6 rad, or the
-    matches are a set met before in the gate (:func:`_matches_met`): the last one's, in
-    a coarse gate (whose work is done once the returns keep their matches), or an
-    earlier one's (matches flipping in a cycle, which no step ends). The residuals and
+    gate in turn, up to ``max_iterations`` least-squares steps a gate
+    (:func:`_normal_step`; LAPACK's ``gelsd`` with numpy's cut-off where it declines),
+    until a step is below 1e-5 m and 1e-6 rad, or the matches are a set met before in
+    the gate (:func:`_matches_met`): the last one's, in a coarse gate (whose work is
+    done once the returns keep their matches), or an earlier one's (matches flipping in
+    a cycle, which no step ends). The residuals and
     Jacobian are those of the last gate at the final motion."""
     n = scan_points.shape[0]
     moved = np.empty((n, 2))
@@ -2642,7 +2684,9 @@ def _odometry_fit(
                             acc += jac[i, a] * jac[i, b]
                         info[a, b] = acc
                 return x0, x1, x2, k, sse, info
-            step = np.linalg.lstsq(jac, rhs, rcond=np.finfo(np.float64).eps * max(k, 3))[0]
+            step = _normal_step_jit(jac, rhs, k)
+            if not math.isfinite(step[0]):
+                step = np.linalg.lstsq(jac, rhs, rcond=np.finfo(np.float64).eps * max(k, 3))[0]
             x0 += step[0]
             x1 += step[1]
             x2 += step[2]
@@ -2800,6 +2844,7 @@ beam_checks: Callable[..., Any] = njit(cache=True, nogil=True)(_beam_checks)
 associate: Callable[..., Any] = njit(cache=True, nogil=True)(_associate)
 _associate_jit = associate
 _to_mine_jit: Callable[..., None] = njit(cache=True, nogil=True)(_to_mine)
+_normal_step_jit: Callable[..., NDArray[np.float64]] = njit(cache=True, nogil=True)(_normal_step)
 _icp_stages_jit: Callable[..., Any] = njit(cache=True, nogil=True)(_icp_stages)
 _close_to_jit: Callable[..., None] = njit(cache=True, nogil=True)(_close_to)
 within: Callable[..., Any] = njit(cache=True, nogil=True)(_within)

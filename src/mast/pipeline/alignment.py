@@ -22,6 +22,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from mast.core.geometry import PanelSet
+from mast.core.linalg import pose_step
 from mast.core.pose import Pose2D
 
 __all__ = ["IcpResult", "Similarity", "icp_point_to_line", "similarity_transform"]
@@ -229,7 +230,7 @@ def _icp_reference(
             jw = nrm[:, 1] * rel[:, 0] - nrm[:, 0] * rel[:, 1]
             A = np.column_stack([nrm, jw])
             b = -dist[ok]
-            x, *_ = np.linalg.lstsq(A, b, rcond=None)
+            x = pose_step(A, b)
             omega = math.pi / 2 - p.azimuth + float(x[2])
             p = Pose2D(
                 p.easting + float(x[0]),

@@ -40,6 +40,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from mast.core._kernels import odometry_fit
+from mast.core.linalg import pose_step
 from mast.core.neighbours import BearingIndex, PointGrid
 from mast.core.scan import Scan
 
@@ -369,7 +370,7 @@ def _scan_to_scan_reference(
             res = np.einsum("ij,ij->i", m[ok] - key.points[j[ok]], nrm)
             rel = m[ok] - x[:2]
             jac = np.column_stack([nrm, nrm[:, 1] * rel[:, 0] - nrm[:, 0] * rel[:, 1]])
-            step, *_ = np.linalg.lstsq(jac, -res, rcond=None)
+            step = pose_step(jac, -res)
             x = x + step
             if math.hypot(step[0], step[1]) < 1e-5 and abs(step[2]) < 1e-6:
                 break
