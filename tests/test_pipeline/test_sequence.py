@@ -11,7 +11,6 @@ from __future__ import annotations
 import math
 from dataclasses import replace
 from functools import cache
-from typing import Any
 
 import numpy as np
 import pytest
@@ -231,43 +230,3 @@ def test_a_second_judgement_with_corners_equals_a_fresh_one() -> None:
             ]
             compared += len(fresh)
     assert compared >= 8
-
-
-def test_a_beacon_shown_where_predicted_spares_the_wide_window() -> None:
-    """Scan 43 of this drive shows one beacon's shape where the prediction puts it and
-    its second beacon too little to be confirmed: the prediction's window confirms the
-    one-beacon pose and fixes nothing. The wide window is then not searched (a pose of
-    it away from the prediction would read the same returns as another beacon's); the
-    global search still is."""
-    import mast.pipeline.locator as locator_module
-
-    scene = drive_scene(0, scans=44)
-    sims = list(scene.iter_simulated())
-    tracker = SequenceLocator(scene.survey, config=_config(scene))
-    for sim in sims[:43]:
-        assert tracker.step(sim.scan).fix.ok
-    windows: list[float] = []
-    grids: list[float] = []
-    real_may_fix = locator_module.window_may_fix
-    real_grid = locator_module.prior_hypotheses
-
-    def may_fix(points: Any, panels: Any, prior: Any, *a: Any, **k: Any) -> bool:
-        windows.append(prior.radius_m)
-        return bool(real_may_fix(points, panels, prior, *a, **k))
-
-    def grid(points: Any, panels: Any, prior: Any, *a: Any, **k: Any) -> Any:
-        grids.append(prior.radius_m)
-        return real_grid(points, panels, prior, *a, **k)
-
-    with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(locator_module, "window_may_fix", may_fix)
-        mp.setattr(locator_module, "prior_hypotheses", grid)
-        step = tracker.step(sims[43].scan)
-    assert step.track_lost
-    assert step.fix.reason == "one_beacon"
-    narrow = windows[0]
-    assert narrow < 0.5 * SEQ.prior(sims[42].pose, 0.04).radius_m
-    assert windows == [narrow]  # the wide window was not even bounded
-    assert grids == [narrow]
-    assert any(v.shaped for v in step.fix.verified)  # the global search's one-beacon pose
-    assert step.fix.stages_s.get("hypotheses", 0.0) > 0.0  # the global search ran

@@ -578,13 +578,7 @@ def _prior_first(
     narrow window comes before the wide one around it: the first costs a few grid
     poses, and a scan it does not fix is searched as if it had not been tried. A window
     in which no pose could be fixed (:func:`~mast.pipeline.tracking.window_may_fix`) is
-    not searched. Nor are the wider windows after one whose search, though it fixed
-    nothing, confirmed a pose inside it at which a beacon shows its shape on its
-    surveyed panels (the prediction was right about where that beacon is): a pose of
-    the wider window away from it would have to read the same returns as another
-    beacon's, and that is the global search's to weigh, with the scan's corners. On
-    simulated drives the wide window fixed none of those scans (one beacon seen, the
-    second refused); it cost a grid search each.
+    not searched.
 
     A prior's search runs first without segmenting the scan: the prior names the
     beacons, and a pose whose beacons each show two panels' returns on their panels, no
