@@ -601,7 +601,6 @@ def _prior_first(
     seg: Segmentation | None = None
     ident: PanelIdentification | None = None
     memo: dict[int, Refinement] = {}
-    pinned = False  # a window's search put a beacon's shape where the prior put it
 
     def tracked(
         window: _Window,
@@ -610,7 +609,6 @@ def _prior_first(
     ) -> Fix | None:
         # The window's centre alone when it is narrow, then the best grid poses, then
         # poses from other basins of the window, each only when those before give no fix.
-        nonlocal pinned
         verified: tuple[Verified, ...] = ()
         within = window.within
         for batch in window.batches(clock):
@@ -623,7 +621,6 @@ def _prior_first(
             if fix.ok:
                 return None  # another pose was confirmed too: the corners must choose
             verified = fix.verified
-        pinned = pinned or any(v.shaped for v in _admitted(list(verified), within))
         return None
 
     if priors:
@@ -663,8 +660,6 @@ def _prior_first(
         fix = tracked(window, seg, ident)
         if fix is not None:
             return fix, False
-        if pinned:
-            break
     if seg is None:
         with clock("segmentation"):
             seg = segment_scan(scan, searched.segmentation)
