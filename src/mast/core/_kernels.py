@@ -800,7 +800,7 @@ def _icp_stages(
                 design[r, 2] = normal[q, 1] * rx - normal[q, 0] * ry
                 rhs[r] = -dist[i]
                 r += 1
-            step = _normal_step_jit(design, rhs, k_ok)
+            step: NDArray[np.floating[Any]] = _normal_step_jit(design, rhs, k_ok)
             if not math.isfinite(step[0]):
                 step = np.linalg.lstsq(design, rhs)[0]
             omega = math.pi / 2 - az + step[2]
@@ -2684,7 +2684,7 @@ def _odometry_fit(
                             acc += jac[i, a] * jac[i, b]
                         info[a, b] = acc
                 return x0, x1, x2, k, sse, info
-            step = _normal_step_jit(jac, rhs, k)
+            step: NDArray[np.floating[Any]] = _normal_step_jit(jac, rhs, k)
             if not math.isfinite(step[0]):
                 step = np.linalg.lstsq(jac, rhs, rcond=np.finfo(np.float64).eps * max(k, 3))[0]
             x0 += step[0]
