@@ -210,18 +210,28 @@ def _single_hypotheses(
     if seen.panel.size == 0:
         return
     w = 1.0 / np.maximum(seen.sigma, 1e-9) ** 2
-    sigma_rot = 1.0 / math.sqrt(float(np.sum(w)))
+    sum_w = np.sum(w)
+    sigma_rot = 1.0 / math.sqrt(float(sum_w))
     spread = node_sigma_m + 2.0 * float(np.hypot(*node.node_scanner)) * sigma_rot
-    for beacon in beacons:
-        named = _renamed(node, beacon)
-        rots = seen.rotations(index, np.array([index.number(beacon)]))[0]
-        ref = float(rots[0])
-        rot = ref + float(np.sum(w * wrap_angles(rots - ref)) / np.sum(w))
-        c, s = math.cos(rot), math.sin(rot)
-        edge = index.survey[beacon].edges[named.edge - 1]
-        t = edge - np.array([[c, -s], [s, c]]) @ named.node_scanner
-        sim = Similarity(1.0, _wrap(rot), np.asarray(t, dtype=float), 0.0)
-        yield Hypothesis((named,), sim, 0.0, "single", spread)
+    todo = iter(beacons)
+    # The rotations of a few beacons at a time (a mine's design may have thousands of
+    # look-alikes, of which a scan asks for a few): each row's weighted mean is the
+    # rotation, the same sums in the same order as one beacon's alone.
+    while chunk := list(itertools.islice(todo, _SINGLES_AT_ONCE)):
+        rots = seen.rotations(index, np.array([index.number(b) for b in chunk]))
+        ref = rots[:, 0]
+        mean = ref + np.sum(w * wrap_angles(rots - ref[:, None]), axis=1) / sum_w
+        for beacon, rot in zip(chunk, mean.tolist(), strict=True):
+            named = _renamed(node, beacon)
+            c, s = math.cos(rot), math.sin(rot)
+            edge = index.survey[beacon].edges[named.edge - 1]
+            t = edge - np.array([[c, -s], [s, c]]) @ named.node_scanner
+            sim = Similarity(1.0, _wrap(rot), np.asarray(t, dtype=float), 0.0)
+            yield Hypothesis((named,), sim, 0.0, "single", spread)
+
+
+#: Beacons whose single-node hypotheses are computed together (:func:`_single_hypotheses`).
+_SINGLES_AT_ONCE = 16
 
 
 def _renamed(node: NodeMatch, beacon: str) -> NodeMatch:
