@@ -65,3 +65,22 @@ def test_icp_converges_to_the_true_pose(de: float, dn: float, da_deg: float) -> 
         0.0, abs=1e-11
     )
     assert res.inliers == int(beacon_beams.sum())
+
+
+def test_similarity_is_the_least_squares_solution() -> None:
+    """The closed form (diagonal normal equations once centred) is lstsq's answer."""
+    rng = np.random.default_rng(11)
+    for n in (2, 3, 7):
+        p = rng.uniform(-20, 20, size=(n, 2))
+        q = rng.uniform(1000, 1040, size=(n, 2))  # not a similarity: residuals remain
+        sim = similarity_transform(p, q)
+        pc, qc = p.mean(axis=0), q.mean(axis=0)
+        x, y = (p - pc).T
+        design = np.zeros((2 * n, 2))
+        design[0::2, 0], design[0::2, 1] = x, -y
+        design[1::2, 0], design[1::2, 1] = y, x
+        (a, b), *_ = np.linalg.lstsq(design, (q - qc).reshape(-1), rcond=None)
+        assert sim.scale == pytest.approx(math.hypot(a, b), rel=1e-12)
+        assert sim.rotation_rad == pytest.approx(math.atan2(b, a), abs=1e-12)
+    same = similarity_transform(np.ones((2, 2)), np.zeros((2, 2)))
+    assert same.scale == 0.0  # coincident points: lstsq's minimum-norm answer

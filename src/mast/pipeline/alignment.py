@@ -66,7 +66,10 @@ def similarity_transform(
     Each pair gives the rows ``[x -y 1 0; y x 0 1]`` of the design matrix for
     the unknowns ``(a, b, tx, ty)`` with ``a = s cos(alpha)``, ``b = s sin(alpha)``
     (the paper's eq. for ``N = u R P + t``). Coordinates are centred first so
-    large mine coordinates do not spoil the conditioning.
+    large mine coordinates do not spoil the conditioning; centred, the two columns
+    for ``a`` and ``b`` are orthogonal and of equal norm, so the normal equations
+    are diagonal and the solution is ``a = sum(x u + y v) / S``, ``b = sum(x v - y u)
+    / S`` (``u, v`` the centred mine coordinates, ``S = sum(x^2 + y^2)``).
     """
     p = np.asarray(points_scanner, dtype=float).reshape(-1, 2)
     q = np.asarray(points_mine, dtype=float).reshape(-1, 2)
@@ -74,12 +77,11 @@ def similarity_transform(
         raise ValueError("a similarity transformation needs at least two points")
     pc, qc = p.mean(axis=0), q.mean(axis=0)
     x, y = (p - pc).T
-    n = p.shape[0]
-    A = np.zeros((2 * n, 2))
-    A[0::2, 0], A[0::2, 1] = x, -y
-    A[1::2, 0], A[1::2, 1] = y, x
-    f = (q - qc).reshape(-1)
-    (a, b), *_ = np.linalg.lstsq(A, f, rcond=None)
+    u, v = (q - qc).T
+    norm = float(np.sum(x * x + y * y))
+    # Coincident points constrain nothing: the minimum-norm answer, as lstsq gives.
+    a = float(np.sum(x * u + y * v)) / norm if norm > 0.0 else 0.0
+    b = float(np.sum(x * v - y * u)) / norm if norm > 0.0 else 0.0
     scale = math.hypot(a, b)
     rot = math.atan2(b, a)
     R = np.array([[a, -b], [b, a]])
