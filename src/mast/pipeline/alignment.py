@@ -78,10 +78,19 @@ def similarity_transform(
     pc, qc = p.mean(axis=0), q.mean(axis=0)
     x, y = (p - pc).T
     u, v = (q - qc).T
-    norm = float(np.sum(x * x + y * y))
-    # Coincident points constrain nothing: the minimum-norm answer, as lstsq gives.
-    a = float(np.sum(x * u + y * v)) / norm if norm > 0.0 else 0.0
-    b = float(np.sum(x * v - y * u)) / norm if norm > 0.0 else 0.0
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+        sum_sq = np.sum(x * x + y * y)
+        norm = float(sum_sq)
+        a = float(np.sum(x * u + y * v) / sum_sq)
+        b = float(np.sum(x * v - y * u) / sum_sq)
+    if not (0.0 < norm < math.inf and math.isfinite(a) and math.isfinite(b)):
+        # Coincident points, or coordinates whose squares overflow: lstsq's answer (the
+        # minimum-norm one where nothing is constrained).
+        n = p.shape[0]
+        design = np.zeros((2 * n, 2))
+        design[0::2, 0], design[0::2, 1] = x, -y
+        design[1::2, 0], design[1::2, 1] = y, x
+        (a, b), *_ = np.linalg.lstsq(design, np.column_stack([u, v]).reshape(-1), rcond=None)
     scale = math.hypot(a, b)
     rot = math.atan2(b, a)
     R = np.array([[a, -b], [b, a]])
