@@ -84,3 +84,13 @@ def test_similarity_is_the_least_squares_solution() -> None:
         assert sim.rotation_rad == pytest.approx(math.atan2(b, a), abs=1e-12)
     same = similarity_transform(np.ones((2, 2)), np.zeros((2, 2)))
     assert same.scale == 0.0  # coincident points: lstsq's minimum-norm answer
+
+
+def test_similarity_refuses_unpaired_points_and_keeps_tiny_ones_exact() -> None:
+    with pytest.raises(ValueError, match="3 scanner points but 1 mine points"):
+        similarity_transform(np.zeros((3, 2)), np.zeros((1, 2)))
+    # a sum of squares below the smallest normal double: lstsq's answer, not a rounded one
+    sim = similarity_transform(
+        np.array([[0.0, 0.0], [1e-160, 0.0]]), np.array([[0.0, 0.0], [1.0, 0.0]])
+    )
+    assert sim.scale == pytest.approx(1e160, rel=1e-12)

@@ -2700,10 +2700,12 @@ def _matches_met(seen: NDArray[np.intp], last: int, coarse: bool) -> bool:
     before's when ``coarse``, or the same as an earlier iteration's (not the one
     before) in any gate. The last step was solved with the matches before; with the
     same matches again a coarse gate has brought the returns to their walls, and a
-    finer one goes on to convergence. Matches met two or more iterations back come
-    round in a cycle (returns on the edge of their gate, or half-way between two
-    neighbours), which the steps never leave: the odometry's reference
-    (``odometry._scan_to_scan_reference``) stops there too."""
+    finer one takes another step. Matches met two or more iterations back either
+    come round in a cycle (returns on the edge of their gate, or half-way between two
+    neighbours), which the steps never leave, or have stood for three iterations: two
+    Gauss-Newton steps on the same matches, the second the square of the first, which
+    leaves the pose at their least-squares optimum to far below the range noise. The
+    odometry's reference (``odometry._scan_to_scan_reference``) stops there too."""
     n = seen.shape[1]
     for k in range(last - 1, -1, -1):
         if k == last - 1 and not coarse:

@@ -75,6 +75,8 @@ def similarity_transform(
     q = np.asarray(points_mine, dtype=float).reshape(-1, 2)
     if p.shape[0] < 2:
         raise ValueError("a similarity transformation needs at least two points")
+    if q.shape != p.shape:
+        raise ValueError(f"{p.shape[0]} scanner points but {q.shape[0]} mine points")
     pc, qc = p.mean(axis=0), q.mean(axis=0)
     x, y = (p - pc).T
     u, v = (q - qc).T
@@ -83,9 +85,9 @@ def similarity_transform(
         norm = float(sum_sq)
         a = float(np.sum(x * u + y * v) / sum_sq)
         b = float(np.sum(x * v - y * u) / sum_sq)
-    if not (0.0 < norm < math.inf and math.isfinite(a) and math.isfinite(b)):
-        # Coincident points, or coordinates whose squares overflow: lstsq's answer (the
-        # minimum-norm one where nothing is constrained).
+    if not (_TINY <= norm < math.inf and math.isfinite(a) and math.isfinite(b)):
+        # Coincident points, or coordinates whose squares underflow or overflow: lstsq's
+        # answer (the minimum-norm one where nothing is constrained).
         n = p.shape[0]
         design = np.zeros((2 * n, 2))
         design[0::2, 0], design[0::2, 1] = x, -y
@@ -97,6 +99,10 @@ def similarity_transform(
     t = qc - R @ pc
     resid = q - (p @ R.T + t)
     return Similarity(scale, rot, t, float(np.sqrt(np.mean(np.sum(resid**2, axis=1)))))
+
+
+#: Smallest normal double: a sum of squares below it has lost its precision.
+_TINY = float(np.finfo(np.float64).tiny)
 
 
 @dataclass(frozen=True, slots=True)

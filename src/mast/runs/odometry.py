@@ -359,7 +359,8 @@ def _scan_to_scan_reference(
             dist, j = grid.query(m, gate)
             ok = np.isfinite(dist)
             # Matches met before end the gate: the last iteration's in a coarse gate (the
-            # returns have found their walls), an earlier one's in any (a cycle).
+            # returns have found their walls), an earlier one's in any (a cycle, or the
+            # same matches for three iterations: two steps on them, converged).
             matched = np.where(ok, j, -1).astype(np.intp).tobytes()
             if matched in seen[: len(seen) - 1] or (coarse and seen and seen[-1] == matched):
                 break
