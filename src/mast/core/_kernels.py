@@ -2617,8 +2617,8 @@ def _odometry_fit(
     (:func:`_normal_step`; LAPACK's ``gelsd`` with numpy's cut-off where it declines),
     until a step is below 1e-5 m and 1e-6 rad, or the matches are a set met before in
     the gate (:func:`_matches_met`): the last one's, in a coarse gate (whose work is
-    done once the returns keep their matches), or an earlier one's (matches flipping in
-    a cycle, which no step ends). The residuals and
+    done once the returns keep their matches), or one two or more iterations back (a
+    cycle no step ends, or matches that stood for three iterations). The residuals and
     Jacobian are those of the last gate at the final motion."""
     n = scan_points.shape[0]
     moved = np.empty((n, 2))

@@ -295,13 +295,13 @@ def pose_hypotheses(
     # Every node's covariance, which is its corner's: one computed per corner, however
     # many designs read it (a survey of many designs identifies many nodes of each).
     corner_covs: dict[tuple[tuple[int, ...], bytes], NDArray[np.float64]] = {}
+    node_covs = []
     for n in nodes:
         at = (tuple(n.segments), n.node_scanner.tobytes())
         if at not in corner_covs:
             corner_covs[at] = node_covariance(n, segmentation)
-    covs = np.array(
-        [corner_covs[(tuple(n.segments), n.node_scanner.tobytes())] for n in nodes], dtype=float
-    ).reshape(-1, 2, 2)
+        node_covs.append(corner_covs[at])
+    covs = np.array(node_covs, dtype=float).reshape(-1, 2, 2)
     # The panels of the nodes that are looked up.
     seen = functools.cache(lambda k: _PanelsSeen.of(nodes[k], segmentation))
     # Per node pair, the survey's readings of it that fit: whether one beacon's two
