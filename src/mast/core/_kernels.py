@@ -1277,33 +1277,63 @@ def _pose_score(
     return total
 
 
-def _block_bound(
-    local: NDArray[np.float64],
+def _cells_score(
+    cells: NDArray[np.int64],
+    tiles: NDArray[np.intp],
+    tile_shape: NDArray[np.intp],
+    tile_offset: NDArray[np.intp],
+    values: NDArray[np.float64],
+    sx: int,
+    sy: int,
+) -> float:
+    """:func:`_pose_score` for points already in whole cells of their tiles (``cells``,
+    the floors of ``local``) and a translation of whole cells: the same sum, without a
+    floor per point and translation."""
+    total = 0.0
+    for i in range(cells.shape[0]):
+        best = 0.0
+        for k in range(tiles.shape[1]):
+            t = tiles[i, k]
+            if t < 0:
+                continue
+            gi = cells[i, k, 0] + sx
+            gj = cells[i, k, 1] + sy
+            w, h = tile_shape[t, 0], tile_shape[t, 1]
+            if gi >= 0 and gi < w and gj >= 0 and gj < h:
+                v = values[tile_offset[t] + gi * h + gj]
+                if v > best:
+                    best = v
+        total += best
+    return total
+
+
+def _cells_bound(
+    cells: NDArray[np.int64],
     tiles: NDArray[np.intp],
     tile_shape: NDArray[np.intp],
     tile_offset: NDArray[np.intp],
     pyramid: NDArray[np.float64],
-    x0: float,
-    x1: float,
-    y0: float,
-    y1: float,
+    x0: int,
+    x1: int,
+    y0: int,
+    y1: int,
 ) -> float:
-    """At least the score of every translation in ``[x0, x1] x [y0, y1]`` (cells): each
-    point's largest value over the cells it can fall in, from the pyramid. Rounding is
-    monotonic, so the sum of these bounds in the same order is at least every score."""
+    """At least the score (:func:`_cells_score`) of every translation in ``[x0, x1] x
+    [y0, y1]`` (whole cells): each point's largest value over the cells it can fall in,
+    from the pyramid. The sum of these bounds in the same order is at least every
+    score."""
     levels = pyramid.shape[0] - 1
     total = 0.0
-    for i in range(local.shape[0]):
+    for i in range(cells.shape[0]):
         best = 0.0
         for k in range(tiles.shape[1]):
             t = tiles[i, k]
             if t < 0:
                 continue
             w, h = tile_shape[t, 0], tile_shape[t, 1]
-            i0 = math.floor(local[i, k, 0] + x0)
-            i1 = math.floor(local[i, k, 0] + x1)
-            j0 = math.floor(local[i, k, 1] + y0)
-            j1 = math.floor(local[i, k, 1] + y1)
+            ci, cj = cells[i, k, 0], cells[i, k, 1]
+            i0, i1 = ci + x0, ci + x1
+            j0, j1 = cj + y0, cj + y1
             if i1 < 0 or i0 >= w or j1 < 0 or j0 >= h:
                 continue
             i0, i1 = max(i0, 0), min(i1, w - 1)
@@ -1338,9 +1368,10 @@ def _near_pose(
     return abs(rot - other[0]) * reach < apart and math.hypot(x - other[1], y - other[2]) < apart
 
 
-def _recount(places: NDArray[np.int64], free: NDArray[np.bool_]) -> None:
-    """``places[a, b]``: how many of ``free[:a, :b]`` are set (a summed-area table)."""
-    for a in range(free.shape[0]):
+def _recount(places: NDArray[np.int64], free: NDArray[np.bool_], start: int = 0) -> None:
+    """``places[a, b]``: how many of ``free[:a, :b]`` are set (a summed-area table), its
+    rows recounted from ``start`` on (those before it count ``free`` as it is)."""
+    for a in range(start, free.shape[0]):
         for b in range(free.shape[1]):
             places[a + 1, b + 1] = places[a, b + 1] + places[a + 1, b] - places[a, b] + free[a, b]
 
@@ -1355,21 +1386,39 @@ def _suppress(
     reach: float,
 ) -> None:
     """Mark the grid poses near ``pose`` as no longer free, and recount the free places
-    of every rotation that changed (``places[r, a, b]``: free ones in ``[0, a) x [0, b)``)."""
+    of every rotation that changed (``places[r, a, b]``: free ones in ``[0, a) x [0, b)``).
+
+    Only places within ``apart`` of the pose along each axis can be near it (``offs_m``
+    increasing), one more each way against rounding: the others are not visited, and a
+    rotation's table is recounted from the first row that changed."""
     side = offs_m.shape[0]
+    a0 = 0
+    while a0 < side and offs_m[a0] <= pose[1] - apart:
+        a0 += 1
+    a1 = side
+    while a1 > a0 and offs_m[a1 - 1] >= pose[1] + apart:
+        a1 -= 1
+    b0 = 0
+    while b0 < side and offs_m[b0] <= pose[2] - apart:
+        b0 += 1
+    b1 = side
+    while b1 > b0 and offs_m[b1 - 1] >= pose[2] + apart:
+        b1 -= 1
+    a0, a1 = max(a0 - 1, 0), min(a1 + 1, side)
+    b0, b1 = max(b0 - 1, 0), min(b1 + 1, side)
     for r in range(rots.shape[0]):
         if abs(rots[r] - pose[0]) * reach >= apart:
             continue
-        changed = False
-        for a in range(side):
-            for b in range(side):
+        changed = side
+        for a in range(a0, a1):
+            for b in range(b0, b1):
                 if free[r, a, b] and _near_pose_jit(
                     rots[r], offs_m[a], offs_m[b], pose, apart, reach
                 ):
                     free[r, a, b] = False
-                    changed = True
-        if changed:
-            _recount_jit(places[r], free[r])
+                    changed = min(changed, a)
+        if changed < side:
+            _recount_jit(places[r], free[r], changed)
 
 
 def _window_picks(
@@ -1382,7 +1431,7 @@ def _window_picks(
     tile_shape: NDArray[np.intp],
     tile_offset: NDArray[np.intp],
     pyramid: NDArray[np.float64],
-    offs_cells: NDArray[np.float64],
+    offs_cells: NDArray[np.int64],
     offs_m: NDArray[np.float64],
     inside: NDArray[np.bool_],
     reach: float,
@@ -1402,8 +1451,10 @@ def _window_picks(
     a return ``(x, y)`` lies at ``((x cos - y sin + origin[0] + t[0]) / res, (x sin + y cos
     + origin[1] + t[1]) / res)`` cells; ``tiles`` the tiles each point reaches (-1 pads);
     ``pyramid`` the field's :func:`_field_pyramid`. The translation at grid place (a, b)
-    is ``(offs_cells[a], offs_cells[b])`` cells, ``(offs_m[a], offs_m[b])`` metres, in
-    the window where ``inside[a, b]``. Each rotation's grid is a quadtree of blocks,
+    is ``(offs_cells[a], offs_cells[b])`` whole cells, ``(offs_m[a], offs_m[b])`` metres,
+    in the window where ``inside[a, b]``: each return is put in its cell once per
+    rotation, and a translation adds whole cells to it (:func:`_cells_score`,
+    :func:`_cells_bound`). Each rotation's grid is a quadtree of blocks,
     opened best bound first (blocks before poses of an equal value), so poses come out
     in exactly the order of scoring them all; the places still free (not near a pose
     taken) are counted per rotation, and a block with none is never opened. The second
@@ -1425,7 +1476,7 @@ def _window_picks(
         free[r] = inside
         _recount_jit(places[r], free[r])
     values = pyramid[0]
-    local = np.zeros((rotations, n, slots, 2))
+    cells = np.zeros((rotations, n, slots, 2), dtype=np.int64)
     for r in range(rotations):
         c, s = math.cos(rots[r]), math.sin(rots[r])
         for i in range(n):
@@ -1435,8 +1486,8 @@ def _window_picks(
             for k in range(slots):
                 t = tiles[i, k]
                 if t >= 0:
-                    local[r, i, k, 0] = cx - tile_lo[t, 0]
-                    local[r, i, k, 1] = cy - tile_lo[t, 1]
+                    cells[r, i, k, 0] = math.floor(cx - tile_lo[t, 0])
+                    cells[r, i, k, 1] = math.floor(cy - tile_lo[t, 1])
     taken = np.zeros((2 * candidates, 4))
     chosen = np.zeros((2 * candidates, 3))  # rotation, x, y (metres)
     got = 0
@@ -1450,13 +1501,13 @@ def _window_picks(
     for r in range(rotations):
         if size == 1:
             if inside[0, 0]:
-                v = _pose_score_jit(
-                    local[r], tiles, tile_shape, tile_offset, values, offs_cells[0], offs_cells[0]
+                v = _cells_score_jit(
+                    cells[r], tiles, tile_shape, tile_offset, values, offs_cells[0], offs_cells[0]
                 )
                 heap.append((-v, 1, -r, 0, 0, 1))
             continue
-        v = _block_bound_jit(
-            local[r],
+        v = _cells_bound_jit(
+            cells[r],
             tiles,
             tile_shape,
             tile_offset,
@@ -1503,11 +1554,11 @@ def _window_picks(
                     continue  # no place in it, or every one near a pose taken
                 if half == 1:
                     sx, sy = offs_cells[a], offs_cells[b]
-                    v = _pose_score_jit(local[r], tiles, tile_shape, tile_offset, values, sx, sy)
+                    v = _cells_score_jit(cells[r], tiles, tile_shape, tile_offset, values, sx, sy)
                     heapq.heappush(heap, (-v, 1, neg_r, -a, -b, 1))
                 else:
-                    v = _block_bound_jit(
-                        local[r],
+                    v = _cells_bound_jit(
+                        cells[r],
                         tiles,
                         tile_shape,
                         tile_offset,
@@ -2865,7 +2916,8 @@ window_scores: Callable[..., NDArray[np.float64]] = njit(cache=True, nogil=True)
 first_hits: Callable[..., Any] = njit(cache=True, nogil=True)(_first_hits)
 field_pyramid: Callable[..., NDArray[np.float64]] = njit(cache=True, nogil=True)(_field_pyramid)
 _pose_score_jit: Callable[..., float] = njit(cache=True, nogil=True)(_pose_score)
-_block_bound_jit: Callable[..., float] = njit(cache=True, nogil=True)(_block_bound)
+_cells_score_jit: Callable[..., float] = njit(cache=True, nogil=True)(_cells_score)
+_cells_bound_jit: Callable[..., float] = njit(cache=True, nogil=True)(_cells_bound)
 near_pose: Callable[..., bool] = njit(cache=True, nogil=True)(_near_pose)
 _near_pose_jit = near_pose
 _recount_jit: Callable[..., None] = njit(cache=True, nogil=True)(_recount)

@@ -116,7 +116,8 @@ class TrackingConfig:
         Widest azimuth window searched on a grid.
     step_m : float
         Grid step in position, and the largest step a return may move per
-        azimuth step.
+        azimuth step: a whole number of ``field_resolution_m`` (the search moves
+        returns by whole cells).
     field_resolution_m : float
         Cell size of the panels' likelihood field.
     max_points : int
@@ -154,6 +155,14 @@ class TrackingConfig:
     other_basins_m: float = 0.4
     direct_radius_m: float = 0.1
     direct_tolerance_rad: float = math.radians(1.5)
+
+    def __post_init__(self) -> None:
+        cells = self.step_m / self.field_resolution_m if self.field_resolution_m > 0 else 0.0
+        if not (self.step_m > 0 and cells >= 1 and abs(cells - round(cells)) <= 1e-9 * cells):
+            raise ValueError(
+                f"step_m ({self.step_m}) must be a whole number of field_resolution_m "
+                f"({self.field_resolution_m}), at least one"
+            )
 
 
 def _likelihood_field(
@@ -458,6 +467,12 @@ def _window_places(radius_m: float, step: float) -> tuple[NDArray[np.float64], N
     return offs, inside
 
 
+def _whole_cells(offs: NDArray[np.float64], res: float) -> NDArray[np.int64]:
+    """The grid's offsets in whole cells of the field (``step_m`` is a whole number of
+    ``field_resolution_m``, :class:`TrackingConfig`)."""
+    return np.rint(offs / res).astype(np.int64)
+
+
 def centre_hypotheses(prior: Prior, config: TrackingConfig = TrackingConfig()) -> list[Hypothesis]:
     """The prior's own pose as the one hypothesis, when its window is narrow enough to
     be searched by ICP from there first (``direct_radius_m`` and
@@ -524,7 +539,7 @@ def prior_hypotheses(
         field.shape,
         field.offset,
         field.pyramid,
-        offs / res,
+        _whole_cells(offs, res),
         offs,
         inside,
         float(np.median(r)),
