@@ -492,3 +492,58 @@ def test_pose_step_is_the_least_squares_solution_and_declines_when_singular() ->
     np.testing.assert_allclose(
         pose_step(flat, rhs), np.linalg.lstsq(flat, rhs, rcond=None)[0], atol=1e-15
     )
+
+
+def _scan_objects() -> list[Any]:
+    scene = paper_scene()
+    out = []
+    for k, shot in enumerate(scene.shots[:6]):
+        for noisy in (False, True):
+            rng = np.random.default_rng(k)
+            scanner = shot.scanner if noisy else shot.scanner.noise_free()
+            out.append(simulate_scan(scene.world, shot.pose, scanner, rng=rng).scan)
+    return out
+
+
+@pytest.mark.parametrize("noise_m", [None, 0.01])
+def test_runs_and_noise_kernels_match_the_reference_on_scans(noise_m: float | None) -> None:
+    """Breakpoints, runs and the noise estimate compiled: the same to the bit."""
+    cfg = seg.SegmentationConfig(noise_m=noise_m)
+    for scan in _scan_objects():
+        beams, pts = scan.points()
+        got_ids, got_noise = seg._runs(scan, beams, pts, cfg)
+        want_ids, want_noise = seg._runs_reference(scan, beams, pts, cfg)
+        np.testing.assert_array_equal(got_ids, want_ids)
+        assert got_noise == want_noise
+        assert seg.estimate_noise(pts, got_ids) == seg._estimate_noise_reference(pts, got_ids)
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    n=st.integers(0, 300),
+    seed=st.integers(0, 2**32 - 1),
+    corners=st.integers(0, 5),
+    sigma=st.sampled_from([0.0, 1e-3, 0.02]),
+    cut=st.integers(1, 50),
+)
+def test_noise_estimate_kernel_matches_the_reference_on_polylines(
+    n: int, seed: int, corners: int, sigma: float, cut: int
+) -> None:
+    pts = _polyline(n, seed, corners, sigma, 8.0)
+    ids = np.arange(n, dtype=np.intp) // cut  # runs of ``cut`` returns
+    assert seg.estimate_noise(pts, ids) == seg._estimate_noise_reference(pts, ids)
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    values=st.lists(
+        st.floats(min_value=-1e6, max_value=1e6, allow_nan=False, allow_subnormal=False),
+        min_size=1,
+        max_size=40,
+    )
+)
+def test_linear_median_is_numpys_quantile(values: list[float]) -> None:
+    from mast.core._kernels import linear_median
+
+    v = np.array(values)
+    assert linear_median(v.copy()) == np.quantile(v, 0.5)

@@ -34,6 +34,7 @@ __all__ = [
     "information",
     "key_pair_nodes",
     "line_fits",
+    "linear_median",
     "near_pose",
     "nearest_by_bearing",
     "nearest_within",
@@ -44,12 +45,15 @@ __all__ = [
     "range_rows",
     "ray_association",
     "reach_tallies",
+    "rebreak",
     "robust_gate",
+    "run_breaks",
     "segment_run",
     "standardised",
     "straight_and_fitted_chi",
     "survey_shares",
     "tallies",
+    "triple_deviations",
     "window_picks",
     "window_scores",
     "within",
@@ -1574,6 +1578,108 @@ def _window_picks(
     return taken[:got], first, got - first
 
 
+def _run_breaks(
+    beams: NDArray[np.intp],
+    ranges: NDArray[np.float64],
+    angles: NDArray[np.float64],
+    points: NDArray[np.float64],
+    max_gap_beams: int,
+    incidence_limit: float,
+    slack: float,
+) -> tuple[NDArray[np.intp], NDArray[np.float64], NDArray[np.float64]]:
+    """``segmentation._runs_reference``'s first pass: each return's run (the count of
+    breakpoints before it), and between consecutive returns the largest step a surface
+    at the limiting incidence explains plus ``slack`` and the step itself. A break is a
+    gap of more than ``max_gap_beams`` beams, a step beyond the largest explained, or
+    beams ``incidence_limit`` or more apart."""
+    n = beams.shape[0]
+    ids = np.zeros(n, dtype=np.intp)
+    explained = np.empty(max(n - 1, 0))
+    step = np.empty(max(n - 1, 0))
+    run = 0
+    for i in range(n - 1):
+        dphi = angles[i + 1] - angles[i]
+        reach = ranges[i] * math.sin(dphi) / math.sin(max(incidence_limit - dphi, 1e-6))
+        explained[i] = reach + slack
+        step[i] = math.hypot(points[i + 1, 0] - points[i, 0], points[i + 1, 1] - points[i, 1])
+        if (
+            beams[i + 1] - beams[i] > max_gap_beams + 1
+            or step[i] > explained[i]
+            or dphi >= incidence_limit
+        ):
+            run += 1
+        ids[i + 1] = run
+    return ids, explained, step
+
+
+def _rebreak(
+    beams: NDArray[np.intp],
+    angles: NDArray[np.float64],
+    explained: NDArray[np.float64],
+    step: NDArray[np.float64],
+    max_gap_beams: int,
+    incidence_limit: float,
+    slack: float,
+) -> NDArray[np.intp]:
+    """:func:`_run_breaks`' runs again, ``slack`` more step explained at every gap (the
+    estimated noise's)."""
+    n = beams.shape[0]
+    ids = np.zeros(n, dtype=np.intp)
+    run = 0
+    for i in range(n - 1):
+        if (
+            beams[i + 1] - beams[i] > max_gap_beams + 1
+            or step[i] > explained[i] + slack
+            or angles[i + 1] - angles[i] >= incidence_limit
+        ):
+            run += 1
+        ids[i + 1] = run
+    return ids
+
+
+def _triple_deviations(points: NDArray[np.float64], ids: NDArray[np.intp]) -> NDArray[np.float64]:
+    """``segmentation._estimate_noise_reference``'s deviations: for each three consecutive
+    returns of one run seen more than about 17 degrees from grazing, the middle one's
+    distance from the line through the outer two over ``|n . u|``, in order."""
+    n = points.shape[0]
+    out = np.empty(max(n - 2, 0))
+    m = 0
+    for i in range(n - 2):
+        if ids[i] != ids[i + 1] or ids[i + 1] != ids[i + 2]:
+            continue
+        acx = points[i + 2, 0] - points[i, 0]
+        acy = points[i + 2, 1] - points[i, 1]
+        bx, by = points[i + 1, 0], points[i + 1, 1]
+        length = math.hypot(acx, acy)
+        rb = math.hypot(bx, by)
+        if not (length > 0 and rb > 0):
+            continue
+        nu = abs(acx * by - acy * bx) / (length * rb)
+        if not nu > 0.3:
+            continue
+        dist = abs(acx * (by - points[i, 1]) - acy * (bx - points[i, 0])) / length
+        out[m] = dist / nu
+        m += 1
+    return out[:m]
+
+
+def _linear_median(values: NDArray[np.float64]) -> float:
+    """``np.quantile(values, 0.5)`` (its default, linear method) of finite ``values``, to
+    the bit: the middle value, or between the two middle ones ``b - (b - a) * 0.5`` as
+    numpy's interpolation takes it."""
+    n = values.shape[0]
+    lo = (n - 1) // 2
+    part = np.partition(values, lo)
+    a = float(part[lo])
+    if n % 2 == 1:
+        return a + 0.0  # numpy adds (b - a) * 0 to it: -0.0 comes out as 0.0
+    b = float(part[lo + 1])
+    for i in range(lo + 2, n):
+        if part[i] < b:
+            b = float(part[i])
+    return b - (b - a) * 0.5
+
+
 def _run_moments(points: NDArray[np.float64]) -> NDArray[np.float64]:
     """Cumulative sums (from 0) of the centred points' first and second moments and
     of the unit beam vectors' second moments, rows in ``partition_dp``'s order
@@ -2880,6 +2986,12 @@ _best_pointers_jit: Callable[..., NDArray[np.intp]] = njit(cache=True, nogil=Tru
 penalty: Callable[[int], float] = njit(cache=True, nogil=True)(_penalty)
 _penalty_jit = penalty
 _run_moments_jit: Callable[..., Any] = njit(cache=True, nogil=True)(_run_moments)
+run_breaks: Callable[..., Any] = njit(cache=True, nogil=True)(_run_breaks)
+rebreak: Callable[..., NDArray[np.intp]] = njit(cache=True, nogil=True)(_rebreak)
+triple_deviations: Callable[..., NDArray[np.float64]] = njit(cache=True, nogil=True)(
+    _triple_deviations
+)
+linear_median: Callable[..., float] = njit(cache=True, nogil=True)(_linear_median)
 _scatter_jit: Callable[..., Any] = njit(cache=True, nogil=True)(_scatter)
 _major_axis_jit: Callable[..., Any] = njit(cache=True, nogil=True)(_major_axis)
 _piece_sse_nu2_jit: Callable[..., Any] = njit(cache=True, nogil=True)(_piece_sse_nu2)

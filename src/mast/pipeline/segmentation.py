@@ -181,6 +181,33 @@ def estimate_noise(points: NDArray[np.float64], run_ids: NDArray[np.intp]) -> fl
     about 17 degrees of grazing are left out. The median is used: triples
     on corners only lengthen the upper tail (rough rock, whose bumps are
     shape, raises it, which only makes the segmentation more cautious).
+    The deviations are compiled (:func:`mast.core._kernels.triple_deviations`);
+    :func:`_estimate_noise_reference` is the same in numpy.
+    """
+    from mast.core._kernels import linear_median, triple_deviations
+
+    deviations = triple_deviations(
+        np.ascontiguousarray(points, dtype=float).reshape(-1, 2),
+        np.ascontiguousarray(run_ids, dtype=np.intp),
+    )
+    if deviations.size == 0:
+        return 0.0
+    # median of |N(0, s)| = 0.6745 s, s^2 = 1.5 sigma^2 (NOISE_QUANTILE is the median)
+    return float(linear_median(deviations) / _HALF_NORMAL_Q / math.sqrt(1.5))
+
+
+def _estimate_noise_reference(points: NDArray[np.float64], run_ids: NDArray[np.intp]) -> float:
+    """Robust estimate of the range noise from triples of consecutive returns.
+
+    For three neighbours on a straight surface, the middle one's distance
+    from the line through the outer two has variance about 1.5 sigma_perp^2,
+    and a range error e moves a return by e |n . u| across the surface (n
+    the surface normal, u the beam). Dividing by |n . u| gives the range
+    noise, which bounds the noise across every surface; triples seen within
+    about 17 degrees of grazing are left out. The median is used: triples
+    on corners only lengthen the upper tail (rough rock, whose bumps are
+    shape, raises it, which only makes the segmentation more cautious).
+    The reference of :func:`estimate_noise` in numpy (the tests compare the two).
     """
     if points.shape[0] < 3:
         return 0.0
@@ -495,7 +522,42 @@ def _segment_of(
 def _runs(
     scan: Scan, beams: NDArray[np.intp], pts: NDArray[np.float64], config: SegmentationConfig
 ) -> tuple[NDArray[np.intp], float]:
-    """Run (stretch without a breakpoint) of every return, and the noise for the thresholds."""
+    """Run (stretch without a breakpoint) of every return, and the noise for the thresholds.
+
+    A breakpoint is a jump larger than a surface at the limiting incidence explains,
+    beams more than ``max_gap_beams`` apart, or beams the incidence limit apart; with
+    the noise estimated (no ``noise_m``), the runs are cut again with three times the
+    estimate more jump explained, so that noisy returns do not cut them. Compiled
+    (:func:`mast.core._kernels.run_breaks`, :func:`mast.core._kernels.rebreak`);
+    :func:`_runs_reference` is the same in numpy.
+    """
+    from mast.core._kernels import rebreak, run_breaks
+
+    beams = np.ascontiguousarray(beams, dtype=np.intp)
+    angles = np.ascontiguousarray(scan.angles_rad[beams], dtype=float)
+    lam = math.radians(config.incidence_limit_deg)
+    noise_guess = config.noise_m
+    slack = 3.0 * (noise_guess if noise_guess is not None else 0.0)
+    run_ids, explained, step = run_breaks(
+        beams,
+        np.ascontiguousarray(scan.ranges_m[beams], dtype=float),
+        angles,
+        np.ascontiguousarray(pts, dtype=float).reshape(-1, 2),
+        config.max_gap_beams,
+        lam,
+        slack,
+    )
+    noise = noise_guess if noise_guess is not None else estimate_noise(pts, run_ids)
+    noise = max(noise, config.noise_floor_m)
+    if noise_guess is None and beams.size > 1:
+        run_ids = rebreak(beams, angles, explained, step, config.max_gap_beams, lam, 3.0 * noise)
+    return run_ids, noise
+
+
+def _runs_reference(
+    scan: Scan, beams: NDArray[np.intp], pts: NDArray[np.float64], config: SegmentationConfig
+) -> tuple[NDArray[np.intp], float]:
+    """:func:`_runs` in numpy (the tests compare the two)."""
     r = scan.ranges_m[beams]
     ang = scan.angles_rad[beams]
     # Breakpoints: a jump larger than a surface at the limiting incidence explains.
@@ -511,7 +573,7 @@ def _runs(
         dmax = dmax + 3.0 * (noise_guess if noise_guess is not None else 0.0)
         brk = (gap_beams > config.max_gap_beams + 1) | (step > dmax) | (dphi >= lam)
         run_ids[1:] = np.cumsum(brk)
-    noise = noise_guess if noise_guess is not None else estimate_noise(pts, run_ids)
+    noise = noise_guess if noise_guess is not None else _estimate_noise_reference(pts, run_ids)
     noise = max(noise, config.noise_floor_m)
     if noise_guess is None and beams.size > 1:
         # Second pass with the estimated noise, so noisy returns do not cut runs.
