@@ -28,6 +28,7 @@ import typer
 
 from mast import __version__
 from mast.apps.outputs import PLOT_SUFFIXES, check_output_file, check_output_folder
+from mast.core.heap import QuietCollector
 from mast.core.noise import DEFAULT_ANGLE_SIGMA_RAD, DEFAULT_RANGE_SIGMA_M, DEFAULT_SURVEY_SIGMA_M
 from mast.core.scan import Scan
 from mast.errors import InputError, MastError, NoFixError, OutputError, shorten
@@ -399,40 +400,45 @@ def locate(
     survey = read_survey(beacons)
     numbered = len(scan_paths) > 1
     fixed = located = 0
-    for scan_path in scan_paths:
-        scans, many = _load_scans(scan_path, topic=topic, range_min=range_min, range_max=range_max)
-        numbered = numbered or many
-        inputs = ReportInputs(
-            scan_file="<stdin>" if scan_path == Path("-") else str(scan_path),
-            survey_file=str(beacons),
-            scanner=scanner,
-            topic=laserscan_topic(scan_path, topic) if many else None,
-            defaults=frozenset(defaults),
-        )
-        source = inputs.scan_file or str(scan_path)
-        tracker = SequenceLocator(survey, config=cfg)
-        for i, scan in enumerate(scans):
-            step = tracker.step(scan)
-            fix = step.fix
-            fixed += fix.ok
-            label = f"{source}#{i}" if many else source
-            if fmt is OutputFormat.json:
-                record = fix_record(
-                    fix, source=source, index=i if many else None, scan=scan, inputs=inputs
-                )
-                if many:
-                    record.update(tracking=step.tracked, track_lost=step.track_lost)
-                typer.echo(json.dumps(record))
-            else:
-                if located:
-                    typer.echo("")
-                typer.echo(fix_text(fix, source=label, scan=scan, inputs=inputs))
-            if plot is not None:
-                from mast.apps.plot import plot_fix
+    # What is alive once a scan is located is frozen, out of the collector's full
+    # passes over it (mast.core.heap): they were a run's slowest scans.
+    with QuietCollector() as heap:
+        for scan_path in scan_paths:
+            scans, many = _load_scans(
+                scan_path, topic=topic, range_min=range_min, range_max=range_max
+            )
+            numbered = numbered or many
+            inputs = ReportInputs(
+                scan_file="<stdin>" if scan_path == Path("-") else str(scan_path),
+                survey_file=str(beacons),
+                scanner=scanner,
+                topic=laserscan_topic(scan_path, topic) if many else None,
+                defaults=frozenset(defaults),
+            )
+            source = inputs.scan_file or str(scan_path)
+            tracker = SequenceLocator(survey, config=cfg)
+            for i, scan in enumerate(heap.each(scans)):
+                step = tracker.step(scan)
+                fix = step.fix
+                fixed += fix.ok
+                label = f"{source}#{i}" if many else source
+                if fmt is OutputFormat.json:
+                    record = fix_record(
+                        fix, source=source, index=i if many else None, scan=scan, inputs=inputs
+                    )
+                    if many:
+                        record.update(tracking=step.tracked, track_lost=step.track_lost)
+                    typer.echo(json.dumps(record))
+                else:
+                    if located:
+                        typer.echo("")
+                    typer.echo(fix_text(fix, source=label, scan=scan, inputs=inputs))
+                if plot is not None:
+                    from mast.apps.plot import plot_fix
 
-                target = plot.with_name(f"{plot.stem}_{located:04d}{plot.suffix}")
-                plot_fix(scan, survey, fix, target if numbered else plot, title=label)
-            located += 1
+                    target = plot.with_name(f"{plot.stem}_{located:04d}{plot.suffix}")
+                    plot_fix(scan, survey, fix, target if numbered else plot, title=label)
+                located += 1
     if fixed == 0:
         raise typer.Exit(EXIT_NO_FIX)
 

@@ -29,6 +29,7 @@ from typing import Any, Protocol
 
 from mast.apps.report import ReportInputs, fix_record
 from mast.core.beacon import Survey
+from mast.core.heap import QuietCollector
 from mast.core.scan import Scan
 from mast.live.sources import Received, Source
 from mast.pipeline.locator import Fix, LocatorConfig, SequenceConfig, SequenceLocator
@@ -156,36 +157,40 @@ def run_live(
     reader = threading.Thread(target=read, name="mast-live-reader", daemon=True)
     t0 = time.perf_counter()
     reader.start()
+    # The survey's index, kernels and session, alive once the first scan is located,
+    # frozen: the collector's full passes over them were the largest latencies.
     try:
-        while (item := slot.take(interrupt)) is not None:
-            if interrupt is not None and interrupt.is_set():
-                break
-            index, received, dropped = item
-            scan = received.scan
-            if before_step is not None:
-                before_step(index, tracker)
-            step = tracker.step(scan)
-            now = replace(inputs, computed_utc=datetime.now(UTC))
-            record = fix_record(step.fix, source=source.url, index=index, scan=scan, inputs=now)
-            record.update(
-                received_ns=received.received_ns,
-                tracking=step.tracked,
-                track_lost=step.track_lost,
-                dropped=dropped,
-            )
-            if received.gap_s is not None:
-                record["gap_s"] = round(received.gap_s, 3)
-            record["latency_ms"] = round((time.perf_counter() - received.received_s) * 1e3, 3)
-            summary.located += 1
-            summary.fixed += step.fix.ok
-            summary.track_lost += step.track_lost
-            try:
-                emit(record)
-            except BrokenPipeError:
-                summary.pipe_closed = True
-                break
-            for sink in sinks:
-                sink.fix(scan, step.fix, record)
+        with QuietCollector() as heap:
+            while (item := slot.take(interrupt)) is not None:
+                if interrupt is not None and interrupt.is_set():
+                    break
+                index, received, dropped = item
+                scan = received.scan
+                if before_step is not None:
+                    before_step(index, tracker)
+                step = tracker.step(scan)
+                now = replace(inputs, computed_utc=datetime.now(UTC))
+                record = fix_record(step.fix, source=source.url, index=index, scan=scan, inputs=now)
+                record.update(
+                    received_ns=received.received_ns,
+                    tracking=step.tracked,
+                    track_lost=step.track_lost,
+                    dropped=dropped,
+                )
+                if received.gap_s is not None:
+                    record["gap_s"] = round(received.gap_s, 3)
+                record["latency_ms"] = round((time.perf_counter() - received.received_s) * 1e3, 3)
+                summary.located += 1
+                summary.fixed += step.fix.ok
+                summary.track_lost += step.track_lost
+                try:
+                    emit(record)
+                except BrokenPipeError:
+                    summary.pipe_closed = True
+                    break
+                for sink in sinks:
+                    sink.fix(scan, step.fix, record)
+                heap.step()
     except KeyboardInterrupt:
         summary.interrupted = True
     finally:

@@ -23,6 +23,7 @@ from numpy.typing import NDArray
 
 from mast.apps.report import ReportInputs, fix_record
 from mast.core.beacon import Survey
+from mast.core.heap import QuietCollector
 from mast.errors import OutputError
 from mast.io.atomic import atomic_open
 from mast.pipeline.locator import segmentation_of
@@ -159,9 +160,14 @@ def track_run(
     walls: dict[int, NDArray[np.float64]] = {}
     last_wall: NDArray[np.float64] | None = None
     try:
-        with atomic_open(out / "fixes.jsonl", "w", encoding="utf-8") as fh:
+        # What is alive once a scan is located is frozen, out of the collector's full
+        # passes (mast.core.heap); again every thousand scans, what the run has kept.
+        with (
+            atomic_open(out / "fixes.jsonl", "w", encoding="utf-8") as fh,
+            QuietCollector() as heap,
+        ):
             try:
-                for i, scan in enumerate(scans(skipped)):
+                for i, scan in enumerate(heap.each(scans(skipped))):
                     if interrupt is not None and interrupt.is_set():
                         result.interrupted = True
                         break

@@ -69,6 +69,7 @@ from mast.apps.bench.accuracy import ACCURACY_CONFIGS
 from mast.apps.bench.minewide import MinewideSummary, run_minewide
 from mast.core.beacon import Survey
 from mast.core.geometry import PanelSet
+from mast.core.heap import QuietCollector
 from mast.core.pose import Pose2D
 from mast.pipeline.locator import STAGES as LOCATOR_STAGES
 from mast.pipeline.locator import Fix, LocatorConfig, SequenceLocator, SequenceStep, locate
@@ -377,22 +378,26 @@ def kept_scans(seed: int, count: int, model: ScannerModel | None = None) -> Kept
     fixes: list[Fix] = []
     seconds: list[float] = []
     warm = False
-    for sim in scene.iter_simulated():
-        if len(sims) >= count:
-            break
-        # fewer than two beacons hit at all: no fix is possible (two are needed)
-        if _beacons_in_view(sim, 1) < 2:
-            continue
-        if not warm:  # the survey's index, any compilation: once per run, not per scan
-            locate(sim.scan, scene.survey, config=cfg)
-            warm = True
-        t0 = time.perf_counter()
-        fix = locate(sim.scan, scene.survey, config=cfg)
-        dt = time.perf_counter() - t0
-        if fix.ok or _beacons_in_view(sim, IN_VIEW_RETURNS) >= 2:
-            sims.append(sim)
-            fixes.append(fix)
-            seconds.append(dt)
+    # As `mast locate` and `mast live` do: what is alive once the first scan is located
+    # is frozen, out of the collector's full passes (mast.core.heap).
+    with QuietCollector() as heap:
+        for sim in scene.iter_simulated():
+            if len(sims) >= count:
+                break
+            # fewer than two beacons hit at all: no fix is possible (two are needed)
+            if _beacons_in_view(sim, 1) < 2:
+                continue
+            if not warm:  # the survey's index, any compilation: once per run, not per scan
+                locate(sim.scan, scene.survey, config=cfg)
+                warm = True
+            t0 = time.perf_counter()
+            fix = locate(sim.scan, scene.survey, config=cfg)
+            dt = time.perf_counter() - t0
+            heap.step()
+            if fix.ok or _beacons_in_view(sim, IN_VIEW_RETURNS) >= 2:
+                sims.append(sim)
+                fixes.append(fix)
+                seconds.append(dt)
     return KeptScans(scene.survey, scanner, tuple(sims), tuple(fixes), tuple(seconds))
 
 
@@ -536,13 +541,16 @@ def measure_tracked(count: int, *, seed: int = 0) -> TrackedSpeed:
     seconds: list[float] = []
     wide: list[float] = []  # the radius of the window of all the vehicle can have done
     tracker = SequenceLocator(scene.survey, config=cfg)
-    for sim in sims:
-        last = tracker.last_pose
-        elapsed = abs(sim.scan.stamp_ns - tracker.last_stamp_ns) / 1e9
-        wide.append(math.inf if last is None else tracker.sequence.prior(last, elapsed).radius_m)
-        t0 = time.perf_counter()
-        steps.append(tracker.step(sim.scan))
-        seconds.append(time.perf_counter() - t0)
+    with QuietCollector() as heap:  # as `mast live` and `mast locate RUN` do
+        for sim in sims:
+            last = tracker.last_pose
+            elapsed = abs(sim.scan.stamp_ns - tracker.last_stamp_ns) / 1e9
+            radius = math.inf if last is None else tracker.sequence.prior(last, elapsed).radius_m
+            wide.append(radius)
+            t0 = time.perf_counter()
+            steps.append(tracker.step(sim.scan))
+            seconds.append(time.perf_counter() - t0)
+            heap.step()
     found = [st.tracked and not st.track_lost and st.fix.ok for st in steps]
     # Per stage, as the locator clocked them on each fix (Fix.stages_s); "other" is the
     # rest of the step's time (choosing between poses, the sequence's bookkeeping).
