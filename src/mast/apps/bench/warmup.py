@@ -23,6 +23,8 @@ def compile_all() -> None:
     scene = paper_scene()
     for shot, sim in zip(scene.shots[:1], scene.simulate_all()[:1], strict=True):
         locate(sim.scan, scene.survey)
-        prior = Prior(shot.pose, 0.1, math.radians(1.0))
+        # A window wider than the one searched from its centre alone: its grid search
+        # (branch and bound on the likelihood tiles) is loaded too.
+        prior = Prior(shot.pose, 0.3, math.radians(3.0))
         locate_near(sim.scan, scene.survey, prior, config=LocatorConfig())
         scan_to_scan(keyframe(sim.scan), sim.scan, range_sigma_m=0.01)  # the odometry's grid
