@@ -23,16 +23,20 @@ def _kernel_pointers(points: np.ndarray, var: float, max_piece: int = seg.MAX_PI
     return np.asarray(partition_dp(*moments, var, penalty(n), min(n, max_piece)))
 
 
-def _scans() -> list[np.ndarray]:
+def _scan_objects() -> list[Any]:
+    """Scans of the paper's scene, noise-free and noisy."""
     scene = paper_scene()
     out = []
     for k, shot in enumerate(scene.shots[:6]):
         for noisy in (False, True):
             rng = np.random.default_rng(k)
             scanner = shot.scanner if noisy else shot.scanner.noise_free()
-            scan = simulate_scan(scene.world, shot.pose, scanner, rng=rng).scan
-            out.append(scan.points()[1])
+            out.append(simulate_scan(scene.world, shot.pose, scanner, rng=rng).scan)
     return out
+
+
+def _scans() -> list[np.ndarray]:
+    return [scan.points()[1] for scan in _scan_objects()]
 
 
 def _polyline(n: int, seed: int, corners: int, sigma: float, length: float) -> np.ndarray:
@@ -492,17 +496,6 @@ def test_pose_step_is_the_least_squares_solution_and_declines_when_singular() ->
     np.testing.assert_allclose(
         pose_step(flat, rhs), np.linalg.lstsq(flat, rhs, rcond=None)[0], atol=1e-15
     )
-
-
-def _scan_objects() -> list[Any]:
-    scene = paper_scene()
-    out = []
-    for k, shot in enumerate(scene.shots[:6]):
-        for noisy in (False, True):
-            rng = np.random.default_rng(k)
-            scanner = shot.scanner if noisy else shot.scanner.noise_free()
-            out.append(simulate_scan(scene.world, shot.pose, scanner, rng=rng).scan)
-    return out
 
 
 @pytest.mark.parametrize("noise_m", [None, 0.01])

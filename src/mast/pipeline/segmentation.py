@@ -197,18 +197,7 @@ def estimate_noise(points: NDArray[np.float64], run_ids: NDArray[np.intp]) -> fl
 
 
 def _estimate_noise_reference(points: NDArray[np.float64], run_ids: NDArray[np.intp]) -> float:
-    """Robust estimate of the range noise from triples of consecutive returns.
-
-    For three neighbours on a straight surface, the middle one's distance
-    from the line through the outer two has variance about 1.5 sigma_perp^2,
-    and a range error e moves a return by e |n . u| across the surface (n
-    the surface normal, u the beam). Dividing by |n . u| gives the range
-    noise, which bounds the noise across every surface; triples seen within
-    about 17 degrees of grazing are left out. The median is used: triples
-    on corners only lengthen the upper tail (rough rock, whose bumps are
-    shape, raises it, which only makes the segmentation more cautious).
-    The reference of :func:`estimate_noise` in numpy (the tests compare the two).
-    """
+    """:func:`estimate_noise` in numpy (the tests compare the two)."""
     if points.shape[0] < 3:
         return 0.0
     a, b, c = points[:-2], points[1:-1], points[2:]
