@@ -527,6 +527,20 @@ def test_noise_estimate_kernel_matches_the_reference_on_polylines(
     assert seg.estimate_noise(pts, ids) == seg._estimate_noise_reference(pts, ids)
 
 
+@pytest.mark.parametrize("scale", [1e-277, 1e-160, 1e150])
+def test_noise_estimate_kernel_matches_the_reference_where_products_overflow_or_vanish(
+    scale: float,
+) -> None:
+    """Returns so close together (or so far) that a product of two distances is 0 (or
+    inf): the quotients are numpy's, inf or nan, not an error."""
+    pts = _polyline(60, 4, 2, 0.02, 8.0) * scale
+    ids = np.zeros(60, dtype=np.intp)
+    with np.errstate(all="ignore"):
+        want = seg._estimate_noise_reference(pts, ids)
+    got = seg.estimate_noise(pts, ids)
+    assert got == want or (math.isnan(got) and math.isnan(want))
+
+
 @settings(max_examples=200, deadline=None)
 @given(
     values=st.lists(

@@ -2986,11 +2986,13 @@ _best_pointers_jit: Callable[..., NDArray[np.intp]] = njit(cache=True, nogil=Tru
 penalty: Callable[[int], float] = njit(cache=True, nogil=True)(_penalty)
 _penalty_jit = penalty
 _run_moments_jit: Callable[..., Any] = njit(cache=True, nogil=True)(_run_moments)
-run_breaks: Callable[..., Any] = njit(cache=True, nogil=True)(_run_breaks)
+#: ``error_model="numpy"``: a quotient of underflowed values is inf or nan, as in the
+#: numpy references (returns 1e-277 m apart: a product of two distances is 0).
+run_breaks: Callable[..., Any] = njit(cache=True, nogil=True, error_model="numpy")(_run_breaks)
 rebreak: Callable[..., NDArray[np.intp]] = njit(cache=True, nogil=True)(_rebreak)
-triple_deviations: Callable[..., NDArray[np.float64]] = njit(cache=True, nogil=True)(
-    _triple_deviations
-)
+triple_deviations: Callable[..., NDArray[np.float64]] = njit(
+    cache=True, nogil=True, error_model="numpy"
+)(_triple_deviations)
 linear_median: Callable[..., float] = njit(cache=True, nogil=True)(_linear_median)
 _scatter_jit: Callable[..., Any] = njit(cache=True, nogil=True)(_scatter)
 _major_axis_jit: Callable[..., Any] = njit(cache=True, nogil=True)(_major_axis)
