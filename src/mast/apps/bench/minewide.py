@@ -22,6 +22,7 @@ import numpy as np
 
 from mast.apps.bench.accuracy import ACCURACY_CONFIGS, owed_poses
 from mast.core.beacon import Beacon, Survey
+from mast.core.heap import QuietCollector
 from mast.core.pose import Pose2D
 from mast.core.scan import Scan
 from mast.pipeline.locator import Fix, LocatorConfig, locate
@@ -231,57 +232,61 @@ def run_minewide(
     builds: list[float] = []
     scans: list[MinewideScan] = []
     min_dist = math.inf
-    for p_idx, (scene, shot) in enumerate(owed_poses(model, poses, seed)):
-        if scene.name not in wide:
-            shots = [s.pose for s in scene.shots]
-            big = minewide_survey(
-                scene.survey,
-                shots,
-                copies=copies,
-                clearance_m=clearance,
-                rng=np.random.default_rng([seed, len(wide), 11]),
-                copies_first=copies_first,
-                distinct=distinct,
+    # As the commands do (mast.core.heap): what is alive after each pose, the surveys'
+    # indexes above all, frozen out of the collector's full passes.
+    with QuietCollector(every=1) as heap:
+        for p_idx, (scene, shot) in enumerate(heap.each(owed_poses(model, poses, seed))):
+            if scene.name not in wide:
+                shots = [s.pose for s in scene.shots]
+                big = minewide_survey(
+                    scene.survey,
+                    shots,
+                    copies=copies,
+                    clearance_m=clearance,
+                    rng=np.random.default_rng([seed, len(wide), 11]),
+                    copies_first=copies_first,
+                    distinct=distinct,
+                )
+                wide[scene.name] = big
+                xy = np.array([p.position for p in shots])
+                for b in big:
+                    if b.id not in scene.survey:
+                        d = np.hypot(*(b.edges[:, None, :] - xy[None, :, :]).transpose(2, 0, 1))
+                        min_dist = min(min_dist, float(d.min()))
+                # Build both surveys' indexes before timing (the locator keeps them);
+                # the local one again last, in case taking in the large one dropped it.
+                for s in (scene.survey, big, scene.survey):
+                    t0 = time.perf_counter()
+                    locate(blank, s, config=cfg)
+                    if s is big:
+                        builds.append(time.perf_counter() - t0)
+                heap.step()  # the new indexes frozen before any scan is timed against them
+            big = wide[scene.name]
+            rng = np.random.default_rng([seed, p_idx, 7])  # the accuracy benchmark's first draw
+            sim = simulate_scan(scene.world, shot.pose, model, rng=rng)
+            t0 = time.perf_counter()
+            local = locate(sim.scan, scene.survey, config=cfg)
+            t1 = time.perf_counter()
+            mine = locate(sim.scan, big, config=cfg)
+            t2 = time.perf_counter()
+            dpos = daz = math.nan
+            if local.ok and mine.ok and local.pose is not None and mine.pose is not None:
+                dpos = float(np.hypot(*(mine.pose.position - local.pose.position)))
+                turn = math.remainder(mine.pose.azimuth - local.pose.azimuth, math.tau)
+                daz = abs(math.degrees(turn)) * 3600
+            scans.append(
+                MinewideScan(
+                    scene=scene.name,
+                    pose_index=p_idx,
+                    local_status=_status(local),
+                    minewide_status=_status(mine),
+                    position_diff_m=dpos,
+                    azimuth_diff_arcsec=daz,
+                    local_s=t1 - t0,
+                    minewide_s=t2 - t1,
+                    minewide_beacons=mine.beacons,
+                )
             )
-            wide[scene.name] = big
-            xy = np.array([p.position for p in shots])
-            for b in big:
-                if b.id not in scene.survey:
-                    d = np.hypot(*(b.edges[:, None, :] - xy[None, :, :]).transpose(2, 0, 1))
-                    min_dist = min(min_dist, float(d.min()))
-            # Build both surveys' indexes before timing (the locator keeps them);
-            # the local one again last, in case taking in the large one dropped it.
-            for s in (scene.survey, big, scene.survey):
-                t0 = time.perf_counter()
-                locate(blank, s, config=cfg)
-                if s is big:
-                    builds.append(time.perf_counter() - t0)
-        big = wide[scene.name]
-        rng = np.random.default_rng([seed, p_idx, 7])  # the accuracy benchmark's first draw
-        sim = simulate_scan(scene.world, shot.pose, model, rng=rng)
-        t0 = time.perf_counter()
-        local = locate(sim.scan, scene.survey, config=cfg)
-        t1 = time.perf_counter()
-        mine = locate(sim.scan, big, config=cfg)
-        t2 = time.perf_counter()
-        dpos = daz = math.nan
-        if local.ok and mine.ok and local.pose is not None and mine.pose is not None:
-            dpos = float(np.hypot(*(mine.pose.position - local.pose.position)))
-            turn = math.remainder(mine.pose.azimuth - local.pose.azimuth, math.tau)
-            daz = abs(math.degrees(turn)) * 3600
-        scans.append(
-            MinewideScan(
-                scene=scene.name,
-                pose_index=p_idx,
-                local_status=_status(local),
-                minewide_status=_status(mine),
-                position_diff_m=dpos,
-                azimuth_diff_arcsec=daz,
-                local_s=t1 - t0,
-                minewide_s=t2 - t1,
-                minewide_beacons=mine.beacons,
-            )
-        )
     summary = _summarise(
         model.name, copies, copies_first, distinct, scans, wide, min_dist, builds, t_start
     )
