@@ -107,6 +107,7 @@ class DriveFigures:
 def _drive(job: tuple[str, float, int, int]) -> DriveFigures:
     """Simulate one drive, send it through its protocol and locate it in sequence."""
     from mast.apps.bench.robustness import is_wrong
+    from mast.core.heap import QuietCollector
     from mast.pipeline.locator import LocatorConfig, SequenceLocator
     from mast.sim import scanner_model
     from mast.sim.drive import drive_scene
@@ -118,47 +119,50 @@ def _drive(job: tuple[str, float, int, int]) -> DriveFigures:
     config = LocatorConfig(range_sigma_m=noise.range_sigma_m, angle_sigma_rad=noise.angle_sigma_rad)
     tracker = SequenceLocator(scene.survey, config=config)
     fig = DriveFigures(kind, rate_hz, seed)
-    for i, sim in enumerate(scene.iter_simulated()):
-        sent = as_sent(kind, sim.scan, i)
-        t_step = time.perf_counter()
-        step = tracker.step(sent)
-        ms = round(1e3 * (time.perf_counter() - t_step), 3)
-        fix, truth = step.fix, sim.pose
-        fig.scans += 1
-        owed = sim.owes_fix()
-        fig.owed += owed
-        row: dict[str, object] = {
-            "scan": i,
-            "owed": int(owed),
-            "status": fix.reason or fix.status,
-            "tracked": int(step.tracked),
-            "track_lost": int(step.track_lost),
-            "error_mm": "",
-            "error_az_arcsec": "",
-            "elapsed_ms": ms,
-        }
-        fig.rows.append(row)
-        if not fix.ok or fix.pose is None or fix.adjustment is None:
-            continue
-        row["status"] = "fix"
-        off = math.hypot(fix.pose.easting - truth.easting, fix.pose.northing - truth.northing)
-        turn = math.remainder(fix.pose.azimuth - truth.azimuth, math.tau)
-        row["error_mm"] = f"{1e3 * off:.3f}"
-        row["error_az_arcsec"] = f"{3600 * math.degrees(turn):.2f}"
-        fig.owed_fixed += owed
-        fig.fixes += 1
-        fig.tracked_fixes += step.tracked
-        d = np.array([fix.pose.easting - truth.easting, fix.pose.northing - truth.northing])
-        cov = fix.adjustment.covariance[:2, :2]
-        fig.outside_99 += float(d @ np.linalg.solve(cov, d)) > ELLIPSE_99
-        if is_wrong(fix, truth):
-            dist = math.hypot(*d)
-            daz = math.degrees(math.remainder(fix.pose.azimuth - truth.azimuth, 2 * math.pi))
-            fig.wrong.append(
-                f"scan {i}: {dist:.3f} m and {daz:+.3f} deg off, sigmas "
-                f"{1e3 * fix.adjustment.sigma[0]:.1f} / {1e3 * fix.adjustment.sigma[1]:.1f} mm, "
-                f"beacons {', '.join(fix.beacons)}, {'tracked' if step.tracked else 'global'}"
-            )
+    # As mast live does (mast.core.heap): what is alive after the first scan frozen.
+    with QuietCollector() as heap:
+        for i, sim in enumerate(heap.each(scene.iter_simulated())):
+            sent = as_sent(kind, sim.scan, i)
+            t_step = time.perf_counter()
+            step = tracker.step(sent)
+            ms = round(1e3 * (time.perf_counter() - t_step), 3)
+            fix, truth = step.fix, sim.pose
+            fig.scans += 1
+            owed = sim.owes_fix()
+            fig.owed += owed
+            row: dict[str, object] = {
+                "scan": i,
+                "owed": int(owed),
+                "status": fix.reason or fix.status,
+                "tracked": int(step.tracked),
+                "track_lost": int(step.track_lost),
+                "error_mm": "",
+                "error_az_arcsec": "",
+                "elapsed_ms": ms,
+            }
+            fig.rows.append(row)
+            if not fix.ok or fix.pose is None or fix.adjustment is None:
+                continue
+            row["status"] = "fix"
+            off = math.hypot(fix.pose.easting - truth.easting, fix.pose.northing - truth.northing)
+            turn = math.remainder(fix.pose.azimuth - truth.azimuth, math.tau)
+            row["error_mm"] = f"{1e3 * off:.3f}"
+            row["error_az_arcsec"] = f"{3600 * math.degrees(turn):.2f}"
+            fig.owed_fixed += owed
+            fig.fixes += 1
+            fig.tracked_fixes += step.tracked
+            d = np.array([fix.pose.easting - truth.easting, fix.pose.northing - truth.northing])
+            cov = fix.adjustment.covariance[:2, :2]
+            fig.outside_99 += float(d @ np.linalg.solve(cov, d)) > ELLIPSE_99
+            if is_wrong(fix, truth):
+                dist = math.hypot(*d)
+                daz = math.degrees(math.remainder(fix.pose.azimuth - truth.azimuth, 2 * math.pi))
+                fig.wrong.append(
+                    f"scan {i}: {dist:.3f} m and {daz:+.3f} deg off, sigmas "
+                    f"{1e3 * fix.adjustment.sigma[0]:.1f} / "
+                    f"{1e3 * fix.adjustment.sigma[1]:.1f} mm, "
+                    f"beacons {', '.join(fix.beacons)}, {'tracked' if step.tracked else 'global'}"
+                )
     fig.seconds = time.perf_counter() - t0
     return fig
 
