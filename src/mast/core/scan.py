@@ -105,7 +105,8 @@ class Scan:
         with np.errstate(invalid="ignore"):
             returned = np.isfinite(ranges) & (ranges > 0)
             valid = returned & (ranges >= rmin) & (ranges <= rmax)
-        median = float(np.median(ranges[returned])) if returned.any() else 0.0
+        with np.errstate(over="ignore"):  # two ranges near 1e308 average to inf: refused
+            median = float(np.median(ranges[returned])) if returned.any() else 0.0
         if median > MAX_PLAUSIBLE_RANGE_M:
             raise InputError(
                 f"scan's median range is {median:.6g} m, beyond any laser "
