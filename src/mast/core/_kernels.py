@@ -1380,6 +1380,19 @@ def _recount(places: NDArray[np.int64], free: NDArray[np.bool_], start: int = 0)
             places[a + 1, b + 1] = places[a, b + 1] + places[a + 1, b] - places[a, b] + free[a, b]
 
 
+def _within_span(offs: NDArray[np.float64], centre: float, apart: float) -> tuple[int, int]:
+    """The places ``[lo, hi)`` of the increasing ``offs`` within ``apart`` of ``centre``,
+    and one more each way against rounding."""
+    side = offs.shape[0]
+    lo = 0
+    while lo < side and offs[lo] <= centre - apart:
+        lo += 1
+    hi = side
+    while hi > lo and offs[hi - 1] >= centre + apart:
+        hi -= 1
+    return max(lo - 1, 0), min(hi + 1, side)
+
+
 def _suppress(
     free: NDArray[np.bool_],
     places: NDArray[np.int64],
@@ -1396,20 +1409,8 @@ def _suppress(
     increasing), one more each way against rounding: the others are not visited, and a
     rotation's table is recounted from the first row that changed."""
     side = offs_m.shape[0]
-    a0 = 0
-    while a0 < side and offs_m[a0] <= pose[1] - apart:
-        a0 += 1
-    a1 = side
-    while a1 > a0 and offs_m[a1 - 1] >= pose[1] + apart:
-        a1 -= 1
-    b0 = 0
-    while b0 < side and offs_m[b0] <= pose[2] - apart:
-        b0 += 1
-    b1 = side
-    while b1 > b0 and offs_m[b1 - 1] >= pose[2] + apart:
-        b1 -= 1
-    a0, a1 = max(a0 - 1, 0), min(a1 + 1, side)
-    b0, b1 = max(b0 - 1, 0), min(b1 + 1, side)
+    a0, a1 = _within_span_jit(offs_m, pose[1], apart)
+    b0, b1 = _within_span_jit(offs_m, pose[2], apart)
     for r in range(rots.shape[0]):
         if abs(rots[r] - pose[0]) * reach >= apart:
             continue
@@ -1593,22 +1594,15 @@ def _run_breaks(
     gap of more than ``max_gap_beams`` beams, a step beyond the largest explained, or
     beams ``incidence_limit`` or more apart."""
     n = beams.shape[0]
-    ids = np.zeros(n, dtype=np.intp)
     explained = np.empty(max(n - 1, 0))
     step = np.empty(max(n - 1, 0))
-    run = 0
     for i in range(n - 1):
         dphi = angles[i + 1] - angles[i]
         reach = ranges[i] * math.sin(dphi) / math.sin(max(incidence_limit - dphi, 1e-6))
         explained[i] = reach + slack
         step[i] = math.hypot(points[i + 1, 0] - points[i, 0], points[i + 1, 1] - points[i, 1])
-        if (
-            beams[i + 1] - beams[i] > max_gap_beams + 1
-            or step[i] > explained[i]
-            or dphi >= incidence_limit
-        ):
-            run += 1
-        ids[i + 1] = run
+    # (a step beyond explained + 0.0 is one beyond explained)
+    ids = _rebreak_jit(beams, angles, explained, step, max_gap_beams, incidence_limit, 0.0)
     return ids, explained, step
 
 
@@ -1621,8 +1615,9 @@ def _rebreak(
     incidence_limit: float,
     slack: float,
 ) -> NDArray[np.intp]:
-    """:func:`_run_breaks`' runs again, ``slack`` more step explained at every gap (the
-    estimated noise's)."""
+    """Each return's run from the steps between consecutive returns and the largest
+    each explains (:func:`_run_breaks`), ``slack`` more explained at every gap (the
+    estimated noise's, in the second pass)."""
     n = beams.shape[0]
     ids = np.zeros(n, dtype=np.intp)
     run = 0
@@ -2988,8 +2983,9 @@ _penalty_jit = penalty
 _run_moments_jit: Callable[..., Any] = njit(cache=True, nogil=True)(_run_moments)
 #: ``error_model="numpy"``: a quotient of underflowed values is inf or nan, as in the
 #: numpy references (returns 1e-277 m apart: a product of two distances is 0).
-run_breaks: Callable[..., Any] = njit(cache=True, nogil=True, error_model="numpy")(_run_breaks)
 rebreak: Callable[..., NDArray[np.intp]] = njit(cache=True, nogil=True)(_rebreak)
+_rebreak_jit = rebreak
+run_breaks: Callable[..., Any] = njit(cache=True, nogil=True, error_model="numpy")(_run_breaks)
 triple_deviations: Callable[..., NDArray[np.float64]] = njit(
     cache=True, nogil=True, error_model="numpy"
 )(_triple_deviations)
@@ -3035,6 +3031,7 @@ _cells_bound_jit: Callable[..., float] = njit(cache=True, nogil=True)(_cells_bou
 near_pose: Callable[..., bool] = njit(cache=True, nogil=True)(_near_pose)
 _near_pose_jit = near_pose
 _recount_jit: Callable[..., None] = njit(cache=True, nogil=True)(_recount)
+_within_span_jit: Callable[..., Any] = njit(cache=True, nogil=True)(_within_span)
 _suppress_jit: Callable[..., None] = njit(cache=True, nogil=True)(_suppress)
 window_picks: Callable[..., Any] = njit(cache=True, nogil=True)(_window_picks)
 _range_rows_jit: Callable[..., None] = njit(cache=True, nogil=True)(_range_rows)

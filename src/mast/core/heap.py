@@ -27,14 +27,15 @@ __all__ = ["QuietCollector"]
 
 class QuietCollector:
     """Freeze the heap after a loop's first step and every ``every`` steps after it, and
-    give it back to the collector when the loop ends.
+    give the process's frozen objects back to the collector when the loop ends (loops
+    using it are not nested).
 
-    Use as a context manager around the loop, calling :meth:`step` after each scan::
+    Use as a context manager around the loop, its items through :meth:`each` (or
+    :meth:`step` called after each)::
 
         with QuietCollector() as heap:
-            for scan in scans:
+            for scan in heap.each(scans):
                 locate(scan)
-                heap.step()
     """
 
     def __init__(self, every: int = 1000) -> None:
