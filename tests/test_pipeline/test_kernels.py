@@ -153,7 +153,7 @@ def test_association_kernel_matches_the_reference() -> None:
     assert math.isinf(float(dist[0]))
 
 
-IcpCase = tuple[np.ndarray, Pose2D, PanelSet, tuple[float, ...], np.ndarray]
+IcpCase = tuple[np.ndarray, Pose2D, PanelSet, tuple[float, ...], np.ndarray, np.ndarray]
 
 
 def _icp_cases() -> list[IcpCase]:
@@ -165,7 +165,8 @@ def _icp_cases() -> list[IcpCase]:
         scene = paper_scene(variant, range_sigma_m=0.01, seed=3)
         panels = PanelSet.from_survey(scene.survey)
         for shot, sim in zip(scene.shots, scene.simulate_all(), strict=True):
-            _, pts = sim.scan.points()
+            beams, pts = sim.scan.points()
+            angles = sim.scan.angles_rad[beams]
             for scale in (0.01, 0.1, 0.5):
                 start = Pose2D(
                     shot.pose.easting + scale * rng.normal(),
@@ -174,7 +175,7 @@ def _icp_cases() -> list[IcpCase]:
                 )
                 gates = (0.5, 0.15, 0.05, 0.03) if scale > 0.1 else (0.15, 0.05, 0.03)
                 near = panels.near(start.position, 100.0)
-                cases.append((pts, start, panels, gates, near))
+                cases.append((pts, start, panels, gates, near, angles))
     return cases
 
 
@@ -184,9 +185,18 @@ def test_icp_kernel_matches_the_reference() -> None:
     cases = _icp_cases()
     assert len(cases) >= 30
     converged = 0
-    for pts, start, panels, gates, near in cases:
+    for pts, start, panels, gates, near, angles in cases:
         got = icp_point_to_line(pts, start, panels, gates_m=gates, subset=near)
         ref = _icp_reference(pts, start, panels, gates_m=gates, subset=near)
+        # Told the beams' angles, it tests each panel on the beams that can reach it
+        # only: the same result to the last bit.
+        by_bearing = icp_point_to_line(
+            pts, start, panels, gates_m=gates, subset=near, angles=angles
+        )
+        assert by_bearing.pose == got.pose
+        assert (by_bearing.iterations, by_bearing.converged) == (got.iterations, got.converged)
+        np.testing.assert_array_equal(by_bearing.panel, got.panel)
+        np.testing.assert_array_equal(by_bearing.residual_m, got.residual_m)
         assert got.iterations == ref.iterations
         assert got.converged == ref.converged
         converged += got.converged
@@ -199,6 +209,66 @@ def test_icp_kernel_matches_the_reference() -> None:
         np.testing.assert_array_equal(got.panel, ref.panel)
         np.testing.assert_allclose(got.residual_m, ref.residual_m, rtol=0.0, atol=1e-9)
     assert converged >= len(cases) // 2
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    first=st.floats(-10.0, 10.0),
+    turn=st.sampled_from([math.radians(270.0), 2 * math.pi + 5e-7, math.radians(90.0)]),
+    reach=st.sampled_from([0.0, 0.03, 0.3, 1.05, 40.0]),
+    utm=st.booleans(),
+)
+def test_bearing_windows_find_what_a_pass_over_every_beam_finds(
+    seed: int, first: float, turn: float, reach: float, utm: bool
+) -> None:
+    """Testing each panel only on the beams that can reach it (by bearing) finds the
+    same returns within reach, the same pairs and the same matches as testing every
+    return against every panel: scans of any span starting at any angle (a turn apart
+    is the same bearing), panels all round, at UTM-sized coordinates, the scanner
+    beside a panel or on it."""
+    from mast.core import _kernels as k
+
+    rng = np.random.default_rng(seed)
+    origin = np.array([500_000.0, 7_000_000.0]) if utm else np.zeros(2)
+    n_panels = 40
+    a = origin + rng.uniform(-6.0, 6.0, size=(n_panels, 2))
+    heading = rng.uniform(0.0, 2 * math.pi, size=n_panels)
+    direction = np.column_stack([np.cos(heading), np.sin(heading)])
+    normal = np.column_stack([-direction[:, 1], direction[:, 0]])
+    length = rng.uniform(0.05, 2.0, size=n_panels)
+    n = 700
+    angles = np.sort(first + rng.uniform(0.0, turn, size=n))
+    angles = np.unique(angles)
+    ranges = rng.uniform(0.05, 9.0, size=angles.size)
+    pts = np.column_stack([ranges * np.cos(angles), ranges * np.sin(angles)])
+    pose = Pose2D(*(origin + rng.uniform(-3.0, 3.0, size=2)), rng.uniform(0.0, 2 * math.pi))
+    if rng.random() < 0.2:  # the scanner on a panel
+        pose = Pose2D(*(a[0] + 0.3 * length[0] * direction[0]), pose.azimuth)
+    m = np.empty_like(pts)
+    k._to_mine_jit(pts, pose.easting, pose.northing, pose.azimuth, m)
+    panels = rng.permutation(n_panels)[: rng.integers(0, n_panels + 1)].astype(np.intp)
+    args = (pose.easting, pose.northing, pose.azimuth, a, direction, normal, length, panels)
+    near, reached = k.within(m, a, direction, normal, length, panels, reach)
+    b_near, b_reached, ptr, pair_point = k._pairs_by_bearing_jit(m, angles, *args, reach)
+    np.testing.assert_array_equal(b_near, near)
+    np.testing.assert_array_equal(b_reached, reached)
+    # the pairs: each reached panel's returns within reach, in increasing order
+    assert ptr.size == np.count_nonzero(reached) + 1
+    for j, q in enumerate(panels[reached]):
+        one, _ = k.within(m, a, direction, normal, length, np.array([q]), reach)
+        np.testing.assert_array_equal(pair_point[ptr[j] : ptr[j + 1]], np.flatnonzero(one))
+    idx, dist = k.associate(m, a, direction, normal, length, panels, np.array([reach]))
+    b_idx, b_dist = k._associate_by_bearing_jit(m, angles, *args, reach)
+    np.testing.assert_array_equal(b_idx, idx)
+    np.testing.assert_array_equal(b_dist, dist)
+    # the matches over the pairs of the panels reached
+    p_idx, p_dist = np.empty(m.shape[0], dtype=np.intp), np.empty(m.shape[0])
+    k._associate_pairs_jit(
+        m, a, direction, normal, length, panels[reached], reach, ptr, pair_point, p_idx, p_dist
+    )
+    np.testing.assert_array_equal(p_idx, idx)
+    np.testing.assert_array_equal(p_dist, dist)
 
 
 def test_within_kernel_matches_the_reference() -> None:

@@ -126,8 +126,8 @@ def test_a_later_pose_the_same_as_a_set_aside_one_is_skipped_if_that_one_is_kept
     b2 = panels.number["B2"]
     real = verification.icp_point_to_line
 
-    def icp(pts, at, panel_set, gates_m, subset=None):  # type: ignore[no-untyped-def]
-        out = real(pts, at, panel_set, gates_m=gates_m, subset=subset)
+    def icp(pts, at, panel_set, gates_m, subset=None, angles=None):  # type: ignore[no-untyped-def]
+        out = real(pts, at, panel_set, gates_m=gates_m, subset=subset, angles=angles)
         if (at.easting, at.northing) == (start.easting, start.northing):
             # the first start's returns reach only B2's panels: one beacon, set aside
             mine = np.flatnonzero(panel_set.beacon == b2)

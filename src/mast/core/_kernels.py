@@ -197,21 +197,37 @@ def _associate(
     and inside its extent, and the signed distance; -1 and inf for none.
 
     ``gates`` holds one gate per point, or a single gate for all. Ties go to the
-    first panel, as ``argmin`` does in ``PanelSet._associate_reference``. One panel at
-    a time over every point (panels in order, so ties still go to the first), so that
-    the compiler runs several points at once.
+    first panel, as ``argmin`` does in ``PanelSet._associate_reference``
+    (:func:`_associate_into`).
     """
     n = points.shape[0]
-    x = np.ascontiguousarray(points[:, 0])
-    y = np.ascontiguousarray(points[:, 1])
-    g = np.empty(n)
-    if gates.shape[0] == 1:
-        g[:] = gates[0]
-    else:
-        g[:] = gates
-    idx = np.full(n, -1, dtype=np.intp)
-    dist = np.full(n, np.inf)
-    best = np.full(n, np.inf)
+    idx = np.empty(n, dtype=np.intp)
+    dist = np.empty(n)
+    _associate_into_jit(points, a, direction, normal, length, panels, gates, idx, dist, np.empty(n))
+    return idx, dist
+
+
+def _associate_into(
+    points: NDArray[np.float64],
+    a: NDArray[np.float64],
+    direction: NDArray[np.float64],
+    normal: NDArray[np.float64],
+    length: NDArray[np.float64],
+    panels: NDArray[np.intp],
+    gates: NDArray[np.float64],
+    idx: NDArray[np.intp],
+    dist: NDArray[np.float64],
+    best: NDArray[np.float64],
+) -> None:
+    """:func:`_associate` into ``idx`` and ``dist`` (``best`` is scratch, as long), for a
+    loop that associates again and again without allocating. One panel at a time over
+    every point (panels in order, so ties still go to the first), so that the compiler
+    runs several points at once."""
+    n = points.shape[0]
+    one = gates.shape[0] == 1
+    idx[:n] = -1
+    dist[:n] = np.inf
+    best[:n] = np.inf
     for k in range(panels.shape[0]):
         q = panels[k]
         ax, ay = a[q, 0], a[q, 1]
@@ -219,16 +235,16 @@ def _associate(
         nx, ny = normal[q, 0], normal[q, 1]
         ln = length[q]
         for p in range(n):
-            rx = x[p] - ax
-            ry = y[p] - ay
+            rx = points[p, 0] - ax
+            ry = points[p, 1] - ay
             t = rx * dx + ry * dy
             s = rx * nx + ry * ny
             d = abs(s)
-            if t >= 0.0 and t <= ln and d <= g[p] and d < best[p]:
+            g = gates[0] if one else gates[p]
+            if t >= 0.0 and t <= ln and d <= g and d < best[p]:
                 best[p] = d
                 idx[p] = q
                 dist[p] = s
-    return idx, dist
 
 
 def _crossing_terms(
@@ -359,6 +375,202 @@ def _within(
             near[p] |= close[p]
         reached[k] = any_close
     return near, reached
+
+
+def _reach_windows(
+    angles: NDArray[np.float64],
+    easting: float,
+    northing: float,
+    azimuth: float,
+    a: NDArray[np.float64],
+    direction: NDArray[np.float64],
+    length: NDArray[np.float64],
+    q: int,
+    reach: float,
+    lo_hi: NDArray[np.intp],
+) -> int:
+    """The runs of beams (``angles``, increasing, a turn at most) from the pose that a
+    return within ``reach`` of panel ``q`` can lie on, into ``lo_hi`` (:func:`_beam_windows`);
+    returns how many, or -1 for every beam.
+
+    A point within ``r`` of a point ``p`` of the panel lies within ``asin(r / |p|)`` of
+    ``p``'s bearing from the scanner, and ``|p|`` is at least the panel's distance ``D``
+    from it: the beams within the angle the panel subtends widened by ``asin(r / D)`` on
+    each side hold every return within ``r`` of it. ``r`` is ``reach`` widened by a
+    micrometre (a mine-frame place is rounded to about 1e-9 m at a UTM northing), the
+    angles by a nanoradian; every beam when the scanner is within ``r`` of the panel or
+    the widened angle is half a turn or more."""
+    ax, ay = a[q, 0] - easting, a[q, 1] - northing
+    dx, dy = direction[q, 0], direction[q, 1]
+    ln = length[q]
+    r = reach * (1.0 + 1e-9) + 1e-6
+    # the scanner's distance from the panel (as a segment)
+    t = min(max(-(ax * dx + ay * dy), 0.0), ln)
+    far = math.hypot(ax + t * dx, ay + t * dy)
+    if not far > r:
+        return -1
+    bx, by = ax + ln * dx, ay + ln * dy
+    # A mine-frame direction (dx, dy) is the beam at angle azimuth - atan2(dx, dy).
+    at_a = azimuth - math.atan2(ax, ay)
+    at_b = azimuth - math.atan2(bx, by)
+    turn = (at_b - at_a + math.pi) % (2.0 * math.pi) - math.pi
+    widen = math.asin(r / far) + 1e-9
+    width = abs(turn) + 2.0 * widen
+    if not width < math.pi - 1e-6:
+        return -1
+    return _beam_windows_jit(angles, min(at_a, at_a + turn) - widen, width, lo_hi)
+
+
+def _pairs_by_bearing(
+    points: NDArray[np.float64],
+    angles: NDArray[np.float64],
+    easting: float,
+    northing: float,
+    azimuth: float,
+    a: NDArray[np.float64],
+    direction: NDArray[np.float64],
+    normal: NDArray[np.float64],
+    length: NDArray[np.float64],
+    panels: NDArray[np.intp],
+    reach: float,
+) -> tuple[NDArray[np.bool_], NDArray[np.bool_], NDArray[np.intp], NDArray[np.intp]]:
+    """:func:`_within` of the mine-frame ``points`` the pose places returns at (beam
+    ``angles``, increasing, a turn at most), each panel tested only on the beams that
+    can reach it (:func:`_reach_windows`): the same ``(near, reached)``, a few dozen
+    returns a panel instead of the scan; and the pairs found, the points of each
+    reached panel in turn (``pair_point[ptr[j]:ptr[j + 1]]`` for the ``j``-th reached
+    panel, points in increasing order)."""
+    n = points.shape[0]
+    n_panels = panels.shape[0]
+    near = np.zeros(n, dtype=np.bool_)
+    reached = np.zeros(n_panels, dtype=np.bool_)
+    spans = np.empty((n_panels, 3, 2), dtype=np.intp)
+    windows = np.empty(n_panels, dtype=np.intp)
+    room = 0
+    for k in range(n_panels):
+        w = _reach_windows_jit(
+            angles, easting, northing, azimuth, a, direction, length, panels[k], reach, spans[k]
+        )
+        if w < 0:
+            spans[k, 0, 0], spans[k, 0, 1] = 0, n
+            w = 1
+        windows[k] = w
+        for j in range(w):
+            room += spans[k, j, 1] - spans[k, j, 0]
+    pair_point = np.empty(room, dtype=np.intp)
+    ptr = np.zeros(n_panels + 1, dtype=np.intp)
+    r2 = reach * reach
+    got = 0
+    n_reached = 0
+    for k in range(n_panels):
+        q = panels[k]
+        ax, ay = a[q, 0], a[q, 1]
+        dx, dy = direction[q, 0], direction[q, 1]
+        nx, ny = normal[q, 0], normal[q, 1]
+        ln = length[q]
+        first = got
+        for w in range(windows[k]):
+            for p in range(spans[k, w, 0], spans[k, w, 1]):
+                rx = points[p, 0] - ax
+                ry = points[p, 1] - ay
+                t = rx * dx + ry * dy
+                s = rx * nx + ry * ny
+                over = max(max(-t, t - ln), 0.0)
+                if over * over + s * s <= r2:
+                    near[p] = True
+                    pair_point[got] = p
+                    got += 1
+        if got > first:
+            reached[k] = True
+            n_reached += 1
+            ptr[n_reached] = got
+    return near, reached, ptr[: n_reached + 1], pair_point[:got]
+
+
+def _associate_pairs(
+    points: NDArray[np.float64],
+    a: NDArray[np.float64],
+    direction: NDArray[np.float64],
+    normal: NDArray[np.float64],
+    length: NDArray[np.float64],
+    panels: NDArray[np.intp],
+    gate: float,
+    ptr: NDArray[np.intp],
+    pair_point: NDArray[np.intp],
+    idx: NDArray[np.intp],
+    dist: NDArray[np.float64],
+) -> None:
+    """:func:`_associate_into` with one gate, testing only the pairs of each panel
+    (``pair_point[ptr[k]:ptr[k + 1]]`` for ``panels[k]``), panels in the same order:
+    the same matches when every point within the gate of a panel is among its pairs."""
+    n = points.shape[0]
+    idx[:n] = -1
+    dist[:n] = np.inf
+    for k in range(panels.shape[0]):
+        q = panels[k]
+        ax, ay = a[q, 0], a[q, 1]
+        dx, dy = direction[q, 0], direction[q, 1]
+        nx, ny = normal[q, 0], normal[q, 1]
+        ln = length[q]
+        for j in range(ptr[k], ptr[k + 1]):
+            p = pair_point[j]
+            rx = points[p, 0] - ax
+            ry = points[p, 1] - ay
+            t = rx * dx + ry * dy
+            s = rx * nx + ry * ny
+            d = abs(s)
+            if t >= 0.0 and t <= ln and d <= gate and d < abs(dist[p]):
+                idx[p] = q
+                dist[p] = s
+
+
+def _associate_by_bearing(
+    points: NDArray[np.float64],
+    angles: NDArray[np.float64],
+    easting: float,
+    northing: float,
+    azimuth: float,
+    a: NDArray[np.float64],
+    direction: NDArray[np.float64],
+    normal: NDArray[np.float64],
+    length: NDArray[np.float64],
+    panels: NDArray[np.intp],
+    gate: float,
+) -> tuple[NDArray[np.intp], NDArray[np.float64]]:
+    """:func:`_associate` with one gate, of the mine-frame ``points`` the pose places
+    returns at (beam ``angles``, increasing, a turn at most), each panel tested only on
+    the beams that can reach it within the gate (:func:`_reach_windows`: a return
+    inside a panel's extent and within the gate of its line is within the gate of the
+    panel): the same answer, panels in the same order."""
+    n = points.shape[0]
+    idx = np.full(n, -1, dtype=np.intp)
+    dist = np.full(n, np.inf)
+    best = np.full(n, np.inf)
+    lo_hi = np.empty((3, 2), dtype=np.intp)
+    for k in range(panels.shape[0]):
+        q = panels[k]
+        windows = _reach_windows_jit(
+            angles, easting, northing, azimuth, a, direction, length, q, gate, lo_hi
+        )
+        if windows < 0:
+            lo_hi[0, 0], lo_hi[0, 1] = 0, n
+            windows = 1
+        ax, ay = a[q, 0], a[q, 1]
+        dx, dy = direction[q, 0], direction[q, 1]
+        nx, ny = normal[q, 0], normal[q, 1]
+        ln = length[q]
+        for w in range(windows):
+            for p in range(lo_hi[w, 0], lo_hi[w, 1]):
+                rx = points[p, 0] - ax
+                ry = points[p, 1] - ay
+                t = rx * dx + ry * dy
+                s = rx * nx + ry * ny
+                d = abs(s)
+                if t >= 0.0 and t <= ln and d <= gate and d < best[p]:
+                    best[p] = d
+                    idx[p] = q
+                    dist[p] = s
+    return idx, dist
 
 
 def _close_to(
@@ -731,6 +943,9 @@ def _icp_stages(
     max_iterations: int,
     tolerance_m: float,
     tolerance_rad: float,
+    ptr: NDArray[np.intp],
+    pair_point: NDArray[np.intp],
+    slack_m: float,
 ) -> tuple[float, float, float, int, bool]:
     """The iterations of ``alignment._icp_reference``: ``(E, N, azimuth, iterations, converged)``.
 
@@ -740,26 +955,57 @@ def _icp_stages(
     otherwise takes the least-squares step of the linearised point-to-line
     problem (Low 2004) for a translation and a rotation about the scanner:
     the same rules and the same solver as the reference (:func:`_normal_step`, and
-    LAPACK's ``lstsq`` where it declines).
+    LAPACK's ``lstsq`` where it declines). Its arrays are made once, not per
+    iteration.
+
+    ``ptr`` and ``pair_point`` (empty when not known), the points within reach of each
+    of ``panels`` at the start (:func:`_pairs_by_bearing`); ``slack_m``, how much
+    farther that reach is than the widest gate. While no point has moved more than
+    the slack less its stage's gate from its start (a move of ``t`` and a turn of
+    ``w`` move a point at range ``r`` by at most ``t + r * w``), a point within a gate
+    of a panel is among its pairs, and only those are tested: the same matches.
     """
     n = points.shape[0]
     e, nn, az = easting, northing, azimuth
     total = 0
     converged = False
-    panel = np.full(n, -1, dtype=np.intp)
+    # The matches of the last association and of the one before, in turn; every one
+    # of a stage met so far; the step's rows.
+    matches = np.full((2, n), -1, dtype=np.intp)
+    latest = 0
+    dist = np.empty(n)
+    best = np.empty(n)
+    seen = np.empty((max_iterations, n), dtype=np.intp)
+    design = np.empty((n, 3))
+    rhs = np.empty(n)
     m = np.empty((n, 2))
+    paired = ptr.shape[0] == panels.shape[0] + 1
+    farthest = 0.0
+    for i in range(n):
+        farthest = max(farthest, math.hypot(points[i, 0], points[i, 1]))
     n_stages = gates.shape[0]
     for stage in range(n_stages):
         converged = False
         final = stage == n_stages - 1
-        previous = panel
-        seen = np.empty((max_iterations, n), dtype=np.intp)
+        before = latest
         n_seen = 0
         gate = gates[stage : stage + 1]
         for _ in range(max_iterations):
             total += 1
             _to_mine_jit(points, e, nn, az, m)
-            panel, dist = _associate_jit(m, a, direction, normal, length, panels, gate)
+            latest = 1 - before
+            panel = matches[latest]
+            previous = matches[before]
+            turned = (az - azimuth + math.pi) % (2.0 * math.pi) - math.pi
+            moved = math.hypot(e - easting, nn - northing) + farthest * abs(turned)
+            if paired and moved < slack_m - gate[0] - 1e-6:
+                _associate_pairs_jit(
+                    m, a, direction, normal, length, panels, gate[0], ptr, pair_point, panel, dist
+                )
+            else:
+                _associate_into_jit(
+                    m, a, direction, normal, length, panels, gate, panel, dist, best
+                )
             same = True
             for i in range(n):
                 if panel[i] != previous[i]:
@@ -784,29 +1030,23 @@ def _icp_stages(
             if n_seen < max_iterations:
                 seen[n_seen, :] = panel
                 n_seen += 1
-            previous = panel
+            before = latest
             k_ok = 0
-            for i in range(n):
-                if panel[i] >= 0:
-                    k_ok += 1
-            if k_ok < 3:
-                break
-            design = np.empty((k_ok, 3))
-            rhs = np.empty(k_ok)
-            r = 0
             for i in range(n):
                 q = panel[i]
                 if q < 0:
                     continue
                 rx, ry = m[i, 0] - e, m[i, 1] - nn
-                design[r, 0] = normal[q, 0]
-                design[r, 1] = normal[q, 1]
-                design[r, 2] = normal[q, 1] * rx - normal[q, 0] * ry
-                rhs[r] = -dist[i]
-                r += 1
+                design[k_ok, 0] = normal[q, 0]
+                design[k_ok, 1] = normal[q, 1]
+                design[k_ok, 2] = normal[q, 1] * rx - normal[q, 0] * ry
+                rhs[k_ok] = -dist[i]
+                k_ok += 1
+            if k_ok < 3:
+                break
             step: NDArray[np.floating[Any]] = _normal_step_jit(design, rhs, k_ok)
             if not math.isfinite(step[0]):
-                step = np.linalg.lstsq(design, rhs)[0]
+                step = np.linalg.lstsq(design[:k_ok], rhs[:k_ok])[0]
             omega = math.pi / 2 - az + step[2]
             e = e + step[0]
             nn = nn + step[1]
@@ -834,31 +1074,49 @@ def _icp_refine(
     max_iterations: int,
     tolerance_m: float,
     tolerance_rad: float,
+    angles: NDArray[np.float64],
 ) -> tuple[float, float, float, int, bool, NDArray[np.intp], NDArray[np.float64]]:
     """``alignment.icp_point_to_line`` in one call: the returns and ``panels`` within
     twice the widest gate (plus 5 cm) of each other at the start
     (:func:`_within`), :func:`_icp_stages` on them, and every return associated at the
     pose reached within the last gate (:func:`_associate`; residual NaN for none).
-    A return's mine-frame place is :func:`_icp_stages`' arithmetic.
+    A return's mine-frame place is :func:`_icp_stages`' arithmetic. With the returns'
+    beam ``angles`` (increasing, a turn at most; empty when not known) each panel is
+    tested only on the beams that can reach it (:func:`_pairs_by_bearing`,
+    :func:`_associate_by_bearing`): the same answer.
 
     Returns ``(E, N, azimuth, iterations, converged, panel, residual)``.
     """
     n = points.shape[0]
+    by_bearing = angles.shape[0] == n
     m = np.empty((n, 2))
     _to_mine_jit(points, easting, northing, azimuth, m)
     widest = gates.max()
-    near, reached = _within_jit(m, a, direction, normal, length, panels, 2.0 * widest + 0.05)
+    reach = 2.0 * widest + 0.05
+    if by_bearing:
+        near, reached, ptr, pair_point = _pairs_by_bearing_jit(
+            m, angles, easting, northing, azimuth, a, direction, normal, length, panels, reach
+        )
+    else:
+        near, reached = _within_jit(m, a, direction, normal, length, panels, reach)
+        ptr = np.zeros(0, dtype=np.intp)
+        pair_point = np.zeros(0, dtype=np.intp)
     count = 0
     for i in range(n):
         if near[i]:
             count += 1
     close = np.empty((count, 2))
+    # each point's place among the close ones, for the pairs
+    place = np.empty(n, dtype=np.intp)
     c = 0
     for i in range(n):
         if near[i]:
             close[c, 0] = points[i, 0]
             close[c, 1] = points[i, 1]
+            place[i] = c
             c += 1
+    for j in range(pair_point.shape[0]):
+        pair_point[j] = place[pair_point[j]]
     e, nn, az, total, converged = _icp_stages_jit(
         close,
         easting,
@@ -873,11 +1131,19 @@ def _icp_refine(
         max_iterations,
         tolerance_m,
         tolerance_rad,
+        ptr,
+        pair_point,
+        reach,
     )
     _to_mine_jit(points, e, nn, az, m)
-    panel, dist = _associate_jit(
-        m, a, direction, normal, length, panels, gates[gates.shape[0] - 1 :]
-    )
+    if by_bearing:
+        panel, dist = _associate_by_bearing_jit(
+            m, angles, e, nn, az, a, direction, normal, length, panels, gates[gates.shape[0] - 1]
+        )
+    else:
+        panel, dist = _associate_jit(
+            m, a, direction, normal, length, panels, gates[gates.shape[0] - 1 :]
+        )
     for i in range(n):
         if panel[i] < 0:
             dist[i] = np.nan
@@ -3004,14 +3270,19 @@ _first_crossing_jit: Callable[..., Any] = njit(cache=True, nogil=True)(_first_cr
 _beams_toward_jit: Callable[..., Any] = njit(cache=True, nogil=True)(_beams_toward)
 _beacon_gathers_jit: Callable[..., bool] = njit(cache=True, nogil=True)(_beacon_gathers)
 beam_checks: Callable[..., Any] = njit(cache=True, nogil=True)(_beam_checks)
+_associate_into_jit: Callable[..., None] = njit(cache=True, nogil=True)(_associate_into)
 associate: Callable[..., Any] = njit(cache=True, nogil=True)(_associate)
 _associate_jit = associate
 _to_mine_jit: Callable[..., None] = njit(cache=True, nogil=True)(_to_mine)
 _normal_step_jit: Callable[..., NDArray[np.float64]] = njit(cache=True, nogil=True)(_normal_step)
+_reach_windows_jit: Callable[..., int] = njit(cache=True, nogil=True)(_reach_windows)
+_associate_by_bearing_jit: Callable[..., Any] = njit(cache=True, nogil=True)(_associate_by_bearing)
 _icp_stages_jit: Callable[..., Any] = njit(cache=True, nogil=True)(_icp_stages)
 _close_to_jit: Callable[..., None] = njit(cache=True, nogil=True)(_close_to)
 within: Callable[..., Any] = njit(cache=True, nogil=True)(_within)
 _within_jit = within
+_pairs_by_bearing_jit: Callable[..., Any] = njit(cache=True, nogil=True)(_pairs_by_bearing)
+_associate_pairs_jit: Callable[..., None] = njit(cache=True, nogil=True)(_associate_pairs)
 icp_refine: Callable[..., Any] = njit(cache=True, nogil=True)(_icp_refine)
 in_place_chi: Callable[..., Any] = njit(cache=True, nogil=True)(_in_place_chi)
 tallies: Callable[..., Any] = njit(cache=True, nogil=True)(_tallies)

@@ -146,6 +146,7 @@ def icp_point_to_line(
     tolerance_m: float = 1e-7,
     tolerance_rad: float = 1e-9,
     subset: NDArray[np.intp] | None = None,
+    angles: NDArray[np.float64] | None = None,
 ) -> IcpResult:
     """Refine ``pose`` by point-to-line ICP against surveyed panels.
 
@@ -166,6 +167,13 @@ def icp_point_to_line(
     tolerance_m, tolerance_rad : float
         The last stage stops when a step moves the pose less than this; the
         pose is a start for the adjustment, which iterates to full precision.
+    subset : ndarray of int, optional
+        The panels to match (all when not given).
+    angles : ndarray, shape (n,), optional
+        The points' beam angles, strictly increasing and spanning a turn at most
+        (a :class:`~mast.core.scan.Scan`'s, as ``Scan.points`` gives the points):
+        then each panel is matched only on the beams that can reach it, for the
+        same result.
 
     Compiled end to end (:func:`mast.core._kernels.icp_refine`);
     :func:`_icp_reference` is the same in numpy (the tests compare the two).
@@ -186,6 +194,7 @@ def icp_point_to_line(
         max_iterations,
         tolerance_m,
         tolerance_rad,
+        np.zeros(0) if angles is None else np.ascontiguousarray(angles, dtype=float),
     )
     return IcpResult(
         Pose2D(float(e), float(n), float(az)), int(total), bool(converged), panel, resid

@@ -1245,7 +1245,9 @@ def verify(
             if kept is not None and kept.hypothesis is h:
                 icp = kept.icp
             else:
-                icp = icp_point_to_line(pts, start, panels, gates_m=(*wide, *gates), subset=near)
+                icp = icp_point_to_line(
+                    pts, start, panels, gates_m=(*wide, *gates), subset=near, angles=angles
+                )
                 kept = None
                 if icp_memo is not None:
                     kept = icp_memo[id(h)] = Refinement(h, icp)
