@@ -121,6 +121,26 @@ def test_pair_counts_are_the_lengths_of_pair_rows(designs: int) -> None:
     assert want.count(0) > 0
 
 
+def test_first_at_least_matches_the_numpy_reference() -> None:
+    """The compiled search of many sorted slices gives the numpy one's positions: bounds
+    below, inside, above and on values (ties either side), empty slices, NaN bounds."""
+    from mast.core.index import _first_at_least, _first_at_least_reference
+
+    rng = np.random.default_rng(4)
+    values = np.concatenate([np.sort(rng.uniform(0, 50, size=k)) for k in (0, 1, 7, 200, 33)])
+    values = np.concatenate([values, np.repeat([5.0, 6.0], 4)])
+    edges = np.concatenate([[0], np.cumsum([0, 1, 7, 200, 33, 8])])
+    for _ in range(50):
+        slab = rng.integers(0, edges.size - 1, size=300)
+        start, stop = edges[slab], edges[slab + 1]
+        bound = rng.choice([rng.uniform(-5, 55), 5.0, 6.0, math.nan, -math.inf, math.inf], size=300)
+        bound = np.where(rng.random(300) < 0.3, values[np.minimum(start, values.size - 1)], bound)
+        for strict in (False, True):
+            got = _first_at_least(values, start, stop, bound, strict=strict)
+            want = _first_at_least_reference(values, start, stop, bound, strict=strict)
+            np.testing.assert_array_equal(got, want)
+
+
 @pytest.mark.parametrize("designs", [1, 3, 40])
 def test_pairs_to_look_up_match_the_reference_and_a_walk(designs: int) -> None:
     """The compiled pair walk gives the numpy reference's pairs in its order, with and

@@ -73,3 +73,60 @@ def test_corner_covariance_equals_the_matrix_formula() -> None:
         np.testing.assert_allclose(got, ref, rtol=1e-10, atol=0)
         assert np.all(np.isfinite(got))
         assert major_sigma(got) == pytest.approx(math.sqrt(np.linalg.eigvalsh(ref)[-1]), rel=1e-10)
+
+
+@pytest.mark.parametrize("distinct", [False, True])
+def test_design_pairs_for_every_pair_of_candidates_at_once_match_one_at_a_time(
+    distinct: bool,
+) -> None:
+    """The corner-free stage's look-up of the design pairs surveyed at about each pair of
+    candidate middle panels' distance gives, for all pairs at once, the rows the look-up
+    one pair at a time gives, in its order: drive scans against their survey and against
+    a mine of 300 beacons of repeated or of distinct designs."""
+    from mast.apps.bench.minewide import minewide_survey
+    from mast.core.index import SurveyIndex
+    from mast.pipeline.hypotheses import HypothesisConfig, _design_pairs, _design_pairs_reference
+    from mast.pipeline.segmentation import segment_scan
+    from mast.sim.drive import drive_scene
+
+    scene = drive_scene(3, scans=120)
+    shots = [s.pose for s in scene.shots]
+    mine = minewide_survey(
+        scene.survey,
+        shots,
+        copies=300,
+        clearance_m=60.0,
+        rng=np.random.default_rng(5),
+        distinct=distinct,
+    )
+    config = HypothesisConfig()
+    compared = rows = 0
+    for survey in (scene.survey, mine):
+        index = SurveyIndex.from_survey(survey)
+        lengths, _ = index.middle_panels
+        for k, sim in enumerate(scene.iter_simulated()):
+            if k % 4:
+                continue
+            seg = segment_scan(sim.scan)
+            cands = []
+            for s in seg.segments:
+                fits = np.flatnonzero(
+                    (config.panel_short_fraction * lengths <= s.length)
+                    & (s.length <= lengths + config.panel_long_m)
+                )
+                if fits.size and len(s) >= config.panel_min_points:
+                    cands.append((s, fits))
+            apart = [
+                (i, j, float(np.hypot(*(cands[j][0].midpoint - cands[i][0].midpoint))))
+                for i in range(len(cands))
+                for j in range(i + 1, len(cands))
+            ]
+            noise = config.sigmas * seg.noise_m
+            got = _design_pairs(apart, cands, index, noise)
+            want = _design_pairs_reference(apart, cands, index, noise)
+            for g, w in zip(got, want, strict=True):
+                np.testing.assert_array_equal(g, w)
+            compared += 1
+            rows += got[0].size
+    assert compared >= 50
+    assert rows > 0

@@ -25,6 +25,7 @@ __all__ = [
     "beam_checks",
     "bound",
     "field_pyramid",
+    "first_at_least",
     "first_hits",
     "first_same",
     "gauss_newton",
@@ -1148,6 +1149,34 @@ def _icp_refine(
         if panel[i] < 0:
             dist[i] = np.nan
     return e, nn, az, total, converged, panel, dist
+
+
+def _first_at_least(
+    values: NDArray[np.float64],
+    start: NDArray[np.intp],
+    stop: NDArray[np.intp],
+    bound: NDArray[np.float64],
+    strict: bool,
+) -> NDArray[np.intp]:
+    """``index._first_at_least_reference`` slice by slice: in each sorted slice
+    ``values[start:stop]``, the position of the first value at least ``bound`` (above
+    it, if ``strict``), or ``stop``, by the same halvings."""
+    n = start.shape[0]
+    out = np.empty(n, dtype=np.intp)
+    last = max(values.shape[0] - 1, 0)
+    for k in range(n):
+        lo, hi = start[k], stop[k]
+        b = bound[k]
+        while lo < hi:
+            mid = (lo + hi) // 2
+            v = values[min(mid, last)]
+            below = (v <= b) if strict else (v < b)
+            if below:
+                lo = mid + 1
+            else:
+                hi = mid
+        out[k] = lo
+    return out
 
 
 def _tallies(values: NDArray[np.intp]) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
@@ -3286,6 +3315,7 @@ _associate_pairs_jit: Callable[..., None] = njit(cache=True, nogil=True)(_associ
 icp_refine: Callable[..., Any] = njit(cache=True, nogil=True)(_icp_refine)
 in_place_chi: Callable[..., Any] = njit(cache=True, nogil=True)(_in_place_chi)
 tallies: Callable[..., Any] = njit(cache=True, nogil=True)(_tallies)
+first_at_least: Callable[..., NDArray[np.intp]] = njit(cache=True, nogil=True)(_first_at_least)
 _key_pair_walk_jit: Callable[..., int] = njit(cache=True, nogil=True)(_key_pair_walk)
 key_pair_nodes: Callable[..., Any] = njit(cache=True, nogil=True)(_key_pair_nodes)
 overrun_counts: Callable[..., NDArray[np.int64]] = njit(cache=True, nogil=True)(_overrun_counts)

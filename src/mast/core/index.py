@@ -147,7 +147,28 @@ def _first_at_least(
     """In each sorted slice ``values[start:stop]``, the position of the first value at
     least ``bound`` (above it, if ``strict``), or ``stop``: ``start +
     searchsorted(values[start:stop], bound, side="right" if strict else "left")`` for
-    every slice at once."""
+    every slice (compiled: :func:`mast.core._kernels.first_at_least`;
+    :func:`_first_at_least_reference` in numpy, the tests compare the two)."""
+    from mast.core._kernels import first_at_least
+
+    return first_at_least(
+        np.ascontiguousarray(values, dtype=float),
+        np.ascontiguousarray(start, dtype=np.intp),
+        np.ascontiguousarray(stop, dtype=np.intp),
+        np.ascontiguousarray(np.broadcast_to(bound, np.shape(start)), dtype=float),
+        strict,
+    )
+
+
+def _first_at_least_reference(
+    values: NDArray[np.float64],
+    start: NDArray[np.intp],
+    stop: NDArray[np.intp],
+    bound: NDArray[np.float64],
+    *,
+    strict: bool,
+) -> NDArray[np.intp]:
+    """:func:`_first_at_least` for every slice at once in numpy."""
     lo, hi = start.astype(np.intp), stop.astype(np.intp)
     last = max(values.size - 1, 0)
     while True:

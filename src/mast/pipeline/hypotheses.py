@@ -465,72 +465,39 @@ def panel_hypotheses(
     """
     reps = index.representatives
     lengths, keys = index.middle_panels
-    order = sorted(
-        range(len(segmentation.segments)), key=lambda i: (-len(segmentation.segments[i]), i)
+    # Each segment that may be a middle panel (most returns first), and the designs
+    # whose it may be.
+    segments = segmentation.segments
+    size = np.array([len(seg) for seg in segments], dtype=np.intp)
+    order = np.argsort(-size, kind="stable")
+    order = order[size[order] >= config.panel_min_points]
+    seg_length = np.array([segments[i].length for i in order.tolist()], dtype=float)
+    fit = (config.panel_short_fraction * lengths[None, :] <= seg_length[:, None]) & (
+        seg_length[:, None] <= (lengths + config.panel_long_m)[None, :]
     )
-    # Each segment that may be a middle panel, and the designs whose it may be.
-    cands: list[tuple[Segment, NDArray[np.intp]]] = []
-    for i in order:
-        s = segmentation.segments[i]
-        if len(s) < config.panel_min_points:
-            continue
-        fits = np.flatnonzero(
-            (config.panel_short_fraction * lengths <= s.length)
-            & (s.length <= lengths + config.panel_long_m)
-        )
-        if fits.size:
-            cands.append((s, fits))
-            if len(cands) == config.max_panel_segments:
-                break
+    some_fit = np.flatnonzero(fit.any(axis=1))[: config.max_panel_segments]
+    cands: list[tuple[Segment, NDArray[np.intp]]] = [
+        (segments[int(order[r])], np.flatnonzero(fit[r])) for r in some_fit.tolist()
+    ]
     survey, ids = index.survey, index.survey.ids
     found: list[Hypothesis] = []
     # Every pair of candidates far enough apart, and each pair of their designs surveyed
     # within reach of each other (one look-up for all), in the order of the pairs.
     pairs = list(itertools.combinations(range(len(cands)), 2))
     mids = np.array([c[0].midpoint for c in cands]).reshape(-1, 2)
-    gaps = [float(np.hypot(*(mids[j] - mids[i]))) for i, j in pairs]
+    p_i = np.array([i for i, _ in pairs], dtype=np.intp)
+    p_j = np.array([j for _, j in pairs], dtype=np.intp)
+    gaps = np.hypot(mids[p_j, 0] - mids[p_i, 0], mids[p_j, 1] - mids[p_i, 1])
+    kept = np.flatnonzero(gaps >= config.min_panel_pair_m)
     apart = [
-        (i, j, ds) for (i, j), ds in zip(pairs, gaps, strict=True) if ds >= config.min_panel_pair_m
+        (i, j, ds)
+        for i, j, ds in zip(
+            p_i[kept].tolist(), p_j[kept].tolist(), gaps[kept].tolist(), strict=True
+        )
     ]
     if not apart:
         return []
-    # Each pair's designs (those of the first candidate, then of the second, in
-    # increasing order) whose middle panels' edges are surveyed within reach of each
-    # other: found from the index's pairs of keys, not from every pair of designs (a
-    # mine of many designs fits a segment to hundreds of them).
-    design_of_key = np.full(int(keys.max(initial=0)) + 1, -1, dtype=np.int64)
-    design_of_key[keys] = np.arange(keys.size)
-    low, high = index.key_pairs
-    known = (low < design_of_key.size) & (high < design_of_key.size)
-    d_low, d_high = design_of_key[low[known]], design_of_key[high[known]]
-    # Only design pairs both of whose designs some candidate may be (the others match
-    # no pair of candidates below): a mine of many designs surveys many such pairs.
-    fit_any = np.zeros(keys.size, dtype=bool)
-    for _, fits in cands:
-        fit_any[fits] = True
-    pair_ok = (d_low >= 0) & (d_high >= 0)
-    pair_ok[pair_ok] = fit_any[d_low[pair_ok]] & fit_any[d_high[pair_ok]]
-    d_low, d_high = d_low[pair_ok], d_high[pair_ok]
-    span_lo, span_hi = (span[known][pair_ok] for span in index.key_pair_spans)
-    owners, kas, kbs = [], [], []
-    for at, (i, j, ds) in enumerate(apart):
-        in_i = np.zeros(keys.size, dtype=bool)
-        in_j = np.zeros(keys.size, dtype=bool)
-        in_i[cands[i][1]] = True
-        in_j[cands[j][1]] = True
-        # Only design pairs with a surveyed pair at about the candidates' distance: at
-        # least as far from it as the widest reach below lets any of them be.
-        far = _widest_reach(cands[i], cands[j], lengths, config.sigmas * segmentation.noise_m)
-        spanned = (span_lo <= ds + far) & (span_hi >= ds - far)
-        forward = in_i[d_low] & in_j[d_high] & spanned
-        backward = in_i[d_high] & in_j[d_low] & (d_low != d_high) & spanned
-        k_a = np.concatenate([d_low[forward], d_high[backward]])
-        k_b = np.concatenate([d_high[forward], d_low[backward]])
-        by = np.lexsort((k_b, k_a))
-        owners.append(np.full(by.size, at, dtype=np.int64))
-        kas.append(k_a[by])
-        kbs.append(k_b[by])
-    owner, ka_all, kb_all = np.concatenate(owners), np.concatenate(kas), np.concatenate(kbs)
+    owner, ka_all, kb_all = _design_pairs(apart, cands, index, config.sigmas * segmentation.noise_m)
     # Each candidate pair's tolerance, and how many surveyed pairs lie within it (one
     # search for all): only those with any are looked up one by one.
     seg_len = np.array([c[0].length for c in cands])
@@ -569,6 +536,111 @@ def panel_hypotheses(
                 found.append(h)
     found.sort(key=lambda h: h.misfit)
     return found[: config.max_panel_hypotheses]
+
+
+def _design_pairs(
+    apart: list[tuple[int, int, float]],
+    cands: list[tuple[Segment, NDArray[np.intp]]],
+    index: SurveyIndex,
+    noise_m: float,
+) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.int64]]:
+    """For each pair of candidate middle panels (``apart``: candidates ``i``, ``j`` and
+    their midpoints' distance), the pairs of designs (``k_a`` of candidate ``i``, ``k_b``
+    of ``j``) whose middle panels' edges are surveyed within reach of each other at
+    about that distance: ``(owner, k_a, k_b)``, one row per such design pair, by pair
+    of candidates (``owner``, its place in ``apart``), then ``k_a``, then ``k_b``.
+
+    Found from the index's pairs of keys, not from every pair of designs (a mine of
+    many designs fits a segment to hundreds of them), for every pair of candidates at
+    once (:func:`_design_pairs_reference` takes them one at a time: the tests compare
+    the two). A design pair counts when the surveyed pairs of its keys span the
+    candidates' distance widened by at least the widest reach any of their designs
+    gets (:func:`_widest_reach`)."""
+    lengths, keys = index.middle_panels
+    d_low, d_high, span_lo, span_hi = _surveyed_design_pairs(cands, index)
+    if not apart or d_low.size == 0:
+        empty = np.zeros(0, dtype=np.int64)
+        return empty, empty, empty
+    # Which designs each candidate may be, and each candidate's share of the reach (the
+    # sum _widest_reach makes, in its order: the same roundings).
+    fits_design = np.zeros((len(cands), keys.size), dtype=bool)
+    share = np.empty(len(cands))
+    for c, (seg, fits) in enumerate(cands):
+        fits_design[c, fits] = True
+        la = lengths[fits]
+        off = max(abs(seg.length - float(la.min())), abs(seg.length - float(la.max())))
+        share[c] = 0.5 * float(la.max()) + 0.5 * off + seg.spacing_start + seg.spacing_end
+    first = np.array([i for i, _, _ in apart], dtype=np.intp)
+    second = np.array([j for _, j, _ in apart], dtype=np.intp)
+    ds = np.array([d for _, _, d in apart])
+    far = ((noise_m + share[first]) + share[second]) * (1.0 + 1e-9) + 1e-9
+    spanned = (span_lo[None, :] <= (ds + far)[:, None]) & (span_hi[None, :] >= (ds - far)[:, None])
+    forward = fits_design[first][:, d_low] & fits_design[second][:, d_high] & spanned
+    backward = (
+        fits_design[first][:, d_high]
+        & fits_design[second][:, d_low]
+        & (d_low != d_high)[None, :]
+        & spanned
+    )
+    p_fwd, q_fwd = np.nonzero(forward)
+    p_bwd, q_bwd = np.nonzero(backward)
+    owner = np.concatenate([p_fwd, p_bwd]).astype(np.int64)
+    k_a = np.concatenate([d_low[q_fwd], d_high[q_bwd]])
+    k_b = np.concatenate([d_high[q_fwd], d_low[q_bwd]])
+    # by pair, then k_a, then k_b; a tie keeps the forward row first (a stable sort)
+    by = np.lexsort((k_b, k_a, owner))
+    return owner[by], k_a[by], k_b[by]
+
+
+def _surveyed_design_pairs(
+    cands: list[tuple[Segment, NDArray[np.intp]]], index: SurveyIndex
+) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.float64], NDArray[np.float64]]:
+    """The pairs of designs (positions in ``index.middle_panels``) whose middle panels'
+    edges are surveyed within reach of each other, both of which some candidate may be,
+    and the span of distances their surveyed pairs lie at: ``(low, high, lo, hi)``."""
+    _, keys = index.middle_panels
+    design_of_key = np.full(int(keys.max(initial=0)) + 1, -1, dtype=np.int64)
+    design_of_key[keys] = np.arange(keys.size)
+    low, high = index.key_pairs
+    known = (low < design_of_key.size) & (high < design_of_key.size)
+    d_low, d_high = design_of_key[low[known]], design_of_key[high[known]]
+    # Only design pairs both of whose designs some candidate may be (the others match
+    # no pair of candidates): a mine of many designs surveys many such pairs.
+    fit_any = np.zeros(keys.size, dtype=bool)
+    for _, fits in cands:
+        fit_any[fits] = True
+    pair_ok = (d_low >= 0) & (d_high >= 0)
+    pair_ok[pair_ok] = fit_any[d_low[pair_ok]] & fit_any[d_high[pair_ok]]
+    span_lo, span_hi = (span[known][pair_ok] for span in index.key_pair_spans)
+    return d_low[pair_ok], d_high[pair_ok], span_lo, span_hi
+
+
+def _design_pairs_reference(
+    apart: list[tuple[int, int, float]],
+    cands: list[tuple[Segment, NDArray[np.intp]]],
+    index: SurveyIndex,
+    noise_m: float,
+) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.int64]]:
+    """:func:`_design_pairs` one pair of candidates at a time (the tests compare the two)."""
+    lengths, keys = index.middle_panels
+    d_low, d_high, span_lo, span_hi = _surveyed_design_pairs(cands, index)
+    owners, kas, kbs = [np.zeros(0, dtype=np.int64)], [d_low[:0]], [d_low[:0]]
+    for at, (i, j, ds) in enumerate(apart):
+        in_i = np.zeros(keys.size, dtype=bool)
+        in_j = np.zeros(keys.size, dtype=bool)
+        in_i[cands[i][1]] = True
+        in_j[cands[j][1]] = True
+        far = _widest_reach(cands[i], cands[j], lengths, noise_m)
+        spanned = (span_lo <= ds + far) & (span_hi >= ds - far)
+        forward = in_i[d_low] & in_j[d_high] & spanned
+        backward = in_i[d_high] & in_j[d_low] & (d_low != d_high) & spanned
+        k_a = np.concatenate([d_low[forward], d_high[backward]])
+        k_b = np.concatenate([d_high[forward], d_low[backward]])
+        by = np.lexsort((k_b, k_a))
+        owners.append(np.full(by.size, at, dtype=np.int64))
+        kas.append(k_a[by])
+        kbs.append(k_b[by])
+    return np.concatenate(owners), np.concatenate(kas), np.concatenate(kbs)
 
 
 def _widest_reach(
