@@ -23,6 +23,7 @@ __all__ = [
     "beacon_statistics",
     "beacons_in_reach",
     "beam_checks",
+    "beam_checks_of",
     "bound",
     "field_pyramid",
     "first_at_least",
@@ -2327,6 +2328,73 @@ def _beam_checks(
     return counts, ll
 
 
+def _beam_checks_of(
+    origin: NDArray[np.float64],
+    azimuth: float,
+    angles: NDArray[np.float64],
+    ranges: NDArray[np.float64],
+    valid: NDArray[np.bool_],
+    range_min: float,
+    range_max: float,
+    a: NDArray[np.float64],
+    b: NDArray[np.float64],
+    direction: NDArray[np.float64],
+    normal: NDArray[np.float64],
+    beacon: NDArray[np.intp],
+    subset: NDArray[np.intp],
+    margin: float,
+    min_sin: float,
+    gate: float,
+    sigma: float,
+    hit_ll0: float,
+    through_ll: float,
+    near: float,
+    near_ll: float,
+) -> tuple[NDArray[np.intp], NDArray[np.intp], NDArray[np.float64]]:
+    """:func:`_beam_checks` of the panels ``subset`` (of a panel set's ends ``a``, ``b``,
+    ``direction``, ``normal`` and ``beacon``), each shrunk by ``margin`` at both ends, the
+    verdicts counted per beacon of the subset: ``(beacons, counts, ll)``, the beacons in
+    increasing order (``numpy.unique``'s), a row of counts and a log-likelihood each."""
+    m = subset.shape[0]
+    seg_a = np.empty((m, 2))
+    seg_b = np.empty((m, 2))
+    normals = np.empty((m, 2))
+    mine = np.empty(m, dtype=np.intp)
+    for k in range(m):
+        q = subset[k]
+        seg_a[k, 0] = a[q, 0] + margin * direction[q, 0]
+        seg_a[k, 1] = a[q, 1] + margin * direction[q, 1]
+        seg_b[k, 0] = b[q, 0] - margin * direction[q, 0]
+        seg_b[k, 1] = b[q, 1] - margin * direction[q, 1]
+        normals[k, 0] = normal[q, 0]
+        normals[k, 1] = normal[q, 1]
+        mine[k] = beacon[q]
+    beacons = np.unique(mine)
+    owner = np.searchsorted(beacons, mine).astype(np.intp)
+    counts, ll = _beam_checks_jit(
+        origin,
+        azimuth,
+        angles,
+        ranges,
+        valid,
+        range_min,
+        range_max,
+        seg_a,
+        seg_b,
+        normals,
+        owner,
+        beacons.shape[0],
+        min_sin,
+        gate,
+        sigma,
+        hit_ll0,
+        through_ll,
+        near,
+        near_ll,
+    )
+    return beacons, counts, ll
+
+
 def _range_rows(
     easting: float,
     northing: float,
@@ -3299,6 +3367,8 @@ _first_crossing_jit: Callable[..., Any] = njit(cache=True, nogil=True)(_first_cr
 _beams_toward_jit: Callable[..., Any] = njit(cache=True, nogil=True)(_beams_toward)
 _beacon_gathers_jit: Callable[..., bool] = njit(cache=True, nogil=True)(_beacon_gathers)
 beam_checks: Callable[..., Any] = njit(cache=True, nogil=True)(_beam_checks)
+_beam_checks_jit = beam_checks
+beam_checks_of: Callable[..., Any] = njit(cache=True, nogil=True)(_beam_checks_of)
 _associate_into_jit: Callable[..., None] = njit(cache=True, nogil=True)(_associate_into)
 associate: Callable[..., Any] = njit(cache=True, nogil=True)(_associate)
 _associate_jit = associate

@@ -240,29 +240,28 @@ def check_beams(
     Compiled (:func:`mast.core._kernels.beam_checks`); :func:`_check_beams_reference`
     is the same in numpy (the tests compare the two).
     """
-    from mast.core._kernels import beam_checks
+    from mast.core._kernels import beam_checks_of
 
     sel = np.arange(len(panels)) if subset is None else subset
-    a = panels.a[sel] + cfg.edge_margin_m * panels.direction[sel]
-    b = panels.b[sel] - cfg.edge_margin_m * panels.direction[sel]
     sigma = noise.gate_sigma_m
     span = _span(scan)
     # The subset's beacons numbered from 0: the tallies cost the panels checked, not the
     # survey's size.
-    beacons, owner = np.unique(panels.beacon[sel], return_inverse=True)
-    counts, ll = beam_checks(
-        np.asarray(pose.position, dtype=float),
+    beacons, counts, ll = beam_checks_of(
+        np.array([pose.easting, pose.northing]),
         pose.azimuth,
         np.ascontiguousarray(scan.angles_rad, dtype=float),
         np.ascontiguousarray(scan.ranges_m, dtype=float),
         np.ascontiguousarray(scan.valid),
         float(scan.range_min_m),
         float(scan.range_max_m),
-        np.ascontiguousarray(a),
-        np.ascontiguousarray(b),
-        np.ascontiguousarray(panels.normal[sel]),
-        owner.astype(np.intp),
-        beacons.size,
+        panels.a,
+        panels.b,
+        panels.direction,
+        panels.normal,
+        panels.beacon,
+        np.ascontiguousarray(sel, dtype=np.intp),
+        cfg.edge_margin_m,
         math.sin(math.radians(cfg.min_check_incidence_deg)),
         cfg.gate_sigmas * sigma,
         sigma,
