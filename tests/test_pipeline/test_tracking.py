@@ -225,3 +225,39 @@ def test_a_narrow_window_is_first_searched_from_its_centre_alone() -> None:
     assert centre_hypotheses(Prior(pose, cfg.direct_radius_m + 0.01, 0.01), cfg) == []
     assert centre_hypotheses(Prior(pose, 0.05, cfg.direct_tolerance_rad + 0.01), cfg) == []
     assert centre_hypotheses(Prior(pose, 0.05, None), cfg) == []
+
+
+def test_sliding_maxima_bound_each_square_as_the_pyramid_does() -> None:
+    """Each cell of a tile's sliding maxima (padded before the tile) is what the window's
+    pyramid bound reads for a point whose translations span that many cells from it: at
+    least the largest field value over the square within the tile, and no value from
+    beyond the square's side either way."""
+    from mast.core._kernels import _cells_bound_jit, field_sliding
+
+    panels = PanelSet.from_survey(paper_scene().survey)
+    field = _TiledField.build(panels, np.arange(len(panels)), RES, SIGMA)
+    widths = np.array([1, 3, 7, 15, 31], dtype=np.intp)
+    sliding, starts = field_sliding(field.shape, field.offset, field.pyramid, widths)
+    rng = np.random.default_rng(5)
+    checked = 0
+    for lw, width in enumerate(widths.tolist()):
+        pad = width - 1
+        for t in range(field.shape.shape[0]):
+            w, h = (int(x) for x in field.shape[t])
+            tile = field.values[field.offset[t] : field.offset[t] + w * h].reshape(w, h)
+            for u, v in zip(
+                rng.integers(0, w + pad, 60), rng.integers(0, h + pad, 60), strict=True
+            ):
+                got = sliding[starts[lw, t] + u * (h + pad) + v]
+                cells = np.array([[[u - pad, v - pad]]], dtype=np.int64)
+                one = np.array([[t]], dtype=np.intp)
+                bound = _cells_bound_jit(
+                    cells, one, field.shape, field.offset, field.pyramid, 0, pad, 0, pad
+                )
+                assert got == bound
+                i0, j0 = max(u - pad, 0), max(v - pad, 0)
+                i1, j1 = min(u - pad + width, w), min(v - pad + width, h)
+                span = max(i1 - i0, j1 - j0)
+                assert tile[i0:i1, j0:j1].max() <= got <= tile[i0 : i0 + span, j0 : j0 + span].max()
+                checked += 1
+    assert checked == 60 * widths.size * field.shape.shape[0]

@@ -26,6 +26,7 @@ __all__ = [
     "beam_checks_of",
     "bound",
     "field_pyramid",
+    "field_sliding",
     "first_at_least",
     "first_hits",
     "first_same",
@@ -1659,6 +1660,95 @@ def _cells_bound(
     return total
 
 
+def _field_sliding(
+    tile_shape: NDArray[np.intp],
+    tile_offset: NDArray[np.intp],
+    pyramid: NDArray[np.float64],
+    widths: NDArray[np.intp],
+) -> tuple[NDArray[np.float64], NDArray[np.intp]]:
+    """For each width ``W`` of ``widths`` and each tile, every cell's largest value over
+    the ``W x W`` cells from it (those inside its tile), from the pyramid
+    (:func:`_field_pyramid`) as :func:`_cells_bound` takes it: a block of the window's
+    grid whose translations span ``W`` cells is bounded by one read a point
+    (:func:`_sliding_bound`) instead of four and a level.
+
+    Each tile's map is padded by ``W - 1`` cells before it along both axes (a point
+    whose square starts up to that far before the tile still reaches into it): map
+    ``l`` of tile ``t`` starts at ``starts[l, t]`` in the returned values, rows of
+    ``h + W - 1`` cells, ``w + W - 1`` rows."""
+    levels = pyramid.shape[0] - 1
+    n_tiles = tile_shape.shape[0]
+    starts = np.zeros((widths.shape[0], n_tiles), dtype=np.intp)
+    total = 0
+    for lw in range(widths.shape[0]):
+        pad = widths[lw] - 1
+        for t in range(n_tiles):
+            starts[lw, t] = total
+            total += (tile_shape[t, 0] + pad) * (tile_shape[t, 1] + pad)
+    out = np.zeros(total)
+    for lw in range(widths.shape[0]):
+        width = widths[lw]
+        pad = width - 1
+        for t in range(n_tiles):
+            w, h = tile_shape[t, 0], tile_shape[t, 1]
+            off = tile_offset[t]
+            rows = h + pad
+            base = starts[lw, t]
+            for u in range(w + pad):
+                i0 = max(u - pad, 0)
+                i1 = min(u - pad + width - 1, w - 1)
+                for v in range(h + pad):
+                    j0 = max(v - pad, 0)
+                    j1 = min(v - pad + width - 1, h - 1)
+                    span = max(i1 - i0, j1 - j0) + 1
+                    lv = 0
+                    while (2 << lv) <= span and lv < levels:
+                        lv += 1
+                    side = 1 << lv
+                    ia = max(i1 - side + 1, i0)
+                    ja = max(j1 - side + 1, j0)
+                    row = pyramid[lv]
+                    out[base + u * rows + v] = max(
+                        max(row[off + i0 * h + j0], row[off + i0 * h + ja]),
+                        max(row[off + ia * h + j0], row[off + ia * h + ja]),
+                    )
+    return out, starts
+
+
+def _sliding_bound(
+    cells: NDArray[np.int64],
+    tiles: NDArray[np.intp],
+    tile_shape: NDArray[np.intp],
+    sliding: NDArray[np.float64],
+    starts: NDArray[np.intp],
+    width: int,
+    x0: int,
+    y0: int,
+) -> float:
+    """:func:`_cells_bound` of the translations ``[x0, x0 + width) x [y0, y0 + width)``
+    (whole cells) from the sliding maxima of that width (``sliding`` and this width's
+    row of ``starts``, :func:`_field_sliding`): the same bound, one read a point. A
+    block cut short by the grid's edge is bounded over the whole width: a bound still,
+    if a looser one."""
+    pad = width - 1
+    total = 0.0
+    for i in range(cells.shape[0]):
+        best = 0.0
+        for k in range(tiles.shape[1]):
+            t = tiles[i, k]
+            if t < 0:
+                continue
+            u = cells[i, k, 0] + x0 + pad
+            v = cells[i, k, 1] + y0 + pad
+            rows = tile_shape[t, 1] + pad
+            if u >= 0 and u < tile_shape[t, 0] + pad and v >= 0 and v < rows:
+                val = sliding[starts[t] + u * rows + v]
+                if val > best:
+                    best = val
+        total += best
+    return total
+
+
 def _near_pose(
     rot: float, x: float, y: float, other: NDArray[np.float64], apart: float, reach: float
 ) -> bool:
@@ -1739,6 +1829,8 @@ def _window_picks(
     candidates: int,
     distinct_m: float,
     other_m: float,
+    sliding: NDArray[np.float64],
+    sliding_starts: NDArray[np.intp],
 ) -> tuple[NDArray[np.float64], int, int]:
     """The window's hypotheses by branch and bound (Olson 2009; Hess et al. 2016): the
     poses of the grid in order of score (then rotation, then translation, each from the
@@ -1762,10 +1854,17 @@ def _window_picks(
     pass needs no pose the first passed over: every pose within ``distinct_m`` of one
     taken is within ``other_m`` of it.
 
+    ``sliding`` and ``sliding_starts`` (:func:`_field_sliding`), the field's sliding
+    maxima over the cells a block of 2, 4, 8, ... translations a side spans (as many
+    sizes as ``sliding_starts`` has rows, none when it has none): such a block is bounded
+    by :func:`_sliding_bound`, a wider one by :func:`_cells_bound`. Either is at least
+    every score in the block, so the poses come out in the same order.
+
     Returns the poses taken as rows (rotation index, a, b, score), and how many of them
     the first pass took and the second.
     """
     rotations, n = rots.shape[0], points.shape[0]
+    step_cells = offs_cells[1] - offs_cells[0] if offs_cells.shape[0] > 1 else 1
     slots = tiles.shape[1]
     side = offs_cells.shape[0]
     size = 1
@@ -1858,17 +1957,33 @@ def _window_picks(
                     v = _cells_score_jit(cells[r], tiles, tile_shape, tile_offset, values, sx, sy)
                     heapq.heappush(heap, (-v, 1, neg_r, -a, -b, 1))
                 else:
-                    v = _cells_bound_jit(
-                        cells[r],
-                        tiles,
-                        tile_shape,
-                        tile_offset,
-                        pyramid,
-                        offs_cells[a],
-                        offs_cells[a1 - 1],
-                        offs_cells[b],
-                        offs_cells[b1 - 1],
-                    )
+                    # the sliding maxima of the cells 2^lw translations span (half = 2^lw)
+                    lw = 0
+                    while (2 << lw) <= half:
+                        lw += 1
+                    if lw <= sliding_starts.shape[0]:
+                        v = _sliding_bound_jit(
+                            cells[r],
+                            tiles,
+                            tile_shape,
+                            sliding,
+                            sliding_starts[lw - 1],
+                            (half - 1) * step_cells + 1,
+                            offs_cells[a],
+                            offs_cells[b],
+                        )
+                    else:
+                        v = _cells_bound_jit(
+                            cells[r],
+                            tiles,
+                            tile_shape,
+                            tile_offset,
+                            pyramid,
+                            offs_cells[a],
+                            offs_cells[a1 - 1],
+                            offs_cells[b],
+                            offs_cells[b1 - 1],
+                        )
                     heapq.heappush(heap, (-v, 0, neg_r, -a, -b, half))
     if first < 0:
         first = got
@@ -3399,6 +3514,8 @@ field_pyramid: Callable[..., NDArray[np.float64]] = njit(cache=True, nogil=True)
 _pose_score_jit: Callable[..., float] = njit(cache=True, nogil=True)(_pose_score)
 _cells_score_jit: Callable[..., float] = njit(cache=True, nogil=True)(_cells_score)
 _cells_bound_jit: Callable[..., float] = njit(cache=True, nogil=True)(_cells_bound)
+_sliding_bound_jit: Callable[..., float] = njit(cache=True, nogil=True)(_sliding_bound)
+field_sliding: Callable[..., Any] = njit(cache=True, nogil=True)(_field_sliding)
 near_pose: Callable[..., bool] = njit(cache=True, nogil=True)(_near_pose)
 _near_pose_jit = near_pose
 _recount_jit: Callable[..., None] = njit(cache=True, nogil=True)(_recount)

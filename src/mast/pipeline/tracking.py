@@ -23,13 +23,13 @@ from __future__ import annotations
 
 import math
 from collections import OrderedDict
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
 from scipy import ndimage
 
-from mast.core._kernels import field_pyramid, window_picks
+from mast.core._kernels import field_pyramid, field_sliding, window_picks
 from mast.core.geometry import PanelSet
 from mast.core.pose import Pose2D
 from mast.pipeline.alignment import Similarity
@@ -189,6 +189,11 @@ def _likelihood_field(
 # Beyond this many sigmas from every panel the field is taken as zero (e^-18).
 _FIELD_CUTOFF_SIGMAS = 6.0
 
+#: Blocks of the window's grid up to 2^SLIDING_LEVELS translations a side are bounded from
+#: the field's sliding maxima (one read a return), wider ones from its pyramid: nearly
+#: all of a wide search's blocks are the small ones.
+SLIDING_LEVELS = 4
+
 
 @dataclass(frozen=True, slots=True)
 class _TiledField:
@@ -223,6 +228,21 @@ class _TiledField:
     pyramid: NDArray[np.float64]
     """Row ``h``: each cell's largest value over the ``2^h`` cells from it along both
     axes, within its tile (row 0 is ``values``): the window search's bounds."""
+    _sliding: dict[int, tuple[NDArray[np.float64], NDArray[np.intp]]] = field(default_factory=dict)
+
+    def sliding(self, step_cells: int) -> tuple[NDArray[np.float64], NDArray[np.intp]]:
+        """The sliding maxima (:func:`mast.core._kernels.field_sliding`) over the cells
+        that blocks of 2, 4, ... ``2^SLIDING_LEVELS`` translations ``step_cells`` apart
+        span: made once per field and step, on the first window searched with them."""
+        made = self._sliding.get(step_cells)
+        if made is None:
+            widths = np.array(
+                [(2**lw - 1) * step_cells + 1 for lw in range(1, SLIDING_LEVELS + 1)],
+                dtype=np.intp,
+            )
+            made = field_sliding(self.shape, self.offset, self.pyramid, widths)
+            self._sliding[step_cells] = made
+        return made
 
     @classmethod
     def build(
@@ -522,6 +542,7 @@ def prior_hypotheses(
     step = config.step_m
     res = config.field_resolution_m
     field = _tiled_field(panels, near, res, step)
+    sliding, sliding_starts = field.sliding(round(step / res))
     d_rot, n_r = _rotation_steps(tol, step, r)
     offs, inside = _window_places(prior.radius_m, step)
     rot0 = math.pi / 2 - prior.pose.azimuth
@@ -546,6 +567,8 @@ def prior_hypotheses(
         config.candidates,
         config.distinct_m,
         config.other_basins_m,
+        sliding,
+        sliding_starts,
     )
     out: list[Hypothesis] = []
     for k, a, b, score in taken.tolist():
