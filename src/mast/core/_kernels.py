@@ -424,6 +424,38 @@ def _reach_windows(
     return _beam_windows_jit(angles, min(at_a, at_a + turn) - widen, width, lo_hi)
 
 
+def _bearing_spans(
+    n: int,
+    angles: NDArray[np.float64],
+    easting: float,
+    northing: float,
+    azimuth: float,
+    a: NDArray[np.float64],
+    direction: NDArray[np.float64],
+    length: NDArray[np.float64],
+    panels: NDArray[np.intp],
+    reach: float,
+) -> tuple[NDArray[np.intp], NDArray[np.intp], int]:
+    """Each of ``panels``' runs of beams (:func:`_reach_windows`; every one of the ``n``
+    beams where it says so): ``spans[k, w]`` the ``w``-th (start, stop) of ``panels[k]``,
+    ``windows[k]`` how many, and how many beams in all."""
+    n_panels = panels.shape[0]
+    spans = np.empty((n_panels, 3, 2), dtype=np.intp)
+    windows = np.empty(n_panels, dtype=np.intp)
+    room = 0
+    for k in range(n_panels):
+        w = _reach_windows_jit(
+            angles, easting, northing, azimuth, a, direction, length, panels[k], reach, spans[k]
+        )
+        if w < 0:
+            spans[k, 0, 0], spans[k, 0, 1] = 0, n
+            w = 1
+        windows[k] = w
+        for j in range(w):
+            room += spans[k, j, 1] - spans[k, j, 0]
+    return spans, windows, room
+
+
 def _pairs_by_bearing(
     points: NDArray[np.float64],
     angles: NDArray[np.float64],
@@ -447,19 +479,9 @@ def _pairs_by_bearing(
     n_panels = panels.shape[0]
     near = np.zeros(n, dtype=np.bool_)
     reached = np.zeros(n_panels, dtype=np.bool_)
-    spans = np.empty((n_panels, 3, 2), dtype=np.intp)
-    windows = np.empty(n_panels, dtype=np.intp)
-    room = 0
-    for k in range(n_panels):
-        w = _reach_windows_jit(
-            angles, easting, northing, azimuth, a, direction, length, panels[k], reach, spans[k]
-        )
-        if w < 0:
-            spans[k, 0, 0], spans[k, 0, 1] = 0, n
-            w = 1
-        windows[k] = w
-        for j in range(w):
-            room += spans[k, j, 1] - spans[k, j, 0]
+    spans, windows, room = _bearing_spans_jit(
+        n, angles, easting, northing, azimuth, a, direction, length, panels, reach
+    )
     pair_point = np.empty(room, dtype=np.intp)
     ptr = np.zeros(n_panels + 1, dtype=np.intp)
     r2 = reach * reach
@@ -546,33 +568,24 @@ def _associate_by_bearing(
     inside a panel's extent and within the gate of its line is within the gate of the
     panel): the same answer, panels in the same order."""
     n = points.shape[0]
-    idx = np.full(n, -1, dtype=np.intp)
-    dist = np.full(n, np.inf)
-    best = np.full(n, np.inf)
-    lo_hi = np.empty((3, 2), dtype=np.intp)
-    for k in range(panels.shape[0]):
-        q = panels[k]
-        windows = _reach_windows_jit(
-            angles, easting, northing, azimuth, a, direction, length, q, gate, lo_hi
-        )
-        if windows < 0:
-            lo_hi[0, 0], lo_hi[0, 1] = 0, n
-            windows = 1
-        ax, ay = a[q, 0], a[q, 1]
-        dx, dy = direction[q, 0], direction[q, 1]
-        nx, ny = normal[q, 0], normal[q, 1]
-        ln = length[q]
-        for w in range(windows):
-            for p in range(lo_hi[w, 0], lo_hi[w, 1]):
-                rx = points[p, 0] - ax
-                ry = points[p, 1] - ay
-                t = rx * dx + ry * dy
-                s = rx * nx + ry * ny
-                d = abs(s)
-                if t >= 0.0 and t <= ln and d <= gate and d < best[p]:
-                    best[p] = d
-                    idx[p] = q
-                    dist[p] = s
+    n_panels = panels.shape[0]
+    spans, windows, room = _bearing_spans_jit(
+        n, angles, easting, northing, azimuth, a, direction, length, panels, gate
+    )
+    ptr = np.zeros(n_panels + 1, dtype=np.intp)
+    pair_point = np.empty(room, dtype=np.intp)
+    got = 0
+    for k in range(n_panels):
+        for w in range(windows[k]):
+            for p in range(spans[k, w, 0], spans[k, w, 1]):
+                pair_point[got] = p
+                got += 1
+        ptr[k + 1] = got
+    idx = np.empty(n, dtype=np.intp)
+    dist = np.empty(n)
+    _associate_pairs_jit(
+        points, a, direction, normal, length, panels, gate, ptr, pair_point, idx, dist
+    )
     return idx, dist
 
 
@@ -3490,6 +3503,7 @@ _associate_jit = associate
 _to_mine_jit: Callable[..., None] = njit(cache=True, nogil=True)(_to_mine)
 _normal_step_jit: Callable[..., NDArray[np.float64]] = njit(cache=True, nogil=True)(_normal_step)
 _reach_windows_jit: Callable[..., int] = njit(cache=True, nogil=True)(_reach_windows)
+_bearing_spans_jit: Callable[..., Any] = njit(cache=True, nogil=True)(_bearing_spans)
 _associate_by_bearing_jit: Callable[..., Any] = njit(cache=True, nogil=True)(_associate_by_bearing)
 _icp_stages_jit: Callable[..., Any] = njit(cache=True, nogil=True)(_icp_stages)
 _close_to_jit: Callable[..., None] = njit(cache=True, nogil=True)(_close_to)
