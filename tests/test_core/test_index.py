@@ -139,6 +139,14 @@ def test_first_at_least_matches_the_numpy_reference() -> None:
             got = _first_at_least(values, start, stop, bound, strict=strict)
             want = _first_at_least_reference(values, start, stop, bound, strict=strict)
             np.testing.assert_array_equal(got, want)
+            # any shape of slices, and one bound for all
+            got = _first_at_least(
+                values, start.reshape(20, 15), stop.reshape(20, 15), bound[0], strict=strict
+            )
+            want = _first_at_least_reference(
+                values, start.reshape(20, 15), stop.reshape(20, 15), bound[0], strict=strict
+            )
+            np.testing.assert_array_equal(got, want)
 
 
 @pytest.mark.parametrize("designs", [1, 3, 40])

@@ -209,6 +209,14 @@ def test_icp_kernel_matches_the_reference() -> None:
         np.testing.assert_array_equal(got.panel, ref.panel)
         np.testing.assert_allclose(got.residual_m, ref.residual_m, rtol=0.0, atol=1e-9)
     assert converged >= len(cases) // 2
+    # no return at all, with or without their (no) angles: no match, the start kept
+    pts, start, panels, gates, near, _ = cases[0]
+    for angles in (None, np.zeros(0)):
+        empty = icp_point_to_line(
+            np.zeros((0, 2)), start, panels, gates_m=gates, subset=near, angles=angles
+        )
+        assert empty.pose == start
+        assert empty.panel.size == 0
 
 
 @settings(max_examples=60, deadline=None)

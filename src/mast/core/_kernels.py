@@ -228,6 +228,8 @@ def _associate_into(
     runs several points at once."""
     n = points.shape[0]
     one = gates.shape[0] == 1
+    if not one and gates.shape[0] != n:
+        raise ValueError("associate: one gate, or one per point")
     idx[:n] = -1
     dist[:n] = np.inf
     best[:n] = np.inf
@@ -975,11 +977,11 @@ def _icp_stages(
     iteration.
 
     ``ptr`` and ``pair_point`` (empty when not known), the points within reach of each
-    of ``panels`` at the start (:func:`_pairs_by_bearing`); ``slack_m``, how much
-    farther that reach is than the widest gate. While no point has moved more than
-    the slack less its stage's gate from its start (a move of ``t`` and a turn of
-    ``w`` move a point at range ``r`` by at most ``t + r * w``), a point within a gate
-    of a panel is among its pairs, and only those are tested: the same matches.
+    of ``panels`` at the start (:func:`_pairs_by_bearing`); ``slack_m``, that reach.
+    While no point has moved more than the reach less its stage's gate from its start
+    (a move of ``t`` and a turn of ``w`` move a point at range ``r`` by at most ``t + r
+    * w``), a point within a gate of a panel is among its pairs, and only those are
+    tested: the same matches.
     """
     n = points.shape[0]
     e, nn, az = easting, northing, azimuth
@@ -1104,7 +1106,7 @@ def _icp_refine(
     Returns ``(E, N, azimuth, iterations, converged, panel, residual)``.
     """
     n = points.shape[0]
-    by_bearing = angles.shape[0] == n
+    by_bearing = n > 0 and angles.shape[0] == n
     m = np.empty((n, 2))
     _to_mine_jit(points, easting, northing, azimuth, m)
     widest = gates.max()
@@ -1844,6 +1846,7 @@ def _window_picks(
     other_m: float,
     sliding: NDArray[np.float64],
     sliding_starts: NDArray[np.intp],
+    sliding_widths: NDArray[np.intp],
 ) -> tuple[NDArray[np.float64], int, int]:
     """The window's hypotheses by branch and bound (Olson 2009; Hess et al. 2016): the
     poses of the grid in order of score (then rotation, then translation, each from the
@@ -1868,10 +1871,12 @@ def _window_picks(
     taken is within ``other_m`` of it.
 
     ``sliding`` and ``sliding_starts`` (:func:`_field_sliding`), the field's sliding
-    maxima over the cells a block of 2, 4, 8, ... translations a side spans (as many
-    sizes as ``sliding_starts`` has rows, none when it has none): such a block is bounded
-    by :func:`_sliding_bound`, a wider one by :func:`_cells_bound`. Either is at least
-    every score in the block, so the poses come out in the same order.
+    maxima over ``sliding_widths[l]`` cells, for blocks of ``2^(l + 1)`` translations a
+    side (as many sizes as there are widths, none when there are none): such a block is
+    bounded by :func:`_sliding_bound` when the width covers what its translations span
+    (``(2^(l + 1) - 1)`` grid steps and a cell), by :func:`_cells_bound` otherwise, and
+    every block too wide for them likewise. Either is at least every score in the
+    block, so the poses come out in the same order.
 
     Returns the poses taken as rows (rotation index, a, b, score), and how many of them
     the first pass took and the second.
@@ -1974,14 +1979,17 @@ def _window_picks(
                     lw = 0
                     while (2 << lw) <= half:
                         lw += 1
-                    if lw <= sliding_starts.shape[0]:
+                    if (
+                        lw <= sliding_widths.shape[0]
+                        and sliding_widths[lw - 1] >= (half - 1) * step_cells + 1
+                    ):
                         v = _sliding_bound_jit(
                             cells[r],
                             tiles,
                             tile_shape,
                             sliding,
                             sliding_starts[lw - 1],
-                            (half - 1) * step_cells + 1,
+                            sliding_widths[lw - 1],
                             offs_cells[a],
                             offs_cells[b],
                         )

@@ -151,13 +151,15 @@ def _first_at_least(
     :func:`_first_at_least_reference` in numpy, the tests compare the two)."""
     from mast.core._kernels import first_at_least
 
-    return first_at_least(
+    shape = np.shape(start)
+    found: NDArray[np.intp] = first_at_least(
         np.ascontiguousarray(values, dtype=float),
-        np.ascontiguousarray(start, dtype=np.intp),
-        np.ascontiguousarray(stop, dtype=np.intp),
-        np.ascontiguousarray(np.broadcast_to(bound, np.shape(start)), dtype=float),
+        np.ascontiguousarray(start, dtype=np.intp).ravel(),
+        np.ascontiguousarray(stop, dtype=np.intp).ravel(),
+        np.ascontiguousarray(np.broadcast_to(bound, shape), dtype=float).ravel(),
         strict,
     )
+    return found.reshape(shape)
 
 
 def _first_at_least_reference(

@@ -475,7 +475,9 @@ def panel_hypotheses(
     fit = (config.panel_short_fraction * lengths[None, :] <= seg_length[:, None]) & (
         seg_length[:, None] <= (lengths + config.panel_long_m)[None, :]
     )
-    some_fit = np.flatnonzero(fit.any(axis=1))[: config.max_panel_segments]
+    some_fit = np.flatnonzero(fit.any(axis=1))
+    if config.max_panel_segments > 0:  # (none or fewer: no cap)
+        some_fit = some_fit[: config.max_panel_segments]
     cands: list[tuple[Segment, NDArray[np.intp]]] = [
         (segments[int(order[r])], np.flatnonzero(fit[r])) for r in some_fit.tolist()
     ]

@@ -193,6 +193,9 @@ _FIELD_CUTOFF_SIGMAS = 6.0
 #: the field's sliding maxima (one read a return), wider ones from its pyramid: nearly
 #: all of a wide search's blocks are the small ones.
 SLIDING_LEVELS = 4
+#: ... and no wider than this many cells: each map holds its tiles widened by its width
+#: (about 1 MB a field at the default 2 cells a step).
+SLIDING_MAX_CELLS = 64
 
 
 @dataclass(frozen=True, slots=True)
@@ -228,19 +231,22 @@ class _TiledField:
     pyramid: NDArray[np.float64]
     """Row ``h``: each cell's largest value over the ``2^h`` cells from it along both
     axes, within its tile (row 0 is ``values``): the window search's bounds."""
-    _sliding: dict[int, tuple[NDArray[np.float64], NDArray[np.intp]]] = field(default_factory=dict)
+    _sliding: dict[int, tuple[NDArray[np.float64], NDArray[np.intp], NDArray[np.intp]]] = field(
+        default_factory=dict
+    )
 
-    def sliding(self, step_cells: int) -> tuple[NDArray[np.float64], NDArray[np.intp]]:
+    def sliding(
+        self, step_cells: int
+    ) -> tuple[NDArray[np.float64], NDArray[np.intp], NDArray[np.intp]]:
         """The sliding maxima (:func:`mast.core._kernels.field_sliding`) over the cells
         that blocks of 2, 4, ... ``2^SLIDING_LEVELS`` translations ``step_cells`` apart
-        span: made once per field and step, on the first window searched with them."""
+        span, those no wider than ``SLIDING_MAX_CELLS``: ``(values, starts, widths)``,
+        made once per field and step, on the first window searched with them."""
         made = self._sliding.get(step_cells)
         if made is None:
-            widths = np.array(
-                [(2**lw - 1) * step_cells + 1 for lw in range(1, SLIDING_LEVELS + 1)],
-                dtype=np.intp,
-            )
-            made = field_sliding(self.shape, self.offset, self.pyramid, widths)
+            spans = [(2**lw - 1) * step_cells + 1 for lw in range(1, SLIDING_LEVELS + 1)]
+            widths = np.array([w for w in spans if w <= SLIDING_MAX_CELLS], dtype=np.intp)
+            made = (*field_sliding(self.shape, self.offset, self.pyramid, widths), widths)
             self._sliding[step_cells] = made
         return made
 
@@ -542,7 +548,7 @@ def prior_hypotheses(
     step = config.step_m
     res = config.field_resolution_m
     field = _tiled_field(panels, near, res, step)
-    sliding, sliding_starts = field.sliding(round(step / res))
+    sliding, sliding_starts, sliding_widths = field.sliding(round(step / res))
     d_rot, n_r = _rotation_steps(tol, step, r)
     offs, inside = _window_places(prior.radius_m, step)
     rot0 = math.pi / 2 - prior.pose.azimuth
@@ -569,6 +575,7 @@ def prior_hypotheses(
         config.other_basins_m,
         sliding,
         sliding_starts,
+        sliding_widths,
     )
     out: list[Hypothesis] = []
     for k, a, b, score in taken.tolist():
