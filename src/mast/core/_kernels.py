@@ -22,7 +22,6 @@ __all__ = [
     "associate",
     "beacon_statistics",
     "beacons_in_reach",
-    "beam_checks",
     "beam_checks_of",
     "bound",
     "field_pyramid",
@@ -3502,8 +3501,7 @@ _beam_windows_jit: Callable[..., int] = njit(cache=True, nogil=True)(_beam_windo
 _first_crossing_jit: Callable[..., Any] = njit(cache=True, nogil=True)(_first_crossing)
 _beams_toward_jit: Callable[..., Any] = njit(cache=True, nogil=True)(_beams_toward)
 _beacon_gathers_jit: Callable[..., bool] = njit(cache=True, nogil=True)(_beacon_gathers)
-beam_checks: Callable[..., Any] = njit(cache=True, nogil=True)(_beam_checks)
-_beam_checks_jit = beam_checks
+_beam_checks_jit: Callable[..., Any] = njit(cache=True, nogil=True)(_beam_checks)
 beam_checks_of: Callable[..., Any] = njit(cache=True, nogil=True)(_beam_checks_of)
 _associate_into_jit: Callable[..., None] = njit(cache=True, nogil=True)(_associate_into)
 associate: Callable[..., Any] = njit(cache=True, nogil=True)(_associate)

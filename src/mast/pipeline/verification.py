@@ -237,7 +237,7 @@ def check_beams(
     Gaussian about the predicted range against a return anywhere in the
     scanner's range; a through-beam costs ``log(through_probability)``.
 
-    Compiled (:func:`mast.core._kernels.beam_checks`); :func:`_check_beams_reference`
+    Compiled (:func:`mast.core._kernels.beam_checks_of`); :func:`_check_beams_reference`
     is the same in numpy (the tests compare the two).
     """
     from mast.core._kernels import beam_checks_of
