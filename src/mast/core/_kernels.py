@@ -205,7 +205,7 @@ def _associate(
     n = points.shape[0]
     idx = np.empty(n, dtype=np.intp)
     dist = np.empty(n)
-    _associate_into_jit(points, a, direction, normal, length, panels, gates, idx, dist, np.empty(n))
+    _associate_into_jit(points, a, direction, normal, length, panels, gates, idx, dist)
     return idx, dist
 
 
@@ -219,19 +219,16 @@ def _associate_into(
     gates: NDArray[np.float64],
     idx: NDArray[np.intp],
     dist: NDArray[np.float64],
-    best: NDArray[np.float64],
 ) -> None:
-    """:func:`_associate` into ``idx`` and ``dist`` (``best`` is scratch, as long), for a
-    loop that associates again and again without allocating. One panel at a time over
-    every point (panels in order, so ties still go to the first), so that the compiler
-    runs several points at once."""
+    """:func:`_associate` into ``idx`` and ``dist``, for a loop that associates again and
+    again without allocating. One panel at a time over every point (panels in order, so
+    ties still go to the first), so that the compiler runs several points at once."""
     n = points.shape[0]
     one = gates.shape[0] == 1
     if not one and gates.shape[0] != n:
         raise ValueError("associate: one gate, or one per point")
     idx[:n] = -1
     dist[:n] = np.inf
-    best[:n] = np.inf
     for k in range(panels.shape[0]):
         q = panels[k]
         ax, ay = a[q, 0], a[q, 1]
@@ -245,8 +242,7 @@ def _associate_into(
             s = rx * nx + ry * ny
             d = abs(s)
             g = gates[0] if one else gates[p]
-            if t >= 0.0 and t <= ln and d <= g and d < best[p]:
-                best[p] = d
+            if t >= 0.0 and t <= ln and d <= g and d < abs(dist[p]):
                 idx[p] = q
                 dist[p] = s
 
@@ -991,7 +987,6 @@ def _icp_stages(
     matches = np.full((2, n), -1, dtype=np.intp)
     latest = 0
     dist = np.empty(n)
-    best = np.empty(n)
     seen = np.empty((max_iterations, n), dtype=np.intp)
     design = np.empty((n, 3))
     rhs = np.empty(n)
@@ -1020,9 +1015,7 @@ def _icp_stages(
                     m, a, direction, normal, length, panels, gate[0], ptr, pair_point, panel, dist
                 )
             else:
-                _associate_into_jit(
-                    m, a, direction, normal, length, panels, gate, panel, dist, best
-                )
+                _associate_into_jit(m, a, direction, normal, length, panels, gate, panel, dist)
             same = True
             for i in range(n):
                 if panel[i] != previous[i]:
@@ -1622,6 +1615,30 @@ def _cells_score(
     return total
 
 
+def _rectangle_max(
+    pyramid: NDArray[np.float64], off: int, h: int, i0: int, i1: int, j0: int, j1: int
+) -> float:
+    """At least the largest value of the cells ``[i0, i1] x [j0, j1]`` (inside it) of the
+    tile at ``off`` (rows of ``h`` cells), from the pyramid (:func:`_field_pyramid`):
+    squares of ``2^lv`` cells, ``2^lv <= width < 2^(lv + 1)``, from the rectangle's two
+    ends along each axis, together covering it and no cell beyond its span."""
+    levels = pyramid.shape[0] - 1
+    width = max(i1 - i0, j1 - j0) + 1
+    lv = 0
+    while (2 << lv) <= width and lv < levels:
+        lv += 1
+    side = 1 << lv
+    ia = max(i1 - side + 1, i0)
+    ja = max(j1 - side + 1, j0)
+    row = pyramid[lv]
+    return float(
+        max(
+            max(row[off + i0 * h + j0], row[off + i0 * h + ja]),
+            max(row[off + ia * h + j0], row[off + ia * h + ja]),
+        )
+    )
+
+
 def _cells_bound(
     cells: NDArray[np.int64],
     tiles: NDArray[np.intp],
@@ -1637,7 +1654,6 @@ def _cells_bound(
     [y0, y1]`` (whole cells): each point's largest value over the cells it can fall in,
     from the pyramid. The sum of these bounds in the same order is at least every
     score."""
-    levels = pyramid.shape[0] - 1
     total = 0.0
     for i in range(cells.shape[0]):
         best = 0.0
@@ -1651,22 +1667,14 @@ def _cells_bound(
             j0, j1 = cj + y0, cj + y1
             if i1 < 0 or i0 >= w or j1 < 0 or j0 >= h:
                 continue
-            i0, i1 = max(i0, 0), min(i1, w - 1)
-            j0, j1 = max(j0, 0), min(j1, h - 1)
-            width = max(i1 - i0, j1 - j0) + 1
-            # Squares of 2^lv cells, 2^lv <= width < 2^(lv + 1), from the rectangle's two
-            # ends along each axis: together they cover it, and no cell beyond its span.
-            lv = 0
-            while (2 << lv) <= width and lv < levels:
-                lv += 1
-            side = 1 << lv
-            ia = max(i1 - side + 1, i0)
-            ja = max(j1 - side + 1, j0)
-            row = pyramid[lv]
-            off = tile_offset[t]
-            v = max(
-                max(row[off + i0 * h + j0], row[off + i0 * h + ja]),
-                max(row[off + ia * h + j0], row[off + ia * h + ja]),
+            v = _rectangle_max_jit(
+                pyramid,
+                tile_offset[t],
+                h,
+                max(i0, 0),
+                min(i1, w - 1),
+                max(j0, 0),
+                min(j1, h - 1),
             )
             if v > best:
                 best = v
@@ -1690,7 +1698,6 @@ def _field_sliding(
     whose square starts up to that far before the tile still reaches into it): map
     ``l`` of tile ``t`` starts at ``starts[l, t]`` in the returned values, rows of
     ``h + W - 1`` cells, ``w + W - 1`` rows."""
-    levels = pyramid.shape[0] - 1
     n_tiles = tile_shape.shape[0]
     starts = np.zeros((widths.shape[0], n_tiles), dtype=np.intp)
     total = 0
@@ -1714,18 +1721,7 @@ def _field_sliding(
                 for v in range(h + pad):
                     j0 = max(v - pad, 0)
                     j1 = min(v - pad + width - 1, h - 1)
-                    span = max(i1 - i0, j1 - j0) + 1
-                    lv = 0
-                    while (2 << lv) <= span and lv < levels:
-                        lv += 1
-                    side = 1 << lv
-                    ia = max(i1 - side + 1, i0)
-                    ja = max(j1 - side + 1, j0)
-                    row = pyramid[lv]
-                    out[base + u * rows + v] = max(
-                        max(row[off + i0 * h + j0], row[off + i0 * h + ja]),
-                        max(row[off + ia * h + j0], row[off + ia * h + ja]),
-                    )
+                    out[base + u * rows + v] = _rectangle_max_jit(pyramid, off, h, i0, i1, j0, j1)
     return out, starts
 
 
@@ -3533,6 +3529,7 @@ first_hits: Callable[..., Any] = njit(cache=True, nogil=True)(_first_hits)
 field_pyramid: Callable[..., NDArray[np.float64]] = njit(cache=True, nogil=True)(_field_pyramid)
 _pose_score_jit: Callable[..., float] = njit(cache=True, nogil=True)(_pose_score)
 _cells_score_jit: Callable[..., float] = njit(cache=True, nogil=True)(_cells_score)
+_rectangle_max_jit: Callable[..., float] = njit(cache=True, nogil=True)(_rectangle_max)
 _cells_bound_jit: Callable[..., float] = njit(cache=True, nogil=True)(_cells_bound)
 _sliding_bound_jit: Callable[..., float] = njit(cache=True, nogil=True)(_sliding_bound)
 field_sliding: Callable[..., Any] = njit(cache=True, nogil=True)(_field_sliding)

@@ -569,9 +569,7 @@ def _design_pairs(
     share = np.empty(len(cands))
     for c, (seg, fits) in enumerate(cands):
         fits_design[c, fits] = True
-        la = lengths[fits]
-        off = max(abs(seg.length - float(la.min())), abs(seg.length - float(la.max())))
-        share[c] = 0.5 * float(la.max()) + 0.5 * off + seg.spacing_start + seg.spacing_end
+        share[c] = _reach_share(seg, lengths[fits])
     first = np.array([i for i, _, _ in apart], dtype=np.intp)
     second = np.array([j for _, j, _ in apart], dtype=np.intp)
     ds = np.array([d for _, _, d in apart])
@@ -656,10 +654,16 @@ def _widest_reach(
     middle panels' lengths), a hair more against rounding."""
     total = noise_m
     for seg, fits in (a, b):
-        la = lengths[fits]
-        off = max(abs(seg.length - float(la.min())), abs(seg.length - float(la.max())))
-        total += 0.5 * float(la.max()) + 0.5 * off + seg.spacing_start + seg.spacing_end
+        total += _reach_share(seg, lengths[fits])
     return total * (1.0 + 1e-9) + 1e-9
+
+
+def _reach_share(seg: Segment, lengths: NDArray[np.float64]) -> float:
+    """One candidate middle panel's share of :func:`_widest_reach`: half the longest of
+    its designs' middle panels (``lengths``), half its length's largest difference from
+    theirs, and its spacings at both ends."""
+    off = max(abs(seg.length - float(lengths.min())), abs(seg.length - float(lengths.max())))
+    return 0.5 * float(lengths.max()) + 0.5 * off + seg.spacing_start + seg.spacing_end
 
 
 def _panel_pair(
