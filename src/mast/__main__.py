@@ -1,5 +1,5 @@
 """``python -m mast`` runs the command line."""
 
-from mast.apps.cli import main
+from mast.program import main
 
 main()

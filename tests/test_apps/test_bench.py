@@ -9,9 +9,9 @@ from pathlib import Path
 import numpy as np
 from numpy.testing import assert_allclose
 
-from mast.apps.bench.accuracy import ACCURACY_CONFIGS, OWED_MIN_POINTS, owed_poses, run_accuracy
-from mast.apps.bench.detection import detection_bins, detection_evidence, detection_table
-from mast.apps.bench.minewide import MinewideSummary, minewide_survey, run_minewide
+from mast.bench.accuracy import ACCURACY_CONFIGS, OWED_MIN_POINTS, owed_poses, run_accuracy
+from mast.bench.detection import detection_bins, detection_evidence, detection_table
+from mast.bench.minewide import MinewideSummary, minewide_survey, run_minewide
 from mast.pipeline.locator import LocatorConfig, locate
 from mast.sim import random_scene, simulate_scan
 
@@ -156,7 +156,7 @@ def test_minewide_run_does_not_depend_on_survey_order() -> None:
 
 
 def test_tracking_bench_good_prior_fixes_wrong_prior_refuses() -> None:
-    from mast.apps.bench.tracking import run_tracking
+    from mast.bench.tracking import run_tracking
 
     lines: list[str] = []
     (s,) = run_tracking(configs=(MODEL,), poses=4, draws=1, echo=lines.append)
@@ -168,7 +168,7 @@ def test_tracking_bench_good_prior_fixes_wrong_prior_refuses() -> None:
 
 
 def test_longdrive_sends_each_scan_through_its_protocol() -> None:
-    from mast.apps.bench.longdrive import as_sent
+    from mast.bench.longdrive import as_sent
     from mast.sim.drive import drive_scene
 
     sim = next(drive_scene(3, scans=2, rate_hz=40.0).iter_simulated())
@@ -189,7 +189,7 @@ def test_longdrive_counts_owed_fixes_and_flags_none_wrong_on_a_short_drive(
 ) -> None:
     import csv
 
-    from mast.apps.bench.longdrive import run_longdrive
+    from mast.bench.longdrive import run_longdrive
 
     lines: list[str] = []
     figures = run_longdrive(

@@ -9,8 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from mast.apps.bench import speed
-from mast.apps.bench.speed import (
+from mast.bench import speed
+from mast.bench.speed import (
     OTHER_STAGE,
     PEER_MISSING,
     STAGES,

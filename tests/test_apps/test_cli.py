@@ -7,7 +7,7 @@ import pytest
 from typer.testing import CliRunner
 
 from mast import __version__
-from mast.apps.cli import app
+from mast.program import app
 from tests._cli import run_mast_text
 
 runner = CliRunner()
@@ -319,7 +319,7 @@ def test_the_command_starts_without_the_heavy_libraries() -> None:
     # `mast --help` must start fast: matplotlib, scipy, GTSAM and the pipeline are
     # imported inside the commands that need them.
     code = (
-        "import sys, mast.apps.cli; "
+        "import sys, mast.program; "
         "print(sorted(m for m in ('matplotlib', 'scipy', 'gtsam', 'mast.pipeline.locator', "
         "'dask', 'laspy', 'ezdxf', 'rosbags') if m in sys.modules))"
     )

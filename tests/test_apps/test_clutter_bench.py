@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from scipy.spatial import cKDTree
 
-from mast.apps.bench.clutter import (
+from mast.bench.clutter import (
     CARMEN_LOGS,
     ClutterSummary,
     WallSite,

@@ -7,8 +7,8 @@ import math
 
 import pytest
 
-from mast.apps.bench.clutter import CARMEN_LOGS
-from mast.apps.bench.reallog import run_real_log
+from mast.bench.clutter import CARMEN_LOGS
+from mast.bench.reallog import run_real_log
 from mast.io.carmen_log import read_carmen_log
 from tests._paths import SHARED_DATA
 

@@ -15,10 +15,10 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-from mast.apps.cli import app
-from mast.apps.report import fix_record, fix_text
 from mast.core.beacon import Beacon, Survey
 from mast.pipeline import LocatorConfig, locate
+from mast.program import app
+from mast.report.record import fix_record, fix_text
 from mast.sim import paper_scene, random_scene, write_scenario
 from tests._cli import run_mast
 
@@ -323,7 +323,7 @@ def test_a_full_standard_output_is_exit_4_with_one_line(files: Path) -> None:
 def test_an_internal_error_is_one_line_with_status_70(
     monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    import mast.apps.cli as cli
+    import mast.cli.root as cli
 
     def broken(**_: object) -> None:
         raise ZeroDivisionError("a bug")

@@ -127,7 +127,7 @@ def test_segmentation_memory_is_linear_in_the_beams() -> None:
 
 
 def test_a_bz2_chunk_inflating_past_its_declared_size_is_refused(tmp_path: Path) -> None:
-    from mast.apps.bench.fuzz import _bz2_bomb_bag
+    from mast.bench.fuzz import _bz2_bomb_bag
 
     bomb = tmp_path / "bomb.bag"
     _bz2_bomb_bag(bomb, 64 << 20)  # declares 1 KiB
@@ -341,7 +341,7 @@ def test_the_fuzzing_campaign_finds_nothing(tmp_path: Path) -> None:
     """A short run of ``mast bench fuzz``: every case in a child under memory, file-size
     and time limits; no traceback, no undocumented status, no bound exceeded, no fix that
     differs from the undamaged file's, no half-written output."""
-    from mast.apps.bench.fuzz import run_fuzz
+    from mast.bench.fuzz import run_fuzz
 
     lines: list[str] = []
     summary = run_fuzz(inputs=120, seed=11, echo=lines.append, keep_failures=tmp_path / "kept")
@@ -356,7 +356,7 @@ def test_a_fuzz_case_is_charged_only_its_own_memory(tmp_path: Path) -> None:
     """A case runs in a child forked from a warmed-up process (late in the test suite, a
     large one): its peak is what it took itself, not the parent's pages it was forked
     with, and a case that does take memory is charged it."""
-    from mast.apps.bench.fuzz import FuzzCase, _run, _vm
+    from mast.bench.fuzz import FuzzCase, _run, _vm
 
     ballast = np.ones(400 * 2**20 // 8)  # a parent holding 400 MiB, touched
     limit = _vm("VmSize") + (2 << 30)
@@ -395,7 +395,7 @@ def test_the_parent_gives_its_free_heap_back_before_a_fork() -> None:
     until malloc_trim gives them back: then the resident size drops."""
     import ctypes
 
-    from mast.apps.bench.fuzz import _trim_heap, _vm
+    from mast.bench.fuzz import _trim_heap, _vm
 
     libc = ctypes.CDLL(None)
     libc.malloc.restype = ctypes.c_void_p

@@ -16,7 +16,7 @@ from typing import TypeVar
 import numpy as np
 import pytest
 
-from mast.apps.bench.dense import measure, write_dense_scan
+from mast.bench.dense import measure, write_dense_scan
 from mast.io import read_scan_csv
 from mast.io.scan_csv import _read_whole
 from mast.pipeline.segmentation import segment_scan

@@ -83,7 +83,7 @@ def test_design_pairs_for_every_pair_of_candidates_at_once_match_one_at_a_time(
     candidate middle panels' distance gives, for all pairs at once, the rows the look-up
     one pair at a time gives, in its order: drive scans against their survey and against
     a mine of 300 beacons of repeated or of distinct designs."""
-    from mast.apps.bench.minewide import minewide_survey
+    from mast.bench.minewide import minewide_survey
     from mast.core.index import SurveyIndex
     from mast.pipeline.hypotheses import HypothesisConfig, _design_pairs, _design_pairs_reference
     from mast.pipeline.segmentation import segment_scan

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from mast import Beacon, Pose2D, Scan, Survey
-from mast.apps.report import fix_record, fix_text
 from mast.pipeline.locator import NO_FIX_REASONS, LocatorConfig, locate
+from mast.report.record import fix_record, fix_text
 from mast.sim import (
     ScannerModel,
     WorldBuilder,
@@ -291,7 +291,7 @@ def test_survey_sigma_is_in_every_record() -> None:
 
 def _accuracy_draw(config: int, pose: int, draw: int = 0):  # type: ignore[no-untyped-def]
     """The accuracy benchmark's scene, shot, noisy scan and located fix for one draw."""
-    from mast.apps.bench.accuracy import ACCURACY_CONFIGS, owed_poses
+    from mast.bench.accuracy import ACCURACY_CONFIGS, owed_poses
 
     model = ACCURACY_CONFIGS[config]
     scene, shot = owed_poses(model, pose + 1, 0)[pose]

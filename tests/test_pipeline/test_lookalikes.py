@@ -8,15 +8,15 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from mast.apps.bench.accuracy import ACCURACY_CONFIGS, owed_poses
-from mast.apps.bench.minewide import minewide_survey
+from mast.bench.accuracy import ACCURACY_CONFIGS, owed_poses
+from mast.bench.minewide import minewide_survey
 from mast.core.geometry import PanelSet
 from mast.core.index import SurveyIndex
 from mast.core.pose import Pose2D
 from mast.pipeline import locator
 from mast.pipeline.hypotheses import Hypothesis, pose_hypotheses
 from mast.pipeline.identification import PanelIdentification, identify_panels
-from mast.pipeline.locator import LocatorConfig, _choose, _settled, _survey_index
+from mast.pipeline.locator import LocatorConfig, _choose, _settled, survey_index
 from mast.pipeline.segmentation import Segmentation, segment_scan
 from mast.pipeline.verification import Refinement, verify
 from mast.sim import SimulatedScan, simulate_scan
@@ -38,7 +38,7 @@ def _first_owed_scan() -> tuple[
     cfg = LocatorConfig(range_sigma_m=MODEL.range_sigma_m, survey_sigma_m=0.0)
     scene, shot = next(iter(owed_poses(MODEL, 1, 0)))
     sim = simulate_scan(scene.world, shot.pose, MODEL, rng=np.random.default_rng([0, 7]))
-    index, panels = _survey_index(scene.survey, sim.scan.range_max_m)
+    index, panels = survey_index(scene.survey, sim.scan.range_max_m)
     seg = segment_scan(sim.scan, cfg.segmentation)
     ident = identify_panels(seg, index.representatives, cfg.identification)
     hyps = pose_hypotheses(ident, seg, index, cfg.hypotheses)
@@ -61,7 +61,7 @@ def test_leaving_one_beacon_poses_unjudged_never_changes_the_choice() -> None:
             )
         survey = wide[scene.name]
         sim = simulate_scan(scene.world, shot.pose, MODEL, rng=np.random.default_rng([k, 7]))
-        index, panels = _survey_index(survey, sim.scan.range_max_m)
+        index, panels = survey_index(survey, sim.scan.range_max_m)
         seg = segment_scan(sim.scan, cfg.segmentation)
         ident = identify_panels(seg, index.representatives, cfg.identification)
         hyps = pose_hypotheses(ident, seg, index, cfg.hypotheses)
@@ -89,14 +89,14 @@ def test_leaving_one_beacon_poses_unjudged_never_changes_the_choice() -> None:
 def test_locate_keeps_a_mine_wide_index_per_scanner_range() -> None:
     scene, shot = next(iter(owed_poses(MODEL, 1, 0)))
     sim = simulate_scan(scene.world, shot.pose, MODEL, rng=np.random.default_rng(0))
-    a, _ = _survey_index(scene.survey, 30.0)
-    b, _ = _survey_index(scene.survey, 80.0)
+    a, _ = survey_index(scene.survey, 30.0)
+    b, _ = survey_index(scene.survey, 80.0)
     assert a is not b
-    assert _survey_index(scene.survey, 30.0)[0] is a  # kept, not rebuilt
+    assert survey_index(scene.survey, 30.0)[0] is a  # kept, not rebuilt
     for k in range(locator._INDEX_CACHE_SIZE + 2):  # least recently used dropped first
-        _survey_index(scene.survey, 100.0 + k)
-        _survey_index(scene.survey, 30.0)
-    assert _survey_index(scene.survey, 30.0)[0] is a
+        survey_index(scene.survey, 100.0 + k)
+        survey_index(scene.survey, 30.0)
+    assert survey_index(scene.survey, 30.0)[0] is a
     assert len(locator._INDEX_CACHE) <= locator._INDEX_CACHE_SIZE
     assert locate_ok(sim.scan, scene.survey, cfg=LocatorConfig(range_sigma_m=0.012))
 
@@ -178,7 +178,7 @@ def test_look_alikes_out_of_reach_of_a_second_beacon_are_not_refined(
             rng=np.random.default_rng(k),
         )
         sim = simulate_scan(scene.world, shot.pose, MODEL, rng=np.random.default_rng([k, 3]))
-        index, panels = _survey_index(survey, sim.scan.range_max_m)
+        index, panels = survey_index(survey, sim.scan.range_max_m)
         seg = segment_scan(sim.scan, cfg.segmentation)
         ident = identify_panels(seg, index.representatives, cfg.identification)
         hyps = pose_hypotheses(ident, seg, index, cfg.hypotheses)

@@ -10,7 +10,7 @@ from dataclasses import replace
 import numpy as np
 
 from mast.core.pose import Pose2D
-from mast.pipeline.locator import LocatorConfig, _survey_index, locate
+from mast.pipeline.locator import LocatorConfig, locate, survey_index
 from mast.pipeline.tracking import Prior, window_may_fix
 from mast.sim import DriveScene, drive_scene
 
@@ -24,7 +24,7 @@ def test_a_window_no_pose_of_which_sees_two_beacons_is_not_searched() -> None:
     prior (its own search, and the global one kept inside it) gives no fix."""
     scene = drive_scene(0, scans=400, rate_hz=25.0)
     cfg = _config(scene)
-    _, panels = _survey_index(scene.survey, scene.shots[0].scanner.range_max_m)
+    _, panels = survey_index(scene.survey, scene.shots[0].scanner.range_max_m)
     rng = np.random.default_rng(7)
     told = {True: 0, False: 0}
     for k, sim in enumerate(scene.iter_simulated()):

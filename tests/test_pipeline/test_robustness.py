@@ -9,8 +9,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from mast import Beacon, Scan, Survey
-from mast.apps.bench.realscans import run_real_scans
-from mast.apps.bench.robustness import is_wrong
+from mast.bench.realscans import run_real_scans
+from mast.bench.robustness import is_wrong
 from mast.errors import InputError
 from mast.pipeline.locator import NO_FIX_REASONS, LocatorConfig, locate
 from mast.sim import drift_scene, hard_scene, paper_scene, random_scene

@@ -200,7 +200,7 @@ def test_a_second_judgement_with_corners_equals_a_fresh_one() -> None:
     and beacon tests (``verify(icp_memo=...)``): it must judge as a fresh search with
     the corners does."""
     from mast.pipeline.identification import identify_panels
-    from mast.pipeline.locator import _survey_index
+    from mast.pipeline.locator import survey_index
     from mast.pipeline.segmentation import segment_scan
     from mast.pipeline.tracking import Prior, prior_hypotheses
     from mast.pipeline.verification import verify
@@ -210,7 +210,7 @@ def test_a_second_judgement_with_corners_equals_a_fresh_one() -> None:
     compared = 0
     for sim in tuple(scene.iter_simulated())[40:48]:  # 44-47 need their corners
         scan = sim.scan
-        index, panels = _survey_index(scene.survey, scan.range_max_m)
+        index, panels = survey_index(scene.survey, scan.range_max_m)
         prior = Prior(sim.pose, 0.3, math.radians(4.0))
         batches = prior_hypotheses(scan.points()[1], panels, prior, scan.range_max_m)
         seg = segment_scan(scan, cfg.segmentation)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from mast.core.beacon import Beacon, Survey
-from mast.plan.drift import Drift, Wall
+from mast.core.walls import Drift, Wall
 from mast.sim.design import paper_design, polyline_design
 from mast.sim.tunnel import Tunnel
 

@@ -7,9 +7,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from mast.core.walls import Drift, Wall
 from mast.errors import InputError
 from mast.io.drift import read_drift
-from mast.plan.drift import Drift, Wall, build_grid, centreline, wall_distance
+from mast.plan.drift import build_grid, centreline, wall_distance
 from mast.sim.tunnel import Tunnel
 from tests.test_plan._scenes import ORIGIN, straight_drift
 

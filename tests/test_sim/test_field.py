@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from mast.apps.bench.field import PRIOR_OFF_DEG, PRIOR_OFF_M, good_prior
+from mast.bench.field import PRIOR_OFF_DEG, PRIOR_OFF_M, good_prior
 from mast.core.pose import Pose2D
 from mast.sim import simulate_scan
 from mast.sim.design import BeaconDesign

@@ -30,12 +30,12 @@ from matplotlib.patches import Circle, Ellipse
 from matplotlib.ticker import MaxNLocator, ScalarFormatter
 from numpy.typing import NDArray
 
-from mast.apps.outputs import PLOT_SUFFIXES, save_figure
 from mast.core.beacon import Survey
 from mast.core.geometry import PanelSet
 from mast.core.pose import Pose2D, format_dms
 from mast.core.scan import Scan
 from mast.errors import InputError
+from mast.io.outputs import PLOT_SUFFIXES, save_figure
 from mast.pipeline.locator import NO_FIX_REASONS, Fix, segmented
 from mast.pipeline.segmentation import Segment
 

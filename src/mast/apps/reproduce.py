@@ -19,9 +19,9 @@ from pathlib import Path
 
 import numpy as np
 
-from mast.apps.outputs import save_figure
 from mast.core.pose import format_dms, parse_azimuth
 from mast.io.atomic import atomic_open, write_atomic
+from mast.io.outputs import save_figure
 from mast.pipeline.locator import LocatorConfig, locate
 from mast.sim import PAPER_VARIANTS, Scene, paper_scene, simulate_scan
 

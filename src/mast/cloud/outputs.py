@@ -24,6 +24,7 @@ from mast.cloud.adjust import variance_bounds
 from mast.cloud.drift import DriftCorrection
 from mast.cloud.georef import FoundBeacon, Georef, explain_missing, grid_origin
 from mast.io.atomic import atomic_open, write_atomic
+from mast.report.html import CSS, axis_label, escape, inline_svg, new_figure, plot_origin
 
 __all__ = ["ACCURACY_CLASSES", "Outputs", "accuracy_class", "write_outputs"]
 
@@ -515,12 +516,10 @@ def _plan_figure(
     pts: NDArray[np.float64],
     drift: DriftCorrection | None,
 ) -> Any:
-    from mast.runs.outputs import _axis_label, _new_figure, _origin
-
-    fig, axes = _new_figure(9.0, 6.0)
+    fig, axes = new_figure(9.0, 6.0)
     ax = axes[0]
     edges = np.array([b.edges for b in result.survey]).reshape(-1, 2)
-    ox, oy = _origin(np.concatenate([pts, edges]) if len(pts) else edges)
+    ox, oy = plot_origin(np.concatenate([pts, edges]) if len(pts) else edges)
     if len(pts):
         ax.scatter(pts[:, 0] - ox, pts[:, 1] - oy, s=0.2, c="0.6", lw=0, rasterized=True)
     key = "after" if drift is not None else "before"
@@ -546,8 +545,8 @@ def _plan_figure(
                     arrowprops={"arrowstyle": "->", "color": col, "lw": 1.0},
                 )
     ax.set_aspect("equal", adjustable="datalim")
-    ax.set_xlabel(_axis_label("Easting", ox))
-    ax.set_ylabel(_axis_label("Northing", oy))
+    ax.set_xlabel(axis_label("Easting", ox))
+    ax.set_ylabel(axis_label("Northing", oy))
     ax.set_title(
         f"Cloud in the grid; residual vectors x{scale:g} "
         "(green control, blue check, red left out, grey not found)",
@@ -557,28 +556,25 @@ def _plan_figure(
 
 
 def _svg_of(fig: Any) -> str:
-    from mast.runs.outputs import _svg
-
-    return _svg(fig, "plan view")
+    return inline_svg(fig, "plan view")
 
 
 def report_html(text: str, svg: str | None, result: Georef) -> str:
     """The report as one self-contained page: the text report and the plan view."""
-    from mast.runs.outputs import _CSS, _e
 
     title = f"MAST georeference: {result.cloud.path.name}"
     buf = io.StringIO()
     buf.write("<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'>")
-    buf.write(f"<title>{_e(title)}</title><style>{_CSS} pre {{ font-size: 0.85em; }}</style>")
-    buf.write(f"</head><body><h1>{_e(title)}</h1>")
+    buf.write(f"<title>{escape(title)}</title><style>{CSS} pre {{ font-size: 0.85em; }}</style>")
+    buf.write(f"</head><body><h1>{escape(title)}</h1>")
     status = (
         "georeferenced" if result.refusal is None else f"not georeferenced: {result.refusal.reason}"
     )
-    buf.write(f"<p class='sub' id='status'>{_e(status)}</p>")
+    buf.write(f"<p class='sub' id='status'>{escape(status)}</p>")
     if svg is not None:
         buf.write(f"<h2>Plan view</h2><figure>{svg}<figcaption>Figure 1. The cloud in the grid ")
         buf.write(
             "(thinned), the surveyed beacons and their residual vectors.</figcaption></figure>"
         )
-    buf.write(f"<h2>Adjustment report</h2><pre>{_e(text)}</pre></body></html>\n")
+    buf.write(f"<h2>Adjustment report</h2><pre>{escape(text)}</pre></body></html>\n")
     return buf.getvalue()

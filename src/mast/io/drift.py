@@ -12,10 +12,10 @@ from pathlib import Path
 import numpy as np
 
 from mast import limits
+from mast.core.walls import Drift, Wall
 from mast.errors import InputError, shorten
 from mast.io._csv import CsvRows, parse_number, parse_within
 from mast.limits import read_bounded
-from mast.plan.drift import Drift, Wall
 
 __all__ = ["MAX_COORDINATE_M", "read_drift"]
 

@@ -27,12 +27,12 @@ from dataclasses import dataclass, replace
 from datetime import UTC, datetime
 from typing import Any, Protocol
 
-from mast.apps.report import ReportInputs, fix_record
 from mast.core.beacon import Survey
 from mast.core.heap import QuietCollector
 from mast.core.scan import Scan
 from mast.live.sources import Received, Source
 from mast.pipeline.locator import Fix, LocatorConfig, SequenceConfig, SequenceLocator
+from mast.report.record import ReportInputs, fix_record
 
 __all__ = ["LatestSlot", "LiveSummary", "Sink", "run_live"]
 

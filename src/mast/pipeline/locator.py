@@ -93,6 +93,7 @@ __all__ = [
     "locate",
     "locate_near",
     "locate_sequence",
+    "survey_index",
 ]
 
 #: Every reason a scan can get no fix, with what it means.
@@ -260,7 +261,7 @@ _INDEX_CACHE_SIZE = 8
 _INDEX_CACHE: OrderedDict[tuple[int, float], tuple[Survey, SurveyIndex, PanelSet]] = OrderedDict()
 
 
-def _survey_index(survey: Survey, range_max_m: float = math.inf) -> tuple[SurveyIndex, PanelSet]:
+def survey_index(survey: Survey, range_max_m: float = math.inf) -> tuple[SurveyIndex, PanelSet]:
     """The survey's index and panels for a scanner of this range, built once per survey
     object and range (a run reuses them). Edge pairs farther apart than twice the
     range are left out of the index: no scan sees both."""
@@ -415,7 +416,7 @@ class Locator:
 
     What belongs to the survey is built once, on the first scan from a scanner of a
     given range, and kept for every scan after it: the survey's index of edge pairs,
-    its panel set (:func:`_survey_index`, shared with every locator of the same survey
+    its panel set (:func:`survey_index`, shared with every locator of the same survey
     object), and the likelihood tiles of the prior's window search (per panel set,
     :func:`~mast.pipeline.tracking.prior_hypotheses`). Each scan is then a short chain
     of stage calls, :data:`STAGES`, timed on the result (:attr:`Fix.stages_s`).
@@ -436,7 +437,7 @@ class Locator:
         """The survey's index and panels for a scanner of this range (built once)."""
         hit = self._ready.get(range_max_m)
         if hit is None:
-            hit = self._ready[range_max_m] = _survey_index(self.survey, range_max_m)
+            hit = self._ready[range_max_m] = survey_index(self.survey, range_max_m)
         return hit
 
     def locate(self, scan: Scan, prior: Prior | None = None, *, narrow: Prior | None = None) -> Fix:
@@ -479,7 +480,7 @@ def segmented(fix: Fix, scan: Scan, survey: Survey) -> tuple[Segmentation, Panel
         return fix.segmentation, fix.identification
     cfg = fix.config
     seg = segmentation_of(fix, scan)
-    index, _ = _survey_index(survey, scan.range_max_m)
+    index, _ = survey_index(survey, scan.range_max_m)
     ident = identify_panels(
         seg, index.representatives, cfg.identification, survey_sigma_m=cfg.noise.survey_sigma_m
     )

@@ -21,9 +21,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from mast.core.geometry import first_hits
+from mast.core.walls import Drift
 from mast.errors import InputError
 
-__all__ = ["Drift", "Grid", "Wall", "build_grid", "centreline", "wall_distance"]
+__all__ = ["Grid", "build_grid", "centreline", "wall_distance"]
 
 #: Wall sampling for the medial axis, metres (finer for narrow drifts).
 _SAMPLE_M = 0.2
@@ -34,34 +35,6 @@ _MEDIAL_TOLERANCE = 0.25
 _MARGIN_TOLERANCE_M = 0.01
 #: The centreline is smoothed over this length (the Voronoi ridges zig-zag by a sample).
 _SMOOTH_M = 2.0
-
-
-@dataclass(frozen=True, slots=True)
-class Wall:
-    """One wall polyline, mine frame (E, N), metres, vertices in order."""
-
-    id: str
-    points: NDArray[np.float64]
-
-
-@dataclass(frozen=True, eq=False)
-class Drift:
-    """The walls of a drift, as read from a drift outline file."""
-
-    walls: tuple[Wall, ...]
-    source: str | None = None
-
-    def segments(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        """Every wall segment's start and end points, shapes (m, 2)."""
-        a = np.vstack([w.points[:-1] for w in self.walls])
-        b = np.vstack([w.points[1:] for w in self.walls])
-        return a, b
-
-    @property
-    def length_m(self) -> float:
-        """Total length of the walls."""
-        a, b = self.segments()
-        return float(np.sum(np.hypot(*(b - a).T)))
 
 
 def _samples(drift: Drift, spacing_m: float) -> NDArray[np.float64]:

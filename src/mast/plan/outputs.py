@@ -11,8 +11,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from mast.apps.outputs import save_figure, write_bytes
 from mast.core.quantiles import chi2_ppf
+from mast.io.outputs import save_figure, write_bytes
 from mast.pipeline.adjustment import position_ellipse
 from mast.plan.predict import Plan
 from mast.runs.outputs import add_dxf_beacons, new_dxf, save_dxf

@@ -34,10 +34,11 @@ from mast.core.beacon import Survey
 from mast.core.geometry import PanelSet
 from mast.core.noise import DEFAULT_SURVEY_SIGMA_M
 from mast.core.pose import Pose2D, wrap_angle
+from mast.core.walls import Drift
 from mast.errors import InputError
 from mast.pipeline.bounds import bound_of, truth_information
 from mast.pipeline.hypotheses import major_sigma
-from mast.plan.drift import Drift, Grid, build_grid
+from mast.plan.drift import Grid, build_grid
 from mast.sim.drive import Reach
 from mast.sim.scanner import ScannerModel, SimulatedScan, simulate_scan
 from mast.sim.tunnel import Roughness, polyline_station, project_station, roughen

@@ -24,9 +24,10 @@ from numpy.typing import NDArray
 from mast.core.beacon import Beacon, Survey
 from mast.core.noise import NoiseModel
 from mast.core.pose import Pose2D, wrap_angle
+from mast.core.walls import Drift
 from mast.pipeline.adjustment import MIN_INCIDENCE_COS
 from mast.pipeline.bounds import information
-from mast.plan.drift import Drift, wall_distance
+from mast.plan.drift import wall_distance
 from mast.plan.predict import (
     MIN_INCIDENCE_DEG,
     MIN_PANEL_RETURNS,

@@ -69,8 +69,8 @@ def _folder_names(runs: Sequence[Path]) -> list[str]:
 
 def _track_one(run: str, survey_path: str, folder: str, options: dict[str, object]) -> RunOutcome:
     """A Dask task: one run, start to finish, in the worker's own process."""
-    from mast.apps.report import ReportInputs
     from mast.io import read_survey
+    from mast.report.record import ReportInputs
     from mast.runs.run import track_run
     from mast.runs.track import TrackConfig
 

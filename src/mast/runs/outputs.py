@@ -28,11 +28,8 @@ from __future__ import annotations
 
 import calendar
 import contextlib
-import html
-import io
 import itertools
 import math
-import re
 from collections.abc import Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from datetime import UTC, datetime
@@ -47,6 +44,15 @@ from mast.core.beacon import Beacon, Survey
 from mast.core.pose import format_dms
 from mast.errors import InputError, OutputError
 from mast.io.atomic import atomic_open, atomic_path, commit, discard, part_path
+from mast.report.html import (
+    CSS,
+    axis_label,
+    escape,
+    group_thousands,
+    inline_svg,
+    new_figure,
+    plot_origin,
+)
 from mast.runs.model import PlacedScan, RunSummary, Trajectory
 
 __all__ = [
@@ -721,82 +727,11 @@ def save_dxf(doc: Any, path: str | Path) -> None:
 
 # --------------------------------------------------------------------------- report
 
-_CSS: Final = """
-body { font-family: system-ui, -apple-system, "Segoe UI", Roboto, sans-serif; color: #222;
-       max-width: 1100px; margin: 1.5em auto; padding: 0 1em; line-height: 1.4; }
-h1 { font-size: 1.6em; margin-bottom: 0.1em; }
-h2 { font-size: 1.2em; margin-top: 1.8em; border-bottom: 1px solid #ccc; }
-.sub { color: #555; margin-top: 0; }
-table { border-collapse: collapse; font-size: 0.9em; }
-th, td { padding: 0.2em 0.6em; border-bottom: 1px solid #e4e4e4; text-align: left; }
-td.n, th.n { text-align: right; font-variant-numeric: tabular-nums; white-space: nowrap; }
-table.summary th { font-weight: normal; color: #555; }
-figure { margin: 1em 0; }
-figure svg { max-width: 100%; height: auto; }
-figcaption { font-size: 0.9em; color: #444; }
-.note { color: #8a5a00; }
-.test-pass { color: #1b6e20; } .test-too_small, .test-too_large { color: #a33; }
-footer { margin-top: 2em; font-size: 0.8em; color: #777; }
-"""
-
 _FIX_COLOUR: Final = "tab:red"
 _ODO_COLOUR: Final = "tab:blue"
 _WALL_COLOUR: Final = "0.6"
 _BEACON_COLOUR: Final = "tab:green"
 _NICE: Final = (1.0, 2.0, 5.0)
-
-
-def _e(value: object) -> str:
-    return html.escape(str(value), quote=True)
-
-
-def _group(value: float, decimals: int = 0) -> str:
-    """A number with its thousands grouped by thin spaces, as survey sheets print them."""
-    return f"{value:,.{decimals}f}".replace(",", "\u2009")
-
-
-def _origin(points: NDArray[np.float64]) -> tuple[float, float]:
-    """Round point the report's map axes count from: zero for coordinates under 10 km,
-    else a multiple of 100 m (or a larger power of ten for a wide view) just below them."""
-    if len(points) == 0 or float(np.max(np.abs(points))) < 10_000.0:
-        return 0.0, 0.0
-    lo, hi = points.min(axis=0), points.max(axis=0)
-    span = float(np.max(hi - lo))
-    step = 10.0 ** max(2, math.ceil(math.log10(max(span, 1.0))))
-    return (math.floor(float(lo[0]) / step) * step, math.floor(float(lo[1]) / step) * step)
-
-
-def _axis_label(name: str, value: float) -> str:
-    return f"{name} (m)" if value == 0.0 else f"{name} − {_group(value)} (m)"
-
-
-def _svg(fig: Any, name: str) -> str:
-    """A matplotlib figure as inline ``<svg>`` (no XML prolog, DOCTYPE or metadata).
-
-    Each figure gets its own hash salt: the ids of its clip paths and markers
-    are then unique in the page (several SVGs share one id space) and the
-    same from run to run.
-    """
-    import matplotlib as mpl
-
-    buf = io.StringIO()
-    with mpl.rc_context({"svg.hashsalt": f"mast-{name}", "svg.fonttype": "none"}):
-        fig.savefig(buf, format="svg", metadata={"Date": None})
-    text = buf.getvalue()
-    start = text.find("<svg")
-    text = text[start:]
-    text = re.sub(r"<metadata>.*?</metadata>\s*", "", text, count=1, flags=re.DOTALL)
-    return text.replace("<svg ", f'<svg role="img" aria-label="{_e(name)}" ', 1)
-
-
-def _new_figure(width_in: float, height_in: float, rows: int = 1) -> tuple[Any, Any]:
-    # Figure objects, not pyplot: nothing is registered with a GUI back-end or kept
-    # alive by pyplot's figure manager, so there is nothing to close and no state leaks.
-    from matplotlib.figure import Figure
-
-    fig = Figure(figsize=(width_in, height_in), layout="constrained")
-    axes = fig.subplots(rows, 1, sharex=True, squeeze=False)[:, 0]
-    return fig, axes
 
 
 def _broken(
@@ -822,9 +757,9 @@ def _map_figure(
     if len(walls) > MAX_FIGURE_POINTS:
         walls = walls[:: math.ceil(len(walls) / MAX_FIGURE_POINTS)]
     extent = np.vstack([pose_xy, edges, walls])
-    oe, on = _origin(extent)
+    oe, on = plot_origin(extent)
     o = np.array([oe, on])
-    fig, (ax,) = _new_figure(10.0, 7.0)
+    fig, (ax,) = new_figure(10.0, 7.0)
     if len(walls):
         # Rasterised: tens of thousands of dots as vector marks would bloat the page.
         ax.scatter(
@@ -878,19 +813,20 @@ def _map_figure(
             )
         ax.plot(*xy[0], ">", ms=8, color="k", zorder=7, label="start")
     ax.set_aspect("equal", adjustable="datalim")
-    ax.set_xlabel(_axis_label("E", oe))
-    ax.set_ylabel(_axis_label("N", on))
+    ax.set_xlabel(axis_label("E", oe))
+    ax.set_ylabel(axis_label("N", on))
     for axis in (ax.xaxis, ax.yaxis):
         axis.get_major_formatter().set_useOffset(False)
         axis.get_major_formatter().set_scientific(False)
     ax.grid(True, color="0.92", lw=0.6, zorder=0)
     if ax.get_legend_handles_labels()[0]:
         ax.legend(fontsize=8, loc="best", framealpha=0.85)
-    svg = _svg(fig, "trajectory-map")
+    svg = inline_svg(fig, "trajectory-map")
     where = (
         "Axes in metres of the mine grid."
         if oe == 0.0 and on == 0.0
-        else f"Axes in metres from E {_group(oe)}, N {_group(on)} (the origin of the axes)."
+        else f"Axes in metres from E {group_thousands(oe)}, N {group_thousands(on)} "
+        "(the origin of the axes)."
     )
     caption = (
         "Trajectory of the scanner over the surveyed beacons (green, with their ids) and "
@@ -908,7 +844,7 @@ def _precision_figure(poses: _Poses, t0_ns: int) -> tuple[str, str]:
     sig = poses.sigma[drawn]
     stretch = poses.stretch[drawn]
     fix = poses.fix[drawn]
-    fig, (ax_pos, ax_az) = _new_figure(10.0, 5.5, rows=2)
+    fig, (ax_pos, ax_az) = new_figure(10.0, 5.5, rows=2)
     series = (
         (ax_pos, sig[:, 0] * 1000.0, "σE", "tab:blue"),
         (ax_pos, sig[:, 1] * 1000.0, "σN", "tab:orange"),
@@ -937,7 +873,7 @@ def _precision_figure(poses: _Poses, t0_ns: int) -> tuple[str, str]:
         ax.grid(True, color="0.92", lw=0.6)
         ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.0, 1.0), framealpha=0.85)
     ax_az.set_xlabel("time since the first scan (s)")
-    svg = _svg(fig, "precision")
+    svg = inline_svg(fig, "precision")
     caption = (
         "Standard deviations of the smoothed poses along the run: easting and northing in "
         "millimetres (top), azimuth in arc-seconds (bottom), against the time since the "
@@ -967,7 +903,7 @@ def _reference_variance_figure(values: Sequence[tuple[float, int]]) -> tuple[str
     ds, counts = np.unique(dof, return_counts=True)
     dens = sum(c * d * stats.chi2.pdf(d * x, d) for d, c in zip(ds, counts, strict=True))
     dens = np.asarray(dens, dtype=float) / len(v)
-    fig, (ax,) = _new_figure(8.0, 4.0)
+    fig, (ax,) = new_figure(8.0, 4.0)
     bins = int(min(60, max(10, math.ceil(2 * len(v) ** (1 / 3)) * 2)))
     ax.hist(
         v,
@@ -984,14 +920,15 @@ def _reference_variance_figure(values: Sequence[tuple[float, int]]) -> tuple[str
     ax.set_ylabel("density")
     ax.grid(True, color="0.92", lw=0.6)
     ax.legend(fontsize=8, framealpha=0.85)
-    svg = _svg(fig, "reference-variance")
+    svg = inline_svg(fig, "reference-variance")
     med = float(np.median(dof))
     caption = (
         f"Histogram (as a density) of the reference variances of the {len(v)} fixes. "
         "The red curve is the density they follow when the precisions used are right: "
         "each fix's reference variance is then χ²(ν)/ν with ν its degrees of freedom, and "
         "the curve is the mixture of those densities over all fixes (ν from "
-        f"{_group(ds.min())} to {_group(ds.max())}, median {_group(med)}). Bars to the "
+        f"{group_thousands(ds.min())} to {group_thousands(ds.max())}, "
+        f"median {group_thousands(med)}). Bars to the "
         "right of the curve: returns scatter more than the range precision says; to the "
         "left: less."
     )
@@ -1011,7 +948,7 @@ def _fmt(value: Any, spec: str, scale: float = 1.0) -> str:
     try:
         return format(float(value) * scale, spec)
     except (TypeError, ValueError):
-        return _e(value)
+        return escape(value)
 
 
 def _fix_table(
@@ -1035,18 +972,18 @@ def _fix_table(
         beacons = r.get("beacons") or []
         rows.append(
             "<tr>"
-            f"<td class='n'>{_e(r.get('scan', ''))}</td>"
+            f"<td class='n'>{escape(r.get('scan', ''))}</td>"
             f"<td class='n'>{_record_time(r, t0_ns)}</td>"
             f"<td class='n'>{_fmt(r.get('easting'), '.4f')}</td>"
             f"<td class='n'>{_fmt(r.get('northing'), '.4f')}</td>"
-            f"<td class='n'>{_e(az or '')}</td>"
+            f"<td class='n'>{escape(az or '')}</td>"
             f"<td class='n'>{_fmt(r.get('sigma_easting_m'), '.2f', 1000.0)}</td>"
             f"<td class='n'>{_fmt(r.get('sigma_northing_m'), '.2f', 1000.0)}</td>"
             f"<td class='n'>{_fmt(r.get('sigma_azimuth_deg'), '.1f', 3600.0)}</td>"
             f"<td class='n'>{_fmt(r.get('reference_variance'), '.3f')}</td>"
-            f"<td class='n'>{_e(r.get('degrees_of_freedom', ''))}</td>"
-            f"<td class='test-{_e(test)}'>{_e(test)}</td>"
-            f"<td>{_e(', '.join(str(b) for b in beacons))}</td>"
+            f"<td class='n'>{escape(r.get('degrees_of_freedom', ''))}</td>"
+            f"<td class='test-{escape(test)}'>{escape(test)}</td>"
+            f"<td>{escape(', '.join(str(b) for b in beacons))}</td>"
             "</tr>"
         )
     return f"<table class='fixes'>{head}{''.join(rows)}</table>", len(fixes)
@@ -1161,14 +1098,14 @@ def write_report_html(
         "<!DOCTYPE html>",
         "<html lang='en'><head><meta charset='utf-8'>",
         "<meta name='viewport' content='width=device-width, initial-scale=1'>",
-        f"<title>MAST run report: {_e(summary.run)}</title>",
-        f"<style>{_CSS}</style></head><body>",
+        f"<title>MAST run report: {escape(summary.run)}</title>",
+        f"<style>{CSS}</style></head><body>",
         "<h1>MAST survey run</h1>",
-        f"<p class='sub'>{_e(summary.run)}</p>",
+        f"<p class='sub'>{escape(summary.run)}</p>",
         "<h2>Summary</h2><table class='summary'>",
     ]
     for key, value in _summary_rows(summary, poses, t0, t1):
-        parts.append(f"<tr><th>{_e(key)}</th><td>{_e(value)}</td></tr>")
+        parts.append(f"<tr><th>{escape(key)}</th><td>{escape(value)}</td></tr>")
     parts.append("</table>")
 
     parts.append("<h2>Scans without a fix</h2>")
@@ -1177,8 +1114,8 @@ def write_report_html(
         parts.append("<table><tr><th>reason</th><th class='n'>scans</th><th>meaning</th></tr>")
         for reason, count in sorted(reasons.items(), key=lambda kv: (-kv[1], kv[0])):
             parts.append(
-                f"<tr><td>{_e(reason)}</td><td class='n'>{count}</td>"
-                f"<td>{_e(NO_FIX_REASONS.get(reason, ''))}</td></tr>"
+                f"<tr><td>{escape(reason)}</td><td class='n'>{count}</td>"
+                f"<td>{escape(NO_FIX_REASONS.get(reason, ''))}</td></tr>"
             )
         parts.append("</table>")
     else:
@@ -1193,15 +1130,16 @@ def write_report_html(
         figures.append(("Precision along the run", svg, cap))
     rv = _reference_variance_figure(summary.reference_variances)
     for k, (title, svg, cap) in enumerate(figures, start=1):
-        parts.append(f"<h2>{_e(title)}</h2><figure>{svg}")
-        parts.append(f"<figcaption>Figure {k}. {_e(cap)}</figcaption></figure>")
+        parts.append(f"<h2>{escape(title)}</h2><figure>{svg}")
+        parts.append(f"<figcaption>Figure {k}. {escape(cap)}</figcaption></figure>")
     parts.append("<h2>Global test of the fixes</h2>")
     if rv is None:
         parts.append("<p>No fix: no reference variance to show.</p>")
     else:
         svg, cap = rv
         parts.append(
-            f"<figure>{svg}<figcaption>Figure {len(figures) + 1}. {_e(cap)}</figcaption></figure>"
+            f"<figure>{svg}<figcaption>Figure {len(figures) + 1}. {escape(cap)}"
+            "</figcaption></figure>"
         )
         tests = dict(summary.chi2_tests)
         if not tests:
@@ -1209,7 +1147,7 @@ def write_report_html(
                 if r.get("status") == "fix" and r.get("chi2_test"):
                     tests[str(r["chi2_test"])] = tests.get(str(r["chi2_test"]), 0) + 1
         if tests:
-            words = ", ".join(f"{_e(k)} {v}" for k, v in sorted(tests.items()))
+            words = ", ".join(f"{escape(k)} {v}" for k, v in sorted(tests.items()))
             parts.append(f"<p>χ² test of the reference variance at 5 %: {words}.</p>")
 
     parts.append("<h2>Fixes</h2>")
@@ -1229,6 +1167,6 @@ def write_report_html(
         )
         parts.append(table)
     now = datetime.now(tz=UTC).strftime("%Y-%m-%d %H:%M:%S UTC")
-    parts.append(f"<footer>mast {_e(__version__)}, {_e(now)}</footer></body></html>")
+    parts.append(f"<footer>mast {escape(__version__)}, {escape(now)}</footer></body></html>")
 
     _write_lines(path, parts)

@@ -21,12 +21,12 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from mast.apps.report import ReportInputs, fix_record
 from mast.core.beacon import Survey
 from mast.core.heap import QuietCollector
 from mast.errors import OutputError
 from mast.io.atomic import atomic_open
 from mast.pipeline.locator import segmentation_of
+from mast.report.record import ReportInputs, fix_record
 from mast.runs.model import RunSummary, Trajectory
 from mast.runs.track import Node, RunTracker, Smoother, TrackConfig
 

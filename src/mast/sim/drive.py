@@ -33,9 +33,9 @@ from mast.core.beacon import Survey
 from mast.core.pose import Pose2D
 from mast.errors import InputError
 from mast.sim.design import BeaconDesign
-from mast.sim.hard import DRIFT_CATALOGUE, _build
+from mast.sim.mounting import DRIFT_CATALOGUE, mount_beacons
 from mast.sim.scanner import ScannerModel, SimulatedScan, simulate_scan
-from mast.sim.scenarios import Scene, Shot
+from mast.sim.scene import Scene, Shot
 from mast.sim.tunnel import Roughness, Tunnel, roughen
 from mast.sim.world import Surface, World
 
@@ -346,7 +346,7 @@ def drive_scene(
     rough = Roughness(
         amplitude_m=float(wall_rng.uniform(0.02, 0.05)), wavelength_min_m=0.2, wavelength_max_m=1.5
     )
-    wb, beacons = _build(wall_rng, tunnel, placements, rough)
+    wb, beacons = mount_beacons(wall_rng, tunnel, placements, rough)
     left, right = tunnel.walls()
     for a, b in ((left[0], right[0]), (left[-1], right[-1])):  # the faces at both ends
         wb.polyline(roughen(np.array([a, b]), rough, wall_rng), Surface("wall"))

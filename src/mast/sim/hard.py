@@ -10,82 +10,22 @@ import math
 from dataclasses import replace
 
 import numpy as np
-from numpy.typing import NDArray
 
-from mast.core.beacon import Beacon, Survey
+from mast.core.beacon import Survey
 from mast.core.pose import Pose2D
-from mast.sim.design import BeaconDesign, paper_design, polyline_design, random_design
+from mast.sim.design import BeaconDesign, paper_design, random_design
+from mast.sim.mounting import (
+    DRIFT_CATALOGUE,
+    direction,
+    mount_beacons,
+    random_centreline,
+)
 from mast.sim.scanner import ScannerModel
-from mast.sim.scenarios import Scene, Shot
-from mast.sim.tunnel import Roughness, Tunnel, project_station, roughen
+from mast.sim.scene import Scene, Shot
+from mast.sim.tunnel import Roughness, Tunnel
 from mast.sim.world import Surface, WorldBuilder
 
 __all__ = ["FIELD_SCANNERS", "drift_scene", "field_scene", "hard_scene"]
-
-
-def _direction(azimuth_rad: float) -> NDArray[np.float64]:
-    return np.array([math.sin(azimuth_rad), math.cos(azimuth_rad)])
-
-
-def _centreline(
-    rng: np.random.Generator, lengths: list[float], max_bend_deg: float
-) -> NDArray[np.float64]:
-    heading = float(rng.uniform(0, 2 * math.pi))
-    pts = [np.array([float(rng.uniform(0, 1e4)), float(rng.uniform(0, 1e4))])]
-    for length in lengths:
-        pts.append(pts[-1] + length * _direction(heading))
-        heading += math.radians(float(rng.uniform(-max_bend_deg, max_bend_deg)))
-    return np.array(pts)
-
-
-def _wall_mount(
-    tunnel: Tunnel, station: float, side: str, tilt_rad: float = 0.0, chord_m: float = 0.0
-) -> tuple[NDArray[np.float64], NDArray[np.float64], int]:
-    """Where a design's chord centre goes, the chord's direction and the tunnel's side.
-
-    A beacon bolted askew (``tilt_rad`` off the wall's line) stands out from the
-    wall so that its nearer base end touches the wall's line: one end on the
-    rock, the other clear of it (divergent or convergent to the wall).
-    """
-    centre, tangent = tunnel.centre_point(station)
-    normal = np.array([-tangent[1], tangent[0]])
-    inward = -normal if side == "left" else normal
-    on_wall = centre - (tunnel.width_m / 2) * inward
-    on_wall = on_wall + (chord_m / 2) * abs(math.sin(tilt_rad)) * inward
-    c, s = math.cos(tilt_rad), math.sin(tilt_rad)
-    chord_dir = np.array([c * tangent[0] - s * tangent[1], s * tangent[0] + c * tangent[1]])
-    return on_wall, chord_dir, (-1 if side == "left" else 1)
-
-
-def _build(
-    rng: np.random.Generator,
-    tunnel: Tunnel,
-    placements: list[tuple[str, float, str, BeaconDesign, str]],
-    roughness: Roughness | None,
-    tilts_rad: dict[str, float] | None = None,
-) -> tuple[WorldBuilder, list[Beacon]]:
-    """Mount beacons and look-alikes ``(id, station, side, design, kind)``, each
-    ``tilts_rad[id]`` off its wall's line (0 when not given), then the walls."""
-    left, right = tunnel.walls()
-    wb = WorldBuilder()
-    smooth: dict[str, list[tuple[float, float]]] = {"left": [], "right": []}
-    beacons = []
-    for bid, st, side, design, kind in placements:
-        tilt = (tilts_rad or {}).get(bid, 0.0)
-        on_wall, tangent, tside = _wall_mount(tunnel, st, side, tilt, design.chord_m)
-        edges = design.mounted(on_wall, tangent, tunnel_side=tside)
-        if len(edges) == 4:
-            wb.panels(edges, bid, kind=kind)
-        else:
-            wb.polyline(edges, Surface(kind, bid))
-        if kind == "beacon":
-            beacons.append(Beacon(bid, edges))
-        ws = project_station(left if side == "left" else right, on_wall)
-        smooth[side].append((ws - design.chord_m / 2, ws + design.chord_m / 2))
-    for side, wall in (("left", left), ("right", right)):
-        pts = roughen(wall, roughness, rng, smooth_intervals=smooth[side]) if roughness else wall
-        wb.polyline(pts, Surface("wall"))
-    return wb, beacons
 
 
 def _poses(
@@ -179,7 +119,7 @@ def hard_scene(seed: int, index: int = 0, *, poses: int = 5) -> Scene:
     scanner with 12 mm noise, a few mm of bias, 3 % dropouts and mixed pixels."""
     rng = np.random.default_rng([seed, index, 5])
     width = float(rng.uniform(4.0, 6.5))
-    tunnel = Tunnel(_centreline(rng, [25.0, 25.0, 25.0], 20.0), width)
+    tunnel = Tunnel(random_centreline(rng, [25.0, 25.0, 25.0], 20.0), width)
     n_beacons = int(rng.integers(2, 5))
     designs = []
     for _ in range(n_beacons):
@@ -206,7 +146,7 @@ def hard_scene(seed: int, index: int = 0, *, poses: int = 5) -> Scene:
     rough = Roughness(
         amplitude_m=float(rng.uniform(0.03, 0.10)), wavelength_min_m=0.2, wavelength_max_m=1.0
     )
-    wb, beacons = _build(rng, tunnel, placements, rough)
+    wb, beacons = mount_beacons(rng, tunnel, placements, rough)
     _equipment_and_people(
         rng, wb, tunnel, (lo - 3, hi + 3), (lo - 3, hi + 3), (0.4, 0.3), (0.18, 0.3)
     )
@@ -225,21 +165,13 @@ def hard_scene(seed: int, index: int = 0, *, poses: int = 5) -> Scene:
     )
 
 
-#: A few standard designs, so that many beacons in one drift are identical.
-DRIFT_CATALOGUE = (
-    paper_design(1.2, 0.2),
-    paper_design(1.5, 0.25),
-    polyline_design((0.5, 0.35, 0.7), (-0.7, -0.9), name="chevron"),
-)
-
-
 def drift_scene(seed: int, index: int = 0, *, poses: int = 10, length_m: float = 200.0) -> Scene:
     """A long drift with a beacon every 6-10 m on alternating walls (two dozen or more),
     drawn from three standard designs, 12 mm noise and mildly rough walls."""
     rng = np.random.default_rng([seed, index, 9])
     width = float(rng.uniform(4.5, 6.0))
     segs = [length_m / 4] * 4
-    tunnel = Tunnel(_centreline(rng, segs, 8.0), width)
+    tunnel = Tunnel(random_centreline(rng, segs, 8.0), width)
     placements: list[tuple[str, float, str, BeaconDesign, str]] = []
     s, side, j = 5.0, "left", 0
     while s < length_m - 5:
@@ -248,7 +180,7 @@ def drift_scene(seed: int, index: int = 0, *, poses: int = 10, length_m: float =
         placements.append((f"D{j:02d}", s, side, d, "beacon"))
         s += float(rng.uniform(6, 10))
         side = "right" if side == "left" else "left"
-    wb, beacons = _build(
+    wb, beacons = mount_beacons(
         rng, tunnel, placements, Roughness(amplitude_m=float(rng.uniform(0.01, 0.04)))
     )
     models = [
@@ -293,7 +225,7 @@ def _panel_lookalike(rng: np.random.Generator) -> BeaconDesign:
     a, b = rng.uniform(0.15, 0.9, 2)
     turn = float(rng.uniform(math.radians(20), math.radians(110)))
     if rng.random() < 0.5:  # an L or V: two faces meeting in a corner
-        pts = [np.zeros(2), np.array([a, 0.0]), np.array([a, 0.0]) + b * _direction(turn)]
+        pts = [np.zeros(2), np.array([a, 0.0]), np.array([a, 0.0]) + b * direction(turn)]
     else:  # a board standing off the wall: three faces, square-ish ends
         d = float(rng.uniform(0.05, 0.25))
         pts = [np.zeros(2), np.array([0.0, d]), np.array([a + b, d]), np.array([a + b, 0.0])]
@@ -312,7 +244,7 @@ def field_scene(seed: int, index: int = 0, *, hostile: bool = False, poses: int 
     every range jump and dropouts."""
     rng = np.random.default_rng([seed, index, 31 if hostile else 30])
     width = float(rng.uniform(4.0, 10.0))
-    tunnel = Tunnel(_centreline(rng, [22.0, 22.0, 22.0], 12.0), width)
+    tunnel = Tunnel(random_centreline(rng, [22.0, 22.0, 22.0], 12.0), width)
     s1 = float(rng.uniform(24.0, 30.0))
     s2 = s1 + float(rng.uniform(4.0, 10.0))
     side1 = "left" if rng.random() < 0.5 else "right"
@@ -344,7 +276,7 @@ def field_scene(seed: int, index: int = 0, *, hostile: bool = False, poses: int 
         wavelength_max_m=1.0,
         beacon_margin_m=0.03,
     )
-    wb, beacons = _build(rng, tunnel, placements, rough, tilts)
+    wb, beacons = mount_beacons(rng, tunnel, placements, rough, tilts)
     if hostile:
         _equipment_and_people(
             rng, wb, tunnel, (s1 - 6.0, s2 + 6.0), (s1 - 4.0, s2 + 4.0), (0.3, 0.2), (0.15, 0.3)

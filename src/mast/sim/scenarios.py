@@ -10,12 +10,11 @@ import csv
 import json
 import math
 from collections.abc import Callable, Iterator, Sequence
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
 
 from mast.core.beacon import Beacon, Survey
 from mast.core.pose import Pose2D
@@ -24,9 +23,12 @@ from mast.io import write_laserscans, write_scan_csv, write_survey
 from mast.io.atomic import atomic_open, write_atomic
 from mast.io.bags import BagKind
 from mast.sim.design import BeaconDesign, paper_design, random_design
-from mast.sim.scanner import SCANNERS, ScannerModel, SimulatedScan, simulate_scan
+from mast.sim.drive import drive_scenario
+from mast.sim.mounting import direction
+from mast.sim.scanner import SCANNERS, ScannerModel, SimulatedScan
+from mast.sim.scene import Scene, Shot
 from mast.sim.tunnel import Roughness, Tunnel, project_station, roughen
-from mast.sim.world import Surface, World, WorldBuilder
+from mast.sim.world import Surface, WorldBuilder
 
 __all__ = [
     "SCENARIOS",
@@ -38,44 +40,6 @@ __all__ = [
     "random_scenario",
     "write_scenario",
 ]
-
-
-@dataclass(frozen=True, slots=True)
-class Shot:
-    """One scan to simulate: a label, the true pose and the scanner."""
-
-    label: str
-    pose: Pose2D
-    scanner: ScannerModel
-
-
-@dataclass(frozen=True, eq=False)
-class Scene:
-    """A site: its surfaces, its beacon survey, and the shots taken in it."""
-
-    name: str
-    world: World
-    survey: Survey
-    shots: tuple[Shot, ...]
-    description: str = ""
-    seed: int = 0
-    params: dict[str, object] = field(default_factory=dict)
-
-    def simulate(
-        self, shot: Shot, *, rng: np.random.Generator | None = None, stamp_ns: int = 0
-    ) -> SimulatedScan:
-        return simulate_scan(self.world, shot.pose, shot.scanner, rng=rng, stamp_ns=stamp_ns)
-
-    def iter_simulated(self) -> Iterator[SimulatedScan]:
-        """Every shot in order, one at a time, with noise drawn from a generator seeded
-        by the scene's seed (stamps 0.1 s apart)."""
-        rng = np.random.default_rng(self.seed)
-        for i, s in enumerate(self.shots):
-            yield self.simulate(s, rng=rng, stamp_ns=i * 100_000_000)
-
-    def simulate_all(self) -> list[SimulatedScan]:
-        """Every shot, as :meth:`iter_simulated` gives them."""
-        return list(self.iter_simulated())
 
 
 def _with_noise(model: ScannerModel, sigma_m: float) -> ScannerModel:
@@ -169,10 +133,6 @@ def paper_scenario(seed: int = 0, *, noise: bool = False, **kw: object) -> list[
 # --------------------------------------------------------------------------- random
 
 
-def _direction(azimuth_rad: float) -> NDArray[np.float64]:
-    return np.array([math.sin(azimuth_rad), math.cos(azimuth_rad)])
-
-
 def random_scene(
     seed: int,
     index: int = 0,
@@ -192,8 +152,8 @@ def random_scene(
     )
     length1, length2 = 30.0, 30.0
     c0 = origin.copy()
-    c1 = c0 + length1 * _direction(heading)
-    c2 = c1 + length2 * _direction(heading + bend)
+    c1 = c0 + length1 * direction(heading)
+    c2 = c1 + length2 * direction(heading + bend)
     tunnel = Tunnel(np.array([c0, c1, c2]), width)
     left, right = tunnel.walls()
 
@@ -310,8 +270,6 @@ def build_scenario(
     (:func:`mast.sim.drive.drive_scenario`).
     """
     if name == "drive":  # scans streamed one at a time; see mast.sim.drive
-        from mast.sim.drive import drive_scenario
-
         unknown = sorted(set(options) - {"scans", "rate_hz"})
         if unknown:
             raise InputError(f"scenario 'drive' has no option {unknown[0]!r}")

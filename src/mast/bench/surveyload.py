@@ -52,7 +52,7 @@ def run_survey_load(
     """Median seconds to read, check and index a ``beacons`` survey, per number of designs,
     for a scanner of ``range_max_m`` (the index keeps edge pairs within twice the range)."""
     from mast.io import read_survey, write_survey
-    from mast.pipeline.locator import _survey_index
+    from mast.pipeline.locator import survey_index
 
     out: dict[int, float] = {}
     with tempfile.TemporaryDirectory(prefix="mast-survey-") as tmp:
@@ -63,7 +63,7 @@ def run_survey_load(
             for _ in range(repeats):
                 t0 = time.perf_counter()
                 survey = read_survey(path)
-                _survey_index(survey, range_max_m)
+                survey_index(survey, range_max_m)
                 times.append(time.perf_counter() - t0)
             out[n_designs] = statistics.median(times)
             size = path.stat().st_size / 2**20

@@ -246,7 +246,7 @@ def run_live_bench(
     echo: Callable[[str], None] = print,
 ) -> list[LiveFigures]:
     """Run the benchmark (see the module) and print its figures."""
-    from mast.apps.bench.warmup import compile_all
+    from mast.cli.warmup import compile_all
 
     compile_all()
     out = []

@@ -8,7 +8,7 @@ alias bombs, file names escaping the bag) and on hostile output paths (a
 missing or read-only place, a file in the way, an unknown suffix, the input
 itself, a name too long, a disk that fills part-way, a closed pipe).
 
-Each case runs the real command line (:func:`mast.apps.cli.main`) in a
+Each case runs the real command line (:func:`mast.cli.main`) in a
 forked child of one warmed-up process, under an address-space limit and a
 file-size limit (the disk that fills), with a time limit. Per case it
 records the exit status, the standard error, the child's peak resident
@@ -603,7 +603,7 @@ def _child(case: FuzzCase, out: Path, err: Path, as_limit: int) -> None:
         sys.stdout = open(1, "w", encoding="utf-8", closefd=False)  # noqa: SIM115
         sys.stderr = open(2, "w", encoding="utf-8", closefd=False)  # noqa: SIM115
         sys.argv = ["mast", *case.argv]
-        from mast.apps.cli import main
+        from mast.cli import main
 
         main()
         status = 0
@@ -823,7 +823,7 @@ def run_fuzz(
         Cases run at once (default: the processor count). Times are judged with
         the undamaged runs measured alone, so a loaded machine errs towards "too slow".
     """
-    from mast.apps.cli import main  # noqa: F401 - imported (and compiled) once, before forking
+    from mast.cli import main  # noqa: F401 - imported (and compiled) once, before forking
     from mast.io.scan_csv import read_scan_csv
     from mast.pipeline.locator import locate
 

@@ -26,8 +26,8 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from mast.apps.bench.accuracy import ACCURACY_CONFIGS, owed_poses
-from mast.apps.bench.robustness import is_wrong
+from mast.bench.accuracy import ACCURACY_CONFIGS, owed_poses
+from mast.bench.robustness import is_wrong
 from mast.core.pose import Pose2D
 from mast.pipeline.locator import LocatorConfig, locate
 from mast.pipeline.tracking import Prior

@@ -30,8 +30,8 @@ from pathlib import Path
 import numpy as np
 from scipy import stats
 
-from mast.apps.bench.robustness import RobustnessSummary, is_wrong, pose_error
-from mast.apps.bench.rows import write_rows
+from mast.bench.robustness import RobustnessSummary, is_wrong, pose_error
+from mast.bench.rows import write_rows
 from mast.core.pose import Pose2D
 from mast.pipeline.bounds import truth_bound
 from mast.pipeline.locator import LocatorConfig, locate

@@ -1,7 +1,7 @@
 """Real-log run benchmark: ``mast track``'s tracker and smoother on real laser logs.
 
 Beacons are mounted on the real walls of the CARMEN logs with corrected poses
-and ray-cast into every scan (as in :mod:`mast.apps.bench.clutter`); the whole
+and ray-cast into every scan (as in :mod:`mast.bench.clutter`); the whole
 log is then tracked in sequence exactly as ``mast track`` does
 (:class:`~mast.runs.track.RunTracker`, then :class:`~mast.runs.track.Smoother`),
 with the scans' own time stamps. These logs keep a scan only every metre or
@@ -30,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-from mast.apps.bench.clutter import (
+from mast.bench.clutter import (
     CARMEN_LOGS,
     PANEL_NOISE_M,
     carmen_logs,
@@ -141,7 +141,7 @@ def run_real_logs(
     echo: Callable[[str], object] = print,
 ) -> list[RealRunFigures]:
     """:func:`run_real_log` on each CARMEN log under ``data_dir``
-    (:func:`~mast.apps.bench.clutter.carmen_logs` gives each its seed)."""
+    (:func:`~mast.bench.clutter.carmen_logs` gives each its seed)."""
     return [
         run_real_log(name, data, beacons=beacons, seed=s, max_gap_s=max_gap_s, echo=echo)
         for name, data, s in carmen_logs(data_dir, logs, seed)

@@ -12,7 +12,7 @@ precisions: the one tracking rule of ``mast locate RUN`` and ``mast live``.
 
 Printed per drive and in all: scans, owed scans and how many were fixed, fixes
 tracked and from scratch, wrong fixes (more than 5 cm or 0.25° off *and* outside
-five of their own standard deviations, :func:`mast.apps.bench.robustness.is_wrong`),
+five of their own standard deviations, :func:`mast.bench.robustness.is_wrong`),
 each listed, and the share of fixes whose position lies outside its own 99 %
 error ellipse (expected 1 %).
 
@@ -37,7 +37,7 @@ from pathlib import Path
 
 import numpy as np
 
-from mast.apps.bench.rows import write_rows
+from mast.bench.rows import write_rows
 from mast.core.scan import Scan
 
 __all__ = ["LONG_SCANNERS", "DriveFigures", "as_sent", "run_longdrive"]
@@ -106,7 +106,7 @@ class DriveFigures:
 
 def _drive(job: tuple[str, float, int, int]) -> DriveFigures:
     """Simulate one drive, send it through its protocol and locate it in sequence."""
-    from mast.apps.bench.robustness import is_wrong
+    from mast.bench.robustness import is_wrong
     from mast.core.heap import QuietCollector
     from mast.pipeline.locator import LocatorConfig, SequenceLocator
     from mast.sim import scanner_model

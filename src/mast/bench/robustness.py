@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from mast.apps.bench.rows import write_rows
+from mast.bench.rows import write_rows
 from mast.core.pose import Pose2D
 from mast.pipeline.locator import Fix, LocatorConfig, locate
 from mast.sim import Scene, drift_scene, hard_scene

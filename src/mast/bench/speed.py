@@ -19,7 +19,7 @@ Six measurements, printed as tables (figures, not timed assertions):
    ``mast track BAG --out DIR``, each in a fresh process timed from before its
    first ``mast`` import to its exit, with that process's peak resident memory.
 3. A mine-wide survey: the mine-wide benchmark's owed scans
-   (:func:`mast.apps.bench.minewide.run_minewide`, 1081 beams) against their
+   (:func:`mast.bench.minewide.run_minewide`, 1081 beams) against their
    scene's own two or three beacons and against a survey of ``beacons`` (the
    same plus copies of their designs in other drifts, out of reach).
 4. Start-up: ``mast --help`` in a fresh process.
@@ -38,7 +38,7 @@ Six measurements, printed as tables (figures, not timed assertions):
    and the peer on the same scans'
    beacon returns from the pose of each fix's prior.
 
-Run: ``mast bench speed`` (or ``python -m mast.apps.bench.speed``).
+Run: ``mast bench speed`` (or ``python -m mast.bench.speed``).
 """
 
 from __future__ import annotations
@@ -65,8 +65,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from mast.apps.bench.accuracy import ACCURACY_CONFIGS
-from mast.apps.bench.minewide import MinewideSummary, run_minewide
+from mast.bench.accuracy import ACCURACY_CONFIGS
+from mast.bench.minewide import MinewideSummary, run_minewide
 from mast.core.beacon import Survey
 from mast.core.geometry import PanelSet
 from mast.core.heap import QuietCollector
@@ -168,7 +168,7 @@ OTHER_STAGE = "other"
 
 # A fresh process for a whole run: times itself from before its first mast import to
 # its end and writes its figures to a side file (standard output may be /dev/null).
-# Its peak memory comes from mast.apps._rss (standard library only), imported after
+# Its peak memory comes from mast.bench.rss (standard library only), imported after
 # the measured work.
 _CHILD = r"""
 import json, sys, time
@@ -180,13 +180,13 @@ try:
         from mast.io.bags import read_laserscans
         scans = sum(1 for _ in read_laserscans(args[0]))
     else:
-        from mast.apps.cli import main
+        from mast.program import main
         sys.argv = ["mast", *args]
         main()
 except SystemExit as stop:
     code = 0 if stop.code is None else stop.code if isinstance(stop.code, int) else 1
 seconds = time.perf_counter() - t0
-from mast.apps._rss import peak_rss_mb
+from mast.bench.rss import peak_rss_mb
 peak = peak_rss_mb()
 with open(side, "w") as fh:
     json.dump({"s": seconds, "peak_mb": peak, "code": code, "scans": scans}, fh)
@@ -532,7 +532,7 @@ def measure_tracked(count: int, *, seed: int = 0) -> TrackedSpeed:
     """Locate ``count`` scans of a 25 Hz drive in sequence, timed, each tracked fix's time
     split by the stages the locator clocks on it; the peer from each tracked fix's prior
     on the same scans."""
-    from mast.apps.bench.warmup import compile_all
+    from mast.cli.warmup import compile_all
 
     scene = drive_scene(seed, scans=count)
     sims = tuple(scene.iter_simulated())
@@ -639,7 +639,7 @@ def measure_runs(
 ) -> list[ProcessRun]:
     """Simulate a drive bag of each length; read it, ``mast locate`` it (``bag_scans``)
     and ``mast track`` it (``track_scans``), each in a fresh process."""
-    from mast.apps.bench.warmup import compile_all
+    from mast.cli.warmup import compile_all
 
     compile_all()  # the children load the compiled kernels, as an installed tool does
     runs: list[ProcessRun] = []
@@ -687,7 +687,7 @@ def measure_startup(runs: int = DEFAULT_STARTUP_RUNS) -> StartupSpeed:
     cmd = (
         [str(script), "--help"]
         if script.exists()
-        else [sys.executable, "-c", "from mast.apps.cli import main; main()", "--help"]
+        else [sys.executable, "-c", "from mast.program import main; main()", "--help"]
     )
     return StartupSpeed(
         tuple(_wall(cmd) for _ in range(runs)),

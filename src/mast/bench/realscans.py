@@ -21,8 +21,8 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from mast.apps.bench.clutter import cast_beacons
-from mast.apps.bench.robustness import is_wrong
+from mast.bench.clutter import cast_beacons
+from mast.bench.robustness import is_wrong
 from mast.core.beacon import Beacon, Survey
 from mast.core.pose import Pose2D
 from mast.core.scan import Scan

@@ -12,7 +12,7 @@ do not mix. Memory should stay within twice a normal scan's (1081 beams) at
 Noise-free by default, so that every stage runs (the scan is fixed); with
 ``range_sigma_m`` the scan carries Gaussian range noise.
 
-Run: ``python -m mast.apps.bench.dense`` (or ``run_dense`` from Python).
+Run: ``python -m mast.bench.dense`` (or ``run_dense`` from Python).
 """
 
 from __future__ import annotations
@@ -28,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from mast.apps._rss import peak_rss_mb
+from mast.bench.rss import peak_rss_mb
 
 __all__ = [
     "DEFAULT_BEAMS",
@@ -102,7 +102,7 @@ def write_dense_scan(
 def measure(scan_csv: Path, survey_csv: Path, *, timeout_s: float | None = None) -> DenseFigures:
     """Read and locate ``scan_csv`` in a fresh Python process; its times and peak memory."""
     done = subprocess.run(
-        [sys.executable, "-m", "mast.apps.bench.dense", "--child", str(scan_csv), str(survey_csv)],
+        [sys.executable, "-m", "mast.bench.dense", "--child", str(scan_csv), str(survey_csv)],
         capture_output=True,
         text=True,
         check=False,

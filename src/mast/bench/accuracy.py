@@ -7,7 +7,7 @@ percentile errors, RMS error over the bound for E, N and A (errors are
 normalised by each pose's own bound, then pooled), coverage of the reported
 95 % intervals (per coordinate and by the 95 % ellipse), and the reference
 variance against its chi-square distribution. Every draw also carries the
-evidence its pose's noise-free scan holds (:mod:`mast.apps.bench.detection`),
+evidence its pose's noise-free scan holds (:mod:`mast.bench.detection`),
 and the draws binned by it show where the fix rate falls off (``detection.csv``).
 
 The bound comes from the simulator's truth: every beam that really hit a
@@ -26,14 +26,14 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import stats
 
-from mast.apps.bench.detection import (
+from mast.bench.detection import (
     detection_bins,
     detection_evidence,
     detection_rows,
     detection_table,
 )
-from mast.apps.bench.robustness import is_wrong, pose_error
-from mast.apps.bench.rows import write_rows
+from mast.bench.robustness import is_wrong, pose_error
+from mast.bench.rows import write_rows
 from mast.pipeline.bounds import truth_bound
 from mast.pipeline.locator import LocatorConfig, locate
 from mast.sim import ScannerModel, Scene, Shot, random_scene, simulate_scan
@@ -108,7 +108,7 @@ def run_accuracy(
     ``accuracy_summary.csv`` and ``detection.csv`` into ``out_dir`` when given.
 
     Besides its errors, each draw's row holds its pose's evidence
-    (:class:`~mast.apps.bench.detection.DetectionEvidence`, from the noise-free
+    (:class:`~mast.bench.detection.DetectionEvidence`, from the noise-free
     scan): ``evidence_returns``, ``evidence_range_m`` and
     ``evidence_direction_sigma_deg``. After the configurations' summary lines,
     the detection tables (draws binned by that evidence) are echoed.

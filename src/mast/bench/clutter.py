@@ -30,7 +30,7 @@ office buildings with corrected (SLAM-optimised) laser poses. For each log:
    scan is owed a fix when two beacons each show two panels with at least 4
    returns seen at 15 degrees or more (:meth:`SimulatedScan.owes_fix`).
 4. *Fixes.* Every scan is located and compared with its corrected pose by
-   :func:`mast.apps.bench.robustness.is_wrong`. The beacons are consistent
+   :func:`mast.bench.robustness.is_wrong`. The beacons are consistent
    with that pose by construction (they are cast at it), so a wrong fix is
    the locator's, not the pose's; the clutter is real.
 """
@@ -47,8 +47,8 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from mast.apps.bench.robustness import is_wrong
-from mast.apps.bench.tracking import prior_pair
+from mast.bench.robustness import is_wrong
+from mast.bench.tracking import prior_pair
 from mast.core.beacon import Beacon, Survey
 from mast.core.geometry import first_hits
 from mast.core.pose import Pose2D
@@ -556,7 +556,7 @@ def run_clutter_log(
     priors : bool
         Also locate every scan with a good prior (within 0.5 m and 5 degrees
         of its true pose) and with a wrong one (1.5 m off), as
-        :func:`mast.apps.bench.tracking.prior_pair` draws them: tracking in
+        :func:`mast.bench.tracking.prior_pair` draws them: tracking in
         real clutter must fix as often and never follow a wrong prior.
     echo : callable
         Receives every wrong fix and the summary line.

@@ -191,10 +191,10 @@ def _large(folder: Path, points: int, echo: Callable[[str], None]) -> dict[str, 
     )
     echo(f"large cloud: {sim.points} points, {sim.cloud.stat().st_size / 1e6:.0f} MB LAZ")
     code = (
-        "import sys, time; t = time.perf_counter(); from mast.apps.cli import main\n"
+        "import sys, time; t = time.perf_counter(); from mast.program import main\n"
         "sys.argv = ['mast', 'georef', sys.argv[1], '-b', sys.argv[2], '--out', sys.argv[3]]\n"
         "try:\n    main()\nexcept SystemExit as e:\n    code = e.code\n"
-        "from mast.apps._rss import peak_rss_mb\n"
+        "from mast.bench.rss import peak_rss_mb\n"
         "print('FIGURES', time.perf_counter() - t, peak_rss_mb(), code, flush=True)\n"
     )
     done = subprocess.run(

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from mast.apps.bench.accuracy import ACCURACY_CONFIGS, owed_poses
+from mast.bench.accuracy import ACCURACY_CONFIGS, owed_poses
 from mast.core.beacon import Beacon, Survey
 from mast.core.heap import QuietCollector
 from mast.core.pose import Pose2D
@@ -224,7 +224,7 @@ def run_minewide(
     echo : callable
         Receives the one-line summary.
     """
-    from mast.apps.bench.warmup import compile_all
+    from mast.cli.warmup import compile_all
 
     t_start = time.perf_counter()
     compile_all()  # every kernel loaded, as mast live does: the first scan is no slower

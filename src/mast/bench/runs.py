@@ -9,7 +9,7 @@ errors of the placed scans against the truth, for fixed scans and for scans
 carried by odometry, with the share of 95 % intervals (per axis) that hold
 the truth.
 
-Run: ``mast bench run`` (or ``python -m mast.apps.bench.runs``).
+Run: ``mast bench run`` (or ``python -m mast.bench.runs``).
 """
 
 from __future__ import annotations
@@ -27,7 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
-from mast.apps._rss import peak_rss_mb
+from mast.bench.rss import peak_rss_mb
 
 __all__ = ["DEFAULT_SCANS", "RunFigures", "run_runs"]
 
@@ -91,7 +91,7 @@ def _child(mode: str, args: list[str]) -> None:
 
 def _measure(*args: str) -> dict[str, float]:
     done = subprocess.run(
-        [sys.executable, "-m", "mast.apps.bench.runs", "--child", *args],
+        [sys.executable, "-m", "mast.bench.runs", "--child", *args],
         capture_output=True,
         text=True,
         check=False,
@@ -127,7 +127,7 @@ def run_runs(
     echo: Callable[[str], object] = print,
 ) -> list[RunFigures]:
     """Simulate, read and track a drive of each length; print and return the figures."""
-    from mast.apps.bench.warmup import compile_all
+    from mast.cli.warmup import compile_all
     from mast.sim import drive_scene, write_scenario
 
     compile_all()  # the children load the compiled kernels, as an installed tool does

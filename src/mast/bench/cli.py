@@ -1,0 +1,379 @@
+"""``mast bench``: the benchmarks' commands, each printing figures (not timed tests)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from mast.cli.options import (
+    DesignSeedOption,
+    LogBeaconsOption,
+    RealDataOption,
+    cell_progress,
+)
+from mast.cli.root import (
+    CONTEXT,
+    app,
+)
+from mast.errors import InputError
+from mast.io.outputs import check_output_file, check_output_folder
+
+bench_app = typer.Typer(
+    help="Benchmarks that print figures (not timed tests).",
+    no_args_is_help=True,
+    context_settings=CONTEXT,
+)
+app.add_typer(bench_app, name="bench")
+
+
+@bench_app.command("accuracy")
+def bench_accuracy(
+    out: Annotated[Path | None, typer.Option("--out", help="Folder for the CSV files.")] = None,
+    poses: Annotated[
+        int, typer.Option("--poses", min=1, help="Owed poses per configuration.")
+    ] = 40,
+    draws: Annotated[int, typer.Option("--draws", min=1, help="Noise draws per pose.")] = 30,
+    seed: Annotated[int, typer.Option("--seed", help="First scene seed.")] = 0,
+) -> None:
+    """RMS error against the Cramer-Rao bound and coverage of the 95 % intervals,
+    for the four scanner configurations (270° at 0.5° and 0.25°, 190° at 1/6°, 360° at 0.2°)."""
+    from mast.bench.accuracy import run_accuracy
+
+    if out is not None:
+        check_output_folder(out)
+    run_accuracy(poses=poses, draws=draws, seed=seed, out_dir=out, echo=typer.echo)
+
+
+@bench_app.command("survey")
+def bench_survey(
+    beacons: Annotated[
+        int, typer.Option("--beacons", min=1, help="Beacons in the mine's survey.")
+    ] = 10_000,
+    range_max: Annotated[
+        float,
+        typer.Option(
+            "--range-max", min=0.1, help="Scanner's longest range, metres (sets the index's reach)."
+        ),
+    ] = 80.0,
+) -> None:
+    """A whole mine's survey read, checked and indexed: seconds, with a few designs and with
+    every beacon its own."""
+    from mast.bench.surveyload import run_survey_load
+
+    run_survey_load(beacons=beacons, range_max_m=range_max, echo=typer.echo)
+
+
+@bench_app.command("fuzz")
+def bench_fuzz(
+    inputs: Annotated[
+        int, typer.Option("--inputs", min=1, help="Damaged or crafted inputs to run.")
+    ] = 10_000,
+    seed: Annotated[int, typer.Option("--seed", help="Seed of the mutations.")] = 0,
+    keep: Annotated[
+        Path | None, typer.Option("--keep", help="Folder to copy failing cases into.")
+    ] = None,
+) -> None:
+    """Damaged and crafted files through every reader and output path, each run in a
+    child with memory, file-size and time limits: tracebacks, undocumented exit
+    statuses, memory and time beyond bounds, fixes that differ, half-written outputs."""
+    from mast.bench.fuzz import run_fuzz
+
+    if keep is not None:
+        check_output_folder(keep, option="--keep")
+    with cell_progress("fuzzing") as progress:
+        run_fuzz(inputs=inputs, seed=seed, echo=typer.echo, progress=progress, keep_failures=keep)
+
+
+@bench_app.command("robustness")
+def bench_robustness(
+    out: Annotated[Path | None, typer.Option("--out", help="Folder for the CSV files.")] = None,
+    hard: Annotated[
+        int, typer.Option("--hard", min=0, help="Hostile scenes (5 scans each).")
+    ] = 200,
+    drift: Annotated[
+        int, typer.Option("--drift", min=0, help="Many-beacon drifts (10 scans each).")
+    ] = 40,
+    seed: Annotated[int, typer.Option("--seed", help="First scene seed.")] = 0,
+) -> None:
+    """Fix rate where two beacons each show two clean panels, wrong fixes and no-fix
+    reasons, over hostile scenes and a many-beacon drift."""
+    from mast.bench.robustness import run_robustness
+
+    if out is not None:
+        check_output_folder(out)
+    run_robustness(hard_scenes=hard, drift_scenes=drift, seed=seed, out_dir=out, echo=typer.echo)
+
+
+@bench_app.command("field")
+def bench_field(
+    out: Annotated[Path | None, typer.Option("--out", help="Folder for the CSV files.")] = None,
+    scenes: Annotated[
+        int, typer.Option("--scenes", min=1, help="Scenes per family (noisy, hostile).")
+    ] = 200,
+    poses: Annotated[int, typer.Option("--poses", min=1, help="Shots per scene.")] = 4,
+    seed: Annotated[int, typer.Option("--seed", help="First scene seed.")] = 0,
+) -> None:
+    """Scenes drawn as widely as the field (beacons of any shape bolted askew onto rough
+    rock, five scanners from 8 to 20 mm, clutter shaped like panels, mixed pixels),
+    scored as the independent scenes are: owed scans fixed, wrong fixes, RMS/CRB and
+    95 % coverage."""
+    from mast.bench.field import run_field
+
+    if out is not None:
+        check_output_folder(out)
+    run_field(scenes=scenes, poses=poses, seed=seed, out_dir=out, echo=typer.echo)
+
+
+@bench_app.command("minewide")
+def bench_minewide(
+    poses: Annotated[int, typer.Option("--poses", min=1, help="Owed scans located.")] = 40,
+    copies: Annotated[
+        int, typer.Option("--copies", min=0, help="Copies of the designs surveyed elsewhere.")
+    ] = 184,
+    seed: Annotated[int, typer.Option("--seed", help="First scene seed.")] = 0,
+    distinct: Annotated[
+        bool,
+        typer.Option(
+            "--distinct", help="Each added beacon of a random design of its own, not a copy."
+        ),
+    ] = False,
+) -> None:
+    """The same scans against their local survey and a mine-wide one (the local beacons
+    plus copies of their designs in other drifts): same fixes, and the time it costs."""
+    from mast.bench.minewide import run_minewide
+
+    run_minewide(poses=poses, copies=copies, seed=seed, distinct=distinct, echo=typer.echo)
+
+
+@bench_app.command("tracking")
+def bench_tracking(
+    poses: Annotated[
+        int, typer.Option("--poses", min=1, help="Owed poses per configuration.")
+    ] = 40,
+    draws: Annotated[int, typer.Option("--draws", min=1, help="Noise draws per pose.")] = 3,
+    seed: Annotated[int, typer.Option("--seed", help="First scene seed.")] = 0,
+) -> None:
+    """Tracking: the accuracy benchmark's owed scans with a prior within 0.5 m and 5 degrees
+    (a fix owed on every one), and with a prior 1.5 m off (no fix owed)."""
+    from mast.bench.tracking import run_tracking
+
+    run_tracking(poses=poses, draws=draws, seed=seed, echo=typer.echo)
+
+
+@bench_app.command("live")
+def bench_live(
+    scans: Annotated[int, typer.Option("--scans", min=100, help="Scans per scanner.")] = 30_000,
+    seed: Annotated[int, typer.Option("--seed", help="Seed of the drive.")] = 0,
+    kind: Annotated[
+        list[str] | None, typer.Option("--kind", help="sick, hokuyo [default: both].")
+    ] = None,
+) -> None:
+    """Live: a simulated drive with beacon gaps served by the SICK (50 Hz) and Hokuyo (40 Hz)
+    emulators and located as it arrives (latency, drops, memory, CPU, owed scans fixed,
+    recovery from a wrong prior)."""
+    from mast.bench.live import run_live_bench
+
+    run_live_bench(scans=scans, seed=seed, kinds=tuple(kind or ("sick", "hokuyo")), echo=typer.echo)
+
+
+@bench_app.command("longdrive")
+def bench_longdrive(
+    scans: Annotated[int, typer.Option("--scans", min=100, help="Scans per drive.")] = 10_000,
+    seeds: Annotated[int, typer.Option("--seeds", min=1, help="Drives per scanner.")] = 5,
+    workers: Annotated[int, typer.Option("--workers", min=1, help="Processes.")] = 2,
+    out: Annotated[
+        Path | None, typer.Option("--out", help="Folder for every scan's outcome (CSV).")
+    ] = None,
+) -> None:
+    """Long drives: SICK (50 Hz) and Hokuyo (40 Hz) drives sent through their protocols and
+    located in sequence as `mast locate RUN` and `mast live` do (owed scans fixed, wrong
+    fixes listed, fixes outside their own 99 % ellipse, time a scan)."""
+    from mast.bench.longdrive import run_longdrive
+
+    if out is not None:
+        check_output_folder(out)
+    run_longdrive(scans=scans, seeds=seeds, workers=workers, out_dir=out, echo=typer.echo)
+
+
+@bench_app.command("georef")
+def bench_georef(
+    clouds: Annotated[int, typer.Option("--clouds", min=0, help="Clouds without drift.")] = 20,
+    drift_clouds: Annotated[
+        int, typer.Option("--drift-clouds", min=0, help="Clouds with 1 % drift.")
+    ] = 6,
+    large_points: Annotated[
+        int, typer.Option("--large-points", min=0, help="Points of the large cloud (0: none).")
+    ] = 50_000_000,
+    density: Annotated[
+        float, typer.Option("--density", min=100.0, help="Points per square metre.")
+    ] = 1000.0,
+    out: Annotated[Path | None, typer.Option("--out", help="CSV of every cloud.")] = None,
+) -> None:
+    """Simulated SLAM clouds through mast georef: beacons found, check misclosures, honest
+    bounds, drift corrected, and a large LAZ's time and memory."""
+    from mast.bench.georef import run_georef_bench
+
+    run_georef_bench(
+        clouds=clouds,
+        drift_clouds=drift_clouds,
+        large_points=large_points,
+        density=density,
+        out=out,
+        echo=typer.echo,
+    )
+
+
+@bench_app.command("dense")
+def bench_dense(
+    beams: Annotated[
+        list[int] | None,
+        typer.Argument(help="Beam counts to measure [default: 1081 10000 100000 1000000]."),
+    ] = None,
+    range_sigma: Annotated[
+        float, typer.Option("--range-sigma", help="Range noise of the scans, metres.")
+    ] = 0.0,
+) -> None:
+    """Dense scans: read and locate time and peak memory (each in a fresh process)
+    against the beams of a scan, from a normal scan to a million beams."""
+    from mast.bench.dense import DEFAULT_BEAMS, run_dense
+
+    run_dense(tuple(beams) if beams else DEFAULT_BEAMS, range_sigma_m=range_sigma, echo=typer.echo)
+
+
+@bench_app.command("run")
+def bench_run(
+    scans: Annotated[
+        list[int] | None,
+        typer.Argument(help="Drive lengths in scans [default: 1000 10000]."),
+    ] = None,
+    seed: Annotated[int, typer.Option("--seed", help="Seed of the drive.")] = 0,
+) -> None:
+    """Survey runs: simulated drives read and tracked (throughput, peak memory), the placed
+    scans against the truth (fixed and carried by odometry) and their 95 % coverage."""
+    from mast.bench.runs import DEFAULT_SCANS, run_runs
+
+    run_runs(tuple(scans) if scans else DEFAULT_SCANS, seed=seed, echo=typer.echo)
+
+
+@bench_app.command("speed")
+def bench_speed(
+    scans: Annotated[
+        int, typer.Option("--scans", min=0, help="Scans located at 1081 beams (0: skip).")
+    ] = 300,
+    scans_360: Annotated[
+        int, typer.Option("--scans-360", min=0, help="Scans located at 1800 beams (0: skip).")
+    ] = 100,
+    bag: Annotated[
+        list[int] | None,
+        typer.Option(
+            "--bag",
+            min=0,
+            help="Bag length read and located by mast locate, repeatable; 0 skips "
+            "[default: 1000 3000].",
+        ),
+    ] = None,
+    track: Annotated[
+        list[int] | None,
+        typer.Option(
+            "--track",
+            min=0,
+            help="Bag length tracked by mast track, repeatable; 0 skips [default: 1000].",
+        ),
+    ] = None,
+    minewide_poses: Annotated[
+        int, typer.Option("--minewide-poses", min=0, help="Mine-wide scans (0: skip).")
+    ] = 40,
+    beacons: Annotated[
+        int, typer.Option("--beacons", min=3, help="Beacons of the mine-wide survey.")
+    ] = 200,
+    startup_runs: Annotated[
+        int, typer.Option("--startup-runs", min=0, help="Fresh 'mast --help' runs (0: skip).")
+    ] = 5,
+    tracked_scans: Annotated[
+        int,
+        typer.Option("--tracked-scans", min=0, help="Drive scans located in sequence (0: skip)."),
+    ] = 600,
+    seed: Annotated[int, typer.Option("--seed", help="Seed of the drives and scenes.")] = 0,
+    out: Annotated[
+        Path | None, typer.Option("--out", help="Also write the figures to this text file.")
+    ] = None,
+) -> None:
+    """Speed: locate per scan and per stage (1081 and 1800 beams), bags read, located and
+    tracked (each in a fresh process: throughput, peak memory), a 200-beacon survey,
+    start-up, a peer (small_gicp point-to-plane ICP) on the same scans, and tracked
+    scans (a drive located in sequence) per stage beside the peer from their priors."""
+    from mast.bench.speed import DEFAULT_BAG_SCANS, DEFAULT_TRACK_SCANS, run_speed
+
+    if out is not None:
+        check_output_file(out, suffixes=(".txt", ".md", ".log"), option="--out")
+    run_speed(
+        scans=scans,
+        scans_360=scans_360,
+        bag_scans=tuple(n for n in bag if n) if bag else DEFAULT_BAG_SCANS,
+        track_scans=tuple(n for n in track if n) if track else DEFAULT_TRACK_SCANS,
+        minewide_poses=minewide_poses,
+        survey_beacons=beacons,
+        startup_runs=startup_runs,
+        tracked_scans=tracked_scans,
+        seed=seed,
+        out=out,
+        echo=typer.echo,
+    )
+
+
+@bench_app.command("clutter")
+def bench_clutter(
+    data: RealDataOption = Path("../shared/data"),
+    beacons: LogBeaconsOption = 29,
+    seed: DesignSeedOption = 0,
+    priors: Annotated[
+        bool,
+        typer.Option(
+            "--priors/--no-priors",
+            help="Also locate every scan with a good prior (0.5 m, 5 deg) and a wrong one.",
+        ),
+    ] = True,
+) -> None:
+    """Real clutter: beacons mounted on the real walls of CARMEN logs with corrected
+    poses, ray-cast into every scan; fixes where owed and wrong fixes per log, also
+    when tracking from a good or a wrong prior."""
+    from mast.bench.clutter import run_real_clutter
+
+    if not data.is_dir():
+        raise InputError("folder of real scans not found", path=data)
+    run_real_clutter(data, beacons=beacons, seed=seed, priors=priors, echo=typer.echo)
+
+
+@bench_app.command("reallog")
+def bench_reallog(
+    data: RealDataOption = Path("../shared/data"),
+    beacons: LogBeaconsOption = 29,
+    seed: DesignSeedOption = 0,
+    max_gap: Annotated[
+        float, typer.Option("--max-gap", min=0.0, help="As mast track's --max-gap, seconds.")
+    ] = 3.0,
+) -> None:
+    """Runs on real logs: beacons mounted on the real walls of CARMEN logs, the logs
+    tracked as mast track does; error and 95 % coverage of the scans placed by odometry."""
+    from mast.bench.reallog import run_real_logs
+
+    if not data.is_dir():
+        raise InputError("folder of real scans not found", path=data)
+    run_real_logs(data, beacons=beacons, seed=seed, max_gap_s=max_gap, echo=typer.echo)
+
+
+@bench_app.command("real")
+def bench_real(
+    data: RealDataOption = Path("../shared/data"),
+    every: Annotated[
+        int, typer.Option("--every", min=1, help="Insert beacons into every Nth scan.")
+    ] = 10,
+) -> None:
+    """Real scans by others: no fix without beacons; fixes with beacons ray-cast into them."""
+    from mast.bench.realscans import run_real_scans
+
+    if not data.is_dir():
+        raise InputError("folder of real scans not found", path=data)
+    run_real_scans(data, every=every, echo=typer.echo)

@@ -1,0 +1,150 @@
+"""``mast georef``: a SLAM point cloud georeferenced on the beacons it shows."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from mast.cli.options import (
+    BeaconsOption,
+    SurveySigmaOption,
+)
+from mast.cli.root import (
+    EXIT_NO_FIX,
+    app,
+)
+from mast.core.noise import DEFAULT_SURVEY_SIGMA_M
+from mast.errors import InputError
+from mast.io.outputs import check_output_folder
+
+
+@app.command()
+def georef(
+    cloud: Annotated[
+        Path, typer.Argument(metavar="CLOUD", help="Point cloud: LAS, LAZ, E57 or PLY, z up.")
+    ],
+    beacons: BeaconsOption,
+    out: Annotated[
+        Path, typer.Option("--out", help="Folder for the outputs (created if missing).")
+    ],
+    model: Annotated[
+        str,
+        typer.Option(
+            "--model",
+            help="4: easting, northing, elevation offset and rotation about the vertical "
+            "(levelled SLAM clouds); helmert7: a 3D similarity.",
+        ),
+    ] = "4",
+    check: Annotated[
+        str | None,
+        typer.Option(
+            "--check", help="Beacons kept out of the solution as independent checks: B7,B9."
+        ),
+    ] = None,
+    band: Annotated[
+        str | None,
+        typer.Option(
+            "--band",
+            help="Z0,Z1: search for panels between these heights of the cloud's frame "
+            "[default: from the floor and roof found along the drift].",
+        ),
+    ] = None,
+    trajectory: Annotated[
+        Path | None,
+        typer.Option(
+            "--trajectory",
+            help="The SLAM trajectory (TUM, or a mast track trajectory.csv), in the points' "
+            "time base: corrects the drift between beacons with a pose graph.",
+        ),
+    ] = None,
+    drift: Annotated[
+        float,
+        typer.Option(
+            "--drift",
+            min=1e-5,
+            max=0.5,
+            help="Drift model with --trajectory: standard deviation of the SLAM's motion "
+            "as a fraction of each step in position; the heading walks a tenth of it "
+            "per root metre.",
+        ),
+    ] = 0.01,
+    max_drift: Annotated[
+        float,
+        typer.Option(
+            "--max-drift",
+            min=0.0,
+            max=0.5,
+            help="Largest drift, as a fraction of the distance between beacons, that "
+            "matching allows for.",
+        ),
+    ] = 0.02,
+    time_field: Annotated[
+        str | None,
+        typer.Option("--time-field", help="Point attribute holding time [default: gps_time]."),
+    ] = None,
+    noise: Annotated[
+        float | None,
+        typer.Option(
+            "--noise", min=0.0, help="The cloud's noise, metres [default: estimated from it]."
+        ),
+    ] = None,
+    survey_sigma: SurveySigmaOption = None,
+) -> None:
+    """Put a 3D SLAM point cloud into the mine grid from the beacons it shows.
+
+    Writes into --out: georeferenced.laz (every attribute kept), transform.json
+    (docs/transform.schema.json), beacons_found.csv, report.txt, report.html and plan.png.
+
+    Exit status 0 georeferenced, 3 refused (too few beacons, an ambiguous match, beacons
+    that disagree: the reports and beacons_found.csv say why), 2 bad input, 4 an output
+    cannot be written.
+    """
+    from mast.apps.georef import parse_band, parse_checks, run_georef
+    from mast.cloud.detect import DetectConfig
+    from mast.cloud.georef import MODELS, GeorefConfig
+    from mast.cloud.match import MatchConfig
+
+    if model not in MODELS:
+        raise InputError(f"--model must be one of {', '.join(MODELS)}, got {model!r}")
+    if survey_sigma is not None and not (math.isfinite(survey_sigma) and survey_sigma >= 0):
+        raise InputError(f"--survey-sigma must be a non-negative number, got {survey_sigma}")
+    config = GeorefConfig(
+        model=model,
+        checks=parse_checks(check),
+        survey_sigma_m=DEFAULT_SURVEY_SIGMA_M if survey_sigma is None else survey_sigma,
+        detect=DetectConfig(band=parse_band(band), noise_m=noise),
+        match=MatchConfig(max_drift=max_drift),
+        drift=drift,
+    )
+    if trajectory is not None and not trajectory.is_file():
+        raise InputError("no such file", path=trajectory)
+    if trajectory is not None and model == "helmert7":
+        raise InputError(
+            "--trajectory corrects drift in plan and height with the 4-parameter model; "
+            "--model helmert7's tilt and scale would not be carried by the pose graph"
+        )
+    check_output_folder(out)
+    run = run_georef(cloud, beacons, out, config, trajectory_path=trajectory, time_field=time_field)
+    r = run.result
+    roles = [b.role for b in r.beacons]
+    typer.echo(
+        f"{cloud}: {r.cloud.count} points; beacons: {roles.count('control')} control, "
+        f"{roles.count('check')} check, {roles.count('excluded')} left out, "
+        f"{roles.count('not_found')} not found"
+    )
+    if r.refusal is not None:
+        typer.echo(f"mast: not georeferenced ({r.refusal.reason}): {r.refusal.detail}", err=True)
+        typer.echo(f"report in {run.outputs.report_txt}", err=True)
+        raise typer.Exit(EXIT_NO_FIX)
+    sol = r.solution
+    assert sol is not None
+    t = sol.transformation
+    typer.echo(
+        f"transformation: rotation {t.rotation_deg:.6f} deg, reference variance "
+        f"{sol.reference_variance:.3f} ({sol.chi2_test}); files in {out}"
+    )
+    for c in r.checks:
+        typer.echo(f"check {c.beacon}: {1000 * c.horizontal_m:.1f} mm horizontal")

@@ -1,0 +1,133 @@
+"""``mast locate``: each scan's fix (or why there is none) as a survey report or JSON."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from mast.cli.options import (
+    AngleSigmaOption,
+    AzimuthToleranceOption,
+    BeaconsOption,
+    NearOption,
+    OutputFormat,
+    RadiusOption,
+    RangeMaxOption,
+    RangeMinOption,
+    RangeSigmaOption,
+    ScannerOption,
+    SurveySigmaOption,
+    TopicOption,
+    load_scans,
+    parse_near,
+    precisions,
+)
+from mast.cli.root import (
+    EXIT_NO_FIX,
+    app,
+)
+from mast.core.heap import QuietCollector
+from mast.errors import InputError
+from mast.io.outputs import PLOT_SUFFIXES, check_output_file
+
+
+@app.command()
+def locate(
+    scan_paths: Annotated[
+        list[Path],
+        typer.Argument(
+            metavar="SCAN...",
+            help="Scan CSVs, ROS 1 bags or ROS 2 bag folders; '-' reads a scan CSV from "
+            "standard input.",
+        ),
+    ],
+    beacons: BeaconsOption,
+    range_sigma: RangeSigmaOption = None,
+    angle_sigma: AngleSigmaOption = None,
+    scanner: ScannerOption = None,
+    fmt: Annotated[
+        OutputFormat,
+        typer.Option("--format", help="text report, or JSON Lines (one record per scan)."),
+    ] = OutputFormat.text,
+    plot: Annotated[
+        Path | None,
+        typer.Option(
+            "--plot",
+            help="Write the paper's Figure 3 for the scan (.png, .pdf, .svg ...); numbered "
+            "per scan when there are several. A missing folder is created.",
+        ),
+    ] = None,
+    topic: TopicOption = None,
+    range_min: RangeMinOption = None,
+    range_max: RangeMaxOption = None,
+    near: NearOption = None,
+    radius: RadiusOption = 10.0,
+    azimuth_tolerance: AzimuthToleranceOption = 30.0,
+    survey_sigma: SurveySigmaOption = None,
+) -> None:
+    """Fix position and azimuth from one scan, several, or every scan of a bag.
+
+    Exit status 0 when a scan is fixed (with several scans or a bag: at least
+    one), 3 when none is, 2 for bad input, 4 when an output cannot be written.
+    """
+    import json
+
+    from mast.io import read_survey
+    from mast.io.bags import laserscan_topic
+    from mast.pipeline.locator import SequenceLocator
+    from mast.report.record import ReportInputs, fix_record, fix_text
+
+    cfg, defaults = precisions(range_sigma, angle_sigma, scanner, survey_sigma)
+    if near is not None:
+        cfg = replace(cfg, prior=parse_near(near, radius, azimuth_tolerance))
+    if scan_paths.count(Path("-")) > 1:
+        raise InputError("standard input ('-') can be read only once")
+    if plot is not None:
+        check_output_file(plot, suffixes=PLOT_SUFFIXES, inputs=[*scan_paths, beacons])
+    survey = read_survey(beacons)
+    numbered = len(scan_paths) > 1
+    fixed = located = 0
+    # What is alive once a scan is located is frozen, out of the collector's full
+    # passes over it (mast.core.heap): they were a run's slowest scans.
+    with QuietCollector() as heap:
+        for scan_path in scan_paths:
+            scans, many = load_scans(
+                scan_path, topic=topic, range_min=range_min, range_max=range_max
+            )
+            numbered = numbered or many
+            inputs = ReportInputs(
+                scan_file="<stdin>" if scan_path == Path("-") else str(scan_path),
+                survey_file=str(beacons),
+                scanner=scanner,
+                topic=laserscan_topic(scan_path, topic) if many else None,
+                defaults=frozenset(defaults),
+            )
+            source = inputs.scan_file or str(scan_path)
+            tracker = SequenceLocator(survey, config=cfg)
+            for i, scan in enumerate(heap.each(scans)):
+                step = tracker.step(scan)
+                fix = step.fix
+                fixed += fix.ok
+                label = f"{source}#{i}" if many else source
+                if fmt is OutputFormat.json:
+                    record = fix_record(
+                        fix, source=source, index=i if many else None, scan=scan, inputs=inputs
+                    )
+                    if many:
+                        record.update(tracking=step.tracked, track_lost=step.track_lost)
+                    typer.echo(json.dumps(record))
+                else:
+                    if located:
+                        typer.echo("")
+                    typer.echo(fix_text(fix, source=label, scan=scan, inputs=inputs))
+                if plot is not None:
+                    from mast.apps.plot import plot_fix
+
+                    target = plot.with_name(f"{plot.stem}_{located:04d}{plot.suffix}")
+                    plot_fix(scan, survey, fix, target if numbered else plot, title=label)
+                located += 1
+    if fixed == 0:
+        raise typer.Exit(EXIT_NO_FIX)

@@ -1,0 +1,298 @@
+"""What the commands share: option types, the scan formats, reading the scans given,
+the precisions and a prior from the options, progress lines and signals."""
+
+from __future__ import annotations
+
+import itertools
+import math
+import signal
+import sys
+import tempfile
+import threading
+import time
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from dataclasses import replace
+from enum import StrEnum
+from pathlib import Path
+from typing import TYPE_CHECKING, Annotated
+
+import typer
+
+from mast.cli.root import (
+    MAX_PLAUSIBLE_ANGLE_SIGMA_RAD,
+    MAX_PLAUSIBLE_SIGMA_M,
+)
+from mast.core.noise import DEFAULT_ANGLE_SIGMA_RAD, DEFAULT_RANGE_SIGMA_M, DEFAULT_SURVEY_SIGMA_M
+from mast.core.scan import Scan
+from mast.errors import InputError
+
+if TYPE_CHECKING:
+    from mast.pipeline.locator import LocatorConfig
+    from mast.pipeline.tracking import Prior
+
+
+class ScanFormat(StrEnum):
+    csv = "csv"
+    bag = "bag"
+    ros2 = "ros2"
+    mcap = "mcap"
+
+
+class OutputFormat(StrEnum):
+    text = "text"
+    json = "json"
+
+
+def load_scans(
+    path: Path, *, topic: str | None, range_min: float | None, range_max: float | None
+) -> tuple[Iterator[Scan], bool]:
+    """The scans in a file: one for a CSV, the LaserScans of a topic for a bag, read one
+    at a time as they are located (a bag's scans are never all in memory at once)."""
+    from mast.io import read_laserscans, read_scan_csv
+    from mast.io.bags import bag_kind
+
+    if path == Path("-"):
+        return iter([read_stdin_scan(range_min, range_max)]), False
+    if not path.exists():
+        raise InputError("scan file not found", path=path)
+    if path.is_file() and path.suffix.lower() in {".csv", ".txt"}:
+        scan = read_scan_csv(path, range_min_m=range_min or 0.0, range_max_m=range_max or math.inf)
+        return iter([scan]), False
+    bag_kind(path)  # a clear error for anything that is neither
+    scans = (s.with_range_limits(range_min, range_max) for s in read_laserscans(path, topic=topic))
+    first = next(scans, None)
+    if first is None:
+        raise InputError("bag holds no LaserScan message on that topic", path=path)
+    return itertools.chain([first], scans), True
+
+
+def read_stdin_scan(range_min: float | None, range_max: float | None) -> Scan:
+    """A scan CSV from standard input, spooled to a temporary file and named ``<stdin>``."""
+    from mast.io import read_scan_csv
+    from mast.limits import read_stream
+
+    with tempfile.TemporaryDirectory(prefix="mast-stdin-") as tmp:
+        spool = Path(tmp) / "stdin.csv"
+        data = read_stream(sys.stdin.buffer, "<stdin>")
+        spool.write_bytes(data)
+        try:
+            return read_scan_csv(
+                spool, range_min_m=range_min or 0.0, range_max_m=range_max or math.inf
+            )
+        except InputError as err:
+            raise InputError(err.problem, path="<stdin>", line=err.line) from None
+
+
+def parse_near(text: str, radius: float, az_tol_deg: float) -> Prior:
+    from mast.core.pose import Pose2D, parse_azimuth
+    from mast.pipeline.tracking import Prior
+
+    parts = [p.strip() for p in text.split(",")]
+    if len(parts) not in (2, 3):
+        raise InputError(f"--near {text!r}: expected E,N or E,N,AZ")
+    try:
+        e, n = float(parts[0]), float(parts[1])
+    except ValueError:
+        raise InputError(f"--near {text!r}: easting and northing must be numbers") from None
+    if not (math.isfinite(e) and math.isfinite(n)):
+        raise InputError(f"--near {text!r}: easting and northing must be finite")
+    if not (math.isfinite(radius) and radius > 0):
+        raise InputError("--radius must be a positive number")
+    if not (math.isfinite(az_tol_deg) and 0 < az_tol_deg <= 180):
+        raise InputError("--azimuth-tolerance must be a number of degrees in (0, 180]")
+    az = parse_azimuth(parts[2]) if len(parts) == 3 else 0.0
+    return Prior(
+        Pose2D.from_degrees(e, n, az),
+        radius,
+        math.radians(az_tol_deg) if len(parts) == 3 else None,
+    )
+
+
+def check_range_limits(range_min: float | None, range_max: float | None) -> None:
+    for name, value in (("--range-min", range_min), ("--range-max", range_max)):
+        if value is not None and not (math.isfinite(value) and value >= 0):
+            raise InputError(f"{name} must be a non-negative number, got {value}")
+
+
+def default_text(value: float) -> str:
+    return f"{value:g}"
+
+
+BeaconsOption = Annotated[Path, typer.Option("--beacons", "-b", help="Beacon survey CSV.")]
+TopicOption = Annotated[str | None, typer.Option("--topic", help="LaserScan topic in a bag.")]
+RealDataOption = Annotated[
+    Path, typer.Option("--data", help="Folder of real scans (../shared/data).")
+]
+LogBeaconsOption = Annotated[int, typer.Option("--beacons", min=2, help="Beacons mounted per log.")]
+DesignSeedOption = Annotated[int, typer.Option("--seed", help="Seed of the designs and the noise.")]
+RangeSigmaOption = Annotated[
+    float | None,
+    typer.Option(
+        "--range-sigma",
+        help="Range standard deviation, metres "
+        f"[default: {default_text(DEFAULT_RANGE_SIGMA_M)}, or the --scanner's].",
+    ),
+]
+AngleSigmaOption = Annotated[
+    float | None,
+    typer.Option(
+        "--angle-sigma",
+        help="Beam angle standard deviation, radians "
+        f"[default: {default_text(DEFAULT_ANGLE_SIGMA_RAD)}, or the --scanner's].",
+    ),
+]
+ScannerOption = Annotated[
+    str | None,
+    typer.Option(
+        "--scanner", help="Named scanner model giving the default sigmas (see mast scanners)."
+    ),
+]
+RangeMinOption = Annotated[
+    float | None,
+    typer.Option("--range-min", help="Shortest valid range, metres [default: the bag's, or 0]."),
+]
+RangeMaxOption = Annotated[
+    float | None,
+    typer.Option("--range-max", help="Longest valid range, metres [default: the bag's, or none]."),
+]
+SurveySigmaOption = Annotated[
+    float | None,
+    typer.Option(
+        "--survey-sigma",
+        help="Standard deviation of a surveyed edge coordinate, metres "
+        f"[default: {default_text(DEFAULT_SURVEY_SIGMA_M)}].",
+    ),
+]
+
+NearOption = Annotated[
+    str | None,
+    typer.Option(
+        "--near",
+        help="Prior position E,N[,AZ] (azimuth in degrees or D°M'S): narrows the search.",
+    ),
+]
+RadiusOption = Annotated[
+    float, typer.Option("--radius", help="Radius of the --near prior, metres.")
+]
+AzimuthToleranceOption = Annotated[
+    float,
+    typer.Option("--azimuth-tolerance", help="With an azimuth in --near: degrees allowed."),
+]
+
+
+@contextmanager
+def run_progress(label: str) -> Iterator[Callable[[int, int], None] | None]:
+    """A progress line on a terminal (scans, fixes, scans per second); nothing otherwise."""
+    if not sys.stderr.isatty():
+        yield None
+        return
+    from rich.progress import Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
+
+    with Progress(
+        SpinnerColumn(),
+        TextColumn("{task.description}"),
+        TextColumn("{task.completed} scans, {task.fields[fixes]} fixed, {task.fields[rate]}"),
+        TimeElapsedColumn(),
+        transient=True,
+    ) as bar:
+        task = bar.add_task(label, total=None, fixes=0, rate="")
+        start = time.perf_counter()
+
+        def update(scans: int, fixes: int) -> None:
+            rate = scans / max(time.perf_counter() - start, 1e-9)
+            bar.update(task, completed=scans, fixes=fixes, rate=f"{rate:.0f} scans/s")
+
+        yield update
+
+
+@contextmanager
+def signals_as_flag() -> Iterator[tuple[threading.Event, list[int]]]:
+    """Ctrl-C and SIGTERM (a vehicle's service manager) only set a flag while inside:
+    the run checks it between two scans, so a signal never lands inside a compiled
+    kernel or a half-written file. Yields the flag and the signals caught; the
+    handlers before it are restored on leaving."""
+    interrupt = threading.Event()
+    caught: list[int] = []
+
+    def on_signal(signum: int, _frame: object) -> None:
+        caught.append(signum)
+        interrupt.set()
+
+    before = {
+        signum: signal.signal(signum, on_signal) for signum in (signal.SIGINT, signal.SIGTERM)
+    }
+    try:
+        yield interrupt, caught
+    finally:
+        for signum, handler in before.items():
+            signal.signal(signum, handler)
+
+
+def precisions(
+    range_sigma: float | None,
+    angle_sigma: float | None,
+    scanner: str | None,
+    survey_sigma: float | None,
+) -> tuple[LocatorConfig, set[str]]:
+    """The locator's precisions from the options, and which were left at their defaults.
+
+    A sigma no scanner or survey has gets a warning naming its unit.
+    """
+    from mast.pipeline.locator import LocatorConfig
+    from mast.sim import scanner_model
+
+    cfg = LocatorConfig()
+    defaults = {"range_sigma_m", "angle_sigma_rad", "survey_sigma_m"}
+    if scanner is not None:
+        noise = scanner_model(scanner).noise()
+        cfg = replace(cfg, range_sigma_m=noise.range_sigma_m, angle_sigma_rad=noise.angle_sigma_rad)
+        defaults -= {"range_sigma_m", "angle_sigma_rad"}
+    checks = (
+        ("--range-sigma", range_sigma),
+        ("--angle-sigma", angle_sigma),
+        ("--survey-sigma", survey_sigma),
+    )
+    for name, value in checks:
+        if value is not None and not (math.isfinite(value) and value >= 0):
+            raise InputError(f"{name} must be a non-negative number, got {value}")
+    for name, value, limit, unit, example in (
+        ("--range-sigma", range_sigma, MAX_PLAUSIBLE_SIGMA_M, "metres", "10 mm is 0.01"),
+        ("--survey-sigma", survey_sigma, MAX_PLAUSIBLE_SIGMA_M, "metres", "3 mm is 0.003"),
+        ("--angle-sigma", angle_sigma, MAX_PLAUSIBLE_ANGLE_SIGMA_RAD, "radians", "0.1° is 0.0017"),
+    ):
+        if value is not None and value > limit:
+            typer.echo(
+                f"mast: warning: {name} {value:g} {unit} is more than any laser scanner or "
+                f"survey has; it is in {unit} ({example})",
+                err=True,
+            )
+    if range_sigma is not None:
+        if range_sigma <= 0:
+            raise InputError("--range-sigma must be positive")
+        cfg = replace(cfg, range_sigma_m=range_sigma)
+        defaults.discard("range_sigma_m")
+    if angle_sigma is not None:
+        cfg = replace(cfg, angle_sigma_rad=angle_sigma)
+        defaults.discard("angle_sigma_rad")
+    if survey_sigma is not None:
+        cfg = replace(cfg, survey_sigma_m=survey_sigma)
+        defaults.discard("survey_sigma_m")
+    return cfg, defaults
+
+
+@contextmanager
+def cell_progress(label: str) -> Iterator[Callable[[int, int], None] | None]:
+    """A progress bar over cells on a terminal; nothing otherwise."""
+    if not sys.stderr.isatty():
+        yield None
+        return
+    from rich.progress import Progress
+
+    with Progress(transient=True) as bar:
+        task = bar.add_task(label, total=None)
+
+        def update(done: int, total: int) -> None:
+            bar.update(task, completed=done, total=total)
+
+        yield update

@@ -1,0 +1,172 @@
+"""``mast track``: a survey run (or a folder of runs) placed scan by scan: trajectory, map and
+report."""
+
+from __future__ import annotations
+
+import signal
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from mast.cli.options import (
+    AngleSigmaOption,
+    BeaconsOption,
+    RangeMaxOption,
+    RangeMinOption,
+    RangeSigmaOption,
+    ScannerOption,
+    SurveySigmaOption,
+    TopicOption,
+    check_range_limits,
+    precisions,
+    run_progress,
+    signals_as_flag,
+)
+from mast.cli.root import (
+    EXIT_BAD_INPUT,
+    EXIT_NO_FIX,
+    app,
+)
+from mast.errors import InputError, shorten
+from mast.io.outputs import check_output_folder
+
+
+@app.command()
+def track(
+    runs: Annotated[
+        list[Path],
+        typer.Argument(
+            metavar="RUN...",
+            help="ROS 1 bags, ROS 2 bag folders (sqlite3, MCAP), or folders holding them.",
+        ),
+    ],
+    beacons: BeaconsOption,
+    out: Annotated[
+        Path, typer.Option("--out", help="Folder for the run's files (created if missing).")
+    ],
+    topic: TopicOption = None,
+    range_sigma: RangeSigmaOption = None,
+    angle_sigma: AngleSigmaOption = None,
+    scanner: ScannerOption = None,
+    survey_sigma: SurveySigmaOption = None,
+    range_min: RangeMinOption = None,
+    range_max: RangeMaxOption = None,
+    max_gap: Annotated[
+        float,
+        typer.Option(
+            "--max-gap",
+            min=0.0,
+            help="Scans further apart in time, seconds, are not chained by odometry "
+            "(a log kept a scan every metre or two: give its spacing; each such step is "
+            "then matched over all the vehicle could have done, and slower).",
+        ),
+    ] = 0.5,
+    scheduler: Annotated[
+        str | None,
+        typer.Option(
+            "--scheduler",
+            help="With several runs: address of a Dask scheduler to run them on "
+            "[default: a local cluster].",
+        ),
+    ] = None,
+    workers: Annotated[
+        int | None,
+        typer.Option("--workers", min=1, help="Processes of the local cluster [default: cores]."),
+    ] = None,
+) -> None:
+    """Place every scan of a run in the mine grid: fixes from beacons, odometry between
+    them, smoothed in a pose graph; writes fixes.jsonl, trajectory.csv and .tum, map.las,
+    map.dxf and report.html into --out.
+
+    Several runs (or a folder of them) are tracked in parallel on Dask, one run per
+    task, each into --out/<run name>/, with --out/index.csv listing them.
+
+    Exit status 0 when scans were placed (in every run), 3 when none could be, 2 for bad
+    input, 4 when an output cannot be written, 130 when interrupted (the files then hold
+    the scans read until then).
+    """
+    from mast.io import read_survey
+    from mast.io.bags import bag_kind, laserscan_topic
+    from mast.report.record import ReportInputs
+    from mast.runs.batch import expand_runs, track_runs
+    from mast.runs.run import track_run
+    from mast.runs.track import TrackConfig
+
+    cfg, defaults = precisions(range_sigma, angle_sigma, scanner, survey_sigma)
+    check_range_limits(range_min, range_max)
+    for given in runs:
+        if not given.exists():
+            raise InputError("run not found", path=given)
+    found = expand_runs(runs)
+    for r in found:
+        bag_kind(r)
+    check_output_folder(out)
+    survey = read_survey(beacons)
+    if len(found) > 1 or scheduler is not None:
+        outcomes = track_runs(
+            found,
+            beacons,
+            out,
+            options={
+                "config": TrackConfig(locator=cfg, max_gap_s=max_gap),
+                "topic": topic,
+                "inputs": ReportInputs(
+                    survey_file=str(beacons), scanner=scanner, defaults=frozenset(defaults)
+                ),
+            },
+            scheduler=scheduler,
+            workers=workers,
+            echo=typer.echo,
+        )
+        typer.echo(f"{len(outcomes)} runs; index in {out / 'index.csv'}")
+        if any(o.status == "error" for o in outcomes):
+            raise typer.Exit(EXIT_BAD_INPUT)
+        if not all(o.placed for o in outcomes):
+            raise typer.Exit(EXIT_NO_FIX)
+        return
+    (run,) = found
+    inputs = ReportInputs(
+        scan_file=str(run),
+        survey_file=str(beacons),
+        scanner=scanner,
+        topic=laserscan_topic(run, topic),
+        defaults=frozenset(defaults),
+    )
+
+    def warn(text: str) -> None:
+        typer.echo(f"mast: warning: {shorten(text, 80)}", err=True)
+
+    with signals_as_flag() as (interrupt, caught), run_progress(f"tracking {run.name}") as progress:
+        result = track_run(
+            run,
+            survey,
+            out,
+            config=TrackConfig(locator=cfg, max_gap_s=max_gap),
+            topic=topic,
+            inputs=inputs,
+            range_limits=(range_min, range_max),
+            warn=warn,
+            progress=progress,
+            interrupt=interrupt,
+        )
+    s = result.summary
+    typer.echo(
+        f"{run}: {s.scans} scans, {s.fixes} fixed, {s.placed} placed"
+        + (f", {s.skipped} messages skipped" if s.skipped else "")
+        + (f", {s.coasted} carried at constant velocity" if s.coasted else "")
+        + f" in {s.elapsed_s:.1f} s ({s.scans / max(s.elapsed_s, 1e-9):.0f} scans/s); "
+        f"files in {out}"
+    )
+    if s.gaps > s.scans // 2:
+        typer.echo(
+            f"mast: hint: {s.gaps} of {s.scans} scans came more than {max_gap:g} s after the "
+            "scan before and were not chained by odometry; if the log keeps a scan only "
+            "every metre or so, give --max-gap its spacing",
+            err=True,
+        )
+    if result.interrupted:
+        typer.echo("mast: interrupted; the files hold the scans read until then", err=True)
+        raise typer.Exit(128 + (caught[0] if caught else signal.SIGINT))
+    if s.placed == 0:
+        raise typer.Exit(EXIT_NO_FIX)
