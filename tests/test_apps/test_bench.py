@@ -9,11 +9,12 @@ from pathlib import Path
 import numpy as np
 from numpy.testing import assert_allclose
 
-from mast.bench.accuracy import ACCURACY_CONFIGS, OWED_MIN_POINTS, owed_poses, run_accuracy
+from mast.bench.accuracy import ACCURACY_CONFIGS, owed_poses, run_accuracy
 from mast.bench.detection import detection_bins, detection_evidence, detection_table
 from mast.bench.minewide import MinewideSummary, minewide_survey, run_minewide
 from mast.pipeline.locator import LocatorConfig, locate
 from mast.sim import random_scene, simulate_scan
+from mast.sim.owed import OWED
 
 MODEL = ACCURACY_CONFIGS[0]  # 270deg-0.5deg-12mm
 
@@ -26,7 +27,7 @@ def test_accuracy_rows_carry_detection_evidence_and_table(tmp_path: Path) -> Non
     assert len(rows) == 6
     for r in rows:
         # every pose is owed a fix, so both beacons show >= 3 returns on two panels
-        assert int(r["evidence_returns"]) >= OWED_MIN_POINTS
+        assert int(r["evidence_returns"]) >= OWED.min_points
         assert 0.0 < float(r["evidence_range_m"]) <= MODEL.range_max_m
         assert 0.0 < float(r["evidence_direction_sigma_deg"]) < 90.0
     table = lines[-1]
@@ -49,9 +50,9 @@ def test_evidence_returns_is_what_the_owed_rule_thresholds() -> None:
         for shot in scene.shots:
             truth = simulate_scan(scene.world, shot.pose, exact)
             ev = detection_evidence(truth, scene.survey, range_sigma_m=MODEL.range_sigma_m)
-            is_owed = truth.owes_fix(min_points=OWED_MIN_POINTS)
+            is_owed = truth.owes_fix(OWED)
             owed += is_owed
-            assert (ev.returns >= OWED_MIN_POINTS) == is_owed
+            assert (ev.returns >= OWED.min_points) == is_owed
             if ev.returns:
                 assert len(ev.beacons) == 2
                 assert math.isfinite(ev.range_m)

@@ -10,6 +10,7 @@ from mast.core.pose import Pose2D
 from mast.sim import simulate_scan
 from mast.sim.design import BeaconDesign
 from mast.sim.hard import FIELD_SCANNERS, field_scene
+from mast.sim.owed import OWED_FIELD
 
 
 def test_field_scenes_are_seeded_and_as_wide_as_the_field() -> None:
@@ -46,7 +47,7 @@ def test_field_scans_owe_fixes_and_hostile_ones_hold_mixed_pixels(hostile: bool)
     for i in range(8):
         scene = field_scene(i // 4, i % 4, hostile=hostile)
         for sim in scene.simulate_all():
-            owed += sim.owes_fix(min_points=4, min_incidence_deg=0.0)
+            owed += sim.owes_fix(OWED_FIELD)
             mixed += int(np.sum((sim.surface_index < 0) & sim.scan.valid))
     assert owed >= 6
     assert (mixed > 0) == hostile

@@ -31,6 +31,7 @@ from matplotlib.ticker import MaxNLocator, ScalarFormatter
 from numpy.typing import NDArray
 
 from mast.core.beacon import Survey
+from mast.core.frames import yaw_of_azimuth
 from mast.core.geometry import PanelSet
 from mast.core.pose import Pose2D, format_dms
 from mast.core.scan import Scan
@@ -526,7 +527,7 @@ def _mine_panel(
         _scanner_marker(
             ax,
             here,
-            0.5 * math.pi - pose.azimuth,
+            yaw_of_azimuth(pose.azimuth),
             0.12 * span,
             f"Az {format_dms(pose.azimuth_deg, decimals=0)}",
         )
@@ -537,7 +538,7 @@ def _mine_panel(
                     (float(here[0]), float(here[1])),
                     2 * ell.semi_major_m * ellipse_scale,
                     2 * ell.semi_minor_m * ellipse_scale,
-                    angle=90.0 - math.degrees(ell.azimuth_rad),
+                    angle=math.degrees(yaw_of_azimuth(ell.azimuth_rad)),
                     fill=False,
                     color=_SCANNER,
                     lw=1.5,

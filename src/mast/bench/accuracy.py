@@ -37,8 +37,9 @@ from mast.bench.rows import write_rows
 from mast.pipeline.bounds import truth_bound
 from mast.pipeline.locator import LocatorConfig, locate
 from mast.sim import ScannerModel, Scene, Shot, random_scene, simulate_scan
+from mast.sim.owed import OWED
 
-__all__ = ["ACCURACY_CONFIGS", "OWED_MIN_POINTS", "AccuracySummary", "owed_poses", "run_accuracy"]
+__all__ = ["ACCURACY_CONFIGS", "AccuracySummary", "owed_poses", "run_accuracy"]
 
 #: The issue's four scanner configurations.
 ACCURACY_CONFIGS: tuple[ScannerModel, ...] = (
@@ -74,7 +75,6 @@ class AccuracySummary:
 
 
 #: Returns a panel must show, noise-free, to count towards a pose being owed a fix.
-OWED_MIN_POINTS = 3
 
 
 def owed_poses(model: ScannerModel, count: int, seed0: int) -> list[tuple[Scene, Shot]]:
@@ -87,7 +87,7 @@ def owed_poses(model: ScannerModel, count: int, seed0: int) -> list[tuple[Scene,
             scene = random_scene(seed, idx)
             for shot in scene.shots:
                 sim = simulate_scan(scene.world, shot.pose, exact)
-                if sim.owes_fix(min_points=OWED_MIN_POINTS):
+                if sim.owes_fix(OWED):
                     out.append((scene, replace(shot, scanner=model)))
                     if len(out) == count:
                         return out

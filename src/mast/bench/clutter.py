@@ -28,7 +28,7 @@ office buildings with corrected (SLAM-optimised) laser poses. For each log:
    fhw log's ranges come in 5 cm steps and its own noise estimate is some
    30 mm). The rest of the scan, real clutter included, is untouched. A
    scan is owed a fix when two beacons each show two panels with at least 4
-   returns seen at 15 degrees or more (:meth:`SimulatedScan.owes_fix`).
+   returns seen at 15 degrees or more (:data:`mast.sim.owed.OWED_REAL_WALLS`).
 4. *Fixes.* Every scan is located and compared with its corrected pose by
    :func:`mast.bench.robustness.is_wrong`. The beacons are consistent
    with that pose by construction (they are cast at it), so a wrong fix is
@@ -58,6 +58,7 @@ from mast.io.carmen_log import read_carmen_log
 from mast.pipeline.locator import LocatorConfig, locate
 from mast.pipeline.segmentation import Segmentation, fit_line, segment_scan
 from mast.sim.design import BeaconDesign, random_design
+from mast.sim.owed import OWED_REAL_WALLS
 from mast.sim.scanner import ScannerModel, SimulatedScan
 from mast.sim.world import Surface
 
@@ -120,9 +121,6 @@ FACE_ON_INCIDENCE_RAD = math.radians(15.0)
 USEFUL_PANEL_M = 0.4
 #: ... at least this many beams face-on.
 USEFUL_BEAMS = 4
-#: The owed-a-fix rule: returns per panel and incidence (SimulatedScan.owes_fix).
-OWED_MIN_POINTS = 4
-OWED_MIN_INCIDENCE_DEG = 15.0
 #: Range noise added to panel returns, metres (the locator is told 10 mm).
 PANEL_NOISE_M = 0.01
 
@@ -583,7 +581,7 @@ def run_clutter_log(
             continue
         sigma = panel_noise_m if panel_noise_m is not None else segs[i].noise_m
         sim = cast_beacons(scan, pose, survey, rng, noise_m=sigma, scanner=model)
-        owed = sim.owes_fix(min_points=OWED_MIN_POINTS, min_incidence_deg=OWED_MIN_INCIDENCE_DEG)
+        owed = sim.owes_fix(OWED_REAL_WALLS)
         fix = locate(sim.scan, survey, config=cfg)
         wrong = is_wrong(fix, pose)
         error = (

@@ -38,10 +38,10 @@ from mast.pipeline.locator import LocatorConfig, locate
 from mast.pipeline.tracking import Prior
 from mast.sim import simulate_scan
 from mast.sim.hard import field_scene
+from mast.sim.owed import OWED_FIELD
 from mast.sim.scanner import SimulatedScan
 
 __all__ = [
-    "FIELD_OWED_MIN_POINTS",
     "PRIOR_OFF_DEG",
     "PRIOR_OFF_M",
     "FieldSummary",
@@ -51,7 +51,6 @@ __all__ = [
 ]
 
 #: Returns a panel must show for the scan to owe a fix (the independent scenes' rule).
-FIELD_OWED_MIN_POINTS = 4
 #: A good prior (issue 31): the truth moved by up to this much and this many degrees,
 #: its window twice that (as the independent scenes' tool draws them).
 PRIOR_OFF_M = 0.5
@@ -76,7 +75,7 @@ _Z95 = float(stats.norm.ppf(0.975))
 
 def owed_field(sim: SimulatedScan) -> bool:
     """Two beacons each show two panels with at least 4 returns, at any incidence."""
-    return sim.owes_fix(min_points=FIELD_OWED_MIN_POINTS, min_incidence_deg=0.0)
+    return sim.owes_fix(OWED_FIELD)
 
 
 @dataclass

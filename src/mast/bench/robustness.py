@@ -22,6 +22,7 @@ from mast.bench.rows import write_rows
 from mast.core.pose import Pose2D
 from mast.pipeline.locator import Fix, LocatorConfig, locate
 from mast.sim import Scene, drift_scene, hard_scene
+from mast.sim.owed import OWED_CLEAN
 from mast.sim.scanner import SimulatedScan
 
 __all__ = ["RobustnessSummary", "is_wrong", "owed_clean", "pose_error", "run_robustness"]
@@ -32,7 +33,7 @@ WRONG_AZIMUTH_RAD = math.radians(0.25)
 
 def owed_clean(sim: SimulatedScan) -> bool:
     """Two beacons each show two clean panels (>= 8 returns, >= 15 degrees incidence)."""
-    return sim.owes_fix(min_points=8, min_incidence_deg=15.0)
+    return sim.owes_fix(OWED_CLEAN)
 
 
 def pose_error(got: Pose2D, truth: Pose2D) -> NDArray[np.float64]:

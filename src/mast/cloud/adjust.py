@@ -31,23 +31,17 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from numpy.typing import NDArray
 
-from mast.core.quantiles import chi2_isf, norm_ppf
+from mast.core.stats import W_TEST_ALPHA, BeaconTest, beacon_critical, variance_bounds, w_critical
 
 __all__ = [
     "BeaconObs",
-    "BeaconTest",
     "CheckResult",
     "Solution",
     "Transformation",
     "adjust_transformation",
     "check_beacons",
     "rigid_solution",
-    "variance_bounds",
 ]
-
-#: Two-sided significance of the global test; of the w-tests and beacon tests (Bonferroni).
-GLOBAL_ALPHA = 0.05
-W_ALPHA = 0.001
 
 
 @dataclass(frozen=True, eq=False)
@@ -154,25 +148,6 @@ def _rotation(model: str, p: NDArray[np.float64]) -> NDArray[np.float64]:
 
 
 @dataclass(frozen=True, eq=False)
-class BeaconTest:
-    """A beacon left out and tested against the solution of the rest: ``statistic`` (a
-    squared Mahalanobis distance) on ``dof`` degrees of freedom, ``critical`` its bound.
-    ``role``: ``control`` (left out to be tested), or, in the drift correction's
-    tests, ``excluded`` (left out as an outlier) or ``check`` (never in the solution),
-    each against the final solution."""
-
-    beacon: str
-    statistic: float
-    dof: int
-    critical: float
-    role: str = "control"
-
-    @property
-    def failed(self) -> bool:
-        return self.statistic > self.critical
-
-
-@dataclass(frozen=True, eq=False)
 class Solution:
     """An adjusted transformation and its statistics.
 
@@ -207,7 +182,7 @@ class Solution:
     excluded: list[str]
     residuals: dict[str, NDArray[np.float64]]
     w: dict[str, NDArray[np.float64]]
-    tests: list[BeaconTest]
+    tests: list[BeaconTest[str]]
     reference_variance: float
     dof: int
     chi2_test: str
@@ -389,7 +364,7 @@ def _solve(
     w = pv / np.sqrt(np.maximum(np.diag(pqp), 1e-30))
     residuals: dict[str, NDArray[np.float64]] = {}
     ws: dict[str, NDArray[np.float64]] = {}
-    tests: list[BeaconTest] = []
+    tests: list[BeaconTest[str]] = []
     for b, (r0, r1) in zip(obs, spans, strict=True):
         residuals[b.beacon] = _per_edge(v[r0:r1], model, heights, len(b.edges))
         ws[b.beacon] = w[r0:r1]
@@ -401,7 +376,7 @@ def _solve(
         k = r1 - r0
         # a beacon left out of a solution of dof = k or less is not testable
         if dof - k > 0:
-            tests.append(BeaconTest(b.beacon, stat, k, chi2_isf(W_ALPHA / len(obs), k)))
+            tests.append(BeaconTest(b.beacon, stat, k, beacon_critical(W_TEST_ALPHA / len(obs), k)))
     qfull = np.zeros((p.size, p.size))
     qfull[np.ix_(free, free)] = qxx
     trans = Transformation(model, names, p, qfull, centre, heights)
@@ -416,16 +391,8 @@ def _solve(
         dof,
         test,
         (lo, hi),
-        norm_ppf(1 - W_ALPHA / 2 / max(v.size, 1)),
+        w_critical(v.size),
     )
-
-
-def variance_bounds(dof: int) -> tuple[float, float]:
-    """The global test's acceptance interval for a reference variance (a chi-square over
-    its ``dof``, two-sided at :data:`GLOBAL_ALPHA`); (0, inf) without redundancy."""
-    if dof <= 0:
-        return 0.0, math.inf
-    return chi2_isf(1 - GLOBAL_ALPHA / 2, dof) / dof, chi2_isf(GLOBAL_ALPHA / 2, dof) / dof
 
 
 def _per_edge(v: NDArray[np.float64], model: str, heights: bool, k: int) -> NDArray[np.float64]:
@@ -571,7 +538,7 @@ def check_beacons(
     free = _free(model, heights)
     out = []
     n_all = sum(len(c.edges) * (3 if heights else 2) for c in checks)
-    crit = norm_ppf(1 - W_ALPHA / 2 / max(n_all, 1))
+    crit = w_critical(n_all)
     for c in checks:
         v = _residual_vector([c], model, heights, p, trans.centre)
         cov, _ = _covariance([c], model, heights, p, survey_sigma_m)

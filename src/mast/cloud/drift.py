@@ -42,8 +42,9 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from mast.cloud.adjust import W_ALPHA, AdjustmentError, BeaconObs, BeaconTest, Transformation
-from mast.core.quantiles import chi2_isf
+from mast.cloud.adjust import AdjustmentError, BeaconObs, Transformation
+from mast.core.frames import yaw_of_azimuth, yaw_quaternion
+from mast.core.stats import W_TEST_ALPHA, BeaconTest, beacon_critical
 from mast.errors import InputError
 
 __all__ = ["DriftCorrection", "Trajectory", "correct_drift", "read_trajectory"]
@@ -134,8 +135,7 @@ def _read_track_csv(p: Path, lines: list[str]) -> Trajectory:
                 path=p,
                 line=no,
             ) from None
-        yaw = math.pi / 2 - math.radians(az)
-        rows.append([t, e, n, 0.0, 0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2)])
+        rows.append([t, e, n, 0.0, *yaw_quaternion(yaw_of_azimuth(math.radians(az)))])
     return _trajectory(p, np.array(rows).reshape(-1, 8))
 
 
@@ -157,7 +157,7 @@ class DriftCorrection:
     #: final graph (module docstring); the squared Mahalanobis distance of its surveyed
     #: plan edges (and top, with heights), on two degrees of freedom per edge (one more
     #: for the top)
-    tests: tuple[BeaconTest, ...] = ()
+    tests: tuple[BeaconTest[str], ...] = ()
     excluded: tuple[str, ...] = ()
 
     @property
@@ -299,7 +299,9 @@ def correct_drift(
         values = gtsam.LevenbergMarquardtOptimizer(graph, init, params).optimize()
         return graph, values
 
-    def test(o: BeaconObs, role: str, others: Sequence[BeaconObs], n: int) -> BeaconTest | None:
+    def test(
+        o: BeaconObs, role: str, others: Sequence[BeaconObs], n: int
+    ) -> BeaconTest[str] | None:
         """``o`` against the graph of ``others`` (a control's is solved without it); None
         when they cannot place the graph (fewer than two edges: a rotation left free)."""
         if sum(len(a.edges) for a in others) < 2:
@@ -319,7 +321,7 @@ def correct_drift(
             r = o.top + float(dz[k]) - o.grid_top
             stat += r * r / (var + o.sigma_top**2 + s2)
             dof += 1
-        return BeaconTest(o.beacon, stat, dof, chi2_isf(W_ALPHA / max(n, 1), dof), role)
+        return BeaconTest(o.beacon, stat, dof, beacon_critical(W_TEST_ALPHA / max(n, 1), dof), role)
 
     def final_marginals() -> Any:
         if not cache or cache[0] is not result:
@@ -329,7 +331,7 @@ def correct_drift(
     cache: list[Any] = []
     active = list(timed)
     final, result = solve(active, start)
-    excluded: list[BeaconTest] = []
+    excluded: list[BeaconTest[str]] = []
     while True:
         tried = [test(o, "control", [a for a in active if a is not o], len(active)) for o in active]
         tests = [t for t in tried if t is not None]

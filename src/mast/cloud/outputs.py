@@ -20,9 +20,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from mast import __version__
-from mast.cloud.adjust import variance_bounds
 from mast.cloud.drift import DriftCorrection
 from mast.cloud.georef import FoundBeacon, Georef, explain_missing, grid_origin
+from mast.core.stats import variance_bounds
 from mast.io.atomic import atomic_open, write_atomic
 from mast.report.html import CSS, axis_label, escape, inline_svg, new_figure, plot_origin
 

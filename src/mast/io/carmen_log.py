@@ -30,7 +30,8 @@ from pathlib import Path
 import numpy as np
 
 from mast import limits
-from mast.core.pose import Pose2D, normalize_azimuth
+from mast.core.frames import azimuth_of_yaw
+from mast.core.pose import Pose2D
 from mast.core.scan import Scan
 from mast.errors import InputError
 
@@ -148,4 +149,4 @@ def _flaser(
         stamp_ns=round(stamp_s * 1e9),
         frame_id=frame_id,
     )
-    return scan, Pose2D(x, y, normalize_azimuth(math.pi / 2 - theta))
+    return scan, Pose2D(x, y, azimuth_of_yaw(theta))

@@ -19,13 +19,13 @@ only ever a complete file; ``mast locate`` and ``mast track`` read it back.
 from __future__ import annotations
 
 import json
-import math
 import threading
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from mast.core.frames import ena_to_xy_yaw_covariance, yaw_of_azimuth, yaw_quaternion
 from mast.core.scan import Scan
 from mast.io.atomic import commit, discard, part_path
 from mast.io.bags import LASERSCAN, laserscan_bytes
@@ -92,12 +92,11 @@ class McapRecorder:
         assert fix.adjustment is not None
         t = self._store.types
         sec, nsec = divmod(int(scan.stamp_ns), 1_000_000_000)
-        yaw = math.pi / 2 - fix.pose.azimuth
+        yaw = yaw_of_azimuth(fix.pose.azimuth)
         c = np.asarray(fix.adjustment.covariance, dtype=float)
         c = (c + c.T) / 2
         cov = np.zeros((6, 6))
-        sign = np.array([1.0, 1.0, -1.0])  # E -> x, N -> y, azimuth -> yaw (opposite sense)
-        cov[np.ix_([0, 1, 5], [0, 1, 5])] = c * np.outer(sign, sign)
+        cov[np.ix_([0, 1, 5], [0, 1, 5])] = ena_to_xy_yaw_covariance(c)
         return t[_POSE](
             header=t["std_msgs/msg/Header"](
                 stamp=t["builtin_interfaces/msg/Time"](sec=sec, nanosec=nsec), frame_id=MINE_FRAME
@@ -108,7 +107,7 @@ class McapRecorder:
                         x=fix.pose.easting, y=fix.pose.northing, z=0.0
                     ),
                     orientation=t["geometry_msgs/msg/Quaternion"](
-                        x=0.0, y=0.0, z=math.sin(yaw / 2), w=math.cos(yaw / 2)
+                        **dict(zip("xyzw", yaw_quaternion(yaw), strict=True))
                     ),
                 ),
                 covariance=cov.ravel(),

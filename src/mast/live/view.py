@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 
 from mast.core.beacon import Survey
+from mast.core.frames import yaw_of_azimuth, yaw_quaternion
 from mast.core.pose import Pose2D
 from mast.core.scan import Scan
 from mast.pipeline.locator import Fix
@@ -41,7 +42,7 @@ _BEACONS_EVERY_S = 1.0
 def _yaw_quaternion(yaw: float) -> Any:
     import foxglove.messages as fm
 
-    return fm.Quaternion(x=0.0, y=0.0, z=math.sin(yaw / 2), w=math.cos(yaw / 2))
+    return fm.Quaternion(**dict(zip("xyzw", yaw_quaternion(yaw), strict=True)))
 
 
 def _timestamp(ns: int) -> Any:
@@ -129,7 +130,7 @@ class LiveView:
         import foxglove.messages as fm
 
         x, y = self._local(pose.easting, pose.northing)
-        yaw = math.pi / 2 - pose.azimuth  # azimuth clockwise from north -> yaw from east
+        yaw = yaw_of_azimuth(pose.azimuth)
         self._tf.log(
             fm.FrameTransform(
                 timestamp=stamp,

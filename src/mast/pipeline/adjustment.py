@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from functools import lru_cache
 from typing import Any
 
 import numpy as np
@@ -35,6 +34,7 @@ from mast.core.noise import NoiseModel
 from mast.core.pose import Pose2D
 from mast.core.quantiles import chi2_ppf, f_ppf, norm_ppf, t_ppf
 from mast.core.scan import Scan
+from mast.core.stats import variance_bounds
 from mast.pipeline.edges import SILHOUETTE_VARIANCE, at_silhouette, jump_m
 
 __all__ = [
@@ -284,20 +284,12 @@ def _adjustment_of(gn: tuple[Any, ...]) -> Adjustment:
         raise np.linalg.LinAlgError("Singular matrix")
     dof = v.size - 3
     s0 = chi2 / dof if dof > 0 else math.nan
-    lo, hi = _chi2_bounds(dof)
+    lo, hi = variance_bounds(dof)
     # Surveying practice: when the global test passes, the a-priori precisions
     # stand (sigma_0 = 1); when it rejects high, they were too optimistic and
     # the covariance is scaled by the a-posteriori reference variance.
     cov: NDArray[np.float64] = q * s0 if s0 > hi else q.copy()
     return Adjustment(Pose2D(e, nn, az), q, cov, s0, dof, lo, hi, v, np.sqrt(var), it, jac)
-
-
-@lru_cache(maxsize=4096)
-def _chi2_bounds(dof: int) -> tuple[float, float]:
-    """Two-sided 95 % acceptance bounds of the reference variance on ``dof`` degrees of freedom."""
-    if dof <= 0:
-        return 0.0, math.inf
-    return chi2_ppf(0.025, dof) / dof, chi2_ppf(0.975, dof) / dof
 
 
 def _adjust_pose_reference(
@@ -340,7 +332,7 @@ def _adjust_pose_reference(
     Q: NDArray[np.float64] = np.asarray(np.linalg.inv(N), dtype=np.float64)
     dof = n - 3
     s0 = float(v @ (w * v) / dof) if dof > 0 else math.nan
-    lo, hi = _chi2_bounds(dof)
+    lo, hi = variance_bounds(dof)
     cov: NDArray[np.float64] = Q * s0 if s0 > hi else Q.copy()
     return Adjustment(p, Q, cov, s0, dof, lo, hi, v, np.sqrt(var), it, jac)
 

@@ -21,6 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from mast.core.frames import azimuth_of_yaw, yaw_of_azimuth
 from mast.core.geometry import PanelSet
 from mast.core.linalg import pose_step
 from mast.core.pose import Pose2D
@@ -54,7 +55,7 @@ class Similarity:
         return Pose2D(
             float(self.translation[0]),
             float(self.translation[1]),
-            (math.pi / 2 - self.rotation_rad) % (2 * math.pi),
+            azimuth_of_yaw(self.rotation_rad),
         )
 
 
@@ -257,11 +258,11 @@ def _icp_reference(
             A = np.column_stack([nrm, jw])
             b = -dist[ok]
             x = pose_step(A, b)
-            omega = math.pi / 2 - p.azimuth + float(x[2])
+            omega = yaw_of_azimuth(p.azimuth) + float(x[2])
             p = Pose2D(
                 p.easting + float(x[0]),
                 p.northing + float(x[1]),
-                (math.pi / 2 - omega) % (2 * math.pi),
+                azimuth_of_yaw(omega),
             )
             # A step below the spacing of doubles at these coordinates cannot change them.
             tol_m = max(tolerance_m, 4 * np.spacing(max(abs(p.easting), abs(p.northing), 1.0)))

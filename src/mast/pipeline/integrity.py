@@ -24,7 +24,6 @@ P. J. G. Teunissen, *Testing Theory*, Delft, 2000 (w-test, group tests).
 from __future__ import annotations
 
 from dataclasses import dataclass
-from functools import lru_cache
 
 import numpy as np
 from numpy.typing import NDArray
@@ -32,11 +31,10 @@ from numpy.typing import NDArray
 from mast.core._kernels import beacon_statistics, group_residuals, standardised
 from mast.core.linalg import grouped_quadratic_form
 from mast.core.noise import NoiseModel
-from mast.core.quantiles import chi2_isf, norm_ppf
+from mast.core.stats import W_TEST_ALPHA, BeaconTest, beacon_critical, w_critical
 from mast.pipeline.adjustment import Adjustment, Observations
 
 __all__ = [
-    "BeaconTest",
     "GroupResiduals",
     "Observations",
     "Residuals",
@@ -46,9 +44,6 @@ __all__ = [
     "snoop",
     "standardised_residuals",
 ]
-
-#: Significance of the w-test (shared over all returns, Bonferroni) and of the beacon test.
-W_TEST_ALPHA = 0.001
 
 
 def standardised_residuals(adj: Adjustment) -> NDArray[np.float64]:
@@ -61,11 +56,6 @@ def _standardised_reference(adj: Adjustment) -> NDArray[np.float64]:
     g = adj.jacobian
     qvv = adj.sigmas_m**2 - np.einsum("ij,jk,ik->i", g, adj.cofactor, g)
     return np.asarray(adj.residuals_m / np.sqrt(np.maximum(qvv, 1e-30)), dtype=float)
-
-
-def w_critical(n: int, alpha: float = W_TEST_ALPHA) -> float:
-    """Critical |w| for the largest of ``n`` standardised residuals (two-sided, Bonferroni)."""
-    return norm_ppf(1 - alpha / 2 / max(n, 1))
 
 
 def snoop(
@@ -91,31 +81,13 @@ def snoop(
     return obs, adj, removed
 
 
-@dataclass(frozen=True, slots=True)
-class BeaconTest:
-    """The left-out test of one beacon."""
-
-    beacon: int
-    statistic: float
-    dof: int
-    critical: float
-
-    @property
-    def ratio(self) -> float:
-        return self.statistic / self.critical
-
-    @property
-    def failed(self) -> bool:
-        return self.statistic > self.critical
-
-
 def beacon_tests(
     obs: Observations,
     adj: Adjustment,
     *,
     noise: NoiseModel,
     alpha: float = W_TEST_ALPHA,
-) -> list[BeaconTest]:
+) -> list[BeaconTest[int]]:
     """Leave-one-beacon-out tests for every beacon with returns (needs two or more).
 
     Each beacon in turn: the others' fit, linearised at the joint solution (the
@@ -145,7 +117,7 @@ def beacon_tests(
         MAX_TEST_CONDITION,
     )
     return [
-        BeaconTest(int(b), float(t), int(n), _critical(alpha / ids.size, int(n)))
+        BeaconTest(int(b), float(t), int(n), beacon_critical(alpha / ids.size, int(n)))
         for b, t, n, ok in zip(ids, stat, count, tested, strict=True)
         if ok
     ]
@@ -156,18 +128,13 @@ def beacon_tests(
 MAX_TEST_CONDITION = 1e14
 
 
-@lru_cache(maxsize=4096)
-def _critical(alpha: float, dof: int) -> float:
-    return chi2_isf(alpha, dof)
-
-
 def _beacon_tests_reference(
     obs: Observations,
     adj: Adjustment,
     *,
     noise: NoiseModel,
     alpha: float = W_TEST_ALPHA,
-) -> list[BeaconTest]:
+) -> list[BeaconTest[int]]:
     """:func:`beacon_tests` in numpy, the compiled kernel's reference."""
     ids = np.unique(obs.beacon)
     if ids.size < 2:
@@ -210,7 +177,7 @@ def _beacon_tests_reference(
         if dof_rest > 0:
             t /= max(1.0, float(v_rest @ (w[rest] * v_rest)) / dof_rest)
         n = int(d.size)
-        out.append(BeaconTest(int(b), t, n, chi2_isf(alpha / ids.size, n)))
+        out.append(BeaconTest(int(b), t, n, beacon_critical(alpha / ids.size, n)))
     return out
 
 
@@ -220,7 +187,7 @@ def exclude_inconsistent(
     *,
     noise: NoiseModel,
     min_beacons: int,
-) -> tuple[Observations, Adjustment, list[int], int, list[BeaconTest]] | list[int]:
+) -> tuple[Observations, Adjustment, list[int], int, list[BeaconTest[int]]] | list[int]:
     """Leave out, one at a time, a beacon whose ranges disagree with the others.
 
     A beacon is at fault only when its removal alone leaves the others
@@ -298,7 +265,7 @@ class Residuals:
     w_critical: float
     per_beacon: dict[str, GroupResiduals]
     per_panel: dict[tuple[str, int], GroupResiduals]
-    beacon_tests: dict[str, BeaconTest]
+    beacon_tests: dict[str, BeaconTest[int]]
 
 
 def _groups(
@@ -337,7 +304,7 @@ def residual_summary(
     ids: tuple[str, ...],
     panel_numbers: NDArray[np.intp],
     noise: NoiseModel,
-    tests: list[BeaconTest] | None = None,
+    tests: list[BeaconTest[int]] | None = None,
 ) -> Residuals:
     """Residuals of an adjustment, overall, per beacon and per panel, with the beacon tests.
 

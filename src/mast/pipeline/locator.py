@@ -40,6 +40,7 @@ from mast.core.noise import (
 from mast.core.pose import Pose2D
 from mast.core.quantiles import chi2_sf
 from mast.core.scan import Scan
+from mast.core.stats import BeaconTest
 from mast.pipeline.adjustment import (
     Adjustment,
     Observations,
@@ -61,7 +62,6 @@ from mast.pipeline.identification import (
     identify_panels,
 )
 from mast.pipeline.integrity import (
-    BeaconTest,
     Residuals,
     exclude_inconsistent,
     residual_summary,
@@ -821,7 +821,7 @@ def _locate(
     obs, adj, outliers = snoop(obs, adj, noise=noise)
 
     def summary(
-        obs: Observations, adj: Adjustment, tests: list[BeaconTest] | None = None
+        obs: Observations, adj: Adjustment, tests: list[BeaconTest[int]] | None = None
     ) -> Residuals:
         return residual_summary(
             obs, adj, ids=panels.ids, panel_numbers=panels.panel, noise=noise, tests=tests

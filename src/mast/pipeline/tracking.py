@@ -30,6 +30,7 @@ from numpy.typing import NDArray
 from scipy import ndimage
 
 from mast.core._kernels import field_pyramid, field_sliding, window_picks
+from mast.core.frames import yaw_of_azimuth
 from mast.core.geometry import PanelSet
 from mast.core.pose import Pose2D
 from mast.pipeline.alignment import Similarity
@@ -507,7 +508,7 @@ def centre_hypotheses(prior: Prior, config: TrackingConfig = TrackingConfig()) -
     if tol is None or prior.radius_m > config.direct_radius_m or tol > config.direct_tolerance_rad:
         return []
     pose = prior.pose
-    rot = math.remainder(math.pi / 2 - pose.azimuth, 2 * math.pi)
+    rot = math.remainder(yaw_of_azimuth(pose.azimuth), math.tau)
     return [Hypothesis((), Similarity(1.0, rot, pose.position, 0.0), 0.0, "prior")]
 
 
@@ -551,7 +552,7 @@ def prior_hypotheses(
     sliding, sliding_starts, sliding_widths = field.sliding(round(step / res))
     d_rot, n_r = _rotation_steps(tol, step, r)
     offs, inside = _window_places(prior.radius_m, step)
-    rot0 = math.pi / 2 - prior.pose.azimuth
+    rot0 = yaw_of_azimuth(prior.pose.azimuth)
     # The tiles each return can reach anywhere in the window.
     at_prior = prior.pose.scanner_to_mine(pts)
     tiles = field.reaching(at_prior, prior.radius_m + r * math.sin(tol) + step + res)

@@ -40,6 +40,7 @@ from mast.pipeline.bounds import bound_of, truth_information
 from mast.pipeline.hypotheses import major_sigma
 from mast.plan.drift import Grid, build_grid
 from mast.sim.drive import Reach
+from mast.sim.owed import OWED, owes_fix
 from mast.sim.scanner import ScannerModel, SimulatedScan, simulate_scan
 from mast.sim.tunnel import Roughness, polyline_station, project_station, roughen
 from mast.sim.world import Surface, World, WorldBuilder
@@ -56,10 +57,9 @@ __all__ = [
     "view_cell",
 ]
 
-#: Returns a panel needs to count as seen (as the availability benchmark's "owed" counts).
-MIN_PANEL_RETURNS = 3
-#: A panel seen closer than this to grazing does not count.
-MIN_INCIDENCE_DEG = 10.0
+#: Returns a panel needs to count as seen, and how far off grazing (as "owed" counts).
+MIN_PANEL_RETURNS = OWED.min_points
+MIN_INCIDENCE_DEG = OWED.min_incidence_deg
 
 Progress = Callable[[int, int], None]
 
@@ -147,7 +147,7 @@ class CellView:
 
     @property
     def owed(self) -> bool:
-        return self.two_panel_beacons >= 2
+        return owes_fix(self.panels)
 
 
 def covariance(information: NDArray[np.float64]) -> NDArray[np.float64]:

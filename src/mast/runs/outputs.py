@@ -41,6 +41,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from mast.core.beacon import Beacon, Survey
+from mast.core.frames import yaw_of_azimuth, yaw_quaternion
 from mast.core.pose import format_dms
 from mast.errors import InputError, OutputError
 from mast.io.atomic import atomic_open, atomic_path, commit, discard, part_path
@@ -336,9 +337,8 @@ def tum_quaternion(azimuth_rad: float) -> tuple[float, float, float, float]:
 
     The yaw is wrapped to (−180°, 180°] first, so that ``qw >= 0``.
     """
-    yaw = math.pi / 2 - azimuth_rad
-    yaw = -((math.pi - yaw) % math.tau - math.pi)  # to (-pi, pi]
-    return 0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2)
+    yaw = yaw_of_azimuth(azimuth_rad)
+    return yaw_quaternion(-((math.pi - yaw) % math.tau - math.pi))  # yaw in (-pi, pi]
 
 
 def write_trajectory_tum(path: str | Path, placed: Iterable[PlacedScan]) -> int:

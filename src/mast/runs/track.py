@@ -24,6 +24,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from mast.core.beacon import Survey
+from mast.core.frames import azimuth_of_yaw, body_jacobian, yaw_of_azimuth
 from mast.core.pose import Pose2D
 from mast.core.scan import Scan
 from mast.pipeline.locator import Fix, Locator, LocatorConfig
@@ -126,28 +127,18 @@ class Step:
     predicted: Pose2D | None
 
 
-def _theta(azimuth_rad: float) -> float:
-    return math.pi / 2 - azimuth_rad
-
-
-def _jacobian(theta: float) -> NDArray[np.float64]:
-    """d(E, N, A) / d(body x, body y, theta) at a pose with heading ``theta``."""
-    c, s = math.cos(theta), math.sin(theta)
-    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, -1.0]])
-
-
 def compose(
     pose: Pose2D, cov: NDArray[np.float64], motion: Motion
 ) -> tuple[Pose2D, NDArray[np.float64]]:
     """The pose after ``motion`` and its covariance (E, N, A), first-order propagation."""
-    th = _theta(pose.azimuth)
+    th = yaw_of_azimuth(pose.azimuth)
     c, s = math.cos(th), math.sin(th)
     de = c * motion.dx - s * motion.dy
     dn = s * motion.dx + c * motion.dy
     new = Pose2D(pose.easting + de, pose.northing + dn, (pose.azimuth - motion.dtheta) % math.tau)
     # d new / d old (E, N, A): the rotation of the step with the azimuth.
     jp = np.array([[1.0, 0.0, dn], [0.0, 1.0, -de], [0.0, 0.0, 1.0]])
-    jm = _jacobian(th)
+    jm = body_jacobian(th)
     return new, jp @ cov @ jp.T + jm @ motion.covariance @ jm.T
 
 
@@ -506,7 +497,7 @@ class Smoother:
             # The motion's covariance is in the keyframe's frame; GTSAM's error of a
             # between factor lives in the frame of the relative pose itself.
             jm = np.eye(3)
-            jm[:2, :2] = _jacobian(m.dtheta)[:2, :2].T
+            jm[:2, :2] = body_jacobian(m.dtheta)[:2, :2].T
             graph.add(
                 gtsam.BetweenFactorPose2(
                     n.ref,
@@ -519,8 +510,8 @@ class Smoother:
         for n in window:
             if n.fix is not None:
                 pose, cov = n.fix
-                th = _theta(pose.azimuth)
-                jinv = np.linalg.inv(_jacobian(th))
+                th = yaw_of_azimuth(pose.azimuth)
+                jinv = np.linalg.inv(body_jacobian(th))
                 graph.add(
                     gtsam.PriorFactorPose2(
                         n.scan,
@@ -535,7 +526,7 @@ class Smoother:
         assert anchor is not None
         assert anchor.fix is not None
         p0 = anchor.fix[0]
-        to_mine = gtsam.Pose2(p0.easting, p0.northing, _theta(p0.azimuth)).compose(
+        to_mine = gtsam.Pose2(p0.easting, p0.northing, yaw_of_azimuth(p0.azimuth)).compose(
             local[anchor.scan].inverse()
         )
         values = gtsam.Values()
@@ -550,13 +541,13 @@ class Smoother:
         placed = []
         for n in window:
             p = result.atPose2(n.scan)
-            j = _jacobian(p.theta())
+            j = body_jacobian(p.theta())
             cov = j @ marginals.marginalCovariance(n.scan) @ j.T
             placed.append(
                 PlacedScan(
                     n.scan,
                     n.stamp_ns,
-                    Pose2D(p.x(), p.y(), (math.pi / 2 - p.theta()) % math.tau),
+                    Pose2D(p.x(), p.y(), azimuth_of_yaw(p.theta())),
                     (cov + cov.T) / 2,
                     "fix" if n.fixed else "odometry",
                 )

@@ -12,6 +12,7 @@ from mast.core.noise import NoiseModel
 from mast.core.pose import Pose2D
 from mast.core.scan import Scan
 from mast.errors import InputError
+from mast.sim.owed import OWED, OwedRule, owes_fix
 from mast.sim.world import Surface, World
 
 __all__ = ["SCANNERS", "ScannerModel", "SimulatedScan", "scanner_model", "simulate_scan"]
@@ -181,10 +182,12 @@ class SimulatedScan:
                     self._panel_cache[(s.beacon, s.panel)] = int(c)
         return dict(self._panel_cache)
 
-    def owes_fix(self, *, min_points: int = 3, min_incidence_deg: float = 10.0) -> bool:
-        """Whether two beacons each show two panels (as counted by :meth:`panels_seen`)."""
-        seen = self.panels_seen(min_points=min_points, min_incidence_deg=min_incidence_deg)
-        return sum(len(p) >= 2 for p in seen.values()) >= 2
+    def owes_fix(self, rule: OwedRule = OWED) -> bool:
+        """Whether this scan is owed a fix (:func:`mast.sim.owed.owes_fix`), its panels
+        counted by ``rule`` (:meth:`panels_seen`)."""
+        return owes_fix(
+            self.panels_seen(min_points=rule.min_points, min_incidence_deg=rule.min_incidence_deg)
+        )
 
     def panels_seen(
         self, *, min_points: int = 5, min_incidence_deg: float = 10.0
