@@ -6,6 +6,7 @@ from __future__ import annotations
 import csv
 import json
 import math
+import re
 import signal
 import subprocess
 import sys
@@ -89,6 +90,28 @@ def test_a_run_writes_every_file_and_places_every_scan(tracked: Path, drive: Pat
     assert {r["source"] for r in traj} == {"fix", "odometry"}
     assert sum(r["source"] == "fix" for r in traj) == fixed
     assert 0 < fixed < 250  # the drive leaves the beacons behind: odometry carries the rest
+
+
+def test_a_run_repeated_with_its_config_toml_gives_the_same_results(
+    tracked: Path, drive: Path, tmp_path: Path
+) -> None:
+    # The effective settings are written beside the results, every record names them,
+    # and a run given that file (no option repeated) is the same run.
+    settings = (tracked / "config.toml").read_text(encoding="utf-8")
+    assert "range_sigma_m = 0.012" in settings
+    assert "[track]" in settings
+    (sha,) = re.findall(r"SHA-256 of the settings below: ([0-9a-f]{64})", settings)
+    records = [json.loads(line) for line in (tracked / "fixes.jsonl").read_text().splitlines()]
+    assert {r["inputs"]["config_sha256"] for r in records} == {sha}
+    again = tmp_path / "again"
+    r = run_mast_text(
+        "track", str(drive / "scans.bag"), "-b", str(drive / "beacons.csv"),
+        "--out", str(again), "--config", str(tracked / "config.toml"),
+    )  # fmt: skip
+    assert r.returncode == 0, r.stderr
+    assert (again / "config.toml").read_text(encoding="utf-8") == settings
+    for name in ("trajectory.csv", "trajectory.tum"):
+        assert (again / name).read_bytes() == (tracked / name).read_bytes(), name
 
 
 def test_placed_scans_are_within_5_cm_of_the_truth_with_honest_sigmas(

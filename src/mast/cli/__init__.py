@@ -5,11 +5,12 @@ returns. Errors the library raises on purpose become one line on stderr and an e
 status: 2 bad input, 3 no fix, 4 an output cannot be written, 70 an internal error.
 
 One module a command, each registering on the one application (:mod:`mast.cli.root`) when
-imported, in the order ``mast --help`` lists them; the benchmarks' ``mast bench`` group
+imported (``mast --help`` lists them by name); the benchmarks' ``mast bench`` group
 is registered from above, by :mod:`mast.bench.cli` (the whole program: :mod:`mast.program`).
 """
 
-from mast.cli import (  # noqa: F401 - imported to register each command, in this order
+from mast.cli import (  # noqa: F401 - imported to register each command
+    config,
     demo,
     emulate,
     georef,

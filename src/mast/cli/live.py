@@ -34,6 +34,7 @@ from mast.cli.root import (
     app,
     silence_stdout,
 )
+from mast.cli.settings import ConfigOption, effective, read_config
 from mast.errors import InputError
 from mast.io.outputs import check_output_file
 
@@ -53,6 +54,7 @@ def live(
     angle_sigma: AngleSigmaOption = None,
     scanner: ScannerOption = None,
     survey_sigma: SurveySigmaOption = None,
+    config: ConfigOption = None,
     range_min: RangeMinOption = None,
     range_max: RangeMaxOption = None,
     near: NearOption = None,
@@ -103,7 +105,11 @@ def live(
     from mast.live.sources import ReplaySource, SourceOptions, open_source
     from mast.report.record import ReportInputs
 
-    cfg, defaults = precisions(range_sigma, angle_sigma, scanner, survey_sigma)
+    tables, given = read_config(config, ("locator", "sequence"))
+    cfg, defaults = precisions(
+        range_sigma, angle_sigma, scanner, survey_sigma, base=tables["locator"], given=given
+    )
+    settings = effective({"locator": cfg, "sequence": tables["sequence"]}, config, "live")
     if near is not None:
         cfg = replace(cfg, prior=parse_near(near, radius, azimuth_tolerance))
     check_range_limits(range_min, range_max)
@@ -121,7 +127,12 @@ def live(
         replayed = [stream.path] if isinstance(stream, ReplaySource) else []
         check_output_file(record, suffixes=(".mcap",), option="--record", inputs=replayed)
     inputs = ReportInputs(
-        scan_file=source, survey_file=str(beacons), scanner=scanner, defaults=frozenset(defaults)
+        scan_file=source,
+        survey_file=str(beacons),
+        scanner=scanner,
+        defaults=frozenset(defaults),
+        config_file=None if config is None else str(config),
+        config_sha256=settings.sha256,
     )
 
     def warn(text: str) -> None:
@@ -163,6 +174,7 @@ def live(
             survey,
             emit=emit,
             config=cfg,
+            sequence=tables["sequence"],
             inputs=inputs,
             sinks=tuple(sinks),
             max_scans=max_scans,

@@ -29,6 +29,7 @@ from mast.cli.root import (
     EXIT_NO_FIX,
     app,
 )
+from mast.cli.settings import ConfigOption, effective, read_config
 from mast.core.heap import QuietCollector
 from mast.errors import InputError
 from mast.io.outputs import PLOT_SUFFIXES, check_output_file
@@ -67,6 +68,7 @@ def locate(
     radius: RadiusOption = 10.0,
     azimuth_tolerance: AzimuthToleranceOption = 30.0,
     survey_sigma: SurveySigmaOption = None,
+    config: ConfigOption = None,
 ) -> None:
     """Fix position and azimuth from one scan, several, or every scan of a bag.
 
@@ -80,7 +82,11 @@ def locate(
     from mast.pipeline.locator import SequenceLocator
     from mast.report.record import ReportInputs, fix_record, fix_text
 
-    cfg, defaults = precisions(range_sigma, angle_sigma, scanner, survey_sigma)
+    tables, given = read_config(config, ("locator", "sequence"))
+    cfg, defaults = precisions(
+        range_sigma, angle_sigma, scanner, survey_sigma, base=tables["locator"], given=given
+    )
+    settings = effective({"locator": cfg, "sequence": tables["sequence"]}, config, "locate")
     if near is not None:
         cfg = replace(cfg, prior=parse_near(near, radius, azimuth_tolerance))
     if scan_paths.count(Path("-")) > 1:
@@ -104,9 +110,11 @@ def locate(
                 scanner=scanner,
                 topic=laserscan_topic(scan_path, topic) if many else None,
                 defaults=frozenset(defaults),
+                config_file=None if config is None else str(config),
+                config_sha256=settings.sha256,
             )
             source = inputs.scan_file or str(scan_path)
-            tracker = SequenceLocator(survey, config=cfg)
+            tracker = SequenceLocator(survey, config=cfg, sequence=tables["sequence"])
             for i, scan in enumerate(heap.each(scans)):
                 step = tracker.step(scan)
                 fix = step.fix

@@ -10,7 +10,7 @@ import sys
 import tempfile
 import threading
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Collection, Iterator
 from contextlib import contextmanager
 from dataclasses import replace
 from enum import StrEnum
@@ -234,16 +234,22 @@ def precisions(
     angle_sigma: float | None,
     scanner: str | None,
     survey_sigma: float | None,
+    *,
+    base: LocatorConfig | None = None,
+    given: Collection[str] = (),
 ) -> tuple[LocatorConfig, set[str]]:
-    """The locator's precisions from the options, and which were left at their defaults.
+    """The locator's configuration: ``base`` (a settings file's ``[locator]``, whose keys
+    ``given`` names as ``locator.<key>``; defaults without one), then the precisions the
+    options give; and which precisions were left at their defaults.
 
     A sigma no scanner or survey has gets a warning naming its unit.
     """
     from mast.pipeline.locator import LocatorConfig
     from mast.sim import scanner_model
 
-    cfg = LocatorConfig()
+    cfg = LocatorConfig() if base is None else base
     defaults = {"range_sigma_m", "angle_sigma_rad", "survey_sigma_m"}
+    defaults -= {key.removeprefix("locator.") for key in given}
     if scanner is not None:
         noise = scanner_model(scanner).noise()
         cfg = replace(cfg, range_sigma_m=noise.range_sigma_m, angle_sigma_rad=noise.angle_sigma_rad)

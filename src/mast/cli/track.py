@@ -4,6 +4,7 @@ report."""
 from __future__ import annotations
 
 import signal
+from dataclasses import replace
 from pathlib import Path
 from typing import Annotated
 
@@ -28,6 +29,7 @@ from mast.cli.root import (
     EXIT_NO_FIX,
     app,
 )
+from mast.cli.settings import ConfigOption, effective, read_config
 from mast.errors import InputError, shorten
 from mast.io.outputs import check_output_folder
 
@@ -50,18 +52,19 @@ def track(
     angle_sigma: AngleSigmaOption = None,
     scanner: ScannerOption = None,
     survey_sigma: SurveySigmaOption = None,
+    config: ConfigOption = None,
     range_min: RangeMinOption = None,
     range_max: RangeMaxOption = None,
     max_gap: Annotated[
-        float,
+        float | None,
         typer.Option(
             "--max-gap",
             min=0.0,
             help="Scans further apart in time, seconds, are not chained by odometry "
             "(a log kept a scan every metre or two: give its spacing; each such step is "
-            "then matched over all the vehicle could have done, and slower).",
+            "then matched over all the vehicle could have done, and slower) [default: 0.5].",
         ),
-    ] = 0.5,
+    ] = None,
     scheduler: Annotated[
         str | None,
         typer.Option(
@@ -91,9 +94,17 @@ def track(
     from mast.report.record import ReportInputs
     from mast.runs.batch import expand_runs, track_runs
     from mast.runs.run import track_run
-    from mast.runs.track import TrackConfig
 
-    cfg, defaults = precisions(range_sigma, angle_sigma, scanner, survey_sigma)
+    tables, keys_given = read_config(config, ("locator", "track"))
+    cfg, defaults = precisions(
+        range_sigma, angle_sigma, scanner, survey_sigma, base=tables["locator"], given=keys_given
+    )
+    run_config = replace(
+        tables["track"],
+        locator=cfg,
+        **({} if max_gap is None else {"max_gap_s": max_gap}),
+    )
+    settings = effective({"locator": cfg, "track": run_config}, config, "track")
     check_range_limits(range_min, range_max)
     for given in runs:
         if not given.exists():
@@ -102,6 +113,7 @@ def track(
     for r in found:
         bag_kind(r)
     check_output_folder(out)
+    settings.write(out)
     survey = read_survey(beacons)
     if len(found) > 1 or scheduler is not None:
         outcomes = track_runs(
@@ -109,10 +121,14 @@ def track(
             beacons,
             out,
             options={
-                "config": TrackConfig(locator=cfg, max_gap_s=max_gap),
+                "config": run_config,
                 "topic": topic,
                 "inputs": ReportInputs(
-                    survey_file=str(beacons), scanner=scanner, defaults=frozenset(defaults)
+                    survey_file=str(beacons),
+                    scanner=scanner,
+                    defaults=frozenset(defaults),
+                    config_file=None if config is None else str(config),
+                    config_sha256=settings.sha256,
                 ),
             },
             scheduler=scheduler,
@@ -132,6 +148,8 @@ def track(
         scanner=scanner,
         topic=laserscan_topic(run, topic),
         defaults=frozenset(defaults),
+        config_file=None if config is None else str(config),
+        config_sha256=settings.sha256,
     )
 
     def warn(text: str) -> None:
@@ -142,7 +160,7 @@ def track(
             run,
             survey,
             out,
-            config=TrackConfig(locator=cfg, max_gap_s=max_gap),
+            config=run_config,
             topic=topic,
             inputs=inputs,
             range_limits=(range_min, range_max),
@@ -160,9 +178,10 @@ def track(
     )
     if s.gaps > s.scans // 2:
         typer.echo(
-            f"mast: hint: {s.gaps} of {s.scans} scans came more than {max_gap:g} s after the "
-            "scan before and were not chained by odometry; if the log keeps a scan only "
-            "every metre or so, give --max-gap its spacing",
+            f"mast: hint: {s.gaps} of {s.scans} scans came more than "
+            f"{run_config.max_gap_s:g} s after the scan before and were not chained by "
+            "odometry; if the log keeps a scan only every metre or so, give --max-gap its "
+            "spacing",
             err=True,
         )
     if result.interrupted:

@@ -60,6 +60,11 @@ class ReportInputs:
         were left at their defaults (neither given nor from ``scanner``).
     computed_utc : datetime
         When the report was made.
+    config_file : str, optional
+        The settings file given (``--config``).
+    config_sha256 : str, optional
+        The SHA-256 of the effective configuration's settings text
+        (:mod:`mast.io.settings`): what ``config.toml`` beside a run's results holds.
     """
 
     scan_file: str | None = None
@@ -68,6 +73,8 @@ class ReportInputs:
     topic: str | None = None
     defaults: frozenset[str] = frozenset()
     computed_utc: datetime = field(default_factory=lambda: datetime.now(UTC))
+    config_file: str | None = None
+    config_sha256: str | None = None
 
 
 def _r(x: float, nd: int = 6) -> float | None:
@@ -118,6 +125,8 @@ def _inputs_record(fix: Fix, scan: Scan | None, inputs: ReportInputs) -> dict[st
     }
     if inputs.topic is not None:
         rec["topic"] = inputs.topic
+    if inputs.config_sha256 is not None:
+        rec.update(config_file=inputs.config_file, config_sha256=inputs.config_sha256)
     if scan is not None:
         rec.update(
             beams=len(scan),
@@ -312,6 +321,9 @@ def _input_lines(fix: Fix, scan: Scan | None, inputs: ReportInputs) -> list[str]
         lines.append(f"  Survey file   {inputs.survey_file}")
     if inputs.scanner is not None:
         lines.append(f"  Scanner       {inputs.scanner}")
+    if inputs.config_sha256 is not None:
+        source = inputs.config_file or "defaults and options"
+        lines.append(f"  Settings      {source} (SHA-256 {inputs.config_sha256[:12]})")
 
     def tag(key: str) -> str:
         if key in inputs.defaults:

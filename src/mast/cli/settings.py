@@ -1,0 +1,92 @@
+"""``--config FILE.toml``: the settings a command that locates reads, the effective
+configuration it runs with (the file, then the options given on the command line), and
+that configuration's fingerprint, which every JSON record names and ``config.toml``
+beside a run's results holds (:mod:`mast.io.settings`)."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Annotated, Any
+
+import typer
+
+from mast import __version__
+from mast.errors import InputError
+from mast.io.settings import fingerprint, from_table, read_settings, settings_text
+
+__all__ = ["ConfigOption", "Effective", "effective", "read_config"]
+
+ConfigOption = Annotated[
+    Path | None,
+    typer.Option(
+        "--config",
+        help="Settings file (TOML: [locator] and its sub-tables; [track] or [sequence]); "
+        "options given on the command line override it. `mast config` prints one.",
+    ),
+]
+
+#: The tables a settings file may hold (every command reads the ones it uses).
+KNOWN_TABLES = ("locator", "track", "sequence")
+
+
+def _classes() -> dict[str, type]:
+    from mast.pipeline.locator import LocatorConfig, SequenceConfig
+    from mast.runs.track import TrackConfig
+
+    return {"locator": LocatorConfig, "track": TrackConfig, "sequence": SequenceConfig}
+
+
+def read_config(path: Path | None, tables: tuple[str, ...]) -> tuple[dict[str, Any], set[str]]:
+    """The configurations of ``tables`` from the settings file at ``path`` (defaults for a
+    table it leaves out, or without a file), and the ``table.key`` names it set."""
+    classes = _classes()
+    if path is None:
+        return {name: classes[name]() for name in tables}, set()
+    data, text = read_settings(path)
+    unknown = sorted(set(data) - set(KNOWN_TABLES))
+    if unknown:
+        raise InputError(
+            f"no settings table [{unknown[0]}]; known: {', '.join(KNOWN_TABLES)}", path=path
+        )
+    out: dict[str, Any] = {}
+    given: set[str] = set()
+    for name in tables:
+        table = data.get(name, {})
+        if not isinstance(table, dict):
+            raise InputError(f"{name} must be a table, [{name}]", path=path)
+        if name == "track" and "locator" in table:
+            raise InputError("the locator's settings are [locator], not [track.locator]", path=path)
+        out[name] = from_table(classes[name], table, path=path, text=text, where=name)
+        given |= {f"{name}.{key}" for key in table}
+    return out, given
+
+
+@dataclass(frozen=True)
+class Effective:
+    """The configuration a command runs with: its tables, the file they came from (None:
+    defaults and options), their TOML text (a comment, then the canonical settings) and
+    the SHA-256 of the settings."""
+
+    tables: Mapping[str, Any]
+    file: Path | None
+    text: str
+    sha256: str
+
+    def write(self, folder: Path) -> None:
+        """Write ``config.toml`` into ``folder`` (a run repeated with ``--config`` on it
+        gives the same results)."""
+        from mast.io.atomic import write_atomic
+
+        write_atomic(folder / "config.toml", self.text.encode("utf-8"))
+
+
+def effective(tables: Mapping[str, Any], file: Path | None, command: str) -> Effective:
+    """The effective configuration of ``command`` (``track``'s locator is ``[locator]``)."""
+    body = settings_text(tables, skip=("locator",))
+    header = (
+        f"# The settings of `mast {command}` (mast {__version__}): --config runs with them.\n"
+        f"# SHA-256 of the settings below: {fingerprint(body)}\n"
+    )
+    return Effective(tables, file, header + body, fingerprint(body))
