@@ -41,8 +41,9 @@ browser:
 		echo "note: no chromium and not root (or no apt-get): install chromium to run the HTML report render test"; \
 	fi
 
+# Two to four processes, a test file to each (its module fixtures built once).
 pytest: $(DEVSTAMP) browser
-	$(BIN)/python -m pytest
+	$(BIN)/python -m pytest -n auto --maxprocesses 4 --dist loadfile
 
 test: lint typecheck pytest
 

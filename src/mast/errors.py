@@ -15,6 +15,8 @@ __all__ = [
     "MastError",
     "NoFixError",
     "OutputError",
+    "describe",
+    "printable",
     "quoted",
     "shorten",
 ]
@@ -74,17 +76,34 @@ def quoted(value: object, limit: int = ECHO_CHARS) -> str:
     return f"{text[: limit - 1]}...' ({len(str(value))} characters)"
 
 
-def shorten(message: str, limit: int = ECHO_CHARS) -> str:
-    """``message`` on one line, with every run of more than ``limit`` characters without
-    a space cut short (a long value a user typed or a file held), and control
-    characters and line separators a file held written as escapes (``\\x0b``)."""
-    text = "".join(
+def printable(text: str) -> str:
+    """``text`` on one line: control characters and line separators written as escapes
+    (``\\x0b``)."""
+    return "".join(
         ch if ch == " " or not _unprintable(ch) else ch.encode("unicode_escape").decode("ascii")
-        for ch in message
+        for ch in text
     )
-    words = text.split(" ")
+
+
+def shorten(message: str, limit: int = ECHO_CHARS) -> str:
+    """``message`` on one line (:func:`printable`), with every run of more than ``limit``
+    characters without a space cut short (a long value a user typed or a file held)."""
+    words = printable(message).split(" ")
     out = [w if len(w) <= limit else f"{w[: limit - 1]}...({len(w)} characters)" for w in words]
     return " ".join(out)
+
+
+def describe(err: MastError, limit: int = ECHO_CHARS) -> str:
+    """An error as one line: the file it names, whole however long its path (the user
+    must be able to find it), then the line and the problem, the problem's long runs
+    cut short (:func:`shorten`)."""
+    path = getattr(err, "path", None)
+    problem = getattr(err, "problem", None)
+    if path is None or problem is None:
+        return shorten(str(err), limit)
+    line = getattr(err, "line", None)
+    where = printable(str(path)) + ("" if line is None else f", line {line}")
+    return f"{where}: {shorten(problem, limit)}"
 
 
 def _unprintable(ch: str) -> bool:

@@ -14,7 +14,7 @@ from typing import Annotated
 import typer
 
 from mast import __version__
-from mast.errors import MastError, NoFixError, OutputError, shorten
+from mast.errors import MastError, NoFixError, OutputError, describe, shorten
 
 EXIT_OK = 0
 EXIT_BAD_INPUT = 2
@@ -103,10 +103,10 @@ def main() -> None:
         _say(f"mast: {shorten(str(err), 80)}")
         sys.exit(EXIT_NO_FIX)
     except OutputError as err:
-        _say(f"mast: error: {shorten(str(err), 80)}")
+        _say(f"mast: error: {describe(err, 80)}")
         sys.exit(EXIT_CANNOT_WRITE)
     except MastError as err:  # InputError and the rest: what was given is wrong
-        _say(f"mast: error: {shorten(str(err), 80)}")
+        _say(f"mast: error: {describe(err, 80)}")
         sys.exit(EXIT_BAD_INPUT)
     except BrokenPipeError:
         # The reader of standard output went away (``mast locate ... | head``): stop
