@@ -347,3 +347,31 @@ def test_bench_field_small_run_writes_csv(tmp_path: Path) -> None:
         assert all(x["wrong"] == "0" for x in rows)
         # Only the owed scans are located again with a prior.
         assert all((x["prior_status"] != "") == (x["owed"] == "1") for x in rows)
+
+
+def test_track_and_locate_read_a_folder_of_scan_csvs(tmp_path: Path) -> None:
+    # The same scan readers for every command: a folder of scan CSVs is a run to
+    # `mast track` as it is to `mast live` and `mast emulate`.
+    import shutil
+    from importlib.resources import as_file, files
+
+    run = tmp_path / "run"
+    run.mkdir()
+    example = files("mast").joinpath("data/example")
+    with as_file(example.joinpath("scan.csv")) as scan:
+        for k in range(3):
+            shutil.copy(scan, run / f"scan_{k:03d}.csv")
+    with as_file(example.joinpath("beacons.csv")) as beacons:
+        shutil.copy(beacons, tmp_path / "beacons.csv")
+    r = runner.invoke(
+        app, ["track", str(run), "-b", str(tmp_path / "beacons.csv"), "--out", str(tmp_path / "o")]
+    )
+    assert r.exit_code == 0, r.output
+    assert "3 scans, 3 fixed" in r.output
+    rows = (tmp_path / "o" / "trajectory.csv").read_text().splitlines()
+    assert len(rows) == 4
+    r = runner.invoke(
+        app, ["locate", str(run), "-b", str(tmp_path / "beacons.csv"), "--format", "json"]
+    )
+    assert r.exit_code == 0, r.output
+    assert len(r.stdout.splitlines()) == 3

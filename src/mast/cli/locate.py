@@ -78,7 +78,6 @@ def locate(
     import json
 
     from mast.io import read_survey
-    from mast.io.bags import laserscan_topic
     from mast.pipeline.locator import SequenceLocator
     from mast.report.record import ReportInputs, fix_record, fix_text
 
@@ -100,7 +99,7 @@ def locate(
     # passes over it (mast.core.heap): they were a run's slowest scans.
     with QuietCollector() as heap:
         for scan_path in scan_paths:
-            scans, many = load_scans(
+            scans, many, scan_topic = load_scans(
                 scan_path, topic=topic, range_min=range_min, range_max=range_max
             )
             numbered = numbered or many
@@ -108,7 +107,7 @@ def locate(
                 scan_file="<stdin>" if scan_path == Path("-") else str(scan_path),
                 survey_file=str(beacons),
                 scanner=scanner,
-                topic=laserscan_topic(scan_path, topic) if many else None,
+                topic=scan_topic,
                 defaults=frozenset(defaults),
                 config_file=None if config is None else str(config),
                 config_sha256=settings.sha256,

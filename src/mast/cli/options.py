@@ -46,25 +46,21 @@ class OutputFormat(StrEnum):
 
 def load_scans(
     path: Path, *, topic: str | None, range_min: float | None, range_max: float | None
-) -> tuple[Iterator[Scan], bool]:
-    """The scans in a file: one for a CSV, the LaserScans of a topic for a bag, read one
-    at a time as they are located (a bag's scans are never all in memory at once)."""
-    from mast.io import read_laserscans, read_scan_csv
-    from mast.io.bags import bag_kind
+) -> tuple[Iterator[Scan], bool, str | None]:
+    """The scans at a path (:func:`mast.io.scans.open_scans`: one for a CSV, a run for a
+    bag or a folder of scan CSVs), read one at a time as they are located; whether it is
+    a run; and the topic they come from (a bag's)."""
+    from mast.io.scans import open_scans
 
     if path == Path("-"):
-        return iter([read_stdin_scan(range_min, range_max)]), False
-    if not path.exists():
-        raise InputError("scan file not found", path=path)
-    if path.is_file() and path.suffix.lower() in {".csv", ".txt"}:
-        scan = read_scan_csv(path, range_min_m=range_min or 0.0, range_max_m=range_max or math.inf)
-        return iter([scan]), False
-    bag_kind(path)  # a clear error for anything that is neither
-    scans = (s.with_range_limits(range_min, range_max) for s in read_laserscans(path, topic=topic))
-    first = next(scans, None)
+        return iter([read_stdin_scan(range_min, range_max)]), False, None
+    run = open_scans(path, topic=topic, range_min_m=range_min, range_max_m=range_max)
+    if not run.format.sequence:
+        return run.scans, False, None
+    first = next(run.scans, None)
     if first is None:
         raise InputError("bag holds no LaserScan message on that topic", path=path)
-    return itertools.chain([first], scans), True
+    return itertools.chain([first], run.scans), True, run.topic
 
 
 def read_stdin_scan(range_min: float | None, range_max: float | None) -> Scan:

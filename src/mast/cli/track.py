@@ -90,7 +90,7 @@ def track(
     the scans read until then).
     """
     from mast.io import read_survey
-    from mast.io.bags import bag_kind, laserscan_topic
+    from mast.io.scans import scan_format
     from mast.report.record import ReportInputs
     from mast.runs.batch import expand_runs, track_runs
     from mast.runs.run import track_run
@@ -111,7 +111,7 @@ def track(
             raise InputError("run not found", path=given)
     found = expand_runs(runs)
     for r in found:
-        bag_kind(r)
+        scan_format(r, what="run")
     check_output_folder(out)
     settings.write(out)
     survey = read_survey(beacons)
@@ -146,7 +146,7 @@ def track(
         scan_file=str(run),
         survey_file=str(beacons),
         scanner=scanner,
-        topic=laserscan_topic(run, topic),
+        topic=scan_format(run, what="run").topic_of(run, topic),
         defaults=frozenset(defaults),
         config_file=None if config is None else str(config),
         config_sha256=settings.sha256,

@@ -40,11 +40,12 @@ import time
 import urllib.parse
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Generator, Iterator
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from mast.core.scan import Scan
 from mast.errors import InputError
+from mast.io.scans import DEFAULT_CSV_HZ
 from mast.live import cola, scip
 
 __all__ = [
@@ -60,8 +61,6 @@ __all__ = [
 
 #: Default TCP port of each scanner family.
 DEFAULT_PORTS = {"sick": 2111, "hokuyo": 10940}
-#: Scans a second of a CSV folder replayed (it has no stamps).
-DEFAULT_CSV_HZ = 25.0
 
 
 @dataclass(frozen=True, slots=True)
@@ -439,33 +438,13 @@ class HokuyoSource(_TcpSource):
 def read_run(
     path: Path, *, csv_hz: float = DEFAULT_CSV_HZ, topic: str | None = None
 ) -> Generator[Scan, None, None]:
-    """The scans of a recorded run, one at a time: a bag (ROS 1, ROS 2 folder or
-    ``.mcap`` file; ``topic`` when it holds several LaserScan topics) or a folder of scan
-    CSVs (every ``*.csv`` whose header starts with ``angle_rad``, in name order, stamped
-    ``1 / csv_hz`` apart from 0)."""
-    from mast.io import read_laserscans, read_scan_csv
-    from mast.io.bags import bag_kind
+    """The scans of a recorded run, one at a time (:func:`mast.io.scans.open_scans`): a
+    bag (ROS 1, ROS 2 folder or ``.mcap`` file; ``topic`` when it holds several LaserScan
+    topics) or a folder of scan CSVs (every ``*.csv`` whose header starts with
+    ``angle_rad``, in name order, stamped ``1 / csv_hz`` apart from 0)."""
+    from mast.io.scans import open_scans
 
-    if not path.exists():
-        raise InputError("run not found", path=path)
-    if path.is_dir() and not (path / "metadata.yaml").is_file():
-        files = sorted(p for p in path.glob("*.csv") if _is_scan_csv(p))
-        if not files:
-            raise InputError("folder holds no scan CSV (angle_rad,range_m) nor a bag", path=path)
-        step_ns = round(1e9 / csv_hz)
-        for k, f in enumerate(files):
-            yield replace(read_scan_csv(f), stamp_ns=k * step_ns)
-        return
-    bag_kind(path)
-    yield from read_laserscans(path, topic=topic)
-
-
-def _is_scan_csv(path: Path) -> bool:
-    try:
-        with path.open("rb") as fh:
-            return fh.read(64).lstrip(b"\xef\xbb\xbf").startswith(b"angle_rad")
-    except OSError:
-        return False
+    return open_scans(path, topic=topic, csv_hz=csv_hz, what="run").scans
 
 
 class ReplaySource(Source):

@@ -35,8 +35,9 @@ class RunOutcome:
 
 
 def expand_runs(paths: Sequence[Path]) -> list[Path]:
-    """The runs named on the command line: bags, ROS 2 bag folders, or folders holding them."""
-    from mast.io.bags import bag_kind
+    """The runs named on the command line: bags, ROS 2 bag folders, folders of scan CSVs,
+    or folders holding bags (:func:`mast.io.scans.scan_format` refuses anything else)."""
+    from mast.io.scans import scan_format
 
     out: list[Path] = []
     for p in paths:
@@ -47,11 +48,11 @@ def expand_runs(paths: Sequence[Path]) -> list[Path]:
                 if (q.is_dir() and (q / "metadata.yaml").is_file())
                 or (q.is_file() and q.suffix in (".bag", ".mcap"))
             )
-            if not inner:
-                bag_kind(p)  # the clear error for a folder that is no bag
-            out.extend(inner)
-        else:
-            out.append(p)
+            if inner:
+                out.extend(inner)
+                continue
+        scan_format(p, what="run")  # a folder of scan CSVs is a run; the rest, an error
+        out.append(p)
     return out
 
 

@@ -102,7 +102,8 @@ def track_run(
     Parameters
     ----------
     bag : Path
-        A ROS 1 bag or a ROS 2 bag folder.
+        A ROS 1 bag, a ROS 2 bag folder, an MCAP file or a folder of scan CSVs
+        (:func:`mast.io.scans.open_scans`).
     survey : Survey
     out : Path
         An existing, writable folder.
@@ -127,14 +128,14 @@ def track_run(
         ``interrupted`` when Ctrl-C stopped the reading: the files then hold the
         scans read until then, and are complete and valid.
     """
-    from mast.io.bags import laserscan_topic, read_laserscans
+    from mast.io.scans import open_scans, scan_format
     from mast.runs import outputs
 
     cfg = config or TrackConfig()
     t0 = time.perf_counter()
     inputs = inputs or ReportInputs()
     # The caller may have resolved the topic already (opening a bag is not free).
-    name = inputs.topic if inputs.topic is not None else laserscan_topic(bag, topic)
+    name = inputs.topic if inputs.topic is not None else scan_format(bag).topic_of(bag, topic)
     inputs = replace(inputs, scan_file=inputs.scan_file or str(bag), topic=name)
     summary = RunSummary(run=str(bag), topic=name)
     result = RunResult(summary, Trajectory(), out)
@@ -146,8 +147,10 @@ def track_run(
         warn(text)
 
     def scans(on_skip: Callable[[str], None]) -> Any:
-        for s in read_laserscans(bag, topic=topic, on_skip=on_skip):
-            yield s.with_range_limits(*range_limits)
+        low, high = range_limits
+        yield from open_scans(
+            bag, topic=topic, range_min_m=low, range_max_m=high, on_skip=on_skip, what="run"
+        ).scans
 
     from mast.runs.outputs import MAX_TABLE_ROWS
 
