@@ -94,11 +94,11 @@ def _number(text: str) -> float:
 
 
 def _grouped(text: str) -> float:
-    """``"E − 512 000 (m)"`` -> 512000.0; ``"Easting E (m)"`` -> 0."""
-    m = re.search(r"([−+]) ([\d ]+) \(m\)", text)
+    """``"E − 512\u2009000 (m)"`` (thin spaces) -> 512000.0; ``"Easting E (m)"`` -> 0."""
+    m = re.search(r"([−+]) ([\d\u2009]+) \(m\)", text)
     if m is None:
         return 0.0
-    value = float(m.group(2).replace(" ", ""))
+    value = float(m.group(2).replace("\u2009", ""))
     return value if m.group(1) == "−" else -value
 
 
@@ -212,12 +212,12 @@ def test_mine_axes_count_from_a_stated_round_origin(utm: tuple[Scan, Survey, Fix
     mine = _axes(fig, "mine")
     e0, n0 = _grouped(mine.get_xlabel()), _grouped(mine.get_ylabel())
     assert (e0, n0) == (512_000.0, 7_012_000.0)
-    assert mine.get_xlabel() == "E − 512 000 (m)"
-    assert mine.get_ylabel() == "N − 7 012 000 (m)"
+    assert mine.get_xlabel() == "E − 512\u2009000 (m)"
+    assert mine.get_ylabel() == "N − 7\u2009012\u2009000 (m)"
     # the origin is printed on the figure, and the scanner's full coordinates too
     caption = fig.get_supxlabel()
-    assert "E 512 000 m, N 7 012 000 m" in caption
-    full = f"E {fix.pose.easting:,.3f} m   N {fix.pose.northing:,.3f} m".replace(",", " ")
+    assert "E 512\u2009000 m, N 7\u2009012\u2009000 m" in caption
+    full = f"E {fix.pose.easting:,.3f} m   N {fix.pose.northing:,.3f} m".replace(",", "\u2009")
     assert full in fig.get_suptitle()  # e.g. "E 512 006.999 m   N 7 012 007.002 m"
     # the scanner drawn at its coordinate minus the stated origin
     (scanner,) = [ln for ln in mine.get_lines() if ln.get_label() == "scanner"]
@@ -299,8 +299,8 @@ def test_closeups_are_labelled_with_their_residuals(utm: tuple[Scan, Survey, Fix
         assert f"RMS {1000 * group.rms_m:.1f} mm, max |w| {group.max_abs_w:.1f}" in title
         assert f"{group.returns} returns" in title
         assert "critical" in title  # the beacon's left-out test
-        assert ax.get_xlabel() == "E − 512 000 (m)"
-        assert ax.get_ylabel() == "N − 7 012 000 (m)"
+        assert ax.get_xlabel() == "E − 512\u2009000 (m)"
+        assert ax.get_ylabel() == "N − 7\u2009012\u2009000 (m)"
         # the panels are named on the plot, their residuals listed in its legend
         texts = {t.get_text() for t in ax.texts}
         assert {"P1", "P2", "P3"} <= texts
@@ -381,7 +381,7 @@ def test_no_fix_shows_scan_survey_and_reason_without_a_warning(
             assert [t.get_text() for t in legend.get_texts()]
         if not ax.get_legend_handles_labels()[1]:
             assert legend is None
-    assert mine.get_xlabel() == "E − 512 000 (m)"
+    assert mine.get_xlabel() == "E − 512\u2009000 (m)"
 
 
 def test_scan_without_returns_plots_without_a_warning(

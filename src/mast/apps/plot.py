@@ -39,6 +39,7 @@ from mast.errors import InputError
 from mast.io.outputs import PLOT_SUFFIXES, save_figure
 from mast.pipeline.locator import NO_FIX_REASONS, Fix, segmented
 from mast.pipeline.segmentation import Segment
+from mast.report.html import axis_label, group_thousands, plot_origin
 
 __all__ = ["PLOT_SUFFIXES", "fix_figure", "plot_fix"]
 
@@ -143,11 +144,6 @@ def fix_figure(scan: Scan, survey: Survey, fix: Fix, *, title: str = "") -> Figu
 # --------------------------------------------------------------------------- coordinates
 
 
-def _group(value: float, decimals: int = 0) -> str:
-    """A number with its thousands grouped by spaces, as survey sheets print them."""
-    return f"{value:,.{decimals}f}".replace(",", " ")
-
-
 @dataclass(frozen=True, slots=True)
 class _Origin:
     """The round point mine-frame axes count their metres from."""
@@ -159,13 +155,7 @@ class _Origin:
     def for_view(cls, view: NDArray[np.float64]) -> _Origin:
         """Zero for coordinates under 10 km; else a multiple of 100 m (or more, for a
         wide view) just below the view, so tick labels keep the coordinate's own digits."""
-        lo, hi = view
-        if float(np.max(np.abs(view))) < 10_000.0:
-            return cls(0.0, 0.0)
-        span = float(np.max(hi - lo))
-        step = 10.0 ** max(2, math.ceil(math.log10(max(span, 1.0))))
-        e, n = (math.floor(float(v) / step) * step for v in lo)
-        return cls(e, n)
+        return cls(*plot_origin(np.asarray(view, dtype=float)))
 
     @property
     def xy(self) -> NDArray[np.float64]:
@@ -175,20 +165,13 @@ class _Origin:
     def is_zero(self) -> bool:
         return self.easting == 0.0 and self.northing == 0.0
 
-    @staticmethod
-    def _axis(name: str, value: float) -> str:
-        if value == 0.0:
-            return f"{name} (m)"
-        sign = "−" if value > 0 else "+"
-        return f"{name} {sign} {_group(abs(value))} (m)"
-
     @property
     def xlabel(self) -> str:
-        return self._axis("E", self.easting) if not self.is_zero else "Easting E (m)"
+        return axis_label("E", self.easting) if not self.is_zero else "Easting E (m)"
 
     @property
     def ylabel(self) -> str:
-        return self._axis("N", self.northing) if not self.is_zero else "Northing N (m)"
+        return axis_label("N", self.northing) if not self.is_zero else "Northing N (m)"
 
     def local(self, points: NDArray[np.float64]) -> NDArray[np.float64]:
         return np.asarray(points, dtype=float) - self.xy
@@ -696,7 +679,7 @@ def _headline(fix: Fix, title: str) -> str:
     if fix.ok and fix.pose is not None and fix.adjustment is not None:
         p, s = fix.pose, fix.adjustment.sigma
         lines.append(
-            f"FIX  E {_group(p.easting, 3)} m   N {_group(p.northing, 3)} m   "
+            f"FIX  E {group_thousands(p.easting, 3)} m   N {group_thousands(p.northing, 3)} m   "
             f"Az {format_dms(p.azimuth_deg)}   "
             f"(σ {1000 * s[0]:.1f} mm, {1000 * s[1]:.1f} mm, "
             f"{format_dms(math.degrees(s[2]), signed=True)})   "
@@ -716,8 +699,8 @@ def _caption(
         frame = "Mine frame in metres (E, N)"
     else:
         frame = (
-            f"Mine frame in metres from the origin E {_group(origin.easting)} m, "
-            f"N {_group(origin.northing)} m"
+            f"Mine frame in metres from the origin E {group_thousands(origin.easting)} m, "
+            f"N {group_thousands(origin.northing)} m"
         )
     parts = [f"{frame}; grid north up, azimuth clockwise from grid north."]
     if ellipse is not None:

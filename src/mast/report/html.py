@@ -69,8 +69,12 @@ def plot_origin(points: NDArray[np.float64]) -> tuple[float, float]:
 
 
 def axis_label(name: str, value: float) -> str:
-    """A map axis' label, naming the origin (:func:`plot_origin`) it counts from."""
-    return f"{name} (m)" if value == 0.0 else f"{name} − {group_thousands(value)} (m)"
+    """A map axis' label, naming the origin (:func:`plot_origin`) it counts from: ``E −
+    12 300 (m)`` counts from E = 12 300 m, ``E + 500 (m)`` from E = −500 m."""
+    if value == 0.0:
+        return f"{name} (m)"
+    sign = "−" if value > 0 else "+"
+    return f"{name} {sign} {group_thousands(abs(value))} (m)"
 
 
 def inline_svg(fig: Any, name: str) -> str:
