@@ -17,7 +17,7 @@ from mast.cloud.adjust import (
     rigid_solution,
 )
 from mast.cloud.detect import _top_edge
-from mast.cloud.drift import DriftCorrection, Trajectory, correct_drift
+from mast.cloud.drift import DriftCorrection, ScannerPath, correct_drift
 from mast.cloud.grid import PlanGrid, cell_keys, key_ij, pack_ij
 from mast.cloud.outputs import accuracy_class
 
@@ -125,7 +125,7 @@ def test_icsm_classes_follow_c_times_d_plus_0_2() -> None:
     assert accuracy_class(0.5, 20.0) is None
 
 
-def _drifting_run(rng: np.random.Generator, drift: float) -> tuple[Trajectory, list[BeaconObs]]:
+def _drifting_run(rng: np.random.Generator, drift: float) -> tuple[ScannerPath, list[BeaconObs]]:
     """A 240 m straight run whose SLAM drifts (heading 0.5 mrad per 10 m, scale ``drift``,
     a lateral wander), with a beacon on alternate walls every 20 m: each seen in the
     cloud where the SLAM put it and surveyed where it is."""
@@ -133,7 +133,7 @@ def _drifting_run(rng: np.random.Generator, drift: float) -> tuple[Trajectory, l
     slam_xyz = np.column_stack([t, np.zeros_like(t), np.zeros_like(t)])
     true_yaw = 0.00005 * t
     true_xy = np.column_stack([(1 + drift) * t, 0.3 * np.sin(t / 50.0)])
-    traj = Trajectory(t, slam_xyz, np.zeros_like(t), Path("run.tum"))
+    traj = ScannerPath(t, slam_xyz, np.zeros_like(t), Path("run.tum"))
     grid0 = np.array([452000.0, 7101000.0])
     out = []
     for k, tb in enumerate(range(10, 240, 20)):

@@ -586,7 +586,9 @@ def test_runs_and_noise_kernels_match_the_reference_on_scans(noise_m: float | No
         want_ids, want_noise = seg._runs_reference(scan, beams, pts, cfg)
         np.testing.assert_array_equal(got_ids, want_ids)
         assert got_noise == want_noise
-        assert seg.estimate_noise(pts, got_ids) == seg._estimate_noise_reference(pts, got_ids)
+        assert seg.range_noise_from_triples(
+            pts, got_ids
+        ) == seg._range_noise_from_triples_reference(pts, got_ids)
 
 
 @settings(max_examples=60, deadline=None)
@@ -602,7 +604,9 @@ def test_noise_estimate_kernel_matches_the_reference_on_polylines(
 ) -> None:
     pts = _polyline(n, seed, corners, sigma, 8.0)
     ids = np.arange(n, dtype=np.intp) // cut  # runs of ``cut`` returns
-    assert seg.estimate_noise(pts, ids) == seg._estimate_noise_reference(pts, ids)
+    assert seg.range_noise_from_triples(pts, ids) == seg._range_noise_from_triples_reference(
+        pts, ids
+    )
 
 
 @pytest.mark.parametrize("scale", [1e-277, 1e-160, 1e150])
@@ -614,8 +618,8 @@ def test_noise_estimate_kernel_matches_the_reference_where_products_overflow_or_
     pts = _polyline(60, 4, 2, 0.02, 8.0) * scale
     ids = np.zeros(60, dtype=np.intp)
     with np.errstate(all="ignore"):
-        want = seg._estimate_noise_reference(pts, ids)
-    got = seg.estimate_noise(pts, ids)
+        want = seg._range_noise_from_triples_reference(pts, ids)
+    got = seg.range_noise_from_triples(pts, ids)
     assert got == want or (math.isnan(got) and math.isnan(want))
 
 

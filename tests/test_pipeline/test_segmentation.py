@@ -7,7 +7,8 @@ from hypothesis import strategies as st
 from numpy.testing import assert_allclose
 
 from mast import Pose2D, Scan
-from mast.pipeline.segmentation import SegmentationConfig, fit_line, segment_scan
+from mast.core.lines import fit_line
+from mast.pipeline.segmentation import SegmentationConfig, segment_scan
 from mast.sim import ScannerModel, Surface, WorldBuilder, paper_scene, simulate_scan
 
 

@@ -51,12 +51,13 @@ from mast.bench.robustness import is_wrong
 from mast.bench.tracking import prior_pair
 from mast.core.beacon import Beacon, Survey
 from mast.core.geometry import first_hits
+from mast.core.lines import fit_line
 from mast.core.pose import Pose2D
 from mast.core.scan import Scan
 from mast.errors import BeaconError
 from mast.io.carmen_log import read_carmen_log
 from mast.pipeline.locator import LocatorConfig, locate
-from mast.pipeline.segmentation import Segmentation, fit_line, segment_scan
+from mast.pipeline.segmentation import Segmentation, segment_scan
 from mast.sim.design import BeaconDesign, random_design
 from mast.sim.owed import OWED_REAL_WALLS
 from mast.sim.scanner import ScannerModel, SimulatedScan

@@ -36,6 +36,7 @@ from numpy.typing import NDArray
 
 from mast.cloud.grid import EIGHT, PlanGrid, cell_keys, key_ij, neighbours, pack_ij
 from mast.cloud.io import Cloud
+from mast.core.lines import intersect_lines
 from mast.errors import InputError
 from mast.pipeline.segmentation import Corner, Segment, Segmentation
 
@@ -360,7 +361,7 @@ class PlanPieces:
     rejected: dict[str, int] = field(default_factory=dict)
 
 
-def estimate_noise(xy: NDArray[np.float64], k: int = 48) -> float:
+def plan_noise_from_neighbours(xy: NDArray[np.float64], k: int = 48) -> float:
     """The plan noise from local line fits: median smallest spread of ``k`` neighbours."""
     from scipy.spatial import cKDTree
 
@@ -576,7 +577,7 @@ def plan_pieces(cand: Candidates, cfg: DetectConfig = DetectConfig()) -> PlanPie
 
     xy = xyz[:, :2]
     core = np.flatnonzero(cand.core)
-    noise = cfg.noise_m if cfg.noise_m is not None else estimate_noise(xy[core])
+    noise = cfg.noise_m if cfg.noise_m is not None else plan_noise_from_neighbours(xy[core])
     noise = max(noise, 1e-4)
     tree = cKDTree(xy)
     core_label, _ = _clusters(xy[core], cfg.cell_m)
@@ -758,12 +759,11 @@ def _corners(segs: list[Segment], noise: float) -> list[Corner]:
         for ai in range(len(group)):
             for bi in range(ai + 1, len(group)):
                 a, b = group[ai], group[bi]
-                cross = a.direction[0] * b.direction[1] - a.direction[1] * b.direction[0]
-                if abs(cross) < 1e-6:
+                node = intersect_lines(
+                    a.centroid, a.direction, b.centroid, b.direction, min_sine=1e-6
+                )
+                if node is None:
                     continue
-                w = b.centroid - a.centroid
-                s = (w[0] * b.direction[1] - w[1] * b.direction[0]) / cross
-                node = a.centroid + s * a.direction
                 da_end = float(np.hypot(*(a.end - node)))
                 da_start = float(np.hypot(*(a.start - node)))
                 db_end = float(np.hypot(*(b.end - node)))

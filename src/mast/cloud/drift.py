@@ -47,7 +47,7 @@ from mast.core.frames import yaw_of_azimuth, yaw_quaternion
 from mast.core.stats import W_TEST_ALPHA, BeaconTest, beacon_critical
 from mast.errors import InputError
 
-__all__ = ["DriftCorrection", "Trajectory", "correct_drift", "read_trajectory"]
+__all__ = ["DriftCorrection", "ScannerPath", "correct_drift", "read_trajectory"]
 
 #: The drift model of the between factors, per step of ``s`` metres: position
 #: ``SCALE_SHARE * drift * s`` in each axis, heading ``HEADING_PER_ROOT_M * drift *
@@ -66,8 +66,10 @@ ROLES = ("control", "excluded", "check")
 
 
 @dataclass(frozen=True, eq=False)
-class Trajectory:
-    """Scanner poses in the cloud's frame: times (s), x, y, z and yaw (radians, from x)."""
+class ScannerPath:
+    """The SLAM scanner's poses in the cloud's frame, read from a trajectory file: times
+    (s), x, y, z and yaw (radians, from x). (A survey run's placed scans in the mine grid
+    are :class:`mast.runs.model.Trajectory`.)"""
 
     time: NDArray[np.float64]
     xyz: NDArray[np.float64]
@@ -75,7 +77,7 @@ class Trajectory:
     path: Path
 
 
-def read_trajectory(path: str | Path) -> Trajectory:
+def read_trajectory(path: str | Path) -> ScannerPath:
     """Read a TUM file (``t x y z qx qy qz qw``) or a ``mast track`` trajectory CSV."""
     p = Path(path)
     try:
@@ -108,7 +110,7 @@ def read_trajectory(path: str | Path) -> Trajectory:
     return _trajectory(p, np.array(rows).reshape(-1, 8))
 
 
-def _trajectory(p: Path, a: NDArray[np.float64]) -> Trajectory:
+def _trajectory(p: Path, a: NDArray[np.float64]) -> ScannerPath:
     if a.shape[0] < 2:
         raise InputError("a trajectory needs at least two poses", path=p)
     t = a[:, 0]
@@ -117,10 +119,10 @@ def _trajectory(p: Path, a: NDArray[np.float64]) -> Trajectory:
         raise InputError(f"times must increase (pose {bad} does not)", path=p)
     qx, qy, qz, qw = a[:, 4], a[:, 5], a[:, 6], a[:, 7]
     yaw = np.arctan2(2 * (qw * qz + qx * qy), 1 - 2 * (qy**2 + qz**2))
-    return Trajectory(t, a[:, 1:4].copy(), np.unwrap(yaw), p)
+    return ScannerPath(t, a[:, 1:4].copy(), np.unwrap(yaw), p)
 
 
-def _read_track_csv(p: Path, lines: list[str]) -> Trajectory:
+def _read_track_csv(p: Path, lines: list[str]) -> ScannerPath:
     import csv
 
     reader = csv.DictReader(lines)
@@ -197,7 +199,7 @@ class DriftCorrection:
         return self.apply(xyz, t)
 
 
-def _pose_at(traj: Trajectory, t: NDArray[np.float64]) -> NDArray[np.float64]:
+def _pose_at(traj: ScannerPath, t: NDArray[np.float64]) -> NDArray[np.float64]:
     return np.column_stack(
         [
             np.interp(t, traj.time, traj.xyz[:, 0]),
@@ -208,7 +210,7 @@ def _pose_at(traj: Trajectory, t: NDArray[np.float64]) -> NDArray[np.float64]:
 
 
 def correct_drift(
-    traj: Trajectory,
+    traj: ScannerPath,
     controls: Sequence[BeaconObs],
     rigid: Transformation,
     *,

@@ -39,7 +39,7 @@ from mast.cloud.detect import (
     find_candidates,
     plan_pieces,
 )
-from mast.cloud.drift import DriftCorrection, Trajectory, correct_drift
+from mast.cloud.drift import DriftCorrection, ScannerPath, correct_drift
 from mast.cloud.io import Cloud
 from mast.cloud.match import Detection, Match, MatchConfig, detect_beacons, match_beacons
 from mast.core.beacon import Survey
@@ -189,7 +189,7 @@ def georeference(
     survey: Survey,
     config: GeorefConfig = GeorefConfig(),
     *,
-    trajectory: Trajectory | None = None,
+    trajectory: ScannerPath | None = None,
     progress: Progress | None = None,
 ) -> Georef:
     """Find the beacons in ``cloud`` and adjust the transformation to the grid.

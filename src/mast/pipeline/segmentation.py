@@ -21,6 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from mast.core.lines import fit_line, intersect_lines
 from mast.core.scan import Scan
 
 __all__ = ["Corner", "Segment", "Segmentation", "SegmentationConfig", "fit_line", "segment_scan"]
@@ -51,33 +52,6 @@ class SegmentationConfig:
     max_gap_beams: int = 3
     noise_floor_m: float = 2e-5
     noise_m: float | None = None
-
-
-@dataclass(frozen=True, slots=True)
-class LineFit:
-    centroid: NDArray[np.float64]
-    direction: NDArray[np.float64]
-    normal: NDArray[np.float64]
-    rms: float
-    t_spread: float  # sum of squared projections about the centroid
-
-
-def fit_line(points: NDArray[np.float64]) -> LineFit:
-    """Total least squares line through ``(n, 2)`` points (principal component).
-
-    The direction points from the first point towards the last.
-    """
-    c = points.mean(axis=0)
-    q = points - c
-    cov = q.T @ q
-    _, v = np.linalg.eigh(cov)
-    d = v[:, 1]
-    if np.dot(points[-1] - points[0], d) < 0:
-        d = -d
-    n = np.array([-d[1], d[0]])
-    resid = q @ n
-    t = q @ d
-    return LineFit(c, d, n, float(np.sqrt(np.mean(resid**2))), float(np.sum(t**2)))
 
 
 @dataclass(frozen=True, eq=False)
@@ -170,7 +144,7 @@ NOISE_QUANTILE = 0.5
 _HALF_NORMAL_Q = 0.6745
 
 
-def estimate_noise(points: NDArray[np.float64], run_ids: NDArray[np.intp]) -> float:
+def range_noise_from_triples(points: NDArray[np.float64], run_ids: NDArray[np.intp]) -> float:
     """Robust estimate of the range noise from triples of consecutive returns.
 
     For three neighbours on a straight surface, the middle one's distance
@@ -182,7 +156,7 @@ def estimate_noise(points: NDArray[np.float64], run_ids: NDArray[np.intp]) -> fl
     on corners only lengthen the upper tail (rough rock, whose bumps are
     shape, raises it, which only makes the segmentation more cautious).
     The deviations are compiled (:func:`mast.core._kernels.triple_deviations`);
-    :func:`_estimate_noise_reference` is the same in numpy.
+    :func:`_range_noise_from_triples_reference` is the same in numpy.
     """
     from mast.core._kernels import linear_median, triple_deviations
 
@@ -196,8 +170,10 @@ def estimate_noise(points: NDArray[np.float64], run_ids: NDArray[np.intp]) -> fl
     return float(linear_median(deviations) / _HALF_NORMAL_Q / math.sqrt(1.5))
 
 
-def _estimate_noise_reference(points: NDArray[np.float64], run_ids: NDArray[np.intp]) -> float:
-    """:func:`estimate_noise` in numpy (the tests compare the two)."""
+def _range_noise_from_triples_reference(
+    points: NDArray[np.float64], run_ids: NDArray[np.intp]
+) -> float:
+    """:func:`range_noise_from_triples` in numpy (the tests compare the two)."""
     if points.shape[0] < 3:
         return 0.0
     a, b, c = points[:-2], points[1:-1], points[2:]
@@ -536,7 +512,7 @@ def _runs(
         lam,
         slack,
     )
-    noise = noise_guess if noise_guess is not None else estimate_noise(pts, run_ids)
+    noise = noise_guess if noise_guess is not None else range_noise_from_triples(pts, run_ids)
     noise = max(noise, config.noise_floor_m)
     if noise_guess is None and beams.size > 1:
         run_ids = rebreak(beams, angles, explained, step, config.max_gap_beams, lam, 3.0 * noise)
@@ -562,7 +538,11 @@ def _runs_reference(
         dmax = dmax + 3.0 * (noise_guess if noise_guess is not None else 0.0)
         brk = (gap_beams > config.max_gap_beams + 1) | (step > dmax) | (dphi >= lam)
         run_ids[1:] = np.cumsum(brk)
-    noise = noise_guess if noise_guess is not None else _estimate_noise_reference(pts, run_ids)
+    noise = (
+        noise_guess
+        if noise_guess is not None
+        else _range_noise_from_triples_reference(pts, run_ids)
+    )
     noise = max(noise, config.noise_floor_m)
     if noise_guess is None and beams.size > 1:
         # Second pass with the estimated noise, so noisy returns do not cut runs.
@@ -622,10 +602,7 @@ def _corner(a: Segment, b: Segment) -> Corner | None:
     cross = a.direction[0] * b.direction[1] - a.direction[1] * b.direction[0]
     dot = float(a.direction @ b.direction)
     defl = math.atan2(cross, dot)
-    if abs(cross) < 1e-12:
+    node = intersect_lines(a.centroid, a.direction, b.centroid, b.direction, min_sine=1e-12)
+    if node is None:
         return None
-    # a.centroid + s a.dir = b.centroid + u b.dir
-    w = b.centroid - a.centroid
-    s = (w[0] * b.direction[1] - w[1] * b.direction[0]) / cross
-    node = a.centroid + s * a.direction
     return Corner(a.index, b.index, defl, node)
