@@ -14,6 +14,7 @@ import numpy as np
 
 from mast.pipeline.locator import locate
 from mast.sim import paper_scenario, random_scene
+from mast.sim.owed import OWED
 
 
 def main(seeds: int = 100) -> None:
@@ -25,7 +26,7 @@ def main(seeds: int = 100) -> None:
     scenes += paper_scenario()
     for scene in scenes:
         for shot, sim in zip(scene.shots, scene.simulate_all(), strict=True):
-            is_owed = sim.owes_fix(min_points=3)
+            is_owed = sim.owes_fix(OWED)
             t0 = time.perf_counter()
             fix = locate(sim.scan, scene.survey)
             times.append(time.perf_counter() - t0)

@@ -84,3 +84,19 @@ def test_a_mistake_in_the_file_is_one_line_and_bad_input(tmp_path: Path) -> None
     assert r.stdout == ""
     (line,) = r.stderr.strip().splitlines()
     assert line.startswith(f"mast: error: {path}, line 3: [locator] has no setting 'gate_sigma'")
+
+
+@pytest.mark.parametrize("value", ["0", "inf", "-0.01", "nan"])
+def test_a_range_sigma_no_scanner_has_is_refused_from_a_file(value: str, tmp_path: Path) -> None:
+    path = tmp_path / "c.toml"
+    path.write_text(f"[locator]\nrange_sigma_m = {value}\n", encoding="utf-8")
+    r = run_mast_text("locate", SCAN, "-b", SURVEY, "--config", str(path))
+    assert r.returncode == 2, r.stderr
+    assert f"{path}, line 2: [locator] range_sigma_m must be" in r.stderr
+
+
+def test_a_refused_track_run_leaves_its_folder_empty(tmp_path: Path) -> None:
+    out = tmp_path / "out"
+    r = run_mast_text("track", SCAN, "-b", str(tmp_path / "missing.csv"), "--out", str(out))
+    assert r.returncode == 2
+    assert list(out.iterdir()) == []

@@ -41,10 +41,14 @@ def test_a_folder_of_scan_csvs_is_a_run_in_name_order_stamped_at_its_rate(
     for name in ("b.csv", "a.csv", "c.csv"):
         shutil.copy(example, folder / name)
     (folder / "notes.csv").write_text("not,a,scan\n")
+    # A header in other case after a blank line, and an upper-case suffix: a scan CSV
+    # still, as read_scan_csv reads it.
+    text = example.read_text(encoding="utf-8")
+    (folder / "d.CSV").write_text("\nAngle_rad,Range_m" + text[len("angle_rad,range_m") :])
     run = open_scans(folder, csv_hz=10.0)
     assert run.format.name == "folder of scan CSVs"
     assert run.format.sequence
-    assert [s.stamp_ns for s in run.scans] == [0, 100_000_000, 200_000_000]
+    assert [s.stamp_ns for s in run.scans] == [0, 100_000_000, 200_000_000, 300_000_000]
 
 
 def test_a_bag_is_a_run_with_its_topic(example: Path, tmp_path: Path) -> None:

@@ -74,9 +74,6 @@ class AccuracySummary:
     wrong: int = 0
 
 
-#: Returns a panel must show, noise-free, to count towards a pose being owed a fix.
-
-
 def owed_poses(model: ScannerModel, count: int, seed0: int) -> list[tuple[Scene, Shot]]:
     """(scene, shot) pairs where, noise-free, two beacons each show two panels."""
     out: list[tuple[Scene, Shot]] = []

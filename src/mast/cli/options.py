@@ -32,7 +32,7 @@ if TYPE_CHECKING:
     from mast.pipeline.tracking import Prior
 
 
-class ScanFormat(StrEnum):
+class SimulatedFormat(StrEnum):
     csv = "csv"
     bag = "bag"
     ros2 = "ros2"

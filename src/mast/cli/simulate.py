@@ -9,7 +9,7 @@ from typing import Annotated
 import typer
 
 from mast.cli.options import (
-    ScanFormat,
+    SimulatedFormat,
 )
 from mast.cli.root import (
     app,
@@ -34,7 +34,7 @@ def simulate(
     ] = "paper",
     seed: Annotated[int, typer.Option("--seed", help="Random seed (noise, random scenes).")] = 0,
     fmt: Annotated[
-        ScanFormat,
+        SimulatedFormat,
         typer.Option(
             "--format",
             help=(
@@ -42,7 +42,7 @@ def simulate(
                 "ros2: ROS 2 sqlite3 bag; mcap: ROS 2 MCAP bag."
             ),
         ),
-    ] = ScanFormat.csv,
+    ] = SimulatedFormat.csv,
     noise: Annotated[
         bool | None,
         typer.Option(

@@ -40,7 +40,8 @@ def track(
         list[Path],
         typer.Argument(
             metavar="RUN...",
-            help="ROS 1 bags, ROS 2 bag folders (sqlite3, MCAP), or folders holding them.",
+            help="ROS 1 bags, ROS 2 bag folders (sqlite3, MCAP), folders of scan CSVs, or "
+            "folders holding bags.",
         ),
     ],
     beacons: BeaconsOption,
@@ -113,8 +114,8 @@ def track(
     for r in found:
         scan_format(r, what="run")
     check_output_folder(out)
-    settings.write(out)
     survey = read_survey(beacons)
+    settings.write(out)  # once the inputs are read: a refused run leaves nothing behind
     if len(found) > 1 or scheduler is not None:
         outcomes = track_runs(
             found,

@@ -55,11 +55,18 @@ def _no_topic(_path: Path, _topic: str | None) -> None:
 
 
 def _is_scan_csv(path: Path) -> bool:
+    """Whether ``path``'s header (its first non-blank line) names the columns a scan CSV
+    has (``angle_rad`` and ``range_m``, in any order and case, as :func:`read_scan_csv`
+    takes them)."""
     try:
         with path.open("rb") as fh:
-            return fh.read(64).lstrip(b"\xef\xbb\xbf").startswith(b"angle_rad")
+            head = fh.read(4096)
     except OSError:
         return False
+    text = head.lstrip(b"\xef\xbb\xbf").decode("utf-8", errors="replace")
+    first = next((line for line in text.splitlines() if line.strip()), "")
+    columns = {c.strip().strip('"').lower() for c in first.split(",")}
+    return {"angle_rad", "range_m"} <= columns
 
 
 def _csv_claims(path: Path) -> bool:
@@ -77,14 +84,23 @@ def _csv_read(path: Path, how: ScanReading) -> Generator[Scan, None, None]:
 
 
 def _scan_csvs(folder: Path) -> list[Path]:
-    return sorted(p for p in folder.glob("*.csv") if _is_scan_csv(p))
+    """The scan CSVs in ``folder`` (``*.csv`` in any case), in name order."""
+    return sorted(
+        p
+        for p in folder.iterdir()
+        if p.suffix.lower() == ".csv" and p.is_file() and _is_scan_csv(p)
+    )
 
 
 def _folder_claims(path: Path) -> bool:
     if not path.is_dir() or (path / "metadata.yaml").is_file():
         return False
     if not _scan_csvs(path):
-        raise InputError("folder holds no scan CSV (angle_rad,range_m) nor a bag", path=path)
+        raise InputError(
+            "folder holds no scan CSV (angle_rad,range_m) and is not a ROS 2 bag "
+            "(no metadata.yaml in it)",
+            path=path,
+        )
     return True
 
 

@@ -5,7 +5,8 @@ results (``config.toml``), so that a run can be repeated exactly.
 The file has one table a configuration (``[locator]``, ``[track]``, ``[sequence]``), and
 one sub-table a nested one (``[locator.verification]``); every key is a field of the
 dataclass of that name, with the units its name says. What a file leaves out keeps its
-default. A key no configuration has, a value of the wrong kind, or a value the
+default. A key no configuration has, a value of the wrong kind (every setting is a
+count, a flag, or a length, angle, share or threshold of 0 or more), or a value the
 configuration refuses is bad input naming the file, the line and the key; a table the
 command does not use is left alone (one file can serve ``mast locate`` and ``mast
 track``). Fields that are inputs rather than settings (a prior's pose, given by
@@ -20,6 +21,7 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
+import math
 import re
 import tomllib
 import types
@@ -33,7 +35,7 @@ import tomli_w
 from mast.errors import InputError
 from mast.limits import MAX_METADATA_BYTES, read_bounded
 
-__all__ = ["fingerprint", "from_table", "read_settings", "settings_text"]
+__all__ = ["fingerprint", "from_table", "line_of", "read_settings", "settings_text"]
 
 T = TypeVar("T")
 
@@ -59,7 +61,7 @@ def read_settings(path: str | Path) -> tuple[dict[str, Any], str]:
         raise InputError(f"not a TOML settings file: {what}", path=p, line=at) from None
 
 
-def _line_of(text: str, table: str, key: str | None) -> int | None:
+def line_of(text: str, table: str, key: str | None) -> int | None:
     """The line of ``key`` in ``[table]`` (of the table's header when ``key`` is None)."""
     current = ""
     for number, raw in enumerate(text.splitlines(), start=1):
@@ -86,12 +88,14 @@ def _value(kind: Any, value: Any) -> Any:
             raise TypeError("true or false")
         return value
     if kind is int:
-        if isinstance(value, bool) or not isinstance(value, int):
-            raise TypeError("a whole number")
+        if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+            raise TypeError("a whole number, 0 or more")
         return value
     if kind is float:
         if isinstance(value, bool) or not isinstance(value, int | float):
             raise TypeError("a number")
+        if math.isnan(value) or value < 0:
+            raise TypeError("a number, 0 or more")
         return float(value)
     if kind is str:
         if not isinstance(value, str):
@@ -112,7 +116,7 @@ def from_table(cls: type[T], table: Mapping[str, Any], *, path: Path, text: str,
     fields = {f.name: f for f in dataclasses.fields(cls)}  # type: ignore[arg-type]
     kw: dict[str, Any] = {}
     for key, value in table.items():
-        line = _line_of(text, where, key)
+        line = line_of(text, where, key)
         if key not in fields or key in NOT_SETTINGS:
             known = ", ".join(sorted(set(fields) - NOT_SETTINGS))
             raise InputError(
@@ -133,7 +137,7 @@ def from_table(cls: type[T], table: Mapping[str, Any], *, path: Path, text: str,
     try:
         return cls(**kw)
     except (TypeError, ValueError) as err:
-        at = _line_of(text, where, None)
+        at = line_of(text, where, None)
         raise InputError(f"[{where}]: {err}", path=path, line=at) from None
 
 

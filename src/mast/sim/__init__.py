@@ -12,8 +12,6 @@ from mast.sim.scenarios import (
     PAPER_VARIANTS,
     SCENARIOS,
     TRUTH_COLUMNS,
-    Scene,
-    Shot,
     build_scenario,
     paper_scenario,
     paper_scene,
@@ -21,6 +19,7 @@ from mast.sim.scenarios import (
     random_scene,
     write_scenario,
 )
+from mast.sim.scene import Scene, Shot
 from mast.sim.tunnel import Roughness, Tunnel, roughen
 from mast.sim.world import Surface, World, WorldBuilder
 
