@@ -53,14 +53,18 @@ def read_config(path: Path | None, tables: tuple[str, ...]) -> tuple[dict[str, A
         )
     out: dict[str, Any] = {}
     given: set[str] = set()
-    for name in tables:
+    # Every table the file holds is checked (a mistake in one this command does not use
+    # would surface in the next command); only the command's own are returned.
+    for name in sorted(set(tables) | set(data), key=KNOWN_TABLES.index):
         table = data.get(name, {})
         if not isinstance(table, dict):
-            raise InputError(f"{name} must be a table, [{name}]", path=path)
+            raise InputError(f"{name} must be a table: [{name}]", path=path)
         if name == "track" and "locator" in table:
             raise InputError("the locator's settings are [locator], not [track.locator]", path=path)
-        out[name] = from_table(classes[name], table, path=path, text=text, where=name)
-        given |= {f"{name}.{key}" for key in table}
+        read: Any = from_table(classes[name], table, path=path, text=text, where=name)
+        if name in tables:
+            out[name] = read
+            given |= {f"{name}.{key}" for key in table}
     locator = out.get("locator")
     if locator is not None and not 0 < locator.range_sigma_m < math.inf:
         raise InputError(

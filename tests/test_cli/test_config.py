@@ -100,3 +100,11 @@ def test_a_refused_track_run_leaves_its_folder_empty(tmp_path: Path) -> None:
     r = run_mast_text("track", SCAN, "-b", str(tmp_path / "missing.csv"), "--out", str(out))
     assert r.returncode == 2
     assert list(out.iterdir()) == []
+
+
+def test_a_mistake_in_a_table_the_command_does_not_use_is_still_found(tmp_path: Path) -> None:
+    path = tmp_path / "c.toml"
+    path.write_text("[locator]\nrange_sigma_m = 0.012\n[track]\nmax_gap = 1\n", encoding="utf-8")
+    r = run_mast_text("locate", SCAN, "-b", SURVEY, "--config", str(path))
+    assert r.returncode == 2
+    assert f"{path}, line 4: [track] has no setting 'max_gap'" in r.stderr
