@@ -17,9 +17,10 @@ from mast.cloud.adjust import (
     rigid_solution,
 )
 from mast.cloud.detect import _top_edge
-from mast.cloud.drift import DriftCorrection, ScannerPath, correct_drift
+from mast.cloud.drift import DriftCorrection, correct_drift
 from mast.cloud.grid import PlanGrid, cell_keys, key_ij, pack_ij
 from mast.cloud.outputs import accuracy_class
+from mast.core.trajectory import ScannerPath
 
 
 def test_cell_keys_round_trip_on_both_sides_of_the_origin() -> None:

@@ -26,17 +26,16 @@ import pytest
 
 from mast.core.beacon import Beacon, Survey
 from mast.core.pose import Pose2D, format_dms
+from mast.core.trajectory import PlacedScan, Trajectory
 from mast.errors import InputError, OutputError
-from mast.runs.model import PlacedScan, RunSummary, Trajectory
+from mast.io.trajectory import TRAJECTORY_HEADER, write_trajectory_csv, write_trajectory_tum
+from mast.runs.model import RunSummary
 from mast.runs.outputs import (
     DXF_LAYERS,
-    TRAJECTORY_HEADER,
     LasMapWriter,
     gps_adjusted_time,
     write_map_dxf,
     write_report_html,
-    write_trajectory_csv,
-    write_trajectory_tum,
 )
 
 E0, N0 = 512_300.0, 7_012_300.0

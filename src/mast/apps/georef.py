@@ -59,8 +59,8 @@ def run_georef(
     progress: Callable[[str, int, int], None] | None = None,
 ) -> GeorefRun:
     """Read, georeference, write; a refusal still writes the beacons and the reports."""
-    from mast.cloud.drift import read_trajectory
     from mast.io import read_survey
+    from mast.io.trajectory import read_trajectory
 
     survey = read_survey(survey_path)
     cloud = open_cloud(cloud_path, time_field=time_field)

@@ -79,11 +79,11 @@ def one_cloud(
 ) -> CloudFigures:
     """Simulate one cloud, georeference it (with the trajectory when it drifts), score it."""
     from mast.cloud.adjust import rigid_solution
-    from mast.cloud.drift import read_trajectory
     from mast.cloud.georef import GeorefConfig, georeference
     from mast.cloud.io import open_cloud
     from mast.core.quantiles import chi2_isf
     from mast.io import read_survey
+    from mast.io.trajectory import read_trajectory
     from mast.sim.cloud import CloudOptions, simulate_cloud
 
     sim = simulate_cloud(

@@ -40,8 +40,8 @@ from mast.bench.clutter import (
 )
 from mast.core.pose import Pose2D
 from mast.core.scan import Scan
+from mast.core.trajectory import PlacedScan
 from mast.pipeline.locator import LocatorConfig
-from mast.runs.model import PlacedScan
 from mast.runs.track import Node, RunTracker, Smoother, TrackConfig
 
 __all__ = ["RealRunFigures", "run_real_log", "run_real_logs"]

@@ -36,18 +36,17 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from mast.cloud.adjust import AdjustmentError, BeaconObs, Transformation
-from mast.core.frames import yaw_of_azimuth, yaw_quaternion
 from mast.core.stats import W_TEST_ALPHA, BeaconTest, beacon_critical
+from mast.core.trajectory import ScannerPath
 from mast.errors import InputError
 
-__all__ = ["DriftCorrection", "ScannerPath", "correct_drift", "read_trajectory"]
+__all__ = ["DriftCorrection", "correct_drift"]
 
 #: The drift model of the between factors, per step of ``s`` metres: position
 #: ``SCALE_SHARE * drift * s`` in each axis, heading ``HEADING_PER_ROOT_M * drift *
@@ -63,82 +62,6 @@ SCALE_SHARE = 1.0
 MAX_EXCLUDED_SHARE = 1.0 / 3.0
 #: The beacons' tests in the order they are reported.
 ROLES = ("control", "excluded", "check")
-
-
-@dataclass(frozen=True, eq=False)
-class ScannerPath:
-    """The SLAM scanner's poses in the cloud's frame, read from a trajectory file: times
-    (s), x, y, z and yaw (radians, from x). (A survey run's placed scans in the mine grid
-    are :class:`mast.runs.model.Trajectory`.)"""
-
-    time: NDArray[np.float64]
-    xyz: NDArray[np.float64]
-    yaw: NDArray[np.float64]
-    path: Path
-
-
-def read_trajectory(path: str | Path) -> ScannerPath:
-    """Read a TUM file (``t x y z qx qy qz qw``) or a ``mast track`` trajectory CSV."""
-    p = Path(path)
-    try:
-        text = p.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as err:
-        raise InputError(f"cannot read: {err}", path=p) from None
-    lines = text.splitlines()
-    first = next((ln for ln in lines if ln.strip() and not ln.startswith("#")), "")
-    if first.startswith("stamp_ns"):
-        return _read_track_csv(p, lines)
-    rows = []
-    for no, line in enumerate(lines, 1):
-        s = line.strip()
-        if not s or s.startswith("#"):
-            continue
-        parts = s.split()
-        if len(parts) != 8:
-            raise InputError(
-                f"a TUM pose has 8 numbers (t x y z qx qy qz qw), this line {len(parts)}",
-                path=p,
-                line=no,
-            )
-        try:
-            vals = [float(v) for v in parts]
-        except ValueError:
-            raise InputError("not a number in a TUM pose", path=p, line=no) from None
-        if not all(math.isfinite(v) for v in vals):
-            raise InputError("a TUM pose with a value that is not finite", path=p, line=no)
-        rows.append(vals)
-    return _trajectory(p, np.array(rows).reshape(-1, 8))
-
-
-def _trajectory(p: Path, a: NDArray[np.float64]) -> ScannerPath:
-    if a.shape[0] < 2:
-        raise InputError("a trajectory needs at least two poses", path=p)
-    t = a[:, 0]
-    if np.any(np.diff(t) <= 0):
-        bad = int(np.flatnonzero(np.diff(t) <= 0)[0]) + 2
-        raise InputError(f"times must increase (pose {bad} does not)", path=p)
-    qx, qy, qz, qw = a[:, 4], a[:, 5], a[:, 6], a[:, 7]
-    yaw = np.arctan2(2 * (qw * qz + qx * qy), 1 - 2 * (qy**2 + qz**2))
-    return ScannerPath(t, a[:, 1:4].copy(), np.unwrap(yaw), p)
-
-
-def _read_track_csv(p: Path, lines: list[str]) -> ScannerPath:
-    import csv
-
-    reader = csv.DictReader(lines)
-    rows = []
-    for no, row in enumerate(reader, 2):
-        try:
-            t = int(row["stamp_ns"]) * 1e-9
-            e, n, az = float(row["easting"]), float(row["northing"]), float(row["azimuth_deg"])
-        except (KeyError, TypeError, ValueError):
-            raise InputError(
-                "a track trajectory row needs stamp_ns, easting, northing, azimuth_deg",
-                path=p,
-                line=no,
-            ) from None
-        rows.append([t, e, n, 0.0, *yaw_quaternion(yaw_of_azimuth(math.radians(az)))])
-    return _trajectory(p, np.array(rows).reshape(-1, 8))
 
 
 @dataclass(frozen=True, eq=False)

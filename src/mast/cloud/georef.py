@@ -39,12 +39,13 @@ from mast.cloud.detect import (
     find_candidates,
     plan_pieces,
 )
-from mast.cloud.drift import DriftCorrection, ScannerPath, correct_drift
+from mast.cloud.drift import DriftCorrection, correct_drift
 from mast.cloud.io import Cloud
 from mast.cloud.match import Detection, Match, MatchConfig, detect_beacons, match_beacons
 from mast.core.beacon import Survey
 from mast.core.index import SurveyIndex
 from mast.core.noise import DEFAULT_SURVEY_SIGMA_M
+from mast.core.trajectory import ScannerPath
 from mast.errors import InputError
 from mast.pipeline.identification import identify_panels
 

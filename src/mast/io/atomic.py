@@ -12,7 +12,7 @@ from __future__ import annotations
 import contextlib
 import os
 import shutil
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from pathlib import Path
 from typing import IO, Any
 
@@ -75,3 +75,14 @@ def write_atomic(path: str | Path, data: bytes) -> None:
     """Write ``data`` as the whole of ``path`` (see :func:`atomic_path`)."""
     with atomic_open(path, "wb") as fh:
         fh.write(data)
+
+
+def write_lines(path: str | Path, lines: Iterable[str]) -> int:
+    """Write ``lines`` (each without its newline); the number of lines after the first."""
+    rows = -1
+    with atomic_open(path, "w", encoding="utf-8", newline="\n") as f:
+        for line in lines:
+            f.write(line)
+            f.write("\n")
+            rows += 1
+    return max(rows, 0)

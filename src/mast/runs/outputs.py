@@ -2,11 +2,11 @@
 
 ``mast track RUN --beacons B --out DIR`` writes (docs/design.md, "A run"):
 
-* ``trajectory.csv`` (:func:`write_trajectory_csv`): one row per placed scan,
+* ``trajectory.csv`` (:func:`mast.io.trajectory.write_trajectory_csv`): one row per placed scan,
   full precision, the file contract
   ``stamp_ns,easting,northing,azimuth_deg,sigma_easting_m,sigma_northing_m,
   sigma_azimuth_deg,source``;
-* ``trajectory.tum`` (:func:`write_trajectory_tum`): the same poses as TUM
+* ``trajectory.tum`` (:func:`mast.io.trajectory.write_trajectory_tum`): the same poses as TUM
   ``t x y z qx qy qz qw`` for trajectory tools such as evo;
 * ``map.las`` (:class:`LasMapWriter`): every return of every placed scan in
   the mine grid, streamed scan by scan;
@@ -41,10 +41,10 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from mast.core.beacon import Beacon, Survey
-from mast.core.frames import yaw_of_azimuth, yaw_quaternion
 from mast.core.pose import format_dms
+from mast.core.trajectory import PlacedScan, Trajectory
 from mast.errors import InputError, OutputError
-from mast.io.atomic import atomic_open, atomic_path, commit, discard, part_path
+from mast.io.atomic import atomic_path, commit, discard, part_path, write_lines
 from mast.report.html import (
     CSS,
     axis_label,
@@ -54,32 +54,17 @@ from mast.report.html import (
     new_figure,
     plot_origin,
 )
-from mast.runs.model import PlacedScan, RunSummary, Trajectory
+from mast.runs.model import RunSummary
 
 __all__ = [
     "DXF_LAYERS",
     "LAS_SCALE_M",
     "MAX_TABLE_ROWS",
-    "TRAJECTORY_HEADER",
     "LasMapWriter",
     "gps_adjusted_time",
-    "tum_quaternion",
     "write_map_dxf",
     "write_report_html",
-    "write_trajectory_csv",
-    "write_trajectory_tum",
 ]
-
-#: Header of ``trajectory.csv`` (a file contract: docs/design.md, "A run").
-TRAJECTORY_HEADER: Final = (
-    "stamp_ns,easting,northing,azimuth_deg,"
-    "sigma_easting_m,sigma_northing_m,sigma_azimuth_deg,source"
-)
-
-#: Header comment of ``trajectory.tum``; TUM readers (evo) skip lines starting with '#'.
-TUM_HEADER: Final = (
-    "# timestamp_s x_easting_m y_northing_m z_m qx qy qz qw (yaw = 90 deg - azimuth)"
-)
 
 #: LAS coordinate quantum, metres: 0.1 mm, kept at UTM-sized coordinates because the
 #: header offset sits near the survey (LAS stores int32 multiples of it from the offset).
@@ -185,32 +170,6 @@ def gps_adjusted_time(stamp_ns: ArrayLike) -> NDArray[np.float64]:
     return np.asarray(whole.astype(np.float64) + frac.astype(np.float64) / 1e9)
 
 
-def _seconds(stamp_ns: int) -> str:
-    """``stamp_ns`` as decimal seconds with all nine digits, without going through a float."""
-    sign = "-" if stamp_ns < 0 else ""
-    s, ns = divmod(abs(int(stamp_ns)), 1_000_000_000)
-    return f"{sign}{s}.{ns:09d}"
-
-
-# --------------------------------------------------------------------------- helpers
-
-
-def _num(value: float) -> str:
-    """Shortest text that reads back as the same double (a Python float's repr)."""
-    return repr(float(value))
-
-
-def _write_lines(path: str | Path, lines: Iterable[str]) -> int:
-    """Write ``lines`` (each without its newline); the number of lines after the first."""
-    rows = -1
-    with atomic_open(path, "w", encoding="utf-8", newline="\n") as f:
-        for line in lines:
-            f.write(line)
-            f.write("\n")
-            rows += 1
-    return max(rows, 0)
-
-
 @dataclass(frozen=True, slots=True)
 class _Poses:
     """A run's placed scans as arrays; ``stretch`` numbers the unbroken stretches.
@@ -278,124 +237,6 @@ class _Poses:
             return 0.0
         step = np.hypot(*np.diff(self.xy, axis=0).T)
         return float(np.sum(step[np.diff(self.stretch) == 0]))
-
-
-# --------------------------------------------------------------------------- trajectory
-
-
-def write_trajectory_csv(path: str | Path, placed: Iterable[PlacedScan]) -> int:
-    """Write ``trajectory.csv``: one row per placed scan, in the given order.
-
-    Parameters
-    ----------
-    path : str or Path
-        The file to write (replaced if it exists).
-    placed : iterable of PlacedScan
-        The placed scans, in time order.
-
-    Returns
-    -------
-    int
-        Rows written (without the header).
-
-    Notes
-    -----
-    The header is :data:`TRAJECTORY_HEADER` (a file contract). Floats are
-    written as their shortest exact representation (Python's ``repr``), so a
-    UTM coordinate such as 512334.1234 reads back as the same double;
-    ``azimuth_deg`` is in [0, 360), ``sigma_azimuth_deg`` in degrees, and
-    ``source`` is ``fix`` or ``odometry``.
-
-    Raises
-    ------
-    OutputError
-        The file cannot be written.
-    """
-
-    def rows() -> Iterator[str]:
-        yield TRAJECTORY_HEADER
-        for p in placed:
-            s = p.sigma
-            yield ",".join(
-                (
-                    str(int(p.stamp_ns)),
-                    _num(p.pose.easting),
-                    _num(p.pose.northing),
-                    _num(p.pose.azimuth_deg),
-                    _num(s[0]),
-                    _num(s[1]),
-                    _num(math.degrees(s[2])),
-                    p.source,
-                )
-            )
-
-    return _write_lines(path, rows())
-
-
-def tum_quaternion(azimuth_rad: float) -> tuple[float, float, float, float]:
-    """``(qx, qy, qz, qw)`` of a rotation about z by ``yaw = 90° − azimuth``.
-
-    The yaw is wrapped to (−180°, 180°] first, so that ``qw >= 0``.
-    """
-    yaw = yaw_of_azimuth(azimuth_rad)
-    return yaw_quaternion(-((math.pi - yaw) % math.tau - math.pi))  # yaw in (-pi, pi]
-
-
-def write_trajectory_tum(path: str | Path, placed: Iterable[PlacedScan]) -> int:
-    """Write ``trajectory.tum``: the placed poses in the TUM RGB-D trajectory format.
-
-    Parameters
-    ----------
-    path : str or Path
-        The file to write (replaced if it exists).
-    placed : iterable of PlacedScan
-        The placed scans, in time order.
-
-    Returns
-    -------
-    int
-        Poses written.
-
-    Notes
-    -----
-    One line per pose, ``t x y z qx qy qz qw`` separated by single spaces
-    (no trailing space: evo refuses one), after one comment line starting
-    with ``#`` (:data:`TUM_HEADER`), which TUM readers skip. ``t`` is the
-    stamp in seconds with all nine decimals, formatted from the integer
-    nanoseconds; ``x`` = easting, ``y`` = northing, ``z`` = 0 (metres); the
-    orientation is the rotation about z by ``yaw = 90° − azimuth`` (the
-    scanner's +x counter-clockwise from +E), a unit quaternion with
-    ``qw >= 0``.
-
-    References
-    ----------
-    TUM RGB-D benchmark, file formats:
-    https://cvg.cit.tum.de/data/datasets/rgbd-dataset/file_formats
-
-    Raises
-    ------
-    OutputError
-        The file cannot be written.
-    """
-
-    def rows() -> Iterator[str]:
-        yield TUM_HEADER
-        for p in placed:
-            qx, qy, qz, qw = tum_quaternion(p.pose.azimuth)
-            yield " ".join(
-                (
-                    _seconds(p.stamp_ns),
-                    _num(p.pose.easting),
-                    _num(p.pose.northing),
-                    "0.0",
-                    _num(qx),
-                    _num(qy),
-                    _num(qz),
-                    _num(qw),
-                )
-            )
-
-    return _write_lines(path, rows())
 
 
 # --------------------------------------------------------------------------- LAS
@@ -1169,4 +1010,4 @@ def write_report_html(
     now = datetime.now(tz=UTC).strftime("%Y-%m-%d %H:%M:%S UTC")
     parts.append(f"<footer>mast {escape(__version__)}, {escape(now)}</footer></body></html>")
 
-    _write_lines(path, parts)
+    write_lines(path, parts)

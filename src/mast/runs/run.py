@@ -23,11 +23,12 @@ from numpy.typing import NDArray
 
 from mast.core.beacon import Survey
 from mast.core.heap import QuietCollector
+from mast.core.trajectory import Trajectory
 from mast.errors import OutputError
 from mast.io.atomic import atomic_open
 from mast.pipeline.locator import segmentation_of
 from mast.report.record import ReportInputs, fix_record
-from mast.runs.model import RunSummary, Trajectory
+from mast.runs.model import RunSummary
 from mast.runs.track import Node, RunTracker, Smoother, TrackConfig
 
 __all__ = ["RUN_FILES", "RunResult", "track_run"]
@@ -129,6 +130,7 @@ def track_run(
         scans read until then, and are complete and valid.
     """
     from mast.io.scans import open_scans, scan_format
+    from mast.io.trajectory import write_trajectory_csv, write_trajectory_tum
     from mast.runs import outputs
 
     cfg = config or TrackConfig()
@@ -221,8 +223,8 @@ def track_run(
         placed.append(p)
     summary.placed = len(placed)
     try:
-        outputs.write_trajectory_csv(out / "trajectory.csv", placed)
-        outputs.write_trajectory_tum(out / "trajectory.tum", placed)
+        write_trajectory_csv(out / "trajectory.csv", placed)
+        write_trajectory_tum(out / "trajectory.tum", placed)
         origin = _origin(survey, placed)
         sample: list[NDArray[np.float64]] = []
         wall_lines: list[NDArray[np.float64]] = []

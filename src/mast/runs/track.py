@@ -27,9 +27,9 @@ from mast.core.beacon import Survey
 from mast.core.frames import azimuth_of_yaw, body_jacobian, yaw_of_azimuth
 from mast.core.pose import Pose2D
 from mast.core.scan import Scan
+from mast.core.trajectory import PlacedScan
 from mast.pipeline.locator import Fix, Locator, LocatorConfig
 from mast.pipeline.tracking import Prior, VehicleLimits
-from mast.runs.model import PlacedScan
 from mast.runs.odometry import (
     Keyframe,
     Motion,
