@@ -42,6 +42,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from mast.cloud.adjust import AdjustmentError, BeaconObs, Transformation
+from mast.core import posegraph
 from mast.core.stats import W_TEST_ALPHA, BeaconTest, beacon_critical
 from mast.core.trajectory import ScannerPath
 from mast.errors import InputError
@@ -217,11 +218,7 @@ def correct_drift(
         for o in active:
             for f in seen[o.beacon].factors(s2):
                 graph.add(f)
-        params = gtsam.LevenbergMarquardtParams()
-        params.setRelativeErrorTol(1e-10)
-        params.setAbsoluteErrorTol(1e-12)
-        params.setMaxIterations(100)
-        values = gtsam.LevenbergMarquardtOptimizer(graph, init, params).optimize()
+        values = posegraph.solve(graph, init)
         return graph, values
 
     def test(

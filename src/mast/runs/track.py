@@ -26,6 +26,7 @@ from numpy.typing import NDArray
 from mast.core.beacon import Survey
 from mast.core.frames import azimuth_of_yaw, body_jacobian, yaw_of_azimuth
 from mast.core.pose import Pose2D
+from mast.core.posegraph import solve
 from mast.core.scan import Scan
 from mast.core.trajectory import PlacedScan
 from mast.pipeline.locator import Fix, Locator, LocatorConfig
@@ -532,11 +533,7 @@ class Smoother:
         values = gtsam.Values()
         for n in window:
             values.insert(n.scan, to_mine.compose(local[n.scan]))
-        params = gtsam.LevenbergMarquardtParams()
-        params.setRelativeErrorTol(1e-10)
-        params.setAbsoluteErrorTol(1e-12)
-        params.setMaxIterations(100)
-        result = gtsam.LevenbergMarquardtOptimizer(graph, values, params).optimize()
+        result = solve(graph, values)
         marginals = gtsam.Marginals(graph, result)
         placed = []
         for n in window:
