@@ -213,7 +213,7 @@ def _truth(path: Path) -> tuple[tuple[float, float, float], ...]:
 
 
 def _write_drift_dxf(path: Path) -> None:
-    from mast.runs.outputs import new_dxf, save_dxf
+    from mast.io.dxf import new_dxf, save_dxf
 
     doc, msp = new_dxf({"W": 7})
     msp.add_lwpolyline([(500000.0, 7000000.0), (500040.0, 7000000.0)], dxfattribs={"layer": "W"})

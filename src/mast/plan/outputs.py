@@ -12,10 +12,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from mast.core.quantiles import chi2_ppf
+from mast.io.dxf import add_dxf_beacons, new_dxf, save_dxf
 from mast.io.outputs import save_figure, write_bytes
 from mast.pipeline.adjustment import position_ellipse
 from mast.plan.predict import Plan
-from mast.runs.outputs import add_dxf_beacons, new_dxf, save_dxf
 
 __all__ = [
     "PLAN_COLUMNS",

@@ -40,11 +40,12 @@ from typing import Any, Final
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from mast.core.beacon import Beacon, Survey
+from mast.core.beacon import Survey
 from mast.core.pose import format_dms
 from mast.core.trajectory import PlacedScan, Trajectory
 from mast.errors import InputError, OutputError
-from mast.io.atomic import atomic_path, commit, discard, part_path, write_lines
+from mast.io.atomic import commit, discard, part_path, write_lines
+from mast.io.dxf import add_dxf_beacons, new_dxf, save_dxf
 from mast.report.html import (
     CSS,
     axis_label,
@@ -84,8 +85,6 @@ DXF_LAYERS: Final[Mapping[str, int]] = {
     "MAST_FIXES": 3,  # green
 }
 
-#: Height of a beacon's id in the DXF, metres.
-DXF_TEXT_HEIGHT_M: Final = 0.25
 #: Radius of the circle marking a fix in the DXF, metres.
 DXF_FIX_RADIUS_M: Final = 0.05
 #: Length of a fix's azimuth tick in the DXF (from the fix along the scanner's +x), metres.
@@ -95,8 +94,6 @@ DXF_FIX_TICK_M: Final = 0.5
 DXF_VERTEX_SPACING_M: Final = 0.1
 #: Fixes are drawn in the DXF at least this far apart (every fix is in trajectory.csv).
 DXF_FIX_SPACING_M: Final = 1.0
-#: $INSUNITS code for metres.
-_DXF_METRES: Final = 6
 
 #: The report's table of fixes stops after this many rows (a note says so).
 MAX_TABLE_ROWS: Final = 2000
@@ -476,7 +473,7 @@ def write_map_dxf(
         one LWPOLYLINE per wall piece;
     ``MAST_BEACONS``
         per beacon, an LWPOLYLINE through its four surveyed edges and a TEXT
-        with its id at its centre (:data:`DXF_TEXT_HEIGHT_M` high);
+        with its id at its centre (:data:`mast.io.dxf.DXF_TEXT_HEIGHT_M` high);
     ``MAST_TRAJECTORY``
         one LWPOLYLINE per unbroken stretch of placed scans (consecutive scan
         indices), a POINT for a stretch of one scan: the path is not drawn
@@ -529,41 +526,6 @@ def write_map_dxf(
         msp.add_line((e, n), tip, dxfattribs={"layer": "MAST_FIXES"})
 
     save_dxf(doc, path)
-
-
-def new_dxf(layers: Mapping[str, int]) -> tuple[Any, Any]:
-    """An empty DXF R2010 drawing in metres (``$INSUNITS`` 6, ``$MEASUREMENT`` 1 metric)
-    with these layers (name: ACI colour), and its modelspace."""
-    from ezdxf import units
-    from ezdxf.filemanagement import new
-
-    doc = new("R2010", units=units.M)
-    doc.header["$INSUNITS"] = _DXF_METRES
-    doc.header["$MEASUREMENT"] = 1
-    for name, colour in layers.items():
-        doc.layers.add(name, color=colour)
-    return doc, doc.modelspace()
-
-
-def add_dxf_beacons(
-    msp: Any, beacons: Iterable[Beacon], layer: str, *, text_height_m: float = DXF_TEXT_HEIGHT_M
-) -> None:
-    """Per beacon, an LWPOLYLINE through its four edges and a TEXT of its id at its centre."""
-    from ezdxf.enums import TextEntityAlignment
-
-    for b in beacons:
-        msp.add_lwpolyline(np.asarray(b.edges).tolist(), dxfattribs={"layer": layer})
-        c = b.centroid
-        msp.add_text(b.id, height=text_height_m, dxfattribs={"layer": layer}).set_placement(
-            (float(c[0]), float(c[1])), align=TextEntityAlignment.BOTTOM_CENTER
-        )
-
-
-def save_dxf(doc: Any, path: str | Path) -> None:
-    """Write a drawing whole (a temporary name, renamed when complete); a failure is an
-    :class:`OutputError` naming the file."""
-    with atomic_path(path) as tmp:
-        doc.saveas(tmp)
 
 
 # --------------------------------------------------------------------------- report
