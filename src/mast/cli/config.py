@@ -19,14 +19,6 @@ class Command(StrEnum):
     live = "live"
 
 
-#: The tables each command reads.
-TABLES = {
-    Command.locate: ("locator", "sequence"),
-    Command.track: ("locator", "track"),
-    Command.live: ("locator", "sequence"),
-}
-
-
 @app.command()
 def config(
     command: Annotated[
@@ -46,20 +38,14 @@ def config(
 
     Example: mast config --for track --out site.toml
     """
-    tables, _ = read_config(config, TABLES[command])
-    locator = tables["locator"]
-    settings = effective(
-        {"locator": locator, **{k: v for k, v in tables.items() if k != "locator"}},
-        config,
-        command.value,
-    )
+    tables, _ = read_config(config, command.value)
+    settings = effective(tables, command.value)
     if out is None:
         typer.echo(settings.text, nl=False)
         return
-    from mast.io.atomic import write_atomic
     from mast.io.outputs import check_output_file
 
     check_output_file(
         out, suffixes=(".toml",), option="--out", inputs=[] if config is None else [config]
     )
-    write_atomic(out, settings.text.encode("utf-8"))
+    settings.write(out)

@@ -105,11 +105,11 @@ def live(
     from mast.live.sources import ReplaySource, SourceOptions, open_source
     from mast.report.record import ReportInputs
 
-    tables, given = read_config(config, ("locator", "sequence"))
+    tables, given = read_config(config, "live")
     cfg, defaults = precisions(
         range_sigma, angle_sigma, scanner, survey_sigma, base=tables["locator"], given=given
     )
-    settings = effective({"locator": cfg, "sequence": tables["sequence"]}, config, "live")
+    settings = effective({"locator": cfg, "sequence": tables["sequence"]}, "live")
     if near is not None:
         cfg = replace(cfg, prior=parse_near(near, radius, azimuth_tolerance))
     check_range_limits(range_min, range_max)

@@ -81,11 +81,11 @@ def locate(
     from mast.pipeline.locator import SequenceLocator
     from mast.report.record import ReportInputs, fix_record, fix_text
 
-    tables, given = read_config(config, ("locator", "sequence"))
+    tables, given = read_config(config, "locate")
     cfg, defaults = precisions(
         range_sigma, angle_sigma, scanner, survey_sigma, base=tables["locator"], given=given
     )
-    settings = effective({"locator": cfg, "sequence": tables["sequence"]}, config, "locate")
+    settings = effective({"locator": cfg, "sequence": tables["sequence"]}, "locate")
     if near is not None:
         cfg = replace(cfg, prior=parse_near(near, radius, azimuth_tolerance))
     if scan_paths.count(Path("-")) > 1:

@@ -17,7 +17,7 @@ from mast import __version__
 from mast.errors import InputError
 from mast.io.settings import fingerprint, from_table, line_of, read_settings, settings_text
 
-__all__ = ["ConfigOption", "Effective", "effective", "read_config"]
+__all__ = ["COMMAND_TABLES", "ConfigOption", "Effective", "effective", "read_config"]
 
 ConfigOption = Annotated[
     Path | None,
@@ -28,34 +28,41 @@ ConfigOption = Annotated[
     ),
 ]
 
-#: The tables a settings file may hold (every command reads the ones it uses).
-KNOWN_TABLES = ("locator", "track", "sequence")
+#: The tables each command that locates reads (a settings file may hold any of them).
+COMMAND_TABLES: dict[str, tuple[str, ...]] = {
+    "locate": ("locator", "sequence"),
+    "track": ("locator", "track"),
+    "live": ("locator", "sequence"),
+}
 
 
 def _classes() -> dict[str, type]:
+    """Every table a settings file may hold, in the order they are written, and the
+    configuration each is read onto."""
     from mast.pipeline.locator import LocatorConfig, SequenceConfig
     from mast.runs.track import TrackConfig
 
     return {"locator": LocatorConfig, "track": TrackConfig, "sequence": SequenceConfig}
 
 
-def read_config(path: Path | None, tables: tuple[str, ...]) -> tuple[dict[str, Any], set[str]]:
-    """The configurations of ``tables`` from the settings file at ``path`` (defaults for a
-    table it leaves out, or without a file), and the ``table.key`` names it set."""
+def read_config(path: Path | None, command: str) -> tuple[dict[str, Any], set[str]]:
+    """The configurations ``command`` reads (:data:`COMMAND_TABLES`) from the settings
+    file at ``path`` (defaults for a table it leaves out, or without a file), and the
+    ``table.key`` names it set."""
     classes = _classes()
+    tables = COMMAND_TABLES[command]
     if path is None:
         return {name: classes[name]() for name in tables}, set()
     data, text = read_settings(path)
-    unknown = sorted(set(data) - set(KNOWN_TABLES))
+    known = tuple(classes)
+    unknown = sorted(set(data) - set(known))
     if unknown:
-        raise InputError(
-            f"no settings table [{unknown[0]}]; known: {', '.join(KNOWN_TABLES)}", path=path
-        )
+        raise InputError(f"no settings table [{unknown[0]}]; known: {', '.join(known)}", path=path)
     out: dict[str, Any] = {}
     given: set[str] = set()
     # Every table the file holds is checked (a mistake in one this command does not use
     # would surface in the next command); only the command's own are returned.
-    for name in sorted(set(tables) | set(data), key=KNOWN_TABLES.index):
+    for name in sorted(set(tables) | set(data), key=known.index):
         table = data.get(name, {})
         if not isinstance(table, dict):
             raise InputError(f"{name} must be a table: [{name}]", path=path)
@@ -77,28 +84,25 @@ def read_config(path: Path | None, tables: tuple[str, ...]) -> tuple[dict[str, A
 
 @dataclass(frozen=True)
 class Effective:
-    """The configuration a command runs with: its tables, the file they came from (None:
-    defaults and options), their TOML text (a comment, then the canonical settings) and
-    the SHA-256 of the settings."""
+    """The configuration a command runs with: its TOML text (a comment, then the
+    canonical settings) and the SHA-256 of the settings."""
 
-    tables: Mapping[str, Any]
-    file: Path | None
     text: str
     sha256: str
 
-    def write(self, folder: Path) -> None:
-        """Write ``config.toml`` into ``folder`` (a run repeated with ``--config`` on it
-        gives the same results)."""
+    def write(self, path: Path) -> None:
+        """Write the settings file (``config.toml`` beside a run's results: the run given
+        it with ``--config`` gives the same results)."""
         from mast.io.atomic import write_atomic
 
-        write_atomic(folder / "config.toml", self.text.encode("utf-8"))
+        write_atomic(path, self.text.encode("utf-8"))
 
 
-def effective(tables: Mapping[str, Any], file: Path | None, command: str) -> Effective:
+def effective(tables: Mapping[str, Any], command: str) -> Effective:
     """The effective configuration of ``command`` (``track``'s locator is ``[locator]``)."""
     body = settings_text(tables, skip=("locator",))
     header = (
         f"# The settings of `mast {command}` (mast {__version__}): --config runs with them.\n"
         f"# SHA-256 of the settings below: {fingerprint(body)}\n"
     )
-    return Effective(tables, file, header + body, fingerprint(body))
+    return Effective(header + body, fingerprint(body))

@@ -91,12 +91,11 @@ def track(
     the scans read until then).
     """
     from mast.io import read_survey
-    from mast.io.scans import scan_format
     from mast.report.record import ReportInputs
     from mast.runs.batch import expand_runs, track_runs
     from mast.runs.run import track_run
 
-    tables, keys_given = read_config(config, ("locator", "track"))
+    tables, keys_given = read_config(config, "track")
     cfg, defaults = precisions(
         range_sigma, angle_sigma, scanner, survey_sigma, base=tables["locator"], given=keys_given
     )
@@ -105,17 +104,15 @@ def track(
         locator=cfg,
         **({} if max_gap is None else {"max_gap_s": max_gap}),
     )
-    settings = effective({"locator": cfg, "track": run_config}, config, "track")
+    settings = effective({"locator": cfg, "track": run_config}, "track")
     check_range_limits(range_min, range_max)
     for given in runs:
         if not given.exists():
             raise InputError("run not found", path=given)
     found = expand_runs(runs)
-    for r in found:
-        scan_format(r, what="run")
     check_output_folder(out)
     survey = read_survey(beacons)
-    settings.write(out)  # once the inputs are read: a refused run leaves nothing behind
+    settings.write(out / "config.toml")  # once the inputs are read: a refused run leaves nothing
     if len(found) > 1 or scheduler is not None:
         outcomes = track_runs(
             found,
@@ -147,7 +144,6 @@ def track(
         scan_file=str(run),
         survey_file=str(beacons),
         scanner=scanner,
-        topic=scan_format(run, what="run").topic_of(run, topic),
         defaults=frozenset(defaults),
         config_file=None if config is None else str(config),
         config_sha256=settings.sha256,

@@ -19,7 +19,15 @@ from pathlib import Path
 from mast.core.scan import Scan
 from mast.errors import InputError
 
-__all__ = ["DEFAULT_CSV_HZ", "FORMATS", "ScanFormat", "ScanRun", "open_scans", "scan_format"]
+__all__ = [
+    "DEFAULT_CSV_HZ",
+    "FORMATS",
+    "ScanFormat",
+    "ScanReading",
+    "ScanRun",
+    "open_scans",
+    "scan_format",
+]
 
 #: Scans of a folder of scan CSVs are stamped this many a second apart, from 0.
 DEFAULT_CSV_HZ = 25.0
@@ -156,13 +164,19 @@ def scan_format(path: Path, *, what: str = "scan file") -> ScanFormat:
 
 @dataclass(frozen=True, slots=True)
 class ScanRun:
-    """Recorded scans opened: their format, the topic they come from (a bag's), and the
-    scans, read one at a time as they are taken (a bag's are never all in memory)."""
+    """Recorded scans opened: their format, the scans, read one at a time as they are
+    taken (a bag's are never all in memory), and the topic asked for."""
 
     path: Path
     format: ScanFormat
-    topic: str | None
     scans: Generator[Scan, None, None]
+    asked_topic: str | None = None
+
+    @property
+    def topic(self) -> str | None:
+        """The topic the scans come from (a bag's; looked up when asked: it opens the
+        bag)."""
+        return self.format.topic_of(self.path, self.asked_topic)
 
 
 def open_scans(
@@ -180,4 +194,4 @@ def open_scans(
     ones, and ``on_skip`` told of each message a damaged bag skips."""
     fmt = scan_format(path, what=what)
     how = ScanReading(topic, csv_hz, range_min_m, range_max_m, on_skip)
-    return ScanRun(path, fmt, fmt.topic_of(path, topic), fmt.read(path, how))
+    return ScanRun(path, fmt, fmt.read(path, how), topic)

@@ -51,8 +51,9 @@ def expand_runs(paths: Sequence[Path]) -> list[Path]:
             if inner:
                 out.extend(inner)
                 continue
-        scan_format(p, what="run")  # a folder of scan CSVs is a run; the rest, an error
-        out.append(p)
+        out.append(p)  # a folder of scan CSVs is a run itself
+    for run in out:
+        scan_format(run, what="run")  # each a run MAST reads, or a clear error now
     return out
 
 

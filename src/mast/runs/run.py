@@ -13,7 +13,7 @@ import json
 import math
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Generator
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -23,6 +23,7 @@ from numpy.typing import NDArray
 
 from mast.core.beacon import Survey
 from mast.core.heap import QuietCollector
+from mast.core.scan import Scan
 from mast.core.trajectory import Trajectory
 from mast.errors import OutputError
 from mast.io.atomic import atomic_open
@@ -129,18 +130,13 @@ def track_run(
         ``interrupted`` when Ctrl-C stopped the reading: the files then hold the
         scans read until then, and are complete and valid.
     """
-    from mast.io.scans import open_scans, scan_format
+    from mast.io.scans import ScanReading, scan_format
     from mast.io.trajectory import write_trajectory_csv, write_trajectory_tum
     from mast.runs import outputs
 
     cfg = config or TrackConfig()
     t0 = time.perf_counter()
     inputs = inputs or ReportInputs()
-    # The caller may have resolved the topic already (opening a bag is not free).
-    name = inputs.topic if inputs.topic is not None else scan_format(bag).topic_of(bag, topic)
-    inputs = replace(inputs, scan_file=inputs.scan_file or str(bag), topic=name)
-    summary = RunSummary(run=str(bag), topic=name)
-    result = RunResult(summary, Trajectory(), out)
 
     def skipped(text: str) -> None:
         if "skipped" in text:
@@ -148,11 +144,18 @@ def track_run(
         result.warnings.append(text)
         warn(text)
 
-    def scans(on_skip: Callable[[str], None]) -> Any:
-        low, high = range_limits
-        yield from open_scans(
-            bag, topic=topic, range_min_m=low, range_max_m=high, on_skip=on_skip, what="run"
-        ).scans
+    low, high = range_limits
+    fmt = scan_format(bag, what="run")
+
+    def scans(on_skip: Callable[[str], None]) -> Generator[Scan, None, None]:
+        """The run's scans (read twice: located, then mapped)."""
+        return fmt.read(bag, ScanReading(topic, range_min_m=low, range_max_m=high, on_skip=on_skip))
+
+    # The caller may have resolved the topic already (opening a bag is not free).
+    name = inputs.topic if inputs.topic is not None else fmt.topic_of(bag, topic)
+    inputs = replace(inputs, scan_file=inputs.scan_file or str(bag), topic=name)
+    summary = RunSummary(run=str(bag), topic=name)
+    result = RunResult(summary, Trajectory(), out)
 
     from mast.runs.outputs import MAX_TABLE_ROWS
 
