@@ -28,12 +28,12 @@ from mast.core.beacon import Beacon, Survey
 from mast.core.pose import Pose2D, format_dms
 from mast.core.trajectory import PlacedScan, Trajectory
 from mast.errors import InputError, OutputError
+from mast.io.las import gps_adjusted_time
 from mast.io.trajectory import TRAJECTORY_HEADER, write_trajectory_csv, write_trajectory_tum
 from mast.runs.model import RunSummary
 from mast.runs.outputs import (
     DXF_LAYERS,
     LasMapWriter,
-    gps_adjusted_time,
     write_map_dxf,
     write_report_html,
 )
@@ -321,7 +321,7 @@ def test_las_errors_name_the_problem(tmp_path: Path) -> None:
     with pytest.raises(InputError, match=r"scan 4: .* more than 215 km from the map origin"):
         las.add(4, T0_NS, np.array([[E0 + 300_000.0, N0]]))
     las.close()
-    with pytest.raises(OutputError, match="map already closed"):
+    with pytest.raises(OutputError, match=r"map\.las: already closed"):
         las.add(0, T0_NS, np.zeros((1, 2)) + [E0, N0])
 
 

@@ -30,7 +30,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from mast.errors import InputError, OutputError
-from mast.io.atomic import atomic_path
+from mast.io.las import LasWriter, las_integers, las_offsets, new_las_header
 
 __all__ = [
     "CLOUD_SUFFIXES",
@@ -44,10 +44,6 @@ CLOUD_SUFFIXES = (".las", ".laz", ".e57", ".ply")
 
 #: Point names PLY writers give a time.
 _PLY_TIMES = ("gps_time", "time", "timestamp", "t")
-
-#: Grid coordinates are written to the millimetre's tenth (LAS scale 0.0001 m): seven
-#: digits of easting and northing fit comfortably in the 32-bit integers.
-GRID_SCALE_M = 0.0001
 
 Transform = Callable[[NDArray[np.float64], NDArray[np.float64] | None], NDArray[np.float64]]
 
@@ -104,10 +100,17 @@ def _finite(cloud: Cloud, xyz: NDArray[np.float64], where: str) -> None:
         raise cloud.bad(f"{where}: a point with a coordinate that is not a finite number")
 
 
+#: Grid coordinates are written at :data:`~mast.io.las.LAS_SCALE_M` (0.1 mm) from offsets
+#: rounded to this (metres): seven digits of easting and northing fit comfortably in
+#: the 32-bit integers.
+GRID_OFFSET_STEP_M = 1000.0
+
+
 def grid_header_offsets(origin: NDArray[np.float64]) -> NDArray[np.float64]:
-    """LAS offsets for grid coordinates near ``origin``: rounded to 1 km, so the
-    32-bit integers at :data:`GRID_SCALE_M` hold ±214 km about them."""
-    return np.round(np.asarray(origin, dtype=float) / 1000.0) * 1000.0
+    """LAS offsets for grid coordinates near ``origin``: rounded to
+    :data:`GRID_OFFSET_STEP_M`, so the 32-bit integers at 0.1 mm hold ±214 km about
+    them."""
+    return las_offsets(origin, GRID_OFFSET_STEP_M)
 
 
 class _LasCloud(Cloud):
@@ -165,28 +168,25 @@ class _LasCloud(Cloud):
     ) -> int:
         import laspy
 
-        written = 0
-        with laspy.open(self.path) as reader, atomic_path(out) as tmp:
+        with laspy.open(self.path) as reader:
             old = reader.header
-            header = laspy.LasHeader(point_format=old.point_format, version=old.version)
-            header.offsets = grid_header_offsets(origin)
-            header.scales = np.full(3, GRID_SCALE_M)
+            header = new_las_header(
+                offsets=grid_header_offsets(origin),
+                software="mast georef",
+                system="MAST georef",
+                point_format=old.point_format,
+                gps_standard=False,
+            )
             header.global_encoding.gps_time_type = old.global_encoding.gps_time_type
-            header.system_identifier = "MAST georef"
-            header.generating_software = "mast georef"
             for vlr in old.vlrs:
                 if _keeps(vlr):
                     header.vlrs.append(vlr)
-            with laspy.open(tmp, mode="w", header=header, do_compress=_compress(out)) as writer:
+            with LasWriter(out, header) as las:
                 for pts in reader.chunk_iterator(size):
-                    grid = transform(*self._xyz_time(pts))
-                    rec = laspy.ScaleAwarePointRecord(
-                        pts.array.copy(), header.point_format, header.scales, header.offsets
-                    )
-                    _set_xyz(rec, grid, out)
-                    writer.write_points(rec)
-                    written += len(grid)
-        return written
+                    rec = las.record(pts.array.copy())
+                    _set_xyz(rec, transform(*self._xyz_time(pts)), out)
+                    las.write(rec)
+                return las.count
 
 
 def _keeps(vlr: Any) -> bool:
@@ -204,10 +204,10 @@ def _compress(out: Path) -> bool:
 
 
 def _set_xyz(rec: Any, grid: NDArray[np.float64], out: Path) -> None:
-    ints = np.round((grid - rec.offsets) / rec.scales)
-    if np.any(np.abs(ints) > 2**31 - 1):
+    ints, far = las_integers(grid, rec.offsets, rec.scales)
+    if far >= 0:
         raise OutputError("a grid coordinate is beyond what LAS can hold at 0.1 mm", path=out)
-    rec.X, rec.Y, rec.Z = (ints[:, k].astype(np.int32) for k in range(3))
+    rec.X, rec.Y, rec.Z = ints.T
 
 
 class _ColumnCloud(Cloud):
@@ -241,47 +241,41 @@ class _ColumnCloud(Cloud):
     def write_georeferenced(
         self, out: Path, transform: Transform, origin: NDArray[np.float64], size: int = 2_000_000
     ) -> int:
-        import laspy
-
-        written = 0
-        header: Any = None
-        with atomic_path(out) as tmp:
-            writer: Any = None
-            try:
-                for cols, lo, hi, chunk in self._slices(size):
-                    if header is None:
-                        header = self._header(cols, origin)
-                        writer = laspy.open(
-                            tmp, mode="w", header=header, do_compress=_compress(out)
-                        )
-                    rec = laspy.ScaleAwarePointRecord.zeros(hi - lo, header=header)
-                    _set_xyz(rec, transform(chunk.xyz, chunk.time), out)
-                    for name, values in cols.items():
-                        if name in ("x", "y", "z"):
-                            continue
-                        dim = self._las_names.get(name, name)
-                        rec[dim] = _fit_dtype(values[lo:hi], rec[dim].dtype)
-                    writer.write_points(rec)
-                    written += hi - lo
-            finally:
-                if writer is not None:
-                    writer.close()
-        return written
+        las: LasWriter | None = None
+        try:
+            for cols, lo, hi, chunk in self._slices(size):
+                if las is None:
+                    las = LasWriter(out, self._header(cols, origin))
+                rec = las.zeros(hi - lo)
+                _set_xyz(rec, transform(chunk.xyz, chunk.time), out)
+                for name, values in cols.items():
+                    if name in ("x", "y", "z"):
+                        continue
+                    dim = self._las_names.get(name, name)
+                    rec[dim] = _fit_dtype(values[lo:hi], rec[dim].dtype)
+                las.write(rec)
+        except BaseException:
+            if las is not None:
+                las.abandon()
+            raise
+        return 0 if las is None else las.close()
 
     def _header(self, cols: dict[str, NDArray[Any]], origin: NDArray[np.float64]) -> Any:
         import laspy
 
         colour = all(k in self._las_names for k in ("red", "green", "blue"))
-        header = laspy.LasHeader(point_format=7 if colour else 6, version="1.4")
-        header.offsets = grid_header_offsets(origin)
-        header.scales = np.full(3, GRID_SCALE_M)
-        header.global_encoding.gps_time_type = laspy.header.GpsTimeType.STANDARD
-        header.generating_software = "mast georef"
-        for name, values in cols.items():
-            if name in ("x", "y", "z") or name in self._las_names:
-                continue
-            header.add_extra_dim(laspy.ExtraBytesParams(name=name, type=values.dtype))
-        return header
+        extra = [
+            laspy.ExtraBytesParams(name=name, type=values.dtype)
+            for name, values in cols.items()
+            if name not in ("x", "y", "z") and name not in self._las_names
+        ]
+        return new_las_header(
+            offsets=grid_header_offsets(origin),
+            software="mast georef",
+            system="MAST georef",
+            point_format=7 if colour else 6,
+            extra=extra,
+        )
 
 
 def _fit_dtype(values: NDArray[Any], dtype: np.dtype[Any]) -> NDArray[Any]:

@@ -26,8 +26,6 @@ cannot be written.
 
 from __future__ import annotations
 
-import calendar
-import contextlib
 import itertools
 import math
 from collections.abc import Iterable, Iterator, Mapping, Sequence
@@ -44,8 +42,17 @@ from mast.core.beacon import Survey
 from mast.core.pose import format_dms
 from mast.core.trajectory import PlacedScan, Trajectory
 from mast.errors import InputError, OutputError
-from mast.io.atomic import commit, discard, part_path, write_lines
+from mast.io.atomic import write_lines
 from mast.io.dxf import add_dxf_beacons, new_dxf, save_dxf
+from mast.io.las import (
+    INT32_MAX,
+    LAS_SCALE_M,
+    LasWriter,
+    gps_adjusted_time,
+    las_integers,
+    las_offsets,
+    new_las_header,
+)
 from mast.report.html import (
     CSS,
     axis_label,
@@ -59,23 +66,15 @@ from mast.runs.model import RunSummary
 
 __all__ = [
     "DXF_LAYERS",
-    "LAS_SCALE_M",
     "MAX_TABLE_ROWS",
     "LasMapWriter",
-    "gps_adjusted_time",
     "write_map_dxf",
     "write_report_html",
 ]
 
-#: LAS coordinate quantum, metres: 0.1 mm, kept at UTM-sized coordinates because the
-#: header offset sits near the survey (LAS stores int32 multiples of it from the offset).
-LAS_SCALE_M: Final = 1e-4
-
 #: The LAS offset is rounded to a multiple of this (metres): a round number a reader
 #: recognises, still well inside the int32 reach of ±214 km at 0.1 mm.
 LAS_OFFSET_STEP_M: Final = 1.0
-
-_INT32_MAX: Final = 2**31 - 1
 
 #: The layers of ``map.dxf`` and their AutoCAD colour index.
 DXF_LAYERS: Final[Mapping[str, int]] = {
@@ -106,65 +105,6 @@ MAX_FIGURE_POSES: Final = 4000
 MAX_VECTOR_MARKERS: Final = 5000
 
 _ARCSEC_PER_RAD: Final = 180.0 / math.pi * 3600.0
-
-# --------------------------------------------------------------------------- time
-
-#: Unix time (s) at the GPS epoch, 1980-01-06T00:00:00 UTC.
-_GPS_EPOCH_UNIX: Final = 315_964_800
-#: Adjusted Standard GPS Time is GPS time minus 10^9 s (LAS 1.4, global encoding bit 0).
-_GPS_ADJUST_S: Final = 1_000_000_000
-#: GPS − UTC in seconds, from each leap second on (IERS Bulletin C). No leap second has
-#: been inserted since 2017-01-01; a new one would be added here.
-_LEAP_SECONDS: Final = tuple(
-    (calendar.timegm((y, m, 1, 0, 0, 0)), k)
-    for k, (y, m) in enumerate(
-        [
-            (1981, 7),
-            (1982, 7),
-            (1983, 7),
-            (1985, 7),
-            (1988, 1),
-            (1990, 1),
-            (1991, 1),
-            (1992, 7),
-            (1993, 7),
-            (1994, 7),
-            (1996, 1),
-            (1997, 7),
-            (1999, 1),
-            (2006, 1),
-            (2009, 1),
-            (2012, 7),
-            (2015, 7),
-            (2017, 1),
-        ],
-        start=1,
-    )
-)
-
-
-def gps_adjusted_time(stamp_ns: ArrayLike) -> NDArray[np.float64]:
-    """Adjusted Standard GPS Time (LAS ``gps_time``) of Unix time stamps.
-
-    Parameters
-    ----------
-    stamp_ns : array_like of int
-        Nanoseconds since the Unix epoch (UTC, as ROS message stamps are).
-
-    Returns
-    -------
-    ndarray of float
-        GPS seconds since 1980-01-06 minus 10^9 s: Unix seconds, plus the
-        leap seconds GPS has gained on UTC by then (18 since 2017), minus
-        315 964 800 s and 10^9 s. Computed in integer nanoseconds, so the only
-        rounding is the final one to a double (0.1 µs near the present).
-    """
-    ns = np.asarray(stamp_ns, dtype=np.int64)
-    bounds = np.array([t for t, _ in _LEAP_SECONDS], dtype=np.int64) * 1_000_000_000
-    leap = np.searchsorted(bounds, ns, side="right").astype(np.int64)
-    shift_ns = (leap - _GPS_EPOCH_UNIX - _GPS_ADJUST_S) * 1_000_000_000
-    whole, frac = np.divmod(ns + shift_ns, 1_000_000_000)
-    return np.asarray(whole.astype(np.float64) + frac.astype(np.float64) / 1e9)
 
 
 @dataclass(frozen=True, slots=True)
@@ -242,9 +182,10 @@ class _Poses:
 class LasMapWriter:
     """Stream the returns of a run's placed scans into a LAS 1.4 point cloud.
 
-    Points are written scan by scan as they are added (nothing accumulates:
-    memory does not grow with the run); the header's counts and bounds are
-    finalised by :meth:`close`. A ``.laz`` path is compressed (lazrs).
+    Points are written scan by scan as they are added, through
+    :class:`mast.io.las.LasWriter` (nothing accumulates: memory does not grow with
+    the run); the header's counts and bounds are finalised by :meth:`close`. A
+    ``.laz`` path is compressed (lazrs).
 
     Parameters
     ----------
@@ -287,36 +228,29 @@ class LasMapWriter:
         if not (math.isfinite(origin_e) and math.isfinite(origin_n)):
             raise InputError(f"map origin ({origin_e}, {origin_n}) is not finite")
         self.path = Path(path)
-        header = laspy.LasHeader(point_format=6, version="1.4")
-        header.add_extra_dim(
-            laspy.ExtraBytesParams(
-                name="scan_index",
-                type=np.uint32,
-                description="LaserScan message index",
-            )
+        scan_index = laspy.ExtraBytesParams(
+            name="scan_index", type=np.uint32, description="LaserScan message index"
         )
-        step = LAS_OFFSET_STEP_M
-        self._offset = np.array([round(origin_e / step) * step, round(origin_n / step) * step, 0.0])
-        header.offsets = self._offset
-        header.scales = np.array([LAS_SCALE_M] * 3)
-        header.global_encoding.gps_time_type = laspy.header.GpsTimeType.STANDARD
-        header.global_encoding.wkt = True
-        header.generating_software = "mast"
-        header.system_identifier = "MAST survey run"
-        self._header = header
-        self.count = 0
-        self._closed = False
-        # Written under a temporary name, renamed onto the map when complete.
-        self._tmp = part_path(self.path)
-        try:
-            self._writer = laspy.open(self._tmp, mode="w", header=header)
-        except OSError as exc:
-            raise OutputError(f"cannot write: {exc.strerror or exc}", path=self.path) from None
+        offsets = las_offsets([origin_e, origin_n, 0.0], LAS_OFFSET_STEP_M)
+        header = new_las_header(
+            offsets=offsets,
+            software="mast",
+            system="MAST survey run",
+            wkt=True,
+            extra=[scan_index],
+        )
+        self._offset = offsets
+        self._las = LasWriter(self.path, header)
+
+    @property
+    def count(self) -> int:
+        """Points written so far."""
+        return self._las.count
 
     @property
     def writing(self) -> Path:
         """The temporary file being written; renamed onto :attr:`path` by :meth:`close`."""
-        return self._tmp
+        return self._las.writing
 
     def __enter__(self) -> LasMapWriter:
         return self
@@ -327,14 +261,8 @@ class LasMapWriter:
         exc: BaseException | None,
         tb: TracebackType | None,
     ) -> None:
-        if exc_type is None:
-            self.close()
-            return
         # Failed part-way: no map rather than half of one.
-        self._closed = True
-        with contextlib.suppress(Exception):
-            self._writer.close()
-        discard(self._tmp)
+        self._las.__exit__(exc_type, exc, tb)
 
     def add(
         self,
@@ -371,10 +299,8 @@ class LasMapWriter:
         OutputError
             The writer is closed, or the file cannot be written.
         """
-        import laspy
-
-        if self._closed:
-            raise OutputError("map already closed", path=self.path)
+        if self._las.closed:
+            raise OutputError("already closed", path=self.path)
         pts = np.asarray(points_mine, dtype=float)
         if pts.ndim != 2 or pts.shape[1] != 2:
             raise InputError(f"points_mine must have shape (n, 2), got {pts.shape}")
@@ -390,18 +316,18 @@ class LasMapWriter:
         n = len(pts)
         if n == 0:
             return 0
-        counts = np.round((pts - self._offset[:2]) / LAS_SCALE_M)
-        if np.any(np.abs(counts) > _INT32_MAX):
-            far = pts[np.argmax(np.max(np.abs(counts), axis=1))]
+        counts, far = las_integers(pts, self._offset[:2])
+        if far >= 0:
+            e, north = pts[far]
             raise InputError(
-                f"scan {scan_index}: point ({far[0]:.3f}, {far[1]:.3f}) is more than "
-                f"{_INT32_MAX * LAS_SCALE_M / 1000:.0f} km from the map origin "
+                f"scan {scan_index}: point ({e:.3f}, {north:.3f}) is more than "
+                f"{INT32_MAX * LAS_SCALE_M / 1000:.0f} km from the map origin "
                 f"({self._offset[0]:.0f}, {self._offset[1]:.0f}); LAS cannot store it at "
                 f"{LAS_SCALE_M * 1000:g} mm"
             )
-        record = laspy.ScaleAwarePointRecord.zeros(n, header=self._header)
-        record.X = counts[:, 0].astype(np.int32)
-        record.Y = counts[:, 1].astype(np.int32)
+        record = self._las.zeros(n)
+        record.X = counts[:, 0]
+        record.Y = counts[:, 1]
         record.Z = np.zeros(n, dtype=np.int32)
         record.intensity = np.clip(np.round(np.nan_to_num(inten, nan=0.0)), 0, 65535).astype(
             np.uint16
@@ -410,24 +336,11 @@ class LasMapWriter:
         record.number_of_returns = np.ones(n, dtype=np.uint8)
         record.gps_time = np.full(n, gps_adjusted_time(np.int64(stamp_ns)))
         record.scan_index = np.full(n, scan_index, dtype=np.uint32)
-        try:
-            self._writer.write_points(record)
-        except OSError as exc:
-            raise OutputError(f"cannot write: {exc.strerror or exc}", path=self.path) from None
-        self.count += n
-        return n
+        return self._las.write(record)
 
     def close(self) -> int:
         """Finalise the header (counts, bounds) and close the file; the points written."""
-        if not self._closed:
-            self._closed = True
-            try:
-                self._writer.close()
-            except OSError as exc:
-                discard(self._tmp)
-                raise OutputError(f"cannot write: {exc.strerror or exc}", path=self.path) from None
-            commit(self._tmp, self.path)
-        return self.count
+        return self._las.close()
 
 
 # --------------------------------------------------------------------------- DXF

@@ -77,8 +77,9 @@ from numpy.typing import NDArray
 
 from mast.core.beacon import Beacon, Survey
 from mast.errors import InputError
-from mast.io.atomic import atomic_open, atomic_path, write_atomic
+from mast.io.atomic import atomic_open, write_atomic
 from mast.io.beacons_csv import write_survey
+from mast.io.las import LAS_SCALE_M, LasWriter, new_las_header
 from mast.sim.design import paper_design
 from mast.sim.tunnel import Roughness, Tunnel, roughen
 
@@ -92,7 +93,6 @@ START_TIME_S = 345_600.0
 SCANNER_HEIGHT_M = 1.6
 TIME_JITTER_M = 3.0
 WIDTH_M, WALL_HEIGHT_M, CROWN_M = 5.0, 3.6, 4.5
-LAS_SCALE_M = 1e-4
 #: Point kinds and their intensity: (low, high, range attenuation per metre).
 ROCK, BEACON, METAL = 0, 1, 2
 _INTENSITY = np.array([[1200.0, 2600.0, 0.02], [48000.0, 62000.0, 0.002], [2500.0, 6000.0, 0.02]])
@@ -851,15 +851,15 @@ def _run(scene: _Scene, drift: float, theta: float, rng: np.random.Generator) ->
 
 
 def _las_header(offsets: Array) -> laspy.LasHeader:
-    header = laspy.LasHeader(point_format=6, version="1.4")
     extra = laspy.ExtraBytesParams("range", np.float32, description="scanner range at gps_time")
-    header.add_extra_dim(extra)
-    header.scales = np.full(3, LAS_SCALE_M)
-    header.offsets = offsets
-    header.creation_date = datetime.date(2026, 1, 1)  # fixed: same seed, same bytes
-    header.system_identifier = "MAST simulated SLAM"
-    header.generating_software = "mast.sim.cloud"
-    return header
+    return new_las_header(
+        offsets=offsets,
+        software="mast.sim.cloud",
+        system="MAST simulated SLAM",
+        gps_standard=False,  # GPS week seconds, as a SLAM cloud often has
+        extra=[extra],
+        created=datetime.date(2026, 1, 1),  # fixed: same seed, same bytes
+    )
 
 
 def _write_cloud(
@@ -874,15 +874,13 @@ def _write_cloud(
     step = float(np.clip(o.chunk_points / (4 * rho * 25.0), 0.25, 10.0))
     limit = o.max_points if o.max_points is not None else np.iinfo(np.int64).max
     written, pending = 0, []
-    with atomic_path(path) as tmp, laspy.open(tmp, mode="w", header=header, do_compress=True) as w:
+    with LasWriter(path, header) as las:
 
         def flush(arr: NDArray[Any]) -> None:
             nonlocal written
             arr = arr[: max(0, limit - written)]
             if len(arr):
-                fmt, scales, offs = header.point_format, header.scales, header.offsets
-                w.write_points(laspy.ScaleAwarePointRecord(arr, fmt, scales, offs))
-                written += len(arr)
+                written += las.write(las.record(arr))
 
         for xyz, st, kind in scene.batches(rho, rng, step, counts):
             n = len(st)
