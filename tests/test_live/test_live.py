@@ -28,7 +28,8 @@ from mast.io.bags import list_topics, read_laserscans
 from mast.live.emulate import Emulator, EmulatorFaults
 from mast.live.record import McapRecorder
 from mast.live.session import LiveSummary, run_live
-from mast.live.sources import SourceOptions, open_source, read_run
+from mast.live.sources import open_source, read_run
+from mast.live.stream import SourceOptions
 from mast.pipeline.locator import LocatorConfig
 from tests._cli import run_mast_text
 from tests.test_live.conftest import Drive
@@ -353,7 +354,8 @@ def test_an_emulator_stamps_a_scan_when_it_was_due_not_when_sent(
     float32 recording, 671 fixes, moved any fix by 0.1 mm.) Here the host stalls 70 ms
     once: the stamps keep the run's 20 ms spacing all the same."""
     from mast.core.scan import Scan
-    from mast.live import cola, emulate
+    from mast.live import emulate
+    from mast.live.protocols import sick
 
     send, calls = emulate._send, [0]
 
@@ -371,13 +373,13 @@ def test_an_emulator_stamps_a_scan_when_it_was_due_not_when_sent(
         emulate.Emulator("sick", scans) as emulator,
         socket.create_connection(("127.0.0.1", emulator.port), timeout=5.0) as conn,
     ):
-        conn.sendall(cola.command("sEN LMDscandata 1"))
+        conn.sendall(sick.command("sEN LMDscandata 1"))
         buf = bytearray()
         while len(stamps) < 10:
             buf += conn.recv(65536)
             stamps += [
-                cola.parse_scandata(t).time_since_startup_us
-                for t in cola.split_telegrams(buf)
+                sick.parse_scandata(t).time_since_startup_us
+                for t in sick.split_telegrams(buf)
                 if t.startswith(b"sSN")
             ]
     assert [b - a for a, b in pairwise(stamps)] == [20_000] * 9
@@ -386,13 +388,13 @@ def test_an_emulator_stamps_a_scan_when_it_was_due_not_when_sent(
 def test_an_emulators_device_clock_only_goes_forward(drive: Drive) -> None:
     """A recording that repeats a stamp (or a poll answered while the stream is behind)
     still gets a device time one tick past the last telegram's."""
-    from mast.live import scip
+    from mast.live.protocols import hokuyo
 
     scan = next(read_run(drive.bag))
     with Emulator("hokuyo", read_run(drive.bag)) as emulator:
         t0 = emulator._t0_ns
         same = [emulator._telegram(scan, at_ns=t0 + 40_000_000) for _ in range(3)]
-    stamps = [scip.parse_distance_reply(scip.split_replies(bytearray(t))[0]).timestamp_ms
+    stamps = [hokuyo.parse_distance_reply(hokuyo.split_replies(bytearray(t))[0]).timestamp_ms
               for t in same]  # fmt: skip
     assert stamps == [40, 41, 42]  # integer ticks: the same at any uptime
 
@@ -403,7 +405,8 @@ def test_an_emulators_device_stamps_do_not_depend_on_the_hosts_uptime(
 ) -> None:
     """The host's clock is taken in integer nanoseconds whatever its uptime: telegrams
     due 20 ms apart carry device times exactly 20 000 us (SICK) and 20 ms (SCIP) apart."""
-    from mast.live import cola, emulate, scip
+    from mast.live import emulate
+    from mast.live.protocols import hokuyo, sick
 
     now = [int(uptime_h * 3600e9) + 123_456_789]
     monkeypatch.setattr(emulate.time, "perf_counter_ns", lambda: now[0])
@@ -413,10 +416,10 @@ def test_an_emulators_device_stamps_do_not_depend_on_the_hosts_uptime(
             t0 = emulator._t0_ns
             telegrams = [emulator._telegram(scan, at_ns=t0 + k * 20_000_000) for k in range(6)]
         if kind == "sick":
-            bodies = [cola.split_telegrams(bytearray(t))[0] for t in telegrams]
-            stamps = [cola.parse_scandata(b).time_since_startup_us for b in bodies]
+            bodies = [sick.split_telegrams(bytearray(t))[0] for t in telegrams]
+            stamps = [sick.parse_scandata(b).time_since_startup_us for b in bodies]
             assert [b - a for a, b in pairwise(stamps)] == [20_000] * 5
         else:
-            ms = [scip.parse_distance_reply(scip.split_replies(bytearray(t))[0]).timestamp_ms
+            ms = [hokuyo.parse_distance_reply(hokuyo.split_replies(bytearray(t))[0]).timestamp_ms
                   for t in telegrams]  # fmt: skip
             assert [b - a for a, b in pairwise(ms)] == [20] * 5

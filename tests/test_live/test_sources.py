@@ -7,17 +7,12 @@ import pytest
 
 from mast.core.scan import Scan
 from mast.errors import InputError
-from mast.live.emulate import hokuyo_parameters
+from mast.live.protocols.hokuyo import HokuyoSource, hokuyo_parameters
+from mast.live.protocols.sick import SickSource
 from mast.live.session import LatestSlot
-from mast.live.sources import (
-    DeviceClock,
-    HokuyoSource,
-    Received,
-    ReplaySource,
-    SickSource,
-    open_source,
-    read_run,
-)
+from mast.live.sources import ReplaySource, open_source, read_run
+from mast.live.stream import Received
+from mast.live.tcp import DeviceClock
 from tests.test_live.conftest import Drive
 
 

@@ -54,18 +54,11 @@ def as_sent(kind: str, scan: Scan, counter: int = 0) -> Scan:
     """``scan`` as a ``kind`` scanner sends it and :mod:`mast.live.sources` reads it back:
     encoded to its telegram with the protocol's own codec and decoded again (ranges in
     whole millimetres, the protocol's no-return codes); the stamp is kept."""
-    from mast.live import cola, scip
-    from mast.live.emulate import encode_scan, hokuyo_parameters
-    from mast.live.sources import SickSource
+    from mast.live.protocols import protocol
 
-    sent = encode_scan(kind, scan, ticks=counter, counter=counter, hz=50.0)
-    if kind == "sick":
-        (telegram,) = cola.split_telegrams(bytearray(sent))
-        return cola.parse_scandata(telegram).to_scan(
-            range_min_m=SickSource.RANGE_MIN_M, range_max_m=math.inf, stamp_ns=scan.stamp_ns
-        )
-    (reply,) = scip.split_replies(bytearray(sent))
-    return scip.parse_distance_reply(reply).to_scan(hokuyo_parameters(scan), stamp_ns=scan.stamp_ns)
+    device = protocol(kind).emulation(scan)
+    sent = device.encode(scan, ticks=counter, counter=counter, hz=50.0)
+    return device.read_back(sent, scan.stamp_ns)
 
 
 @dataclass(slots=True)

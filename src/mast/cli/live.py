@@ -102,7 +102,8 @@ def live(
 
     from mast.io import read_survey
     from mast.live.session import Sink, run_live
-    from mast.live.sources import ReplaySource, SourceOptions, open_source
+    from mast.live.sources import ReplaySource, open_source
+    from mast.live.stream import SourceOptions
     from mast.report.record import ReportInputs
 
     tables, given = read_config(config, "live")

@@ -1,15 +1,8 @@
 """Scanner emulators: a recorded or simulated run served over the real protocol on TCP.
 
-``mast emulate sick|hokuyo --from RUN --port N`` answers as the scanner would:
-
-* ``sick``: CoLa-A. ``sEN LMDscandata 1`` is acknowledged (``sEA LMDscandata 1``)
-  and starts the stream of ``sSN LMDscandata`` telegrams, ``sEN LMDscandata 0``
-  stops it, ``sRN LMDscandata`` polls one scan (``sRA``); anything else gets
-  ``sFA`` (an error, as the device answers an unknown request).
-* ``hokuyo``: SCIP 2.0. ``SCIP2.0``, ``PP`` (the step geometry of the run's
-  scans: ``ARES`` from the angular step, ``AFRT`` at the forward beam), ``MD``
-  (acknowledged with status ``00``, then one reply with status ``99`` per scan)
-  and ``QT``; anything else gets status ``0E``.
+``mast emulate KIND --from RUN --port N`` answers as a scanner of that protocol would
+(:mod:`mast.live.protocols`: ``sick`` CoLa-A, ``hokuyo`` SCIP 2.0; each protocol's
+module says which requests it answers and how).
 
 Scans are sent at the run's recorded spacing (or ``hz`` a second); the device's
 clock counts from the emulator's start. One client is served at a time; a
@@ -20,7 +13,6 @@ a dropped connection, a scanner that stops sending, malformed telegrams.
 
 from __future__ import annotations
 
-import math
 import select
 import socket
 import threading
@@ -28,17 +20,14 @@ import time
 from collections.abc import Iterator
 from dataclasses import dataclass
 
-import numpy as np
-
 from mast.core.scan import Scan
 from mast.errors import InputError
-from mast.live import cola, scip
+from mast.live.protocols import PROTOCOLS, protocol
 
-__all__ = ["KINDS", "Emulator", "EmulatorFaults", "encode_scan", "hokuyo_parameters"]
+__all__ = ["KINDS", "Emulator", "EmulatorFaults"]
 
-KINDS = ("sick", "hokuyo")
-#: Hokuyo's error code for a beam without an echo (below DMIN, so read as no return).
-_NO_ECHO = 1
+#: The kinds of scanner an emulator can be: every protocol's name.
+KINDS = tuple(PROTOCOLS)
 
 
 @dataclass(frozen=True, slots=True)
@@ -61,44 +50,6 @@ class EmulatorFaults:
     corrupt_every: int | None = None
 
 
-def hokuyo_parameters(scan: Scan, *, model: str = "MAST-EMULATED-UST") -> scip.DeviceParameters:
-    """``PP`` parameters under which the steps of ``scan`` are the device's steps."""
-    inc = scan.angle_increment
-    ares = round(2 * math.pi / inc)
-    step = 2 * math.pi / ares
-    afrt = round(-float(scan.angles_rad[0]) / step)
-    if not scan.is_uniform or abs(-afrt * step - float(scan.angles_rad[0])) > 1e-6:
-        raise InputError(
-            "the run's beams do not fall on a Hokuyo step grid (2 pi / ARES from forward)"
-        )
-    dmax = scan.range_max_m if math.isfinite(scan.range_max_m) else 60.0
-    return scip.DeviceParameters(
-        model=model,
-        dmin_mm=max(20, round(scan.range_min_m * 1000)),
-        dmax_mm=round(dmax * 1000),
-        ares=ares,
-        amin=0,
-        amax=len(scan) - 1,
-        afrt=afrt,
-        scan_rpm=2400,
-    )
-
-
-def encode_scan(kind: str, scan: Scan, *, ticks: int, counter: int, hz: float) -> bytes:
-    """``scan`` as a ``kind`` scanner sends it: a framed ``sSN LMDscandata`` telegram
-    (``sick``; device clock ``ticks`` in microseconds, scan ``counter``, ``hz`` scans a
-    second) or an ``MD`` reply (``hokuyo``; ``ticks`` in milliseconds), ranges in whole
-    millimetres and a beam without an echo as each protocol codes it."""
-    if kind == "sick":
-        return cola.encode_scandata(
-            scan, scan_counter=counter, time_since_startup_us=ticks, scan_frequency_hz=hz
-        )
-    if kind == "hokuyo":
-        mm = np.where(scan.valid, np.rint(scan.ranges_m * 1000.0), _NO_ECHO).astype(np.int64)
-        return scip.encode_distance_reply(mm, first_step=0, timestamp_ms=ticks)
-    raise InputError(f"unknown scanner kind {kind!r}; known: {', '.join(KINDS)}")
-
-
 class Emulator:
     """Serve ``scans`` as a ``kind`` scanner on ``host:port`` (0: a free port) in a thread.
 
@@ -116,14 +67,13 @@ class Emulator:
         hz: float | None = None,
         faults: EmulatorFaults = EmulatorFaults(),
     ) -> None:
-        if kind not in KINDS:
-            raise InputError(f"unknown scanner kind {kind!r}; known: {', '.join(KINDS)}")
+        self.protocol = protocol(kind)
         self.kind = kind
         self._scans = scans
         self._next: Scan | None = next(scans, None)
         if self._next is None:
             raise InputError("the run holds no scan to serve")
-        self._params = hokuyo_parameters(self._next) if kind == "hokuyo" else None
+        self._device = self.protocol.emulation(self._next)
         self.hz = hz
         self.faults = faults
         try:
@@ -138,7 +88,7 @@ class Emulator:
         # The device clock in integer ticks of the protocol (SICK: 1 us, SCIP: 1 ms),
         # counted from the host's perf_counter_ns: float seconds since boot truncated to
         # ticks gave 40, 40, 41 for three telegrams a tick apart at some uptimes.
-        self._tick_ns = 1_000 if kind == "sick" else 1_000_000
+        self._tick_ns = self._device.tick_ns
         self._t0_ns = time.perf_counter_ns()
         self._sent = 0
         self._last_tick = -1  # the device time of the last telegram, in ticks
@@ -219,8 +169,8 @@ class Emulator:
                 if not data:
                     return  # the client went away
                 inbox += data
-                for request in self._requests(inbox):
-                    answer, streaming_now = self._answer(request, streaming)
+                for request in self._device.requests(inbox):
+                    answer, streaming_now = self._device.answer(request, streaming, self._poll)
                     if answer and not _send(conn, answer):
                         return
                     if streaming_now and not streaming:
@@ -239,7 +189,7 @@ class Emulator:
             # late scans in one millisecond must not give them one stamp
             telegram = self._telegram(self._next, at_ns=due)
             if f.corrupt_every and (self._sent + 1) % f.corrupt_every == 0:
-                telegram = self._corrupt(telegram)
+                telegram = self._device.corrupt(telegram)
             if not _send(conn, telegram):
                 return
             self._sent += 1
@@ -248,39 +198,9 @@ class Emulator:
                 self._dropped = True
                 return
 
-    def _requests(self, inbox: bytearray) -> list[bytes]:
-        if self.kind == "sick":
-            return cola.split_telegrams(inbox)
-        out = []
-        while (end := inbox.find(b"\n")) >= 0:
-            line = bytes(inbox[:end]).rstrip(b"\r")
-            del inbox[: end + 1]
-            if line:
-                out.append(line)
-        return out
-
-    def _answer(self, request: bytes, streaming: bool) -> tuple[bytes, bool]:
-        """The reply to one request and whether the stream runs after it."""
-        if self.kind == "sick":
-            if request == b"sEN LMDscandata 1":
-                return cola.command("sEA LMDscandata 1"), True
-            if request == b"sEN LMDscandata 0":
-                return cola.command("sEA LMDscandata 0"), False
-            if request == b"sRN LMDscandata" and self._next is not None:
-                telegram = self._telegram(self._next).replace(b"sSN", b"sRA", 1)
-                return telegram, streaming
-            return cola.command("sFA 2"), streaming
-        assert self._params is not None
-        word = request[:2]
-        if request == b"SCIP2.0":
-            return b"SCIP2.0\n0Ee\n\n", streaming
-        if word == b"PP":
-            return scip.encode_parameters(self._params), streaming
-        if word == b"MD" and len(request) >= 15:
-            return request + b"\n00P\n\n", True
-        if word == b"QT":
-            return b"QT\n00P\n\n", False
-        return request + b"\n0Ee\n\n", streaming
+    def _poll(self) -> bytes | None:
+        """The next scan's telegram, for a request of one scan; None when served."""
+        return None if self._next is None else self._telegram(self._next)
 
     def _telegram(self, scan: Scan, *, at_ns: int | None = None) -> bytes:
         """``scan`` as the scanner sends it, stamped by the device clock at ``at_ns``
@@ -289,13 +209,7 @@ class Emulator:
         at = time.perf_counter_ns() if at_ns is None else at_ns
         ticks = max((at - self._t0_ns) // self._tick_ns, self._last_tick + 1)
         self._last_tick = ticks
-        return encode_scan(self.kind, scan, ticks=ticks, counter=self._sent, hz=self.hz or 25.0)
-
-    def _corrupt(self, telegram: bytes) -> bytes:
-        if self.kind == "sick":
-            return telegram[: len(telegram) // 2] + cola.ETX  # cut short
-        k = telegram.rfind(b"\n", 0, len(telegram) - 2) + 5  # inside the last data line
-        return telegram[:k] + bytes([telegram[k] ^ 0x01]) + telegram[k + 1 :]
+        return self._device.encode(scan, ticks=ticks, counter=self._sent, hz=self.hz or 25.0)
 
 
 def _send(conn: socket.socket, data: bytes) -> bool:

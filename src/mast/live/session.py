@@ -30,7 +30,7 @@ from typing import Any, Protocol
 from mast.core.beacon import Survey
 from mast.core.heap import QuietCollector
 from mast.core.scan import Scan
-from mast.live.sources import Received, Source
+from mast.live.stream import Received, Source
 from mast.pipeline.locator import Fix, LocatorConfig, SequenceConfig, SequenceLocator
 from mast.report.record import ReportInputs, fix_record
 

@@ -1,6 +1,13 @@
-"""SICK CoLa-A (ASCII) telegrams of the LMS1xx, LMS5xx and TiM5xx: framing, the
-``LMDscandata`` scan telegram read into a :class:`~mast.core.scan.Scan`, and the
-same telegram written (for the scanner emulator and the tests).
+"""SICK LMS1xx, LMS5xx and TiM5xx over CoLa-A (ASCII) on TCP: the telegrams' framing,
+the ``LMDscandata`` scan telegram read into a :class:`~mast.core.scan.Scan` and
+written, the client ``mast live sick://HOST`` uses (:class:`SickSource`) and the
+scanner's side ``mast emulate sick`` answers with (:class:`SickEmulation`).
+
+The client starts the stream with ``sEN LMDscandata 1`` and stops it with
+``sEN LMDscandata 0``; every ``sSN LMDscandata`` telegram is a scan. The emulator
+acknowledges ``sEN LMDscandata 1`` (``sEA LMDscandata 1``) and starts the stream,
+``sEN LMDscandata 0`` stops it, ``sRN LMDscandata`` polls one scan (``sRA``);
+anything else gets ``sFA`` (an error, as the device answers an unknown request).
 
 A CoLa-A telegram is ``STX`` (0x02), space-separated tokens, ``ETX`` (0x03).
 Numbers are hexadecimal (upper case) unless signed with ``+`` or ``-``, then
@@ -43,7 +50,9 @@ the scanner frame (x forward, y left), as in ``sensor_msgs/LaserScan``.
 from __future__ import annotations
 
 import math
+import socket
 import struct
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -51,11 +60,16 @@ from numpy.typing import NDArray
 
 from mast.core.scan import Scan
 from mast.errors import InputError
+from mast.live.protocols.protocol import Emulation, Protocol
+from mast.live.tcp import DeviceClock, TcpSource
 
 __all__ = [
     "ETX",
+    "PROTOCOL",
     "STX",
     "ScanTelegram",
+    "SickEmulation",
+    "SickSource",
     "command",
     "encode_scandata",
     "parse_scandata",
@@ -308,3 +322,88 @@ def encode_scandata(
     )
     values = " ".join(f"{v:X}" for v in mm.tolist())
     return command(head + values + " 0 0 0 0 0 0")
+
+
+# --------------------------------------------------------------------------- client
+
+
+class SickSource(TcpSource):
+    """SICK LMS1xx / LMS5xx / TiM5xx, CoLa-A: the client."""
+
+    scheme = "sick"
+    #: Shortest range of the LMS1xx family, metres (the telegram does not carry it).
+    RANGE_MIN_M = 0.05
+
+    def _new_connection(self) -> None:
+        self._clock = DeviceClock(32, 1_000)
+
+    def _start(self, sock: socket.socket) -> None:
+        self._new_connection()
+        sock.sendall(command("sEN LMDscandata 1"))
+
+    def _split(self, buffer: bytearray) -> list[bytes]:
+        return split_telegrams(buffer)
+
+    def _handle(self, telegram: bytes, sock: socket.socket, received_ns: int) -> Scan | None:
+        head = telegram[:16]
+        if not (head.startswith((b"sSN LMDscandata", b"sRA LMDscandata"))):
+            if head.startswith(b"sFA"):
+                raise InputError(f"the scanner refused a request: {telegram[:40]!r}")
+            return None  # an acknowledgement (sEA LMDscandata 1) or another answer
+        t = parse_scandata(telegram)
+        lo, hi = self._limits(self.RANGE_MIN_M, math.inf)
+        stamp = self._clock.stamp(t.time_since_startup_us, received_ns)
+        return t.to_scan(range_min_m=lo, range_max_m=hi, stamp_ns=stamp)
+
+    def _stop(self, sock: socket.socket) -> None:
+        sock.sendall(command("sEN LMDscandata 0"))
+
+
+# --------------------------------------------------------------------------- the scanner's side
+
+
+class SickEmulation(Emulation):
+    """A SICK scanner streaming CoLa-A, for ``mast emulate sick``."""
+
+    tick_ns = 1_000  # time since start-up, microseconds
+
+    def __init__(self, first: Scan) -> None:
+        del first  # the telegram describes each scan whole
+
+    def requests(self, inbox: bytearray) -> list[bytes]:
+        return split_telegrams(inbox)
+
+    def answer(
+        self, request: bytes, streaming: bool, poll: Callable[[], bytes | None]
+    ) -> tuple[bytes, bool]:
+        if request == b"sEN LMDscandata 1":
+            return command("sEA LMDscandata 1"), True
+        if request == b"sEN LMDscandata 0":
+            return command("sEA LMDscandata 0"), False
+        if request == b"sRN LMDscandata" and (telegram := poll()) is not None:
+            return telegram.replace(b"sSN", b"sRA", 1), streaming
+        return command("sFA 2"), streaming
+
+    def encode(self, scan: Scan, *, ticks: int, counter: int, hz: float) -> bytes:
+        return encode_scandata(
+            scan, scan_counter=counter, time_since_startup_us=ticks, scan_frequency_hz=hz
+        )
+
+    def corrupt(self, telegram: bytes) -> bytes:
+        return telegram[: len(telegram) // 2] + ETX  # cut short
+
+    def read_back(self, sent: bytes, stamp_ns: int) -> Scan:
+        (telegram,) = split_telegrams(bytearray(sent))
+        return parse_scandata(telegram).to_scan(
+            range_min_m=SickSource.RANGE_MIN_M, range_max_m=math.inf, stamp_ns=stamp_ns
+        )
+
+
+PROTOCOL = Protocol(
+    name="sick",
+    wire="CoLa-A",
+    models="SICK LMS1xx / LMS5xx / TiM5xx",
+    default_port=2111,
+    source=SickSource,
+    emulation=SickEmulation,
+)

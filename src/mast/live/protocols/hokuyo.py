@@ -1,7 +1,15 @@
-"""Hokuyo SCIP 2.0 (UST, UTM, URG over TCP or serial): the character encodings and
-sum checks, the ``PP`` parameter reply and the ``MD``/``GD`` distance replies read
-into a :class:`~mast.core.scan.Scan`, and the same replies written (for the
-scanner emulator and the tests).
+"""Hokuyo UST, UTM and URG over SCIP 2.0 on TCP: the character encodings and sum
+checks, the ``PP`` parameter reply and the ``MD``/``GD`` distance replies read into a
+:class:`~mast.core.scan.Scan` and written, the client ``mast live hokuyo://HOST``
+uses (:class:`HokuyoSource`) and the scanner's side ``mast emulate hokuyo`` answers
+with (:class:`HokuyoEmulation`).
+
+The client asks ``PP`` for the step geometry and range limits, then ``MD``
+(continuous, every step, no clustering) streams the scans; ``QT`` stops them. The
+emulator answers ``SCIP2.0``, ``PP`` (the step geometry of the run's scans: ``ARES``
+from the angular step, ``AFRT`` at the forward beam, :func:`hokuyo_parameters`),
+``MD`` (acknowledged with status ``00``, then one reply with status ``99`` per scan)
+and ``QT``; anything else gets status ``0E``.
 
 SCIP 2.0 (Hokuyo, "Communication Protocol Specification For SCIP2.0 Standard"):
 
@@ -21,6 +29,8 @@ SCIP 2.0 (Hokuyo, "Communication Protocol Specification For SCIP2.0 Standard"):
 from __future__ import annotations
 
 import math
+import socket
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -28,15 +38,21 @@ from numpy.typing import NDArray
 
 from mast.core.scan import Scan
 from mast.errors import InputError
+from mast.live.protocols.protocol import Emulation, Protocol
+from mast.live.tcp import DeviceClock, TcpSource
 
 __all__ = [
+    "PROTOCOL",
     "DeviceParameters",
     "DistanceReply",
+    "HokuyoEmulation",
+    "HokuyoSource",
     "checksum",
     "decode",
     "encode",
     "encode_distance_reply",
     "encode_parameters",
+    "hokuyo_parameters",
     "parse_distance_reply",
     "parse_parameters",
     "split_replies",
@@ -270,3 +286,133 @@ def encode_distance_reply(
         chunk = data[k : k + LINE_CHARS]
         lines.append(chunk + bytes([checksum(chunk)]))
     return b"\n".join(lines) + b"\n\n"
+
+
+# --------------------------------------------------------------------------- client
+
+
+class HokuyoSource(TcpSource):
+    """Hokuyo UST / UTM, SCIP 2.0: the client."""
+
+    scheme = "hokuyo"
+
+    def _new_connection(self) -> None:
+        self._clock = DeviceClock(24, 1_000_000)
+        self._params: DeviceParameters | None = None
+
+    def _start(self, sock: socket.socket) -> None:
+        self._new_connection()
+        sock.sendall(b"SCIP2.0\nPP\n")
+
+    def _split(self, buffer: bytearray) -> list[bytes]:
+        return split_replies(buffer)
+
+    def _handle(self, telegram: bytes, sock: socket.socket, received_ns: int) -> Scan | None:
+        if telegram.startswith(b"PP"):
+            p = parse_parameters(telegram)
+            self._params = p
+            sock.sendall(f"MD{p.amin:04d}{p.amax:04d}00000\n".encode("ascii"))
+            return None
+        if not telegram.startswith(b"MD"):
+            return None  # SCIP2.0, QT and other answers
+        lines = telegram.split(b"\n")
+        if len(lines) == 2 and lines[1][:2] == b"00":
+            return None  # MD acknowledged; the scans follow
+        if self._params is None:
+            raise InputError("a distance reply before the device's parameters (PP)")
+        reply = parse_distance_reply(telegram)
+        lo, hi = self._limits(self._params.dmin_mm / 1000.0, self._params.dmax_mm / 1000.0)
+        scan = reply.to_scan(
+            self._params, stamp_ns=self._clock.stamp(reply.timestamp_ms, received_ns)
+        )
+        if (lo, hi) != (scan.range_min_m, scan.range_max_m):
+            scan = scan.with_range_limits(lo, hi)
+        return scan
+
+    def _stop(self, sock: socket.socket) -> None:
+        sock.sendall(b"QT\n")
+
+
+# --------------------------------------------------------------------------- the scanner's side
+
+#: The error code written for a beam without an echo (below DMIN, so read as no return).
+NO_ECHO = 1
+
+
+def hokuyo_parameters(scan: Scan, *, model: str = "MAST-EMULATED-UST") -> DeviceParameters:
+    """``PP`` parameters under which the steps of ``scan`` are the device's steps."""
+    inc = scan.angle_increment
+    ares = round(2 * math.pi / inc)
+    step = 2 * math.pi / ares
+    afrt = round(-float(scan.angles_rad[0]) / step)
+    if not scan.is_uniform or abs(-afrt * step - float(scan.angles_rad[0])) > 1e-6:
+        raise InputError(
+            "the run's beams do not fall on a Hokuyo step grid (2 pi / ARES from forward)"
+        )
+    dmax = scan.range_max_m if math.isfinite(scan.range_max_m) else 60.0
+    return DeviceParameters(
+        model=model,
+        dmin_mm=max(20, round(scan.range_min_m * 1000)),
+        dmax_mm=round(dmax * 1000),
+        ares=ares,
+        amin=0,
+        amax=len(scan) - 1,
+        afrt=afrt,
+        scan_rpm=2400,
+    )
+
+
+class HokuyoEmulation(Emulation):
+    """A Hokuyo scanner answering SCIP 2.0, for ``mast emulate hokuyo``."""
+
+    tick_ns = 1_000_000  # milliseconds
+
+    def __init__(self, first: Scan) -> None:
+        self.params = hokuyo_parameters(first)
+
+    def requests(self, inbox: bytearray) -> list[bytes]:
+        out = []
+        while (end := inbox.find(b"\n")) >= 0:
+            line = bytes(inbox[:end]).rstrip(b"\r")
+            del inbox[: end + 1]
+            if line:
+                out.append(line)
+        return out
+
+    def answer(
+        self, request: bytes, streaming: bool, poll: Callable[[], bytes | None]
+    ) -> tuple[bytes, bool]:
+        del poll  # SCIP's one-scan request (GD) is not emulated
+        word = request[:2]
+        if request == b"SCIP2.0":
+            return b"SCIP2.0\n0Ee\n\n", streaming
+        if word == b"PP":
+            return encode_parameters(self.params), streaming
+        if word == b"MD" and len(request) >= 15:
+            return request + b"\n00P\n\n", True
+        if word == b"QT":
+            return b"QT\n00P\n\n", False
+        return request + b"\n0Ee\n\n", streaming
+
+    def encode(self, scan: Scan, *, ticks: int, counter: int, hz: float) -> bytes:
+        del counter, hz  # an MD reply carries neither
+        mm = np.where(scan.valid, np.rint(scan.ranges_m * 1000.0), NO_ECHO).astype(np.int64)
+        return encode_distance_reply(mm, first_step=0, timestamp_ms=ticks)
+
+    def corrupt(self, telegram: bytes) -> bytes:
+        k = telegram.rfind(b"\n", 0, len(telegram) - 2) + 5  # inside the last data line
+        return telegram[:k] + bytes([telegram[k] ^ 0x01]) + telegram[k + 1 :]
+
+    def read_back(self, sent: bytes, stamp_ns: int) -> Scan:
+        (reply,) = split_replies(bytearray(sent))
+        return parse_distance_reply(reply).to_scan(self.params, stamp_ns=stamp_ns)
+
+
+PROTOCOL = Protocol(
+    name="hokuyo",
+    wire="SCIP 2.0",
+    models="Hokuyo UST / UTM",
+    default_port=10940,
+    source=HokuyoSource,
+    emulation=HokuyoEmulation,
+)
