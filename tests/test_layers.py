@@ -31,7 +31,6 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("report", "sim"),  # the JSON record, text report and HTML kit; the simulator
     ("runs", "live"),  # survey runs (`mast track`); live streams (`mast live`)
     ("cloud", "plan"),  # georeferencing clouds (`mast georef`); planning layouts (`mast plan`)
-    ("apps",),  # what a command does beyond one library call: demo, reproduce, plots
     ("cli",),  # the command line, one module per command
     ("bench",),  # the benchmarks and `mast bench`
     ("program",),  # the whole program: the command line and its benchmarks

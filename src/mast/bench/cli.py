@@ -1,4 +1,5 @@
-"""``mast bench``: the benchmarks' commands, each printing figures (not timed tests)."""
+"""``mast bench``: the benchmarks' commands, each printing figures (not timed tests); and
+``mast reproduce paper``, the paper's own experiments beside its Table 2."""
 
 from __future__ import annotations
 
@@ -26,6 +27,27 @@ bench_app = typer.Typer(
     context_settings=CONTEXT,
 )
 app.add_typer(bench_app, name="bench")
+
+reproduce_app = typer.Typer(
+    help="Re-run published experiments.", no_args_is_help=True, context_settings=CONTEXT
+)
+app.add_typer(reproduce_app, name="reproduce")
+
+
+@reproduce_app.command("paper")
+def reproduce_paper_cmd(
+    out: Annotated[
+        Path, typer.Option("--out", help="Folder for report.md, figures and results.csv.")
+    ],
+    draws: Annotated[int, typer.Option("--draws", min=1, help="Noisy draws per shot.")] = 30,
+    seed: Annotated[int, typer.Option("--seed", help="Noise seed.")] = 0,
+) -> None:
+    """The MAST paper's experiments (Table 2 positions, wall yaws, beacon sizes), noise-free
+    and with 12 mm range noise, reported beside the paper's published values."""
+    from mast.bench.paper import reproduce_paper
+
+    check_output_folder(out)
+    reproduce_paper(out, draws=draws, seed=seed, echo=typer.echo)
 
 
 @bench_app.command("accuracy")

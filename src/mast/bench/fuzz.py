@@ -842,8 +842,8 @@ def run_fuzz(
         import rosbags.rosbag1
         import rosbags.rosbag2  # noqa: F401
 
-        import mast.apps.plan
-        import mast.apps.plot
+        import mast.plan.run
+        import mast.report.plot
         import mast.runs.run  # noqa: F401
 
         as_limit = _vm("VmSize") + MEMORY_BOUND_BYTES + (256 << 20)

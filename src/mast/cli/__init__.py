@@ -6,7 +6,8 @@ status: 2 bad input, 3 no fix, 4 an output cannot be written, 70 an internal err
 
 One module a command, each registering on the one application (:mod:`mast.cli.root`) when
 imported (``mast --help`` lists them by name); the benchmarks' ``mast bench`` group
-is registered from above, by :mod:`mast.bench.cli` (the whole program: :mod:`mast.program`).
+and ``mast reproduce`` are registered from above, by :mod:`mast.bench.cli` (the whole
+program: :mod:`mast.program`).
 """
 
 from mast.cli import (  # noqa: F401 - imported to register each command
@@ -17,7 +18,6 @@ from mast.cli import (  # noqa: F401 - imported to register each command
     live,
     locate,
     plan,
-    reproduce,
     scanners,
     simulate,
     track,

@@ -102,10 +102,10 @@ def georef(
     that disagree: the reports and beacons_found.csv say why), 2 bad input, 4 an output
     cannot be written.
     """
-    from mast.apps.georef import parse_band, parse_checks, run_georef
     from mast.cloud.detect import DetectConfig
     from mast.cloud.georef import MODELS, GeorefConfig
     from mast.cloud.match import MatchConfig
+    from mast.cloud.run import run_georef
 
     if model not in MODELS:
         raise InputError(f"--model must be one of {', '.join(MODELS)}, got {model!r}")
@@ -148,3 +148,29 @@ def georef(
     )
     for c in r.checks:
         typer.echo(f"check {c.beacon}: {1000 * c.horizontal_m:.1f} mm horizontal")
+
+
+def parse_checks(text: str | None) -> tuple[str, ...]:
+    """``B7,B9`` -> ``("B7", "B9")``; an empty name is bad input."""
+    if text is None:
+        return ()
+    names = tuple(t.strip() for t in text.split(","))
+    if any(not n for n in names):
+        raise InputError(f"--check: an empty beacon name in {text!r}")
+    return names
+
+
+def parse_band(text: str | None) -> tuple[float, float] | None:
+    """``Z0,Z1`` in the cloud's frame, ``Z0 < Z1``."""
+    if text is None:
+        return None
+    parts = text.split(",")
+    try:
+        z0, z1 = (float(p) for p in parts)
+    except ValueError:
+        raise InputError(f"--band must be two heights Z0,Z1 in metres, got {text!r}") from None
+    if not (math.isfinite(z0) and math.isfinite(z1)):
+        raise InputError(f"--band: heights must be finite numbers, got {text!r}")
+    if not z0 < z1:
+        raise InputError(f"--band: Z0 must be below Z1, got {text!r}")
+    return z0, z1

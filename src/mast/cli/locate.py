@@ -131,7 +131,7 @@ def locate(
                         typer.echo("")
                     typer.echo(fix_text(fix, source=label, scan=scan, inputs=inputs))
                 if plot is not None:
-                    from mast.apps.plot import plot_fix
+                    from mast.report.plot import plot_fix
 
                     target = plot.with_name(f"{plot.stem}_{located:04d}{plot.suffix}")
                     plot_fix(scan, survey, fix, target if numbered else plot, title=label)

@@ -126,9 +126,10 @@ def plan(
     survey with the new beacons, for mast plan and mast locate).
     Exit status 0, 2 for bad input, 4 when an output cannot be written.
     """
-    from mast.apps.plan import run_plan, scanner_for
     from mast.io import read_survey
     from mast.plan.predict import PlanSettings
+    from mast.plan.run import run_plan
+    from mast.sim.scanner import scanner_for
 
     for name, value in (
         ("--step", step),

@@ -8,14 +8,21 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from numpy.typing import NDArray
 
-from mast.core.noise import NoiseModel
+from mast.core.noise import DEFAULT_RANGE_SIGMA_M, NoiseModel
 from mast.core.pose import Pose2D
 from mast.core.scan import Scan
 from mast.errors import InputError
 from mast.sim.owed import OWED, OwedRule, owes_fix
 from mast.sim.world import Surface, World
 
-__all__ = ["SCANNERS", "ScannerModel", "SimulatedScan", "scanner_model", "simulate_scan"]
+__all__ = [
+    "SCANNERS",
+    "ScannerModel",
+    "SimulatedScan",
+    "scanner_for",
+    "scanner_model",
+    "simulate_scan",
+]
 
 
 #: The smallest range sigma a scanner's returns are weighted with, metres.
@@ -218,6 +225,36 @@ class SimulatedScan:
             if incidence >= min_incidence_deg:
                 out.setdefault(b, []).append(p)
         return out
+
+
+def scanner_for(
+    name: str | None,
+    *,
+    fov_deg: float | None,
+    resolution_deg: float | None,
+    range_sigma_m: float | None,
+    range_max_m: float | None,
+    angle_sigma_rad: float | None,
+) -> ScannerModel:
+    """A named scanner model with any explicit figure replacing its own, or one built from
+    the explicit figures (field of view and resolution required)."""
+    options = {
+        "fov_deg": fov_deg,
+        "resolution_deg": resolution_deg,
+        "range_sigma_m": range_sigma_m,
+        "range_max_m": range_max_m,
+        "angle_sigma_rad": angle_sigma_rad,
+    }
+    given: dict[str, float] = {k: v for k, v in options.items() if v is not None}
+    if name is not None:
+        model = scanner_model(name)
+        return replace(model, name=model.name if not given else model.name + "-custom", **given)
+    if fov_deg is None or resolution_deg is None:
+        raise InputError(
+            "give --scanner NAME (see mast scanners) or the scanner's --fov and --resolution"
+        )
+    given.setdefault("range_sigma_m", DEFAULT_RANGE_SIGMA_M)
+    return ScannerModel("custom", **given)
 
 
 def simulate_scan(

@@ -20,9 +20,9 @@ from matplotlib.text import Text
 from matplotlib.ticker import ScalarFormatter
 
 from mast import Beacon, Pose2D, Scan, Survey
-from mast.apps.plot import PLOT_SUFFIXES, fix_figure, plot_fix
 from mast.errors import InputError, OutputError
 from mast.pipeline.locator import Fix, LocatorConfig, locate
+from mast.report.plot import PLOT_SUFFIXES, fix_figure, plot_fix
 from mast.sim import build_scenario
 
 #: Where the paper's scene is moved to: a UTM-sized easting and northing.

@@ -1,9 +1,10 @@
-"""``mast plan``: predict a layout over a drift, suggest beacons, write the four outputs."""
+"""``mast plan`` as one call: read the drift, predict the layout (and suggest beacons), write
+the outputs; as :mod:`mast.runs.run` is for ``mast track``."""
 
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -23,6 +24,9 @@ PLAN_FILES = ("plan.csv", "plan.png", "plan.dxf", "summary.json")
 
 @dataclass(frozen=True, eq=False)
 class PlanResult:
+    """The layout predicted (after any suggested beacons), the one before them, the
+    summary's figures and the files written."""
+
     plan: Plan
     before: Plan | None
     figures: dict[str, Any]
@@ -79,37 +83,3 @@ def run_plan(
     write_summary(out / "summary.json", figures)
     written += [out / name for name in PLAN_FILES]
     return PlanResult(plan, before, figures, tuple(written))
-
-
-def scanner_for(
-    name: str | None,
-    *,
-    fov_deg: float | None,
-    resolution_deg: float | None,
-    range_sigma_m: float | None,
-    range_max_m: float | None,
-    angle_sigma_rad: float | None,
-) -> ScannerModel:
-    """A named scanner model with any explicit figure replacing its own, or one built from
-    the explicit figures (field of view and resolution required)."""
-    from mast.core.noise import DEFAULT_RANGE_SIGMA_M
-    from mast.errors import InputError
-    from mast.sim.scanner import scanner_model
-
-    options = {
-        "fov_deg": fov_deg,
-        "resolution_deg": resolution_deg,
-        "range_sigma_m": range_sigma_m,
-        "range_max_m": range_max_m,
-        "angle_sigma_rad": angle_sigma_rad,
-    }
-    given: dict[str, float] = {k: v for k, v in options.items() if v is not None}
-    if name is not None:
-        model = scanner_model(name)
-        return replace(model, name=model.name if not given else model.name + "-custom", **given)
-    if fov_deg is None or resolution_deg is None:
-        raise InputError(
-            "give --scanner NAME (see mast scanners) or the scanner's --fov and --resolution"
-        )
-    given.setdefault("range_sigma_m", DEFAULT_RANGE_SIGMA_M)
-    return ScannerModel("custom", **given)

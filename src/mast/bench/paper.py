@@ -209,7 +209,7 @@ def _figures(out: Path, rows: list[ShotResult]) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from mast.apps.plot import plot_fix
+    from mast.report.plot import plot_fix
 
     # Figure 3 panels: the default beacons, P1 and P4 at 0.25 deg, parallel walls.
     scene = paper_scene("parallel", chord_m=0.998, depth_m=0.2)

@@ -2,7 +2,7 @@ import math
 
 import pytest
 
-from mast.apps.reproduce import load_paper_table2
+from mast.bench.paper import load_paper_table2
 
 
 def test_table2_transcription_is_consistent() -> None:

@@ -1,9 +1,9 @@
-"""``mast georef``: put a 3D SLAM cloud into the mine grid (a thin application over
-:func:`mast.cloud.georef.georeference` and :func:`mast.cloud.outputs.write_outputs`)."""
+"""``mast georef`` as one call: read the cloud, the survey and the SLAM trajectory,
+georeference (:func:`mast.cloud.georef.georeference`) and write every output
+(:func:`mast.cloud.outputs.write_outputs`); as :mod:`mast.runs.run` is for ``mast track``."""
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -13,39 +13,15 @@ from mast.cloud.io import open_cloud
 from mast.cloud.outputs import Outputs, write_outputs
 from mast.errors import InputError
 
-__all__ = ["GeorefRun", "parse_band", "parse_checks", "run_georef"]
+__all__ = ["GeorefRun", "run_georef"]
 
 
 @dataclass(frozen=True, eq=False)
 class GeorefRun:
+    """What a georef run found and the files it wrote."""
+
     result: Georef
     outputs: Outputs
-
-
-def parse_checks(text: str | None) -> tuple[str, ...]:
-    """``B7,B9`` -> ``("B7", "B9")``; an empty name is bad input."""
-    if text is None:
-        return ()
-    names = tuple(t.strip() for t in text.split(","))
-    if any(not n for n in names):
-        raise InputError(f"--check: an empty beacon name in {text!r}")
-    return names
-
-
-def parse_band(text: str | None) -> tuple[float, float] | None:
-    """``Z0,Z1`` in the cloud's frame, ``Z0 < Z1``."""
-    if text is None:
-        return None
-    parts = text.split(",")
-    try:
-        z0, z1 = (float(p) for p in parts)
-    except ValueError:
-        raise InputError(f"--band must be two heights Z0,Z1 in metres, got {text!r}") from None
-    if not (math.isfinite(z0) and math.isfinite(z1)):
-        raise InputError(f"--band: heights must be finite numbers, got {text!r}")
-    if not z0 < z1:
-        raise InputError(f"--band: Z0 must be below Z1, got {text!r}")
-    return z0, z1
 
 
 def run_georef(
