@@ -19,6 +19,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from mast.core.beacon import Survey
+from mast.core.lines import fit_line
 from mast.pipeline.locator import NO_FIX_REASONS
 from mast.sim.scanner import SimulatedScan
 from mast.sim.world import Surface
@@ -128,13 +129,10 @@ def _direction_sigma_rad(truth: SimulatedScan, beacon: str, panel: int, sigma_m:
     beams, pts_all = truth.scan.points()
     k = truth.surfaces.index(Surface("beacon", beacon, panel))
     pts = pts_all[truth.surface_index[beams] == k]
-    centre = pts.mean(axis=0)
-    _, _, vt = np.linalg.svd(pts - centre)
-    along, normal = vt[0], vt[1]
-    t = (pts - centre) @ along
+    line = fit_line(pts)
     u = pts / np.hypot(pts[:, 0], pts[:, 1])[:, None]
-    perp = sigma_m * math.sqrt(float(np.mean((u @ normal) ** 2)))
-    spread = float(np.sum(t**2))
+    perp = sigma_m * math.sqrt(float(np.mean((u @ line.normal) ** 2)))
+    spread = line.t_spread
     return perp / math.sqrt(spread) if spread > 0 else math.inf
 
 

@@ -36,7 +36,7 @@ from numpy.typing import NDArray
 
 from mast.cloud.grid import EIGHT, PlanGrid, cell_keys, key_ij, neighbours, pack_ij
 from mast.cloud.io import Cloud
-from mast.core.lines import intersect_lines
+from mast.core.lines import fit_line, intersect_lines
 from mast.errors import InputError
 from mast.pipeline.segmentation import Corner, Segment, Segmentation
 
@@ -437,9 +437,8 @@ def _lines_in(
         for _ in range(2):  # refit, gather again
             if inl.size < 2:
                 break
-            c = p[inl].mean(axis=0)
-            _, _, vt = np.linalg.svd(p[inl] - c, full_matrices=False)
-            u, n = vt[0], vt[1]
+            line = fit_line(p[inl])
+            c, u, n = line.centroid, line.direction, line.normal
             near = np.flatnonzero(np.abs((p - c) @ n) <= band)
             t = (p[near] - c) @ u
             order = np.argsort(t)
@@ -508,14 +507,10 @@ def _segment(
     trim_m: float,
 ) -> Segment:
     """A plan :class:`Segment` of a piece (``rows``: its candidate points)."""
-    c = xy.mean(axis=0)
+    line = fit_line(xy)  # directed from the first point towards the last
+    c, d, n = line.centroid, line.direction, line.normal
     q = xy - c
-    _, _, vt = np.linalg.svd(q, full_matrices=False)
-    d = vt[0]
     t = q @ d
-    if t[-1] < t[0]:
-        d, t = -d, -t
-    n = np.array([-d[1], d[0]])
     order = np.argsort(t)
     t_sorted = t[order]
     spread = float(np.sum(t**2))
@@ -643,16 +638,16 @@ def _near_line(
     """The candidates within ``band`` of a piece's plan line, along the middle
     ``middle`` share of its extent and within its heights (and 3 bands beyond)."""
     p = xyz[rows, :2]
-    c = p.mean(axis=0)
-    _, _, vt = np.linalg.svd(p - c, full_matrices=False)
-    t = (p - c) @ vt[0]
+    line = fit_line(p)
+    c = line.centroid
+    t = (p - c) @ line.direction
     a0, a1 = float(t.min()), float(t.max())
     cut = 0.5 * (1.0 - middle) * (a1 - a0)
     a0, a1 = a0 + cut, a1 - cut
     reach = max(abs(a0), abs(a1)) + band
     found = np.asarray(tree.query_ball_point(c, reach), dtype=np.intp)  # type: ignore[attr-defined]
     q = xyz[found, :2] - c
-    along, across = q @ vt[0], q @ vt[1]
+    along, across = q @ line.direction, q @ line.normal
     z = xyz[found, 2]
     z0, z1 = float(xyz[rows, 2].min()), float(xyz[rows, 2].max())
     near = (
@@ -696,9 +691,7 @@ def _panel_noise(
             if near.size < 15:
                 own = None  # too short to say: left out
                 break
-            p = xyz[near, :2]
-            _, sv, _ = np.linalg.svd(p - p.mean(axis=0), full_matrices=False)
-            own = max(float(sv[-1] / math.sqrt(near.size)), 1e-4)
+            own = max(fit_line(xyz[near, :2]).rms, 1e-4)
         if own is not None:
             rms.append(own)
     if not rms:

@@ -8,6 +8,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from numpy.typing import NDArray
 
+from mast.core.lines import fit_line
 from mast.core.noise import DEFAULT_RANGE_SIGMA_M, NoiseModel
 from mast.core.pose import Pose2D
 from mast.core.scan import Scan
@@ -214,10 +215,8 @@ class SimulatedScan:
                 continue
             k = self.surfaces.index(Surface("beacon", b, p))
             sel = self.surface_index[beam_of] == k
-            pts = pts_all[sel]
-            centre = pts.mean(axis=0)
-            _, _, vt = np.linalg.svd(pts - centre)
-            along = vt[0]
+            line = fit_line(pts_all[sel])
+            along, centre = line.direction, line.centroid
             beam = centre / np.hypot(*centre)
             incidence = math.degrees(
                 math.asin(min(1.0, abs(beam[0] * along[1] - beam[1] * along[0])))
