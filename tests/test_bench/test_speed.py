@@ -9,17 +9,17 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from mast.bench import speed
 from mast.bench.speed import (
-    OTHER_STAGE,
     PEER_MISSING,
-    STAGES,
     Stats,
     kept_scans,
     measure_locate,
     measure_peer,
+    peer,
     run_speed,
+    stages,
 )
+from mast.bench.speed.model import OTHER_STAGE, STAGES
 from mast.core.pose import Pose2D
 from mast.pipeline.locator import STAGES as LOCATOR_STAGES
 
@@ -166,7 +166,7 @@ def test_stage_clocks_cover_the_locator_and_are_removed() -> None:
     assert all(callable(fn) for fn in before.values())  # no stage renamed unnoticed
     clock: dict[str, float] = {}
     kept = kept_scans(0, 1)
-    with speed._stage_clocks(clock):
+    with stages._stage_clocks(clock):
         locator.locate(kept.sims[0].scan, kept.survey)
     assert clock["segmentation"] > 0.0
     assert clock["verification (ICP)"] > 0.0
@@ -176,8 +176,8 @@ def test_stage_clocks_cover_the_locator_and_are_removed() -> None:
 
 def test_pose_matrix_round_trip() -> None:
     pose = Pose2D(1234.5, 6789.25, 2.5)
-    m = speed._matrix(pose)
-    back = speed._pose_of(m)
+    m = peer._matrix(pose)
+    back = peer._pose_of(m)
     assert back.easting == pytest.approx(pose.easting)
     assert back.northing == pytest.approx(pose.northing)
     assert math.remainder(back.azimuth - pose.azimuth, math.tau) == pytest.approx(0.0, abs=1e-12)

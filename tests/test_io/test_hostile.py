@@ -127,10 +127,10 @@ def test_segmentation_memory_is_linear_in_the_beams() -> None:
 
 
 def test_a_bz2_chunk_inflating_past_its_declared_size_is_refused(tmp_path: Path) -> None:
-    from mast.bench.fuzz import _bz2_bomb_bag
+    from mast.bench.fuzz.mutations import bz2_bomb_bag
 
     bomb = tmp_path / "bomb.bag"
-    _bz2_bomb_bag(bomb, 64 << 20)  # declares 1 KiB
+    bz2_bomb_bag(bomb, 64 << 20)  # declares 1 KiB
     tracemalloc.start()
     try:
         with pytest.raises(InputError, match="decompresses beyond its declared size"):
@@ -356,11 +356,12 @@ def test_a_fuzz_case_is_charged_only_its_own_memory(tmp_path: Path) -> None:
     """A case runs in a child forked from a warmed-up process (late in the test suite, a
     large one): its peak is what it took itself, not the parent's pages it was forked
     with, and a case that does take memory is charged it."""
-    from mast.bench.fuzz import FuzzCase, _run, _vm
+    from mast.bench.fuzz import FuzzCase
+    from mast.bench.fuzz.children import run_case, vm_bytes
 
     ballast = np.ones(400 * 2**20 // 8)  # a parent holding 400 MiB, touched
-    limit = _vm("VmSize") + (2 << 30)
-    status, _, peak, inherited, out, _ = _run(
+    limit = vm_bytes("VmSize") + (2 << 30)
+    status, _, peak, inherited, out, _ = run_case(
         FuzzCase("t", "help", ("--help",), None), tmp_path / "a", limit, 60.0
     )
     assert status == 0
@@ -371,7 +372,7 @@ def test_a_fuzz_case_is_charged_only_its_own_memory(tmp_path: Path) -> None:
     # 0.0018 deg), whose points, segments and hypotheses take tens of MiB more than the
     # same room at 1 000 beams (imports and library pages alike in both).
     sim = tmp_path / "sim"
-    status, *_ = _run(FuzzCase("t", "sim", ("simulate", "--out", str(sim)), None),
+    status, *_ = run_case(FuzzCase("t", "sim", ("simulate", "--out", str(sim)), None),
                       tmp_path / "b", limit, 60.0)  # fmt: skip
     assert status == 0
     survey = next(sim.rglob("beacons.csv"))
@@ -381,7 +382,7 @@ def test_a_fuzz_case_is_charged_only_its_own_memory(tmp_path: Path) -> None:
         angles = np.linspace(-np.pi, np.pi, n, endpoint=False)
         np.savetxt(scan, np.c_[angles, np.full(n, 5.0)], delimiter=",", fmt="%.7f",
                    header="angle_rad,range_m", comments="")  # fmt: skip
-        status, _, peak, _, _, _ = _run(
+        status, _, peak, _, _, _ = run_case(
             FuzzCase("t", "room", ("locate", str(scan), "-b", str(survey)), None),
             tmp_path / f"c{n}", limit, 60.0,
         )  # fmt: skip
@@ -395,7 +396,7 @@ def test_the_parent_gives_its_free_heap_back_before_a_fork() -> None:
     until malloc_trim gives them back: then the resident size drops."""
     import ctypes
 
-    from mast.bench.fuzz import _trim_heap, _vm
+    from mast.bench.fuzz.children import trim_heap, vm_bytes
 
     libc = ctypes.CDLL(None)
     libc.malloc.restype = ctypes.c_void_p
@@ -407,9 +408,9 @@ def test_the_parent_gives_its_free_heap_back_before_a_fork() -> None:
     keep = libc.malloc(64)  # above them: the heap's top cannot just shrink
     for b in blocks:
         libc.free(b)
-    held = _vm("VmRSS")
-    assert _trim_heap()
-    assert _vm("VmRSS") < held - 100 * 2**20
+    held = vm_bytes("VmRSS")
+    assert trim_heap()
+    assert vm_bytes("VmRSS") < held - 100 * 2**20
     libc.free(keep)
 
 
