@@ -181,7 +181,17 @@ def test_locate_bad_input_is_status_2(paper_files: Path, tmp_path: Path) -> None
         "-1",
     )
     assert r.returncode == 2
-    assert "--range-sigma must be a non-negative number" in r.stderr
+    assert "--range-sigma must be a positive number of metres (10 mm is 0.01), got -1" in r.stderr
+    for option, value, said in (
+        ("--range-sigma", "0", "--range-sigma must be a positive number"),
+        ("--angle-sigma", "nan", "--angle-sigma must be a non-negative number of radians"),
+        ("--survey-sigma", "-0.003", "--survey-sigma must be a non-negative number of metres"),
+    ):
+        r = _mast("locate", str(folder / "scan_001.csv"), "-b", str(folder / "beacons.csv"),
+                  option, value)  # fmt: skip
+        assert r.returncode == 2
+        assert said in r.stderr
+        assert len(r.stderr.strip().splitlines()) == 1
 
 
 def test_locate_plot_writes_a_png(paper_files: Path, tmp_path: Path) -> None:

@@ -95,6 +95,15 @@ def test_a_range_sigma_no_scanner_has_is_refused_from_a_file(value: str, tmp_pat
     assert f"{path}, line 2: [locator] range_sigma_m must be" in r.stderr
 
 
+@pytest.mark.parametrize("key", ["angle_sigma_rad", "survey_sigma_m"])
+def test_an_endless_precision_is_refused_from_a_file_on_its_line(key: str, tmp_path: Path) -> None:
+    path = tmp_path / "c.toml"
+    path.write_text(f"[locator]\nrange_sigma_m = 0.01\n{key} = inf\n", encoding="utf-8")
+    r = run_mast_text("locate", SCAN, "-b", SURVEY, "--config", str(path))
+    assert r.returncode == 2, r.stderr
+    assert f"{path}, line 3: [locator] {key} must be a non-negative number" in r.stderr
+
+
 def test_a_refused_track_run_leaves_its_folder_empty(tmp_path: Path) -> None:
     out = tmp_path / "out"
     r = run_mast_text("track", SCAN, "-b", str(tmp_path / "missing.csv"), "--out", str(out))

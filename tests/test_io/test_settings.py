@@ -80,7 +80,7 @@ MISTAKES = [
     ("[locator.verification]\ncoarse_gates_m = 0.5\n", "line 2: [locator.verification] coarse"),
     ("[locator]\nverification = 3\n", "line 2: [locator] verification must be a table"),
     ("[locator]\nrange_sigma_m = \n", "line 2: not a TOML settings file"),
-    ("[locator.tracking]\nstep_m = 0.033\n", "line 1: [locator.tracking]: step_m"),
+    ("[locator.tracking]\nstep_m = 0.033\n", "line 2: [locator.tracking] step_m (0.033) must be"),
 ]  # fmt: skip
 
 

@@ -16,6 +16,7 @@ from mast.sim import (
     random_scene,
     simulate_scan,
 )
+from mast.sim.owed import OWED, OwedRule
 
 ARCSEC = math.radians(1 / 3600)
 
@@ -48,7 +49,7 @@ def test_random_scenes_every_owed_fix_is_exact(seed: int) -> None:
     for index in range(4):
         scene = random_scene(seed, index)
         for shot, sim in zip(scene.shots, scene.simulate_all(), strict=True):
-            seen = sim.panels_seen(min_points=3)
+            seen = sim.panels_seen(OWED)
             is_owed = sum(len(p) >= 2 for p in seen.values()) >= 2
             fix = locate(sim.scan, scene.survey)
             owed += is_owed
@@ -84,7 +85,7 @@ def test_two_middle_panels_alone_fix_exactly_and_never_wrong() -> None:
         for index in range(4):
             scene = random_scene(seed, index)
             for shot, sim in zip(scene.shots, scene.simulate_all(), strict=True):
-                seen = sim.panels_seen(min_points=5)
+                seen = sim.panels_seen(OwedRule(5, 10.0))
                 middles = sum(2 in p and len(p) >= 2 for p in seen.values()) >= 2
                 fix = locate(sim.scan, scene.survey)
                 owed += middles
@@ -456,3 +457,13 @@ def test_a_mirror_pose_with_fewer_identified_corners_must_explain_the_scan_bette
     # Since issue 31's fourth round one of the mirror's beacons does not lie on its
     # panels within its noise: the mirror is not even a verified pose any more.
     assert [v for v in fix.verified if v.supported] == [fix.chosen]
+
+
+@pytest.mark.parametrize(
+    ("field", "value"),
+    [("range_sigma_m", 0.0), ("range_sigma_m", math.nan), ("angle_sigma_rad", -1e-4),
+     ("survey_sigma_m", math.inf)],
+)  # fmt: skip
+def test_the_locator_refuses_a_precision_no_instrument_has(field: str, value: float) -> None:
+    with pytest.raises(ValueError, match=rf"^{field} must be a (positive|non-negative) number"):
+        LocatorConfig(**{field: value})

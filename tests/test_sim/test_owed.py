@@ -17,7 +17,7 @@ def test_two_beacons_with_two_panels_each_are_owed_a_fix() -> None:
 def test_a_simulated_scan_counts_its_panels_by_the_rule_given() -> None:
     sim = paper_scene().simulate_all()[0]
     for rule in (OWED, OWED_FIELD, OWED_CLEAN, OWED_REAL_WALLS):
-        seen = sim.panels_seen(min_points=rule.min_points, min_incidence_deg=rule.min_incidence_deg)
+        seen = sim.panels_seen(rule)
         assert sim.owes_fix(rule) == owes_fix(seen)
     # No panel has a million returns: nothing is owed under that rule.
     assert not sim.owes_fix(OwedRule(min_points=1_000_000))

@@ -21,6 +21,7 @@ from numpy.typing import NDArray
 from mast.core.beacon import Survey
 from mast.core.lines import fit_line
 from mast.pipeline.locator import NO_FIX_REASONS
+from mast.sim.owed import OWED, OwedRule
 from mast.sim.scanner import SimulatedScan
 from mast.sim.world import Surface
 
@@ -42,7 +43,7 @@ DIRECTION_SIGMA_BINS_DEG: tuple[float, ...] = (0.0, 0.5, 1.0, 2.0, 3.0, 5.0, 10.
 
 #: A line through two returns already has a direction: panels with fewer are
 #: not ranked (the owed rule itself asks for 3, so no owed pose depends on them).
-_MIN_PANEL_RETURNS = 2
+_RANKED = OwedRule(2, OWED.min_incidence_deg)
 
 
 @dataclass(frozen=True, slots=True)
@@ -101,7 +102,7 @@ def detection_evidence(
         The scanner's range noise, metres (``truth`` has none).
     """
     hits = truth.panel_hits()
-    seen = truth.panels_seen(min_points=_MIN_PANEL_RETURNS)
+    seen = truth.panels_seen(_RANKED)
     position = truth.pose.position
     ranked: list[tuple[int, float, str, list[int]]] = []
     for b, panels in seen.items():

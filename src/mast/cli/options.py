@@ -250,14 +250,6 @@ def precisions(
         noise = scanner_model(scanner).noise()
         cfg = replace(cfg, range_sigma_m=noise.range_sigma_m, angle_sigma_rad=noise.angle_sigma_rad)
         defaults -= {"range_sigma_m", "angle_sigma_rad"}
-    checks = (
-        ("--range-sigma", range_sigma),
-        ("--angle-sigma", angle_sigma),
-        ("--survey-sigma", survey_sigma),
-    )
-    for name, value in checks:
-        if value is not None and not (math.isfinite(value) and value >= 0):
-            raise InputError(f"{name} must be a non-negative number, got {value}")
     for name, value, limit, unit, example in (
         ("--range-sigma", range_sigma, MAX_PLAUSIBLE_SIGMA_M, "metres", "10 mm is 0.01"),
         ("--survey-sigma", survey_sigma, MAX_PLAUSIBLE_SIGMA_M, "metres", "3 mm is 0.003"),
@@ -269,17 +261,19 @@ def precisions(
                 f"survey has; it is in {unit} ({example})",
                 err=True,
             )
-    if range_sigma is not None:
-        if range_sigma <= 0:
-            raise InputError("--range-sigma must be positive")
-        cfg = replace(cfg, range_sigma_m=range_sigma)
-        defaults.discard("range_sigma_m")
-    if angle_sigma is not None:
-        cfg = replace(cfg, angle_sigma_rad=angle_sigma)
-        defaults.discard("angle_sigma_rad")
-    if survey_sigma is not None:
-        cfg = replace(cfg, survey_sigma_m=survey_sigma)
-        defaults.discard("survey_sigma_m")
+    given_here = {
+        "range_sigma_m": ("--range-sigma", range_sigma),
+        "angle_sigma_rad": ("--angle-sigma", angle_sigma),
+        "survey_sigma_m": ("--survey-sigma", survey_sigma),
+    }
+    for key, (option, value) in given_here.items():
+        if value is None:
+            continue
+        try:  # LocatorConfig checks the value; its message names the field first
+            cfg = replace(cfg, **{key: value})  # type: ignore[arg-type]
+        except ValueError as err:
+            raise InputError(str(err).replace(key, option, 1)) from None
+        defaults.discard(key)
     return cfg, defaults
 
 

@@ -5,7 +5,6 @@ beside a run's results holds (:mod:`mast.io.settings`)."""
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -15,7 +14,7 @@ import typer
 
 from mast import __version__
 from mast.errors import InputError
-from mast.io.settings import fingerprint, from_table, line_of, read_settings, settings_text
+from mast.io.settings import fingerprint, from_table, read_settings, settings_text
 
 __all__ = ["COMMAND_TABLES", "ConfigOption", "Effective", "effective", "read_config"]
 
@@ -72,13 +71,6 @@ def read_config(path: Path | None, command: str) -> tuple[dict[str, Any], set[st
         if name in tables:
             out[name] = read
             given |= {f"{name}.{key}" for key in table}
-    locator = out.get("locator")
-    if locator is not None and not 0 < locator.range_sigma_m < math.inf:
-        raise InputError(
-            "[locator] range_sigma_m must be a positive number of metres (10 mm is 0.01)",
-            path=path,
-            line=line_of(text, "locator", "range_sigma_m"),
-        )
     return out, given
 
 

@@ -137,8 +137,10 @@ def from_table(cls: type[T], table: Mapping[str, Any], *, path: Path, text: str,
     try:
         return cls(**kw)
     except (TypeError, ValueError) as err:
-        at = line_of(text, where, None)
-        raise InputError(f"[{where}]: {err}", path=path, line=at) from None
+        # A configuration's refusal names its field first: the line is that key's.
+        named = next((k for k in table if str(err).startswith(f"{k} ")), None)
+        at = line_of(text, where, named)
+        raise InputError(f"[{where}] {err}", path=path, line=at) from None
 
 
 def _table(obj: object) -> dict[str, Any]:

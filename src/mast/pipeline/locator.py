@@ -183,6 +183,19 @@ class LocatorConfig:
     verification: VerificationConfig = field(default_factory=VerificationConfig)
     tracking: TrackingConfig = field(default_factory=TrackingConfig)
 
+    def __post_init__(self) -> None:
+        # The one check of the precisions, whoever gives them (an option, a settings
+        # file, a library call): each message starts with the field it is about.
+        if not 0.0 < self.range_sigma_m < math.inf:
+            raise ValueError(
+                "range_sigma_m must be a positive number of metres (10 mm is 0.01), "
+                f"got {self.range_sigma_m!r}"
+            )
+        for name, unit in (("angle_sigma_rad", "radians"), ("survey_sigma_m", "metres")):
+            value = getattr(self, name)
+            if not 0.0 <= value < math.inf:
+                raise ValueError(f"{name} must be a non-negative number of {unit}, got {value!r}")
+
     @property
     def noise(self) -> NoiseModel:
         return NoiseModel(self.range_sigma_m, self.angle_sigma_rad, self.survey_sigma_m)

@@ -191,7 +191,7 @@ def plan_world(drift: Drift, survey: Survey, *, roughness_m: float = 0.0, seed: 
 
 
 def _panels_seen(sim: SimulatedScan) -> dict[str, tuple[int, ...]]:
-    seen = sim.panels_seen(min_points=MIN_PANEL_RETURNS, min_incidence_deg=MIN_INCIDENCE_DEG)
+    seen = sim.panels_seen(OWED)
     return {b: tuple(p) for b, p in seen.items()}
 
 

@@ -193,19 +193,14 @@ class SimulatedScan:
     def owes_fix(self, rule: OwedRule = OWED) -> bool:
         """Whether this scan is owed a fix (:func:`mast.sim.owed.owes_fix`), its panels
         counted by ``rule`` (:meth:`panels_seen`)."""
-        return owes_fix(
-            self.panels_seen(min_points=rule.min_points, min_incidence_deg=rule.min_incidence_deg)
-        )
+        return owes_fix(self.panels_seen(rule))
 
-    def panels_seen(
-        self, *, min_points: int = 5, min_incidence_deg: float = 10.0
-    ) -> dict[str, list[int]]:
-        """Panels with at least ``min_points`` returns, per beacon id.
-
-        A panel seen at grazing incidence (the beam within ``min_incidence_deg``
-        of the panel's plane at its returns' centroid) does not count: its
-        returns are too sparse to draw a line through.
-        """
+    def panels_seen(self, rule: OwedRule) -> dict[str, list[int]]:
+        """The panels ``rule`` counts as shown, per beacon id: at least ``rule.min_points``
+        returns, and not at grazing incidence (the beam within ``rule.min_incidence_deg``
+        of the panel's plane at its returns' centroid: returns too sparse to draw a line
+        through). Every caller names its rule (:mod:`mast.sim.owed`)."""
+        min_points, min_incidence_deg = rule.min_points, rule.min_incidence_deg
         out: dict[str, list[int]] = {}
         ok = self.scan.valid
         _, pts_all = self.scan.points()
