@@ -10,6 +10,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from mast.core import lines
 from mast.core._kernels import line_fits, partition_dp, penalty, segment_run
 from mast.core.geometry import PanelSet
 from mast.core.pose import Pose2D
@@ -586,9 +587,9 @@ def test_runs_and_noise_kernels_match_the_reference_on_scans(noise_m: float | No
         want_ids, want_noise = seg._runs_reference(scan, beams, pts, cfg)
         np.testing.assert_array_equal(got_ids, want_ids)
         assert got_noise == want_noise
-        assert seg.range_noise_from_triples(
+        assert lines.range_noise_from_triples(
             pts, got_ids
-        ) == seg._range_noise_from_triples_reference(pts, got_ids)
+        ) == lines.range_noise_from_triples_reference(pts, got_ids)
 
 
 @settings(max_examples=60, deadline=None)
@@ -604,7 +605,7 @@ def test_noise_estimate_kernel_matches_the_reference_on_polylines(
 ) -> None:
     pts = _polyline(n, seed, corners, sigma, 8.0)
     ids = np.arange(n, dtype=np.intp) // cut  # runs of ``cut`` returns
-    assert seg.range_noise_from_triples(pts, ids) == seg._range_noise_from_triples_reference(
+    assert lines.range_noise_from_triples(pts, ids) == lines.range_noise_from_triples_reference(
         pts, ids
     )
 
@@ -618,8 +619,8 @@ def test_noise_estimate_kernel_matches_the_reference_where_products_overflow_or_
     pts = _polyline(60, 4, 2, 0.02, 8.0) * scale
     ids = np.zeros(60, dtype=np.intp)
     with np.errstate(all="ignore"):
-        want = seg._range_noise_from_triples_reference(pts, ids)
-    got = seg.range_noise_from_triples(pts, ids)
+        want = lines.range_noise_from_triples_reference(pts, ids)
+    got = lines.range_noise_from_triples(pts, ids)
     assert got == want or (math.isnan(got) and math.isnan(want))
 
 

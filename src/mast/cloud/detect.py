@@ -36,7 +36,7 @@ from numpy.typing import NDArray
 
 from mast.cloud.grid import EIGHT, PlanGrid, cell_keys, key_ij, neighbours, pack_ij
 from mast.cloud.io import Cloud
-from mast.core.lines import fit_line, intersect_lines
+from mast.core.lines import fit_line, intersect_lines, plan_noise_from_neighbours
 from mast.errors import InputError
 from mast.pipeline.segmentation import Corner, Segment, Segmentation
 
@@ -359,22 +359,6 @@ class PlanPieces:
     segmentation: Segmentation
     panels: tuple[Panel, ...]
     rejected: dict[str, int] = field(default_factory=dict)
-
-
-def plan_noise_from_neighbours(xy: NDArray[np.float64], k: int = 48) -> float:
-    """The plan noise from local line fits: median smallest spread of ``k`` neighbours."""
-    from scipy.spatial import cKDTree
-
-    if xy.shape[0] < k + 1:
-        return 0.0
-    tree = cKDTree(xy)
-    sample = xy[:: max(1, xy.shape[0] // 20000)]
-    _, idx = tree.query(sample, k=k)
-    nb = xy[idx]
-    c = nb - nb.mean(axis=1, keepdims=True)
-    cov = np.einsum("nki,nkj->nij", c, c) / (k - 1)
-    lam = np.linalg.eigvalsh(cov)[:, 0]
-    return float(math.sqrt(max(float(np.median(lam)), 0.0)))
 
 
 def _clusters(xy: NDArray[np.float64], cell_m: float) -> tuple[NDArray[np.intp], int]:

@@ -21,7 +21,12 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from mast.core.lines import fit_line, intersect_lines
+from mast.core.lines import (
+    fit_line,
+    intersect_lines,
+    range_noise_from_triples,
+    range_noise_from_triples_reference,
+)
 from mast.core.scan import Scan
 
 __all__ = ["Corner", "Segment", "Segmentation", "SegmentationConfig", "fit_line", "segment_scan"]
@@ -136,64 +141,6 @@ class Segmentation:
     corners: tuple[Corner, ...]
     noise_m: float
     """Noise standard deviation used for the thresholds (estimated or given)."""
-
-
-#: Quantile of the triple deviations used for the noise estimate, and that
-#: quantile of a unit half-normal distribution.
-NOISE_QUANTILE = 0.5
-_HALF_NORMAL_Q = 0.6745
-
-
-def range_noise_from_triples(points: NDArray[np.float64], run_ids: NDArray[np.intp]) -> float:
-    """Robust estimate of the range noise from triples of consecutive returns.
-
-    For three neighbours on a straight surface, the middle one's distance
-    from the line through the outer two has variance about 1.5 sigma_perp^2,
-    and a range error e moves a return by e |n . u| across the surface (n
-    the surface normal, u the beam). Dividing by |n . u| gives the range
-    noise, which bounds the noise across every surface; triples seen within
-    about 17 degrees of grazing are left out. The median is used: triples
-    on corners only lengthen the upper tail (rough rock, whose bumps are
-    shape, raises it, which only makes the segmentation more cautious).
-    The deviations are compiled (:func:`mast.core._kernels.triple_deviations`);
-    :func:`_range_noise_from_triples_reference` is the same in numpy.
-    """
-    from mast.core._kernels import linear_median, triple_deviations
-
-    deviations = triple_deviations(
-        np.ascontiguousarray(points, dtype=float).reshape(-1, 2),
-        np.ascontiguousarray(run_ids, dtype=np.intp),
-    )
-    if deviations.size == 0:
-        return 0.0
-    # median of |N(0, s)| = 0.6745 s, s^2 = 1.5 sigma^2 (NOISE_QUANTILE is the median)
-    return float(linear_median(deviations) / _HALF_NORMAL_Q / math.sqrt(1.5))
-
-
-def _range_noise_from_triples_reference(
-    points: NDArray[np.float64], run_ids: NDArray[np.intp]
-) -> float:
-    """:func:`range_noise_from_triples` in numpy (the tests compare the two)."""
-    if points.shape[0] < 3:
-        return 0.0
-    a, b, c = points[:-2], points[1:-1], points[2:]
-    same = (run_ids[:-2] == run_ids[1:-1]) & (run_ids[1:-1] == run_ids[2:])
-    if not np.any(same):
-        return 0.0
-    ac = c - a
-    length = np.hypot(ac[:, 0], ac[:, 1])
-    rb = np.hypot(b[:, 0], b[:, 1])
-    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
-        # |n . u| = |sin(angle between the surface and the beam)|
-        nu = np.abs(ac[:, 0] * b[:, 1] - ac[:, 1] * b[:, 0]) / (length * rb)
-    ok = same & (length > 0) & (rb > 0) & (nu > 0.3)
-    if not np.any(ok):
-        return 0.0
-    dist = (
-        np.abs(ac[ok, 0] * (b[ok, 1] - a[ok, 1]) - ac[ok, 1] * (b[ok, 0] - a[ok, 0])) / length[ok]
-    )
-    # median of |N(0, s)| = 0.6745 s, s^2 = 1.5 sigma^2
-    return float(np.quantile(dist / nu[ok], NOISE_QUANTILE) / _HALF_NORMAL_Q / math.sqrt(1.5))
 
 
 #: Longest piece the optimal partition considers at once (returns): bounds its work
@@ -539,9 +486,7 @@ def _runs_reference(
         brk = (gap_beams > config.max_gap_beams + 1) | (step > dmax) | (dphi >= lam)
         run_ids[1:] = np.cumsum(brk)
     noise = (
-        noise_guess
-        if noise_guess is not None
-        else _range_noise_from_triples_reference(pts, run_ids)
+        noise_guess if noise_guess is not None else range_noise_from_triples_reference(pts, run_ids)
     )
     noise = max(noise, config.noise_floor_m)
     if noise_guess is None and beams.size > 1:
