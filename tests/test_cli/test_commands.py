@@ -331,7 +331,7 @@ def test_the_command_starts_without_the_heavy_libraries() -> None:
     code = (
         "import sys, mast.program; "
         "print(sorted(m for m in ('matplotlib', 'scipy', 'gtsam', 'mast.pipeline.locator', "
-        "'dask', 'laspy', 'ezdxf', 'rosbags') if m in sys.modules))"
+        "'dask', 'laspy', 'ezdxf', 'rosbags', 'rich') if m in sys.modules))"
     )
     done = subprocess.run(
         [sys.executable, "-c", code], capture_output=True, text=True, timeout=60, check=True

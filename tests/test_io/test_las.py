@@ -87,3 +87,44 @@ def test_coordinates_beyond_int32_are_found_not_wrapped() -> None:
     assert ints.dtype == np.int32
     assert ints[0].tolist() == [3_456_780, 2_345_000, -1_877_000]
     assert las_integers(np.zeros((0, 3)), offsets)[1] == -1
+
+
+def test_offsets_just_below_zero_are_zero_not_minus_zero() -> None:
+    offsets = las_offsets([-0.3, 0.2, -0.4], 1.0)
+    assert offsets.tolist() == [0.0, 0.0, 0.0]
+    assert not np.any(np.signbit(offsets))
+
+
+def test_a_library_failure_at_opening_leaves_no_file(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    def half_open(path: Path, **_: object) -> None:
+        Path(path).write_bytes(b"LASF")
+        raise laspy.LaspyException("no LAZ backend")
+
+    monkeypatch.setattr(laspy, "open", half_open)
+    header = new_las_header(offsets=las_offsets(ORIGIN, 1.0), software="test")
+    with pytest.raises(laspy.LaspyException, match="no LAZ backend"):
+        LasWriter(tmp_path / "cloud.laz", header)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_georeferenced_copy_keeps_its_source_version(tmp_path: Path) -> None:
+    from mast.cloud.io import open_cloud
+
+    xyz = _points(500) - ORIGIN  # a local frame
+    src = laspy.create(point_format=3, file_version="1.2")
+    src.header.offsets = [0.0, 0.0, 0.0]
+    src.header.scales = [0.001, 0.001, 0.001]
+    src.x, src.y, src.z = xyz.T
+    src.gps_time = np.arange(500, dtype=float)
+    src.write(tmp_path / "local.las")
+    shift = np.array([512_000.0, 7_001_000.0, 800.0])
+    n = open_cloud(tmp_path / "local.las").write_georeferenced(
+        tmp_path / "grid.laz", lambda p, t: p + shift, shift
+    )
+    out = laspy.read(tmp_path / "grid.laz")
+    assert n == 500
+    assert str(out.header.version) == "1.2"
+    assert out.header.point_format.id == 3
+    assert np.max(np.abs(np.column_stack([out.x, out.y, out.z]) - (xyz + shift))) < 0.001

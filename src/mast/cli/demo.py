@@ -9,15 +9,16 @@ import math
 import tempfile
 from collections.abc import Callable
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import typer
-from rich.console import Console
-from rich.table import Table
 
 from mast.cli.root import app
 from mast.core.pose import format_dms
 from mast.io.outputs import check_output_folder
+
+if TYPE_CHECKING:
+    from rich.table import Table
 
 __all__ = ["run_demo"]
 
@@ -37,6 +38,8 @@ def demo(
 
 
 def _table(title: str) -> Table:
+    from rich.table import Table
+
     t = Table(title=title, title_justify="left", show_lines=False, pad_edge=False)
     for name in (
         "Pos",
@@ -67,6 +70,8 @@ def run_demo(folder: Path, *, echo: Callable[[str], object] = print, keep: bool 
 
     Returns the number of scans without a fix.
     """
+    from rich.console import Console
+
     from mast.io import read_scan_csv, read_survey
     from mast.pipeline.locator import LocatorConfig, locate
     from mast.sim import build_scenario, write_scenario

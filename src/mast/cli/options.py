@@ -250,17 +250,6 @@ def precisions(
         noise = scanner_model(scanner).noise()
         cfg = replace(cfg, range_sigma_m=noise.range_sigma_m, angle_sigma_rad=noise.angle_sigma_rad)
         defaults -= {"range_sigma_m", "angle_sigma_rad"}
-    for name, value, limit, unit, example in (
-        ("--range-sigma", range_sigma, MAX_PLAUSIBLE_SIGMA_M, "metres", "10 mm is 0.01"),
-        ("--survey-sigma", survey_sigma, MAX_PLAUSIBLE_SIGMA_M, "metres", "3 mm is 0.003"),
-        ("--angle-sigma", angle_sigma, MAX_PLAUSIBLE_ANGLE_SIGMA_RAD, "radians", "0.1° is 0.0017"),
-    ):
-        if value is not None and value > limit:
-            typer.echo(
-                f"mast: warning: {name} {value:g} {unit} is more than any laser scanner or "
-                f"survey has; it is in {unit} ({example})",
-                err=True,
-            )
     given_here = {
         "range_sigma_m": ("--range-sigma", range_sigma),
         "angle_sigma_rad": ("--angle-sigma", angle_sigma),
@@ -274,6 +263,17 @@ def precisions(
         except ValueError as err:
             raise InputError(str(err).replace(key, option, 1)) from None
         defaults.discard(key)
+    for name, value, limit, unit, example in (
+        ("--range-sigma", range_sigma, MAX_PLAUSIBLE_SIGMA_M, "metres", "10 mm is 0.01"),
+        ("--survey-sigma", survey_sigma, MAX_PLAUSIBLE_SIGMA_M, "metres", "3 mm is 0.003"),
+        ("--angle-sigma", angle_sigma, MAX_PLAUSIBLE_ANGLE_SIGMA_RAD, "radians", "0.1° is 0.0017"),
+    ):
+        if value is not None and value > limit:
+            typer.echo(
+                f"mast: warning: {name} {value:g} {unit} is more than any laser scanner or "
+                f"survey has; it is in {unit} ({example})",
+                err=True,
+            )
     return cfg, defaults
 
 

@@ -175,6 +175,7 @@ class _LasCloud(Cloud):
                 software="mast georef",
                 system="MAST georef",
                 point_format=old.point_format,
+                version=str(old.version),
                 gps_standard=False,
             )
             header.global_encoding.gps_time_type = old.global_encoding.gps_time_type
@@ -197,10 +198,6 @@ def _keeps(vlr: Any) -> bool:
         return False
     # the extra-bytes description (LASF_Spec 4) is written again by laspy from the format
     return not ((user == "LASF_Spec" and record in (4, 100)) or record in (2111, 2112))
-
-
-def _compress(out: Path) -> bool:
-    return out.suffix.lower() == ".laz"
 
 
 def _set_xyz(rec: Any, grid: NDArray[np.float64], out: Path) -> None:

@@ -2060,7 +2060,7 @@ def _rebreak(
 
 
 def _triple_deviations(points: NDArray[np.float64], ids: NDArray[np.intp]) -> NDArray[np.float64]:
-    """``segmentation._range_noise_from_triples_reference``'s deviations: for each three consecutive
+    """``lines.range_noise_from_triples_reference``'s deviations: for each three consecutive
     returns of one run seen more than about 17 degrees from grazing, the middle one's
     distance from the line through the outer two over ``|n . u|``, in order."""
     n = points.shape[0]

@@ -122,7 +122,8 @@ def las_offsets(origin: ArrayLike, step_m: float) -> NDArray[np.float64]:
     """Header offsets for coordinates near ``origin``: each rounded to a multiple of
     ``step_m`` (a number a reader recognises), so the int32 coordinates reach
     ±214 km about them at :data:`LAS_SCALE_M`."""
-    return np.asarray(np.round(np.asarray(origin, dtype=float) / step_m) * step_m)
+    # + 0.0: an origin just west or south of zero gives 0, not -0 (a header's bytes)
+    return np.asarray(np.round(np.asarray(origin, dtype=float) / step_m) * step_m + 0.0)
 
 
 def new_las_header(
@@ -131,12 +132,13 @@ def new_las_header(
     software: str,
     system: str | None = None,
     point_format: int | laspy.PointFormat = 6,
+    version: str = "1.4",
     gps_standard: bool = True,
     wkt: bool = False,
     extra: Sequence[laspy.ExtraBytesParams] = (),
     created: datetime.date | None = None,
 ) -> laspy.LasHeader:
-    """A LAS 1.4 header at :data:`LAS_SCALE_M` (0.1 mm) on every axis.
+    """A LAS header (1.4 unless told) at :data:`LAS_SCALE_M` (0.1 mm) on every axis.
 
     Parameters
     ----------
@@ -149,6 +151,8 @@ def new_las_header(
     point_format : int or laspy.PointFormat
         The point data record format (6: no colour, 7: RGB), or a copy's own format
         with its extra dimensions.
+    version : str
+        The LAS version ("1.4"; a copy keeps its source's).
     gps_standard : bool
         ``gps_time`` is Adjusted Standard GPS Time (global encoding bit 0), as
         :func:`gps_adjusted_time` makes it; otherwise GPS week time.
@@ -162,7 +166,7 @@ def new_las_header(
     """
     import laspy
 
-    header = laspy.LasHeader(point_format=point_format, version="1.4")
+    header = laspy.LasHeader(point_format=point_format, version=version)
     for dim in extra:
         header.add_extra_dim(dim)
     header.offsets = np.asarray(offsets, dtype=float)
@@ -247,6 +251,9 @@ class LasWriter:
         except OSError as exc:
             discard(self._tmp)
             raise self._failed(exc) from None
+        except BaseException:  # laspy's own (no LAZ backend, a bad header): no file left
+            discard(self._tmp)
+            raise
 
     @property
     def writing(self) -> Path:
@@ -291,6 +298,9 @@ class LasWriter:
             except OSError as exc:
                 discard(self._tmp)
                 raise self._failed(exc) from None
+            except BaseException:
+                discard(self._tmp)
+                raise
             commit(self._tmp, self.path)
         return self.count
 

@@ -1,5 +1,5 @@
 """The scanner protocols MAST speaks, each one module: its codec, its client and the
-scanner's side for the emulator (:mod:`mast.live.protocols.protocol`).
+scanner's side for the emulator (:mod:`mast.live.protocols.base`).
 
 * ``sick``: SICK LMS1xx / LMS5xx / TiM5xx, CoLa-A on TCP port 2111 (:mod:`.sick`).
 * ``hokuyo``: Hokuyo UST / UTM, SCIP 2.0 on TCP port 10940 (:mod:`.hokuyo`).
@@ -11,7 +11,7 @@ from collections.abc import Mapping
 
 from mast.errors import InputError
 from mast.live.protocols import hokuyo, sick
-from mast.live.protocols.protocol import Emulation, Protocol
+from mast.live.protocols.base import Emulation, Protocol
 
 __all__ = ["PROTOCOLS", "Emulation", "Protocol", "protocol"]
 

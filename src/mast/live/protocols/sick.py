@@ -60,7 +60,7 @@ from numpy.typing import NDArray
 
 from mast.core.scan import Scan
 from mast.errors import InputError
-from mast.live.protocols.protocol import Emulation, Protocol
+from mast.live.protocols.base import Emulation, Protocol
 from mast.live.tcp import DeviceClock, TcpSource
 
 __all__ = [
