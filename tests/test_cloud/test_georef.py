@@ -371,3 +371,24 @@ def test_bad_files_are_one_line_errors_naming_them(scene: CloudScenario, tmp_pat
     done = _georef(scene.cloud, scene.survey, tmp_path / "o", "--trajectory", str(traj))
     assert done.returncode == 2
     assert "t.tum, line 2" in done.stderr
+
+
+def test_the_report_gives_the_walls_density(georef: Path) -> None:
+    """The simulated cloud has 1 500 points per square metre of every surface: the
+    report's measure of the walls lands within a tenth of it, and says it is enough."""
+    (line,) = [s for s in (georef / "report.txt").read_text().splitlines() if "wall density" in s]
+    density = float(line.split()[2])
+    assert 1350 <= density <= 1650, line
+    assert "TOO SPARSE" not in line
+
+
+def test_a_cloud_too_sparse_for_beacons_is_refused_saying_so(tmp_path: Path) -> None:
+    sparse = simulate_cloud(
+        tmp_path / "sim", 2, CloudOptions(length_m=60.0, beacons=2, density=400.0)
+    )
+    done = _georef(sparse.cloud, sparse.survey, tmp_path / "geo")
+    assert done.returncode == 3, done.stderr
+    assert "too sparse for beacons: " in done.stderr
+    assert "points per m² on the walls, beacons need about 1200" in done.stderr
+    density = float(done.stderr.split("too sparse for beacons: ")[1].split()[0])
+    assert 340 <= density <= 460

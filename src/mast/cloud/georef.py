@@ -31,6 +31,7 @@ from mast.cloud.adjust import (
     rigid_solution,
 )
 from mast.cloud.detect import (
+    BEACON_DENSITY_M2,
     Candidates,
     DetectConfig,
     Panel,
@@ -280,6 +281,8 @@ def georeference(
         )
     )
     beacons = _fates(survey, found, config, excluded, short)
+    if refusal is not None and refusal.reason == "too_few":
+        refusal = _too_sparse(refusal, cand.wall_density_m2)
     return Georef(
         cloud,
         survey,
@@ -294,6 +297,19 @@ def georeference(
         heights,
         refusal,
         drift,
+    )
+
+
+def _too_sparse(refusal: AdjustmentError, density_m2: float) -> AdjustmentError:
+    """Too few beacons in a cloud too sparse for them: say so, with the density measured
+    and the density beacons need (:data:`~mast.cloud.detect.BEACON_DENSITY_M2`)."""
+    if not density_m2 < BEACON_DENSITY_M2:  # dense enough (or NaN: cannot say)
+        return refusal
+    return AdjustmentError(
+        refusal.reason,
+        f"too sparse for beacons: {density_m2:.0f} points per m² on the walls, beacons "
+        f"need about {BEACON_DENSITY_M2:.0f} ({refusal.detail})",
+        refusal.suspects,
     )
 
 

@@ -20,6 +20,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from mast import __version__
+from mast.cloud.detect import BEACON_DENSITY_M2
 from mast.cloud.drift import DriftCorrection
 from mast.cloud.georef import FoundBeacon, Georef, explain_missing, grid_origin
 from mast.core.stats import variance_bounds
@@ -307,6 +308,14 @@ def _write_beacons(
                 )
 
 
+def _density(density_m2: float) -> str:
+    """The walls' density, and whether beacons can be found at it."""
+    if not math.isfinite(density_m2):
+        return "not measured (too few points between the floor and the roof)"
+    text = f"{density_m2:.0f} points/m² (beacons need about {BEACON_DENSITY_M2:.0f})"
+    return text + (": TOO SPARSE for beacons" if density_m2 < BEACON_DENSITY_M2 else "")
+
+
 def _class_line(result: Georef, res: dict[str, dict[str, Any]], key: str) -> str:
     """The class the check beacons' horizontal misclosures reach, each over its distance
     to the nearest control beacon."""
@@ -367,6 +376,7 @@ def report_text(
     )
     add(f"survey sigma     {1000 * result.config.survey_sigma_m:.1f} mm per coordinate")
     add(f"cloud noise      {1000 * result.pieces.segmentation.noise_m:.1f} mm (estimated in plan)")
+    add(f"wall density     {_density(result.candidates.wall_density_m2)}")
     if not result.heights:
         add("heights          NOT CONTROLLED: the survey has no elevations; z is kept as it is")
     add("")

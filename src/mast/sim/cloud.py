@@ -115,7 +115,10 @@ class CloudOptions:
     noise_m : float
         Standard deviation of the isotropic 3D Gaussian noise of every point.
     density : float
-        Points per square metre of every surface (rock, beacon panels, clutter).
+        Points per square metre of every surface (rock, beacon panels, clutter). The
+        default, 2 000, is a mobile scanner's near the walls, and above the density
+        ``mast georef`` needs to find beacons
+        (:data:`~mast.cloud.detect.BEACON_DENSITY_M2`, about 1 200).
     survey_sigma_m : float
         Noise added to the surveyed edge coordinates and elevations in ``beacons.csv``.
     panel_height_m, beacon_top_m : float
@@ -131,7 +134,7 @@ class CloudOptions:
     beacons: int = 12
     drift: float = 0.0
     noise_m: float = 0.01
-    density: float = 600.0
+    density: float = 2000.0
     survey_sigma_m: float = 0.003
     panel_height_m: float = 0.6
     beacon_top_m: float = 2.0
