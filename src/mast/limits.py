@@ -31,6 +31,7 @@ __all__ = [
     "MAX_ELEVATION_M",
     "MAX_LINE_BYTES",
     "MAX_METADATA_BYTES",
+    "MAX_SURVEY_SIGMA_M",
     "MAX_TEXT_BYTES",
     "MAX_WALL_LENGTH_M",
     "check_lines",
@@ -61,6 +62,9 @@ MAX_COORDINATE_M = 1e8
 MAX_WALL_LENGTH_M = 100_000.0
 #: Largest elevation in magnitude, metres (the deepest mine is ~4 km below the surface).
 MAX_ELEVATION_M = 1e5
+#: Largest standard deviation of a surveyed edge coordinate, metres: a survey a metre out
+#: is no survey (and millimetres typed as metres are caught).
+MAX_SURVEY_SIGMA_M = 1.0
 
 _CHUNK = 1 << 20
 

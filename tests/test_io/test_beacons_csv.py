@@ -157,3 +157,53 @@ def test_garbage_rows_only_raise_input_error(tmp_path: Path, rows: list[list[str
     for b in s:
         assert b.edges.shape == (4, 2)
         assert np.all(np.isfinite(b.edges))
+
+
+def test_sigma_and_design_round_trip_and_stay_optional(tmp_path: Path) -> None:
+    d = paper_design(1.0, 0.2)
+    survey = Survey(
+        [
+            Beacon("A", d.edges_local, None, np.array([0.001, 0.0015, np.nan, 0.002]), "paper"),
+            Beacon("B", d.edges_local + [5.0, 0.0]),
+        ]
+    )
+    p = tmp_path / "beacons.csv"
+    write_survey(p, survey)
+    assert p.read_text().splitlines()[0] == "beacon,edge,easting,northing,sigma_m,design"
+    back = read_survey(p)
+    a, b = back["A"], back["B"]
+    assert a.design == "paper"
+    assert a.edge_sigmas_m is not None
+    assert_array_equal(a.edge_sigmas_m[[0, 1, 3]], [0.001, 0.0015, 0.002])
+    assert np.isnan(a.edge_sigmas_m[2])
+    assert b.design is None
+    assert b.edge_sigmas_m is None
+    # a survey without them is written as before
+    write_survey(p, Survey([Beacon("B", d.edges_local)]))
+    assert p.read_text().splitlines()[0] == "beacon,edge,easting,northing"
+
+
+@pytest.mark.parametrize(
+    ("rows", "said"),
+    [
+        (
+            ("1,,a", "2,,a", "3,,b", "4,,a"),
+            "line 4: beacon 'B1' is of design 'a' on line 2 and 'b'",
+        ),
+        (("1,-0.001,", "2,,", "3,,", "4,,"), "line 2: column 'sigma_m': -0.001 is negative"),
+        (("1,,", "2,3,", "3,,", "4,,"), "line 3: column 'sigma_m': 3 m is beyond ±1 m"),
+        (("1,,", "2,,", "3,nan,", "4,,"), "line 4: column 'sigma_m': 'nan' is not a finite"),
+    ],
+)
+def test_a_bad_sigma_or_design_names_the_line(
+    tmp_path: Path, rows: tuple[str, ...], said: str
+) -> None:
+    xy = ("100.0,200.0", "100.3539,200.2", "100.9637,200.2", "101.0,200.0")
+    lines = ["beacon,edge,easting,northing,sigma_m,design"]
+    for r, p in zip(rows, xy, strict=True):
+        edge, *rest = r.split(",")
+        lines.append(f"B1,{edge},{p},{','.join(rest)}")
+    path = tmp_path / "s.csv"
+    path.write_text("\n".join(lines) + "\n")
+    with pytest.raises(InputError, match=said):
+        read_survey(path)

@@ -82,7 +82,11 @@ def simulate(
     ] = None,
     density: Annotated[
         float | None,
-        typer.Option("--density", min=1.0, help="cloud: points per square metre (default 2000; georef needs about 1200)."),
+        typer.Option(
+            "--density",
+            min=1.0,
+            help="cloud: points per square metre (default 2000; georef needs about 1200).",
+        ),
     ] = None,
 ) -> None:
     """Simulate a scenario: per scene, beacons.csv, the scans and truth.csv; or, with

@@ -107,11 +107,18 @@ class Beacon:
         ``e1..e4`` as (Easting, Northing), metres, in polyline order.
     elevations : ndarray, shape (4,), optional
         Surveyed elevation of each edge point, metres (not used in 2D).
+    edge_sigmas_m : ndarray, shape (4,), optional
+        Standard deviation of each edge's horizontal coordinates, metres, where the
+        survey gives it (``sigma_m``; NaN for an edge it leaves out).
+    design : str, optional
+        The name of the design this beacon is built to (``design``), where given.
     """
 
     id: str
     edges: NDArray[np.float64]
     elevations: NDArray[np.float64] | None = None
+    edge_sigmas_m: NDArray[np.float64] | None = None
+    design: str | None = None
     template: BeaconTemplate = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
@@ -128,6 +135,14 @@ class Beacon:
                 raise BeaconError(f"beacon {self.id!r} needs 4 elevations, got {z.size}")
             z.setflags(write=False)
             object.__setattr__(self, "elevations", z)
+        if self.edge_sigmas_m is not None:
+            s = np.array(self.edge_sigmas_m, dtype=float).reshape(-1)
+            if s.shape != (4,):
+                raise BeaconError(f"beacon {self.id!r} needs 4 edge sigmas, got {s.size}")
+            if np.any(s[~np.isnan(s)] < 0) or np.any(np.isinf(s)):
+                raise BeaconError(f"beacon {self.id!r}: an edge sigma is negative or infinite")
+            s.setflags(write=False)
+            object.__setattr__(self, "edge_sigmas_m", s)
         object.__setattr__(self, "template", BeaconTemplate.from_edges(e))
 
     def identifiability_problems(

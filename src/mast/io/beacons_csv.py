@@ -1,4 +1,9 @@
-"""The beacon survey file: ``beacon,edge,easting,northing[,elevation]``."""
+"""The beacon survey file: ``beacon,edge,easting,northing[,elevation][,sigma_m][,design]``.
+
+``sigma_m`` (optional, per edge) is the standard deviation of that edge's easting and
+northing, metres, where the survey gives one (``mast survey-in`` does); ``design``
+(optional, per beacon: the same on its four rows) names the design it is built to.
+An empty field leaves it out for that edge or beacon."""
 
 from __future__ import annotations
 
@@ -101,10 +106,12 @@ def read_survey(
     rows = CsvRows(
         path,
         required=("beacon", "edge", "easting", "northing"),
-        optional=("elevation",),
+        optional=("elevation", "sigma_m", "design"),
     )
     p = rows.path
     edges: dict[str, dict[int, tuple[float, float, float, int]]] = {}
+    sigmas: dict[tuple[str, int], float] = {}
+    designs: dict[str, tuple[str, int]] = {}
     last_id: str | None = None
     for line, f in rows:
         bid = f["beacon"].strip()
@@ -155,6 +162,18 @@ def read_survey(
                 line=line,
             )
         got[k] = (east, north, elev, line)
+        if rows.has("sigma_m") and f["sigma_m"].strip():
+            sigmas[(bid, k)] = _sigma(f["sigma_m"], p, line)
+        if rows.has("design") and f["design"].strip():
+            name = f["design"].strip()
+            before = designs.setdefault(bid, (name, line))
+            if before[0] != name:
+                raise InputError(
+                    f"beacon {quoted(bid)} is of design {quoted(before[0])} on line {before[1]} "
+                    f"and {quoted(name)} here: a beacon has one design",
+                    path=p,
+                    line=line,
+                )
         last_id = bid
     if not edges:
         raise InputError("no beacon rows after the header", path=p, line=rows.header_line)
@@ -172,7 +191,14 @@ def read_survey(
         xy = np.array([[got[k][0], got[k][1]] for k in range(1, 5)])
         _check_shape(bid, xy, [got[k][3] for k in range(1, 5)], p)
         z = np.array([got[k][2] for k in range(1, 5)])
-        beacon = Beacon(bid, xy, None if np.all(np.isnan(z)) else z)
+        s = np.array([sigmas.get((bid, k), math.nan) for k in range(1, 5)])
+        beacon = Beacon(
+            bid,
+            xy,
+            None if np.all(np.isnan(z)) else z,
+            None if np.all(np.isnan(s)) else s,
+            designs[bid][0] if bid in designs else None,
+        )
         if rules is not None:
             problems = beacon.identifiability_problems(rules)
             if problems:
@@ -186,16 +212,42 @@ def read_survey(
     return Survey(beacons, source=str(p))
 
 
+def _sigma(text: str, path: Path, line: int) -> float:
+    value = parse_within(
+        text,
+        column="sigma_m",
+        path=path,
+        line=line,
+        bound="MAX_SURVEY_SIGMA_M",
+        what="survey standard deviation",
+    )
+    if value < 0:
+        raise InputError(
+            f"column 'sigma_m': {value:g} is negative; a standard deviation is 0 or more",
+            path=path,
+            line=line,
+        )
+    return value
+
+
 def write_survey(path: str | Path, survey: Survey) -> None:
-    """Write a survey in the beacon CSV contract (full double precision)."""
+    """Write a survey in the beacon CSV contract (full double precision); ``elevation``,
+    ``sigma_m`` and ``design`` only when some beacon has them."""
     with_z = any(b.elevations is not None for b in survey)
+    with_s = any(b.edge_sigmas_m is not None for b in survey)
+    with_d = any(b.design is not None for b in survey)
+    header = ["beacon", "edge", "easting", "northing"]
+    header += ["elevation"] * with_z + ["sigma_m"] * with_s + ["design"] * with_d
     with atomic_open(path, "w", newline="", encoding="utf-8") as fh:
         w = csv.writer(fh)
-        w.writerow(["beacon", "edge", "easting", "northing", *(["elevation"] if with_z else [])])
+        w.writerow(header)
         for b in survey:
             for k in range(4):
                 row = [b.id, k + 1, repr(float(b.edges[k, 0])), repr(float(b.edges[k, 1]))]
-                if with_z:
-                    z = math.nan if b.elevations is None else float(b.elevations[k])
-                    row.append("" if math.isnan(z) else repr(z))
+                for present, values in ((with_z, b.elevations), (with_s, b.edge_sigmas_m)):
+                    if present:
+                        v = math.nan if values is None else float(values[k])
+                        row.append("" if math.isnan(v) else repr(v))
+                if with_d:
+                    row.append(b.design or "")
                 w.writerow(row)
