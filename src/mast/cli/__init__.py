@@ -20,6 +20,7 @@ from mast.cli import (  # noqa: F401 - imported to register each command
     plan,
     scanners,
     simulate,
+    survey_in,
     track,
 )
 from mast.cli.root import app, main

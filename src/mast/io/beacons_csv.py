@@ -91,12 +91,15 @@ def read_survey(
     path: str | Path,
     *,
     rules: IdentifiabilityRules | None = _DEFAULT_RULES,
+    apart: bool = True,
 ) -> Survey:
     """Read a beacon survey CSV (DESIGN.md, "Beacon survey file").
 
     One row per surveyed edge; ``edge`` is 1..4 in polyline order and every
     beacon has exactly four. Each beacon is checked to be identifiable under
-    ``rules`` (pass ``None`` to skip, e.g. to inspect a bad survey).
+    ``rules`` (pass ``None`` to skip, e.g. to inspect a bad survey), and no two
+    beacons to share an edge point unless ``apart`` is False (a designs file: one
+    beacon per design, each in its own frame, often all at one origin).
 
     Raises
     ------
@@ -208,7 +211,8 @@ def read_survey(
                     line=first,
                 )
         beacons.append(beacon)
-    _check_apart(beacons, edges, p)
+    if apart:
+        _check_apart(beacons, edges, p)
     return Survey(beacons, source=str(p))
 
 

@@ -1,0 +1,420 @@
+"""``mast survey-in``: beacon edges from terrestrial laser scans already in the mine grid.
+
+The step the method starts from (the paper: beacons "surveyed in using a tripod based
+laser scanner referenced to the mine reference system", their panel edges extracted
+from the point cloud). The scans are in the grid already (the scanner set up over
+control and backsighted, as every survey package does); the designs are the shapes
+that were bolted up, one beacon per design in any frame (``DESIGNS.csv``).
+
+1. **Panels**: :mod:`mast.cloud.detect`'s three passes and plan pieces, with the
+   scanner's noise given (a TLS cloud is far denser than the local-fit noise estimate
+   was made for: at millimetre spacing it measures the spacing, not the noise).
+2. **Beacons**: the corners identified against the designs (Table 1 tests, as
+   ``locate``'s), whole beacons (e2 and e3 sharing P2) kept when their middle panel's
+   length is the design's; a beacon found from several pieces or stations is one
+   beacon (the detection with the most panel points is kept).
+3. **The beacon-level fit**: each panel's plan line fitted to its points (total least
+   squares, its angle and offset with their variances from the fit's own residuals);
+   e2 and e3 where neighbouring lines meet, e1 and e4 at the design's panel lengths
+   along P1 and P3 from them (a panel's free end is where its points stop, which a
+   scan sees short by its spacing; the length bolted up is known). The four edges'
+   8x8 covariance is propagated from the three lines' (e1 and e2 share P1 and P2, e2
+   and e3 share P2, ...), plus the station's own setup error (``station_sigma_m``)
+   on every coordinate. ``sigma_m`` is the root mean square of an edge's two
+   coordinate standard deviations. The top is where the panels' point density halves
+   (:class:`mast.cloud.detect.Panel`), the panels' tops combined.
+4. **Names**: with a previous survey, a beacon found within
+   :data:`SAME_BEACON_M` of a previous one of the same design keeps its id, and each
+   edge's displacement is tested against both surveys' precision (chi-square, two
+   degrees of freedom, at :data:`MOVED_ALPHA`); new beacons are ``<design>-<n>``,
+   numbered along increasing easting then northing.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+from mast.cloud.detect import DetectConfig, Panel, PlanPieces, find_candidates, plan_pieces
+from mast.cloud.io import Chunk, Cloud, open_cloud
+from mast.cloud.match import Detection, detect_beacons
+from mast.core.beacon import Beacon, Survey
+from mast.core.index import SurveyIndex
+from mast.core.lines import fit_line
+from mast.errors import InputError
+from mast.pipeline.identification import identify_panels
+
+__all__ = [
+    "MOVED_ALPHA",
+    "SAME_BEACON_M",
+    "FoundBeacon",
+    "SurveyIn",
+    "SurveyInConfig",
+    "survey_in",
+]
+
+#: A beacon found within this of a previous one of the same design is that beacon.
+SAME_BEACON_M = 0.5
+#: An edge has moved when its displacement's chi-square (2 dof) passes this level.
+MOVED_ALPHA = 0.001
+#: A whole beacon's middle panel, between its fitted inner edges, may differ from its
+#: design's by this, plus 2 % of it (a beacon built to its design).
+LENGTH_SLACK_M = 0.005
+#: A panel's points may reach this far beyond its edges (the noise, a mixed return).
+PANEL_SLACK_M = 0.02
+#: A panel is seen when its points span at least this share of its length.
+MIN_SHARE_SEEN = 0.2
+#: Detections whose centres are closer than this are one beacon.
+ONE_BEACON_M = 0.3
+
+
+@dataclass(frozen=True, slots=True)
+class SurveyInConfig:
+    """What ``mast survey-in`` is asked to do.
+
+    Attributes
+    ----------
+    noise_m : float
+        The scanner's range noise (one coordinate's standard deviation), metres.
+    station_sigma_m : float
+        Standard deviation of a station's setup in each horizontal coordinate (the
+        scanner over control, backsighted), added to every edge's; 0 where the scans'
+        poses are exact (simulations).
+    detect : DetectConfig
+        The panel search's other settings.
+    """
+
+    noise_m: float = 0.002
+    station_sigma_m: float = 0.001
+    detect: DetectConfig = field(default_factory=DetectConfig)
+
+    def __post_init__(self) -> None:
+        if not 0.0 < self.noise_m < 1.0:
+            raise ValueError(f"noise_m must be a positive number of metres, got {self.noise_m}")
+        if not 0.0 <= self.station_sigma_m < 1.0:
+            raise ValueError(
+                f"station_sigma_m must be 0 or more metres, got {self.station_sigma_m}"
+            )
+
+
+@dataclass(frozen=True, eq=False)
+class FoundBeacon:
+    """One beacon surveyed in.
+
+    Attributes
+    ----------
+    beacon : Beacon
+        Its id, edges, the elevation of each edge's top, ``sigma_m`` and design.
+    covariance : ndarray, shape (8, 8)
+        The edges' covariance, (E1, N1, E2, N2, ..., N4), metres squared.
+    sigma_top_m : float
+    panels : tuple of Panel
+        P1, P2, P3 as found.
+    panel_lengths_m, design_lengths_m : ndarray, shape (3,)
+        Each panel's length measured (its points' extent along its line; the inner
+        ends at e2 and e3) and built.
+    previous : str or None
+        The previous survey's id it kept, if any.
+    moved : tuple of bool
+        Per edge, whether its displacement from the previous survey is significant.
+    displacement_m : ndarray, shape (4,)
+        Per edge, the horizontal displacement from the previous survey (NaN if none).
+    """
+
+    beacon: Beacon
+    covariance: NDArray[np.float64]
+    sigma_top_m: float
+    panels: tuple[Panel, ...]
+    panel_lengths_m: NDArray[np.float64]
+    design_lengths_m: NDArray[np.float64]
+    previous: str | None = None
+    moved: tuple[bool, ...] = (False, False, False, False)
+    displacement_m: NDArray[np.float64] = field(default_factory=lambda: np.full(4, np.nan))
+
+
+@dataclass(frozen=True, eq=False)
+class SurveyIn:
+    """What a survey-in found: the beacons, and what the search saw."""
+
+    beacons: tuple[FoundBeacon, ...]
+    designs: Survey
+    pieces: PlanPieces
+    points: int
+    partial: int  # beacons seen in part (one corner): not surveyed
+    rejected: int  # whole shapes whose middle panel is not their design's
+    previous_missing: tuple[str, ...] = ()
+
+    @property
+    def survey(self) -> Survey:
+        return Survey([f.beacon for f in self.beacons])
+
+
+class ChainedCloud(Cloud):
+    """Several clouds read one after another as one (stations scanned apart)."""
+
+    def __init__(self, clouds: Sequence[Cloud]) -> None:
+        self._clouds = list(clouds)
+        self.path = self._clouds[0].path
+        self.count = sum(c.count for c in self._clouds)
+        self.time_field = None
+
+    def chunks(self, size: int = 2_000_000) -> Iterator[Chunk]:
+        for c in self._clouds:
+            for chunk in c.chunks(size):
+                yield Chunk(chunk.xyz, None)
+
+
+def survey_in(
+    paths: Sequence[Path],
+    designs: Survey,
+    config: SurveyInConfig = SurveyInConfig(),
+    *,
+    previous: Survey | None = None,
+) -> SurveyIn:
+    """Survey in the beacons the clouds at ``paths`` show (see the module)."""
+    if not paths:
+        raise InputError("no cloud given")
+    clouds = [open_cloud(p) for p in paths]
+    cloud: Cloud = clouds[0] if len(clouds) == 1 else ChainedCloud(clouds)
+    detect = replace(config.detect, noise_m=config.noise_m)
+    cand = find_candidates(cloud, detect)
+    pieces = plan_pieces(cand, detect)
+    index = SurveyIndex.from_survey(designs, reach_m=5.0)
+    ident = identify_panels(pieces.segmentation, index.representatives, survey_sigma_m=0.0)
+    dets = detect_beacons(pieces, ident, index)
+    found: list[FoundBeacon] = []
+    rejected = 0
+    for det in _one_per_beacon([d for d in dets if d.whole and len(d.panels) == 3], pieces):
+        fit = _fit(det, pieces, designs, index, config)
+        if fit is None:
+            rejected += 1
+            continue
+        found.append(fit)
+    partial = len(_one_per_beacon([d for d in dets if not d.whole], pieces))
+    named, missing = _name(found, previous)
+    return SurveyIn(tuple(named), designs, pieces, cloud.count, partial, rejected, missing)
+
+
+def _points(det: Detection, pieces: PlanPieces) -> int:
+    return sum(len(pieces.panels[k].segment.points) for k in det.panels.values())
+
+
+def _one_per_beacon(dets: list[Detection], pieces: PlanPieces) -> list[Detection]:
+    """The detection with the most panel points among those within :data:`ONE_BEACON_M`
+    of each other (one beacon found from several pieces, corners or stations)."""
+    out: list[Detection] = []
+    for d in sorted(dets, key=lambda d: -_points(d, pieces)):
+        if all(math.dist(d.centre, o.centre) > ONE_BEACON_M for o in out):
+            out.append(d)
+    return out
+
+
+def _line(
+    points: NDArray[np.float64], noise: float
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """A panel's line as (angle of its normal, offset) and their 2x2 covariance, from a
+    total-least-squares fit (its own residuals, never below a tenth of the noise)."""
+    fit = fit_line(points)
+    sigma = max(fit.rms, 0.1 * noise)
+    n = fit.normal
+    phi = math.atan2(n[1], n[0])
+    rho = float(fit.centroid @ n)
+    var_phi = sigma**2 / max(fit.t_spread, 1e-12)
+    var_off = sigma**2 / len(points)
+    # offset about the centroid is independent of the angle; about the origin it is not
+    lever = float(fit.centroid @ fit.direction)
+    jac = np.array([[1.0, 0.0], [lever, 1.0]])  # d(phi, rho) / d(phi, offset at centroid)
+    cov = jac @ np.diag([var_phi, var_off]) @ jac.T
+    return np.array([phi, rho]), cov
+
+
+def _edges(
+    lines: NDArray[np.float64], lengths: NDArray[np.float64], outward: NDArray[np.float64]
+) -> NDArray[np.float64]:
+    """e1..e4 (8,) from the three lines (phi, rho each): e2 = L1 x L2, e3 = L2 x L3; e1
+    and e4 the design's P1 and P3 lengths along their lines, on the ``outward`` sides."""
+
+    def meet(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
+        na = np.array([math.cos(a[0]), math.sin(a[0])])
+        nb = np.array([math.cos(b[0]), math.sin(b[0])])
+        return np.linalg.solve(np.array([na, nb]), np.array([a[1], b[1]]))
+
+    def along(line: NDArray[np.float64], sign_ref: NDArray[np.float64]) -> NDArray[np.float64]:
+        d = np.array([-math.sin(line[0]), math.cos(line[0])])
+        return d if float(d @ sign_ref) >= 0 else -d
+
+    e2 = meet(lines[0], lines[1])
+    e3 = meet(lines[1], lines[2])
+    e1 = e2 + lengths[0] * along(lines[0], outward[0])
+    e4 = e3 + lengths[2] * along(lines[2], outward[1])
+    return np.concatenate([e1, e2, e3, e4])
+
+
+def _fit(
+    det: Detection,
+    pieces: PlanPieces,
+    designs: Survey,
+    index: SurveyIndex,
+    config: SurveyInConfig,
+) -> FoundBeacon | None:
+    """The beacon-level fit of a whole detection (module, step 3); None when its middle
+    panel is not the length of any design its shape fits."""
+    panels = tuple(pieces.panels[det.panels[k]] for k in (1, 2, 3))
+    # lines about a point at the beacon: in grid coordinates (70 km from the origin) an
+    # angle's variance times the lever would swamp the offsets' in the propagation
+    origin = det.centre
+    params, covs = zip(
+        *(_line(p.segment.points - origin, config.noise_m) for p in panels), strict=True
+    )
+    lines = np.array(params)
+    cov_lines = np.zeros((6, 6))
+    for k, c in enumerate(covs):
+        cov_lines[2 * k : 2 * k + 2, 2 * k : 2 * k + 2] = c
+    reps = index.representatives
+    # P1's points lie from e2 towards e1, P3's from e3 towards e4
+    e2, e3 = det.nodes[2] - origin, det.nodes[3] - origin
+    outward = np.array(
+        [panels[0].segment.centroid - det.nodes[2], panels[2].segment.centroid - det.nodes[3]]
+    )
+    design: Beacon | None = None
+    for k in sorted(det.designs, key=lambda k: abs(_lengths(reps[k])[1] - math.dist(e2, e3))):
+        lengths = _lengths(reps[k])
+        edges = _edges(lines, lengths, outward).reshape(4, 2)
+        if _fits(edges, panels, origin, lengths):
+            design = reps[k]
+            break
+    if design is None:
+        return None
+    lengths = _lengths(design)
+    edges = _edges(lines, lengths, outward)
+    jac = np.zeros((8, 6))
+    for j in range(6):
+        step = 1e-7 if j % 2 == 0 else 1e-6
+        up, down = lines.copy().reshape(-1), lines.copy().reshape(-1)
+        up[j] += step
+        down[j] -= step
+        jac[:, j] = (
+            _edges(up.reshape(3, 2), lengths, outward)
+            - _edges(down.reshape(3, 2), lengths, outward)
+        ) / (2 * step)
+    cov = jac @ cov_lines @ jac.T + config.station_sigma_m**2 * np.eye(8)
+    sig = np.sqrt(0.5 * (np.diag(cov)[0::2] + np.diag(cov)[1::2]))
+    tops = np.array([p.top_m for p in panels])
+    sig_top = np.array([max(p.sigma_top_m, 1e-6) for p in panels])
+    ref = int(np.argmin(sig_top))
+    agree = np.abs(tops - tops[ref]) <= 3.0 * np.hypot(sig_top, sig_top[ref])
+    w = 1.0 / sig_top[agree] ** 2
+    top = float(np.sum(w * tops[agree]) / np.sum(w))
+    xy = edges.reshape(4, 2) + origin
+    measured = np.array([p.segment.length for p in panels])
+    beacon = Beacon("?", xy, np.full(4, top), sig, design.design or design.id)
+    return FoundBeacon(
+        beacon,
+        cov,
+        float(1.0 / math.sqrt(float(np.sum(w)))),
+        panels,
+        measured,
+        lengths,
+    )
+
+
+def _fits(
+    edges: NDArray[np.float64],
+    panels: tuple[Panel, ...],
+    origin: NDArray[np.float64],
+    lengths: NDArray[np.float64],
+) -> bool:
+    """Whether the edges a design gives hold its panels: the middle panel as long as the
+    design's, and each panel's points between its two edges (a shape assembled from
+    pieces of other beacons or rock has its points elsewhere), over a good share of it."""
+    if abs(math.dist(edges[1], edges[2]) - lengths[1]) > LENGTH_SLACK_M + 0.02 * lengths[1]:
+        return False
+    for k, p in enumerate(panels):
+        a, b = edges[k], edges[k + 1]
+        d = (b - a) / max(math.dist(a, b), 1e-9)
+        t = (p.segment.points - origin - a) @ d
+        inside = (t > -PANEL_SLACK_M) & (t < lengths[k] + PANEL_SLACK_M)
+        if np.mean(inside) < 0.9 or float(np.ptp(t)) < MIN_SHARE_SEEN * lengths[k]:
+            return False
+    return True
+
+
+def _lengths(b: Beacon) -> NDArray[np.float64]:
+    return np.asarray(np.hypot(*np.diff(b.edges, axis=0).T))
+
+
+def _name(
+    found: list[FoundBeacon], previous: Survey | None
+) -> tuple[list[FoundBeacon], tuple[str, ...]]:
+    """Ids: a previous beacon's within :data:`SAME_BEACON_M`, of the same design; new ones
+    ``<design>-<n>`` along increasing easting, then northing (module, step 4)."""
+    from scipy.stats import chi2
+
+    limit = float(chi2.isf(MOVED_ALPHA, 2))
+    taken: set[str] = set()
+    out: list[FoundBeacon] = []
+    order = sorted(
+        found,
+        key=lambda f: (float(f.beacon.edges[:, 0].mean()), float(f.beacon.edges[:, 1].mean())),
+    )
+    counters: dict[str, int] = {}
+    names = set(previous.ids) if previous is not None else set()
+    for f in order:
+        b = f.beacon
+        match = None
+        if previous is not None:
+            near = [
+                p
+                for p in previous
+                if p.id not in taken
+                and (p.design is None or p.design == b.design)
+                and math.dist(p.edges.mean(axis=0), b.edges.mean(axis=0)) <= SAME_BEACON_M
+            ]
+            match = min(
+                near,
+                key=lambda p: math.dist(p.edges.mean(axis=0), b.edges.mean(axis=0)),
+                default=None,
+            )
+        if match is not None:
+            taken.add(match.id)
+            d = b.edges - match.edges
+            prev_sig = match.edge_sigmas_m if match.edge_sigmas_m is not None else np.zeros(4)
+            prev_sig = np.where(np.isfinite(prev_sig), prev_sig, 0.0)
+            var = np.diag(f.covariance)
+            moved = []
+            for k in range(4):
+                vx = var[2 * k] + prev_sig[k] ** 2
+                vy = var[2 * k + 1] + prev_sig[k] ** 2
+                moved.append(bool(d[k, 0] ** 2 / vx + d[k, 1] ** 2 / vy > limit))
+            renamed = Beacon(match.id, b.edges, b.elevations, b.edge_sigmas_m, b.design)
+            displacement = np.hypot(d[:, 0], d[:, 1])
+            out.append(replace(f, beacon=renamed, previous=match.id, moved=tuple(moved),
+                               displacement_m=displacement))  # fmt: skip
+            continue
+        design = b.design or "beacon"
+        n = counters.get(design, 0)
+        while True:
+            n += 1
+            name = f"{design}-{n}"
+            if name not in names:
+                break
+        counters[design] = n
+        names.add(name)
+        renamed = Beacon(name, b.edges, b.elevations, b.edge_sigmas_m, b.design)
+        out.append(
+            FoundBeacon(
+                renamed,
+                f.covariance,
+                f.sigma_top_m,
+                f.panels,
+                f.panel_lengths_m,
+                f.design_lengths_m,
+            )
+        )
+    missing = tuple(p.id for p in previous if p.id not in taken) if previous is not None else ()
+    return out, missing

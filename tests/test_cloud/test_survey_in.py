@@ -1,0 +1,114 @@
+"""mast survey-in on simulated terrestrial scans: each beacon of its design, its edges and
+top within their sigmas, ids kept from a previous survey, a moved beacon named."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from subprocess import CompletedProcess
+
+import numpy as np
+import pytest
+
+from mast.core.beacon import Beacon, Survey
+from mast.io import read_survey, write_survey
+from mast.sim.tls import TlsOptions, TlsScenario, simulate_tls
+from tests._cli import run_mast_text
+
+OPTIONS = TlsOptions(length_m=24.0, beacons=3, designs=2, stations=2, step_rad=0.0006)
+
+
+@pytest.fixture(scope="module")
+def scene(tmp_path_factory: pytest.TempPathFactory) -> TlsScenario:
+    return simulate_tls(tmp_path_factory.mktemp("tls"), 1, OPTIONS)
+
+
+@pytest.fixture(scope="module")
+def surveyed(scene: TlsScenario, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    out = tmp_path_factory.mktemp("survey")
+    done = _survey_in(scene, out)
+    assert done.returncode == 0, done.stderr
+    return out
+
+
+def _survey_in(scene: TlsScenario, out: Path, *args: str) -> CompletedProcess[str]:
+    return run_mast_text(
+        "survey-in", str(scene.e57), "--designs", str(scene.designs), "--out", str(out),
+        "--noise", "0.0015", "--station-sigma", "0", *args,
+    )  # fmt: skip
+
+
+def _nearest(survey: Survey, b: Beacon) -> Beacon:
+    return min(survey, key=lambda t: math.dist(t.edges.mean(axis=0), b.edges.mean(axis=0)))
+
+
+def test_beacons_are_surveyed_in_with_their_designs_within_their_sigmas(
+    scene: TlsScenario, surveyed: Path
+) -> None:
+    found = read_survey(surveyed / "beacons.csv")
+    truth = read_survey(scene.survey)
+    assert len(found) >= 2
+    for b in found:
+        t = _nearest(truth, b)
+        assert b.design == t.design
+        assert b.id.startswith(f"{b.design}-")
+        assert b.edge_sigmas_m is not None
+        assert b.elevations is not None
+        assert t.elevations is not None
+        err = np.hypot(*(b.edges - t.edges).T)
+        assert np.all(err < 0.002), (b.id, err)
+        # each coordinate within 4.5 sigma (two coordinates, four edges, a few beacons)
+        assert np.all(np.abs(b.edges - t.edges) <= 4.5 * b.edge_sigmas_m[:, None] + 1e-5)
+        assert abs(float(b.elevations[0] - t.elevations[0])) < 0.003
+
+
+def test_the_report_names_each_panel_and_edge(surveyed: Path) -> None:
+    text = (surveyed / "report.txt").read_text()
+    assert "beacon(s) surveyed in" in text
+    for word in ("P1", "P2", "P3", "plane RMS", "tilt", "length seen", "e4", "sigma"):
+        assert word in text
+    assert (surveyed / "report.html").read_text().startswith("<!DOCTYPE html>")
+
+
+def test_a_previous_survey_keeps_its_ids_and_names_the_beacon_that_moved(
+    scene: TlsScenario, surveyed: Path, tmp_path: Path
+) -> None:
+    found = read_survey(surveyed / "beacons.csv")
+    truth = read_survey(scene.survey)
+    # the previous survey: the truth, with one beacon 8 mm away from where it is now
+    moved = _nearest(truth, next(iter(found))).id
+    before = [
+        Beacon(b.id, b.edges + ([0.008, 0.0] if b.id == moved else 0.0), b.elevations,
+               np.full(4, 0.001), b.design)
+        for b in truth
+    ]  # fmt: skip
+    previous = tmp_path / "previous.csv"
+    write_survey(previous, Survey(before))
+    done = _survey_in(scene, tmp_path / "again", "--previous", str(previous))
+    assert done.returncode == 0, done.stderr
+    again = read_survey(tmp_path / "again" / "beacons.csv")
+    assert set(again.ids) <= set(truth.ids)
+    stdout = done.stdout
+    assert f"{moved} (" in stdout
+    moved_lines = [line for line in stdout.splitlines() if "MOVED" in line]
+    assert len(moved_lines) == 1
+    assert moved_lines[0].strip().startswith(moved)
+
+
+def test_scans_without_beacons_exit_3(tmp_path: Path) -> None:
+    empty = simulate_tls(tmp_path / "sim", 2, TlsOptions(length_m=12.0, beacons=0, stations=1,
+                                                         step_rad=0.001))  # fmt: skip
+    done = _survey_in(empty, tmp_path / "out")
+    assert done.returncode == 3
+    assert "no beacon found" in done.stderr
+
+
+@pytest.mark.parametrize(("option", "value"), [("--noise", "0"), ("--station-sigma", "-1")])
+def test_bad_options_are_bad_input(
+    scene: TlsScenario, tmp_path: Path, option: str, value: str
+) -> None:
+    done = run_mast_text("survey-in", str(scene.e57), "--designs", str(scene.designs),
+                         "--out", str(tmp_path / "o"), option, value)  # fmt: skip
+    assert done.returncode == 2
+    assert option in done.stderr
+    assert len(done.stderr.strip().splitlines()) == 1
