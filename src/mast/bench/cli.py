@@ -247,6 +247,21 @@ def bench_georef(
     )
 
 
+@bench_app.command("survey-in")
+def bench_survey_in(
+    scenes: Annotated[int, typer.Option("--scenes", min=1, help="Simulated TLS scenes.")] = 12,
+    seed: Annotated[int, typer.Option("--seed", help="First scene's seed.")] = 0,
+    out: Annotated[Path | None, typer.Option("--out", help="CSV of every beacon.")] = None,
+) -> None:
+    """Simulated terrestrial scans through mast survey-in: beacons found with their
+    designs, edge and elevation errors against sigma_m, a moved beacon named."""
+    from mast.bench.survey_in import run_survey_in_bench
+
+    if out is not None:
+        check_output_file(out, suffixes=(".csv",))
+    run_survey_in_bench(scenes=scenes, seed=seed, out=out, echo=typer.echo)
+
+
 @bench_app.command("dense")
 def bench_dense(
     beams: Annotated[

@@ -28,7 +28,7 @@ identification as ``mast locate`` (:func:`mast.pipeline.identification.identify_
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -403,6 +403,26 @@ class PlanPieces:
     segmentation: Segmentation
     panels: tuple[Panel, ...]
     rejected: dict[str, int] = field(default_factory=dict)
+
+
+def beacon_top(panels: Sequence[Panel]) -> tuple[float, float]:
+    """A beacon's top and its sigma from its panels' (they share one level): the weighted
+    mean of the largest group of panel tops that agree within three combined sigmas (the
+    best-placed group on a tie). A panel whose points ran on into a pipe, rock or an end
+    wall above it (on simulated clouds, tops 0.2 to 1 m high, and at times the
+    best-placed of the three) is outvoted by the two that agree; taking the best-placed
+    panel as the one reference, as georef did, let such a panel decide alone."""
+    tops = np.array([p.top_m for p in panels])
+    sig = np.array([max(p.sigma_top_m, 1e-6) for p in panels])
+    best: tuple[int, float, NDArray[np.bool_]] | None = None
+    for ref in range(len(panels)):
+        agree = np.abs(tops - tops[ref]) <= 3.0 * np.hypot(sig, sig[ref])
+        key = (int(agree.sum()), -float(np.sum(1.0 / sig[agree] ** 2)))
+        if best is None or key > (best[0], best[1]):
+            best = (key[0], key[1], agree)
+    assert best is not None
+    w = 1.0 / sig[best[2]] ** 2
+    return float(np.sum(w * tops[best[2]]) / np.sum(w)), float(1.0 / math.sqrt(float(np.sum(w))))
 
 
 def _clusters(xy: NDArray[np.float64], cell_m: float) -> tuple[NDArray[np.intp], int]:

@@ -15,7 +15,6 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -34,9 +33,9 @@ from mast.cloud.detect import (
     BEACON_DENSITY_M2,
     Candidates,
     DetectConfig,
-    Panel,
     PlanPieces,
     Progress,
+    beacon_top,
     find_candidates,
     plan_pieces,
 )
@@ -143,19 +142,6 @@ def _usable_edges(det: Detection, beacon: str, pieces: PlanPieces, survey: Surve
     return out
 
 
-def _beacon_top(panels: Sequence[Panel]) -> tuple[float, float]:
-    """The beacon's top: the weighted mean of its panels' tops that agree, within three
-    standard deviations, with the best-placed one. A beacon's panels share one level;
-    a panel whose points ran into a pipe or the wall above (on simulated clouds, tops
-    25 cm to 1 m high) is left out rather than averaged in."""
-    sig = np.array([max(p.sigma_top_m, 1e-6) for p in panels])
-    tops = np.array([p.top_m for p in panels])
-    ref = int(np.argmin(sig))
-    agree = np.abs(tops - tops[ref]) <= 3.0 * np.hypot(sig, sig[ref])
-    w = 1.0 / sig[agree] ** 2
-    return float(np.sum(w * tops[agree]) / np.sum(w)), float(1.0 / math.sqrt(float(np.sum(w))))
-
-
 def _observation(
     det: Detection, beacon: str, pieces: PlanPieces, survey: Survey, heights: bool
 ) -> BeaconObs | None:
@@ -163,7 +149,7 @@ def _observation(
     if not edges:
         return None
     panels = [pieces.panels[k] for k in det.panels.values()]
-    top, sigma_top = _beacon_top(panels)
+    top, sigma_top = beacon_top(panels)
     b = survey[beacon]
     grid_top = math.nan
     if heights and b.elevations is not None:

@@ -40,7 +40,14 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from mast.cloud.detect import DetectConfig, Panel, PlanPieces, find_candidates, plan_pieces
+from mast.cloud.detect import (
+    DetectConfig,
+    Panel,
+    PlanPieces,
+    beacon_top,
+    find_candidates,
+    plan_pieces,
+)
 from mast.cloud.io import Chunk, Cloud, open_cloud
 from mast.cloud.match import Detection, detect_beacons
 from mast.core.beacon import Beacon, Survey
@@ -304,19 +311,14 @@ def _fit(
         ) / (2 * step)
     cov = jac @ cov_lines @ jac.T + config.station_sigma_m**2 * np.eye(8)
     sig = np.sqrt(0.5 * (np.diag(cov)[0::2] + np.diag(cov)[1::2]))
-    tops = np.array([p.top_m for p in panels])
-    sig_top = np.array([max(p.sigma_top_m, 1e-6) for p in panels])
-    ref = int(np.argmin(sig_top))
-    agree = np.abs(tops - tops[ref]) <= 3.0 * np.hypot(sig_top, sig_top[ref])
-    w = 1.0 / sig_top[agree] ** 2
-    top = float(np.sum(w * tops[agree]) / np.sum(w))
+    top, sigma_top = beacon_top(panels)
     xy = edges.reshape(4, 2) + origin
     measured = np.array([p.segment.length for p in panels])
     beacon = Beacon("?", xy, np.full(4, top), sig, design.design or design.id)
     return FoundBeacon(
         beacon,
         cov,
-        float(1.0 / math.sqrt(float(np.sum(w)))),
+        sigma_top,
         panels,
         measured,
         lengths,
