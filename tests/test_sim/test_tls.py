@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import math
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -117,3 +118,39 @@ def test_options_out_of_range_are_refused(tmp_path: Path) -> None:
 
     with pytest.raises(InputError, match="beacon_top_m"):
         simulate_tls(tmp_path, 0, TlsOptions(beacon_top_m=9.0))
+
+
+def test_a_wide_beam_mixes_a_panels_boundary_with_what_lies_behind(tmp_path: Path) -> None:
+    """Mixed pixels: only returns near a beacon change when the beam gets a width, and
+    some of them move off the panels by more than the noise (into the gap behind)."""
+    thin = simulate_tls(tmp_path / "thin", 3, SMALL)
+    wide = simulate_tls(tmp_path / "wide", 3, replace(SMALL, beam_exit_m=0.01))
+    a, b = _grid_points(thin), _grid_points(wide)
+    assert a.shape == b.shape
+    moved = np.linalg.norm(a - b, axis=1) > 1e-4
+    assert 0 < moved.sum() < 0.05 * len(a)
+    survey = read_survey(thin.survey)
+    near = np.min(
+        [np.min(np.hypot(*(a[moved, None, :2] - bb.edges[None]).transpose(2, 0, 1)), axis=1)
+         for bb in survey],
+        axis=0,
+    )  # fmt: skip
+    assert np.all(near < 1.0)
+    assert np.max(np.linalg.norm(a[moved] - b[moved], axis=1)) > 0.01
+
+
+def test_a_stations_setup_error_moves_its_whole_scan(tmp_path: Path) -> None:
+    import pye57
+
+    off = simulate_tls(
+        tmp_path / "off",
+        3,
+        replace(SMALL, station_sigma_m=0.01),
+    )
+    truth = json.loads(off.truth.read_text())["stations"][0]
+    e57 = pye57.E57(str(off.e57))
+    written = np.asarray(e57.get_header(0).translation)
+    e57.close()
+    shift = written[:2] - [truth["easting"], truth["northing"]]
+    assert 1e-4 < float(np.hypot(*shift)) < 0.05
+    assert written[2] == pytest.approx(truth["elevation"])

@@ -76,6 +76,15 @@ LENGTH_SLACK_M = 0.005
 PANEL_SLACK_M = 0.02
 #: A panel is seen when its points span at least this share of its length.
 MIN_SHARE_SEEN = 0.2
+#: A panel's points are gathered again this many times from the fitted edges.
+GATHER_ROUNDS = 2
+#: A panel's points lie within three noise sigmas and this of its line (a bulge, the
+#: fit's own error).
+GATHER_SLACK_M = 0.003
+#: Points this close to a panel's boundary are left out of its line (mixed returns).
+END_MARGIN_M = 0.01
+#: Fewest points a panel's line is fitted to.
+MIN_PANEL_POINTS = 30
 #: Detections whose centres are closer than this are one beacon.
 ONE_BEACON_M = 0.3
 
@@ -125,6 +134,8 @@ class FoundBeacon:
     panel_lengths_m, design_lengths_m : ndarray, shape (3,)
         Each panel's length measured (its points' extent along its line; the inner
         ends at e2 and e3) and built.
+    points_per_panel : tuple of int
+        The points each panel's line was fitted to.
     previous : str or None
         The previous survey's id it kept, if any.
     moved : tuple of bool
@@ -139,6 +150,7 @@ class FoundBeacon:
     panels: tuple[Panel, ...]
     panel_lengths_m: NDArray[np.float64]
     design_lengths_m: NDArray[np.float64]
+    points_per_panel: tuple[int, ...] = ()
     previous: str | None = None
     moved: tuple[bool, ...] = (False, False, False, False)
     displacement_m: NDArray[np.float64] = field(default_factory=lambda: np.full(4, np.nan))
@@ -197,7 +209,7 @@ def survey_in(
     found: list[FoundBeacon] = []
     rejected = 0
     for det in _one_per_beacon([d for d in dets if d.whole and len(d.panels) == 3], pieces):
-        fit = _fit(det, pieces, designs, index, config)
+        fit = _fit(det, pieces, cand.xyz, index, config)
         if fit is None:
             rejected += 1
             continue
@@ -265,7 +277,7 @@ def _edges(
 def _fit(
     det: Detection,
     pieces: PlanPieces,
-    designs: Survey,
+    xyz: NDArray[np.float64],
     index: SurveyIndex,
     config: SurveyInConfig,
 ) -> FoundBeacon | None:
@@ -299,6 +311,26 @@ def _fit(
         return None
     lengths = _lengths(design)
     edges = _edges(lines, lengths, outward)
+    # every candidate point of each panel, not only its piece's (a long panel's piece
+    # may be a fragment of it: a bulge or the mixed returns at its ends cut it), twice
+    near = xyz[np.max(np.abs(xyz[:, :2] - origin), axis=1) < lengths.sum() + 0.5]
+    for _ in range(GATHER_ROUNDS):
+        own = [_gather(near, origin, edges.reshape(4, 2), k, panels[k], config) for k in range(3)]
+        if any(len(p) < MIN_PANEL_POINTS for p in own):
+            return None
+        params, covs = zip(*(_line(p, config.noise_m) for p in own), strict=True)
+        lines = np.array(params)
+        edges = _edges(lines, lengths, outward)
+    cov_lines = np.zeros((6, 6))
+    for k, c in enumerate(covs):
+        cov_lines[2 * k : 2 * k + 2, 2 * k : 2 * k + 2] = c
+    seen = []
+    for k in range(3):
+        a, b = edges.reshape(4, 2)[k], edges.reshape(4, 2)[k + 1]
+        t = (own[k] - a) @ ((b - a) / max(math.dist(a, b), 1e-9))
+        seen.append(float(np.ptp(t)))
+    if any(s < MIN_SHARE_SEEN * length for s, length in zip(seen, lengths, strict=True)):
+        return None
     jac = np.zeros((8, 6))
     for j in range(6):
         step = 1e-7 if j % 2 == 0 else 1e-6
@@ -313,16 +345,41 @@ def _fit(
     sig = np.sqrt(0.5 * (np.diag(cov)[0::2] + np.diag(cov)[1::2]))
     top, sigma_top = beacon_top(panels)
     xy = edges.reshape(4, 2) + origin
-    measured = np.array([p.segment.length for p in panels])
+    measured = np.array(seen)
     beacon = Beacon("?", xy, np.full(4, top), sig, design.design or design.id)
     return FoundBeacon(
-        beacon,
-        cov,
-        sigma_top,
-        panels,
-        measured,
-        lengths,
+        beacon, cov, sigma_top, panels, measured, lengths, tuple(len(p) for p in own)
     )
+
+
+def _gather(
+    xyz: NDArray[np.float64],
+    origin: NDArray[np.float64],
+    edges: NDArray[np.float64],
+    k: int,
+    panel: Panel,
+    config: SurveyInConfig,
+) -> NDArray[np.float64]:
+    """Panel ``k``'s points (plan, about ``origin``): within three noise sigmas and
+    :data:`GATHER_SLACK_M` of its line, between its edges less :data:`END_MARGIN_M` at
+    each (the corners' and free ends' mixed returns), and within its heights less as
+    much at the top and bottom."""
+    a, b = edges[k], edges[k + 1]
+    length = math.dist(a, b)
+    d = (b - a) / max(length, 1e-9)
+    rel = xyz[:, :2] - origin - a
+    t = rel @ d
+    off = rel @ np.array([-d[1], d[0]])
+    z = xyz[:, 2]
+    keep = (
+        (t > END_MARGIN_M)
+        & (t < length - END_MARGIN_M)
+        & (np.abs(off) <= 3.0 * config.noise_m + GATHER_SLACK_M)
+        & (z > panel.bottom_m + END_MARGIN_M)
+        & (z < panel.top_m - END_MARGIN_M)
+    )
+    out: NDArray[np.float64] = rel[keep] + a
+    return out
 
 
 def _fits(
@@ -333,7 +390,7 @@ def _fits(
 ) -> bool:
     """Whether the edges a design gives hold its panels: the middle panel as long as the
     design's, and each panel's points between its two edges (a shape assembled from
-    pieces of other beacons or rock has its points elsewhere), over a good share of it."""
+    pieces of other beacons or rock has its points elsewhere)."""
     if abs(math.dist(edges[1], edges[2]) - lengths[1]) > LENGTH_SLACK_M + 0.02 * lengths[1]:
         return False
     for k, p in enumerate(panels):
@@ -341,7 +398,7 @@ def _fits(
         d = (b - a) / max(math.dist(a, b), 1e-9)
         t = (p.segment.points - origin - a) @ d
         inside = (t > -PANEL_SLACK_M) & (t < lengths[k] + PANEL_SLACK_M)
-        if np.mean(inside) < 0.9 or float(np.ptp(t)) < MIN_SHARE_SEEN * lengths[k]:
+        if np.mean(inside) < 0.9:
             return False
     return True
 
@@ -408,15 +465,6 @@ def _name(
         counters[design] = n
         names.add(name)
         renamed = Beacon(name, b.edges, b.elevations, b.edge_sigmas_m, b.design)
-        out.append(
-            FoundBeacon(
-                renamed,
-                f.covariance,
-                f.sigma_top_m,
-                f.panels,
-                f.panel_lengths_m,
-                f.design_lengths_m,
-            )
-        )
+        out.append(replace(f, beacon=renamed))
     missing = tuple(p.id for p in previous if p.id not in taken) if previous is not None else ()
     return out, missing

@@ -87,7 +87,7 @@ def report_text(result: SurveyIn, *, clouds: list[Path], designs_file: Path) -> 
             tilt = p.tilt_deg
             warn = f"  TILTED more than {TILT_WARNING_DEG:g} deg" if tilt > TILT_WARNING_DEG else ""
             add(
-                f"  P{k + 1}  {len(p.segment.points):7d} pts  plane RMS "
+                f"  P{k + 1}  {f.points_per_panel[k]:7d} pts  plane RMS "
                 f"{1000 * p.plane_rms_m:5.2f} mm  tilt {tilt:5.2f} deg  length seen "
                 f"{1000 * f.panel_lengths_m[k]:6.1f} of {1000 * f.design_lengths_m[k]:6.1f} mm"
                 f"  top {p.top_m:.4f} m{warn}"

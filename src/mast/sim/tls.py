@@ -26,6 +26,12 @@ it). The scanner is simulated by casting its rays:
   looks for) at ``overview_step_rad``. Each ray takes the nearest surface it meets
   (panels hide the rock behind them), its range gets Gaussian noise
   ``range_noise_m`` and beyond ``max_range_m`` it has no return.
+* **What a real scan adds** (each off by default, the benchmark turns them on): a
+  beam ``beam_exit_m`` wide at the exit, diverging, whose footprint on a panel's
+  boundary mixes the panel's range with what lies behind (a phase-based scanner's
+  mixed pixel); panels bulging ``panel_bow_m`` at their middle; each station's setup
+  ``station_sigma_m`` off per horizontal coordinate (the E57 pose is the written one,
+  ``truth.json`` the true one).
 
 Files written into the output folder:
 
@@ -99,6 +105,16 @@ class TlsOptions:
         The scanner's centre above the floor.
     margin_m : float
         A beacon's window reaches this far beyond it.
+    station_sigma_m : float
+        Standard deviation of each station's setup per horizontal coordinate: the pose
+        written in the E57 is off the true one by this much (0: exact).
+    panel_bow_m : float
+        A panel's bulge at its middle (a dome across its length and height): real
+        panels are flat to a millimetre, not to the micron.
+    beam_exit_m, beam_divergence_rad : float
+        The beam's diameter at the exit and its divergence. Where the footprint straddles
+        a panel's boundary, the return is a mixed pixel: a phase-based scanner averages
+        the ranges under it, weighted by the share on each (0: a beam without width).
     origin : tuple of float
         Easting, northing and elevation of the drift's start (floor, centre line).
     bearing_deg : float
@@ -121,6 +137,10 @@ class TlsOptions:
     beacon_top_m: float = 2.0
     scanner_height_m: float = 1.5
     margin_m: float = 0.4
+    station_sigma_m: float = 0.0
+    panel_bow_m: float = 0.0
+    beam_exit_m: float = 0.0
+    beam_divergence_rad: float = 0.0003
     origin: tuple[float, float, float] = (25_000.0, 71_000.0, -840.0)
     bearing_deg: float = 57.0
 
@@ -274,9 +294,57 @@ def _cast(
             s = (px * ab[0] + py * ab[1]) / float(ab @ ab)
             z = origin[2] + t * dz
             ok = (t > 0) & (t < best) & (s >= 0) & (s <= 1) & (z >= pan.z0) & (z <= pan.z1)
+            if o.panel_bow_m > 0:  # the bulge towards the drift, to first order along the ray
+                h = pan.z1 - pan.z0
+                bow = (
+                    o.panel_bow_m
+                    * np.sin(np.pi * np.clip(s, 0, 1))
+                    * np.sin(np.pi * np.clip((z - pan.z0) / h, 0, 1))
+                )
+                unit = nrm / math.hypot(*nrm)
+                toward = 1.0 if float((origin[:2] - pan.a) @ unit) > 0 else -1.0
+                t = t - toward * bow * math.hypot(*nrm) / np.abs(denom)
             best = np.where(ok, t, best)
             hit = np.where(ok, 3 * pan.beacon + pan.index, hit)
     return best, hit
+
+
+def _mixed(
+    origin: Array,
+    dirs: Array,
+    r: Array,
+    hit: NDArray[np.intp],
+    o: TlsOptions,
+    walls: tuple[_Rough, _Rough, _Rough, _Rough],
+    panels: list[_Panel],
+) -> Array:
+    """Ranges with mixed pixels: a ray whose footprint straddles its panel's boundary
+    returns the mean of the panel's range and the range behind (the next surface the
+    ray meets without that panel), weighted by the footprint's share on each."""
+    if o.beam_exit_m <= 0:
+        return r
+    out = r.copy()
+    for k, pan in enumerate(panels):
+        rows = np.flatnonzero(hit == 3 * pan.beacon + pan.index)
+        if rows.size == 0:
+            continue
+        p = origin + r[rows, None] * dirs[rows]
+        ab = pan.b - pan.a
+        length = math.hypot(*ab)
+        s = ((p[:, :2] - pan.a) @ ab) / length
+        inside = np.minimum.reduce(
+            [s, length - s, p[:, 2] - pan.z0, pan.z1 - p[:, 2]]
+        )  # distance to the nearest boundary, in the panel's plane
+        half = 0.5 * (o.beam_exit_m + o.beam_divergence_rad * r[rows])
+        edge = inside < half
+        if not np.any(edge):
+            continue
+        rows = rows[edge]
+        share = 0.5 + 0.5 * inside[edge] / half[edge]  # the footprint's share on the panel
+        behind, _ = _cast(origin, dirs[rows], o, walls, panels[:k] + panels[k + 1 :])
+        behind = np.where(np.isfinite(behind), behind, r[rows])
+        out[rows] = share * r[rows] + (1.0 - share) * behind
+    return out
 
 
 def _window(
@@ -353,6 +421,7 @@ def simulate_tls(out: str | Path, seed: int = 0, options: TlsOptions = TlsOption
     mounted = _mount(o, designs, rng)
     panels = _panels(mounted, o)
     noise_rng = np.random.default_rng([seed, 1])
+    setup_rng = np.random.default_rng([seed, 2])
     theta = math.radians(90.0 - o.bearing_deg)  # the drift's x axis, counter-clockwise from E
     cos_t, sin_t = math.cos(theta), math.sin(theta)
     e0, n0, z0 = o.origin
@@ -402,6 +471,10 @@ def simulate_tls(out: str | Path, seed: int = 0, options: TlsOptions = TlsOption
                 # the scanner's axes in the grid: its heading plus the drift's bearing
                 yaw = theta + heading
                 grid_station = to_grid(station[None, :])[0]
+                # the setup's error: the pose written, not the station's true place
+                written = grid_station + np.array(
+                    [*setup_rng.normal(0.0, o.station_sigma_m, 2), 0.0]
+                )
                 inten = np.where(kinds >= 0, PANEL_INTENSITY, ROCK_INTENSITY)
                 inten = np.clip(inten + noise_rng.normal(0.0, 0.03, r.size), 0.0, 1.0)
                 e57.write_scan_raw(
@@ -413,7 +486,7 @@ def simulate_tls(out: str | Path, seed: int = 0, options: TlsOptions = TlsOption
                     },
                     name=f"station {s + 1}",
                     rotation=np.array([math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2)]),
-                    translation=grid_station,
+                    translation=written,
                 )
                 azimuth = math.degrees(math.pi / 2 - yaw) % 360.0
                 stations.append(
@@ -501,11 +574,13 @@ def _scan_station(
             rel = np.remainder(az - a0, 2 * math.pi)
             inside |= (rel <= a1 - a0) & (el >= e0) & (el <= e1)
         r, hit = _cast(station, dirs[~inside], o, walls, panels)
+        r = _mixed(station, dirs[~inside], r, hit, o, walls, panels)
         pts.append(station + r[:, None] * dirs[~inside])
         kinds.append(hit)
     for a0, a1, e0, e1, step in windows:
         for dirs in _grid(a0, a1, e0, e1, step):
             r, hit = _cast(station, dirs, o, walls, panels)
+            r = _mixed(station, dirs, r, hit, o, walls, panels)
             pts.append(station + r[:, None] * dirs)
             kinds.append(hit)
     return np.concatenate(pts), np.concatenate(kinds)
