@@ -112,3 +112,74 @@ def test_bad_options_are_bad_input(
     assert done.returncode == 2
     assert option in done.stderr
     assert len(done.stderr.strip().splitlines()) == 1
+
+
+def test_a_panel_lines_covariance_matches_its_scatter() -> None:
+    """The line's angle and offset (about an origin 0.35 m away, as the fit takes them)
+    vary over many noisy fits as the covariance says, their correlation's sign too."""
+    from mast.cloud.survey_in import _line
+
+    rng = np.random.default_rng(5)
+    t = np.linspace(0.0, 0.6, 300)
+    base = np.column_stack([0.2 + t * math.cos(0.4), 0.3 + t * math.sin(0.4)])
+    normal = np.array([-math.sin(0.4), math.cos(0.4)])
+    draws = []
+    for _ in range(3000):
+        pts = base + rng.normal(0.0, 0.0015, t.size)[:, None] * normal
+        draws.append(_line(pts, 0.0015)[0])
+    got = np.cov(np.array(draws).T)
+    _, want = _line(base + rng.normal(0.0, 0.0015, t.size)[:, None] * normal, 0.0015)
+    assert np.allclose(np.diag(got), np.diag(want), rtol=0.15)
+    assert np.sign(got[0, 1]) == np.sign(want[0, 1])
+    assert got[0, 1] == pytest.approx(want[0, 1], rel=0.2)
+
+
+def test_a_design_longer_at_a_free_end_is_not_taken_for_the_true_one(
+    scene: TlsScenario, surveyed: Path, tmp_path: Path
+) -> None:
+    """A design with P1 30 mm longer, listed first: the free end's points stop at the
+    true design's length, so the beacons are surveyed as the designs they are."""
+    designs = read_survey(scene.designs, apart=False)
+    first = designs.ids[0]
+    d = designs[first]
+    e = d.edges.copy()
+    e[0] = e[1] + (e[0] - e[1]) * (math.dist(e[0], e[1]) + 0.03) / math.dist(e[0], e[1])
+    longer = Beacon("longer", e + [20.0, 0.0], design="longer")
+    path = tmp_path / "designs.csv"
+    write_survey(path, Survey([longer, *designs]))
+    done = run_mast_text("survey-in", str(scene.e57), "--designs", str(path), "--out",
+                         str(tmp_path / "o"), "--noise", "0.0015")  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    found = read_survey(tmp_path / "o" / "beacons.csv")
+    assert "longer" not in {b.design for b in found}
+    assert {b.design for b in found} == {b.design for b in read_survey(surveyed / "beacons.csv")}
+
+
+def test_two_designs_of_one_shape_are_refused(scene: TlsScenario, tmp_path: Path) -> None:
+    designs = read_survey(scene.designs, apart=False)
+    first = designs[designs.ids[0]]
+    twin = Beacon("twin", first.edges + [0.0005, 0.0], design="twin")
+    path = tmp_path / "designs.csv"
+    write_survey(path, Survey([*designs, twin]))
+    done = run_mast_text("survey-in", str(scene.e57), "--designs", str(path), "--out",
+                         str(tmp_path / "o"))  # fmt: skip
+    assert done.returncode == 2
+    assert "are the same shape" in done.stderr
+    assert "twin" in done.stderr
+
+
+def test_a_previous_survey_without_sigmas_leaves_movement_untested(
+    scene: TlsScenario, tmp_path: Path
+) -> None:
+    truth = read_survey(scene.survey)
+    plain = Survey([Beacon(b.id, b.edges, b.elevations, None, b.design) for b in truth])
+    previous = tmp_path / "previous.csv"
+    write_survey(previous, plain)
+    done = _survey_in(scene, tmp_path / "o", "--previous", str(previous))
+    assert done.returncode == 0, done.stderr
+    assert "movement untested" in done.stdout
+    assert "MOVED" not in done.stdout
+    assert (
+        "untested (the previous survey gives no sigma_m)"
+        in (tmp_path / "o" / "report.txt").read_text()
+    )

@@ -230,7 +230,7 @@ def bench_georef(
     ] = 50_000_000,
     density: Annotated[
         float, typer.Option("--density", min=100.0, help="Points per square metre.")
-    ] = 1000.0,
+    ] = 2000.0,
     out: Annotated[Path | None, typer.Option("--out", help="CSV of every cloud.")] = None,
 ) -> None:
     """Simulated SLAM clouds through mast georef: beacons found, check misclosures, honest

@@ -215,7 +215,7 @@ def run_georef_bench(
     clouds: int = 20,
     drift_clouds: int = 6,
     large_points: int = 0,
-    density: float = 1000.0,
+    density: float = 2000.0,
     out: Path | None = None,
     echo: Callable[[str], None] = print,
 ) -> list[CloudFigures]:

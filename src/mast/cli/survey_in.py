@@ -85,7 +85,9 @@ def survey_in(
         worst = 1000 * float(max(b.edge_sigmas_m)) if b.edge_sigmas_m is not None else 0.0
         moved = [k + 1 for k, m in enumerate(f.moved) if m]
         note = f"; MOVED at edge(s) {', '.join(map(str, moved))}" if moved else ""
-        typer.echo(f"  {b.id} ({b.design}): edges to {worst:.1f} mm{note}")
+        if any(m is None for m in f.moved):
+            note += "; movement untested (the previous survey gives no sigma_m)"
+        typer.echo(f"  {b.id} ({b.design}): edges to {worst:.2f} mm{note}")
     if not result.beacons:
         typer.echo("mast: no beacon found in the scans", err=True)
         raise typer.Exit(EXIT_NO_FIX)

@@ -83,6 +83,15 @@ GATHER_ROUNDS = 2
 GATHER_SLACK_M = 0.003
 #: Points this close to a panel's boundary are left out of its line (mixed returns).
 END_MARGIN_M = 0.01
+#: A free end's points may stop this short of a design's length and confirm it (the
+#: scan's spacing, the mixed returns at the end, the margin kept from the boundary).
+END_TOLERANCE_M = 0.015
+#: Points running on this far past a design's free end refute it.
+OVERRUN_M = 0.01
+#: A panel's points are one run until a gap wider than this along its line.
+REACH_GAP_M = 0.02
+#: How far past a design's free end its points are looked for.
+FREE_END_LOOK_M = 0.05
 #: Fewest points a panel's line is fitted to.
 MIN_PANEL_POINTS = 30
 #: Detections whose centres are closer than this are one beacon.
@@ -138,8 +147,11 @@ class FoundBeacon:
         The points each panel's line was fitted to.
     previous : str or None
         The previous survey's id it kept, if any.
-    moved : tuple of bool
-        Per edge, whether its displacement from the previous survey is significant.
+    moved : tuple of bool or None
+        Per edge, whether its displacement from the previous survey is significant
+        (``d^T (C + s^2 I)^-1 d`` against chi-square with 2 degrees of freedom, ``C`` the
+        edge's 2x2 covariance now, ``s`` its previous ``sigma_m``); None when the
+        previous survey gives no ``sigma_m`` for it (untested: its precision unknown).
     displacement_m : ndarray, shape (4,)
         Per edge, the horizontal displacement from the previous survey (NaN if none).
     """
@@ -152,7 +164,7 @@ class FoundBeacon:
     design_lengths_m: NDArray[np.float64]
     points_per_panel: tuple[int, ...] = ()
     previous: str | None = None
-    moved: tuple[bool, ...] = (False, False, False, False)
+    moved: tuple[bool | None, ...] = (False, False, False, False)
     displacement_m: NDArray[np.float64] = field(default_factory=lambda: np.full(4, np.nan))
 
 
@@ -204,6 +216,13 @@ def survey_in(
     cand = find_candidates(cloud, detect)
     pieces = plan_pieces(cand, detect)
     index = SurveyIndex.from_survey(designs, reach_m=5.0)
+    for group in index.designs:
+        if len(group) > 1:  # designs alike within the index's tolerance: one name for both
+            raise InputError(
+                f"designs {' and '.join(repr(g) for g in group[:2])} are the same shape within "
+                "5 mm and 0.5 deg: a scan cannot tell them apart; name one design once",
+                path=designs.source,
+            )
     ident = identify_panels(pieces.segmentation, index.representatives, survey_sigma_m=0.0)
     dets = detect_beacons(pieces, ident, index)
     found: list[FoundBeacon] = []
@@ -214,7 +233,12 @@ def survey_in(
             rejected += 1
             continue
         found.append(fit)
-    partial = len(_one_per_beacon([d for d in dets if not d.whole], pieces))
+    # a corner of a beacon surveyed whole (from another piece or station) is not "in part"
+    parts = _one_per_beacon([d for d in dets if not d.whole], pieces)
+    partial = sum(
+        all(math.dist(d.centre, f.beacon.edges.mean(axis=0)) > ONE_BEACON_M for f in found)
+        for d in parts
+    )
     named, missing = _name(found, previous)
     return SurveyIn(tuple(named), designs, pieces, cloud.count, partial, rejected, missing)
 
@@ -245,8 +269,10 @@ def _line(
     rho = float(fit.centroid @ n)
     var_phi = sigma**2 / max(fit.t_spread, 1e-12)
     var_off = sigma**2 / len(points)
-    # offset about the centroid is independent of the angle; about the origin it is not
-    lever = float(fit.centroid @ fit.direction)
+    # offset about the centroid is independent of the angle; about the origin it is not:
+    # the normal (direction turned +90 deg) turns by -direction per radian, so the offset
+    # at the origin moves by -(centroid . direction) per radian
+    lever = -float(fit.centroid @ fit.direction)
     jac = np.array([[1.0, 0.0], [lever, 1.0]])  # d(phi, rho) / d(phi, offset at centroid)
     cov = jac @ np.diag([var_phi, var_off]) @ jac.T
     return np.array([phi, rho]), cov
@@ -296,24 +322,26 @@ def _fit(
         cov_lines[2 * k : 2 * k + 2, 2 * k : 2 * k + 2] = c
     reps = index.representatives
     # P1's points lie from e2 towards e1, P3's from e3 towards e4
-    e2, e3 = det.nodes[2] - origin, det.nodes[3] - origin
     outward = np.array(
         [panels[0].segment.centroid - det.nodes[2], panels[2].segment.centroid - det.nodes[3]]
     )
-    design: Beacon | None = None
-    for k in sorted(det.designs, key=lambda k: abs(_lengths(reps[k])[1] - math.dist(e2, e3))):
-        lengths = _lengths(reps[k])
-        edges = _edges(lines, lengths, outward).reshape(4, 2)
-        if _fits(edges, panels, origin, lengths):
-            design = reps[k]
-            break
+    held = [
+        k
+        for k in det.designs
+        if _fits(_edges(lines, _lengths(reps[k]), outward).reshape(4, 2), panels, origin,
+                 _lengths(reps[k]))
+    ]  # fmt: skip
+    if not held:
+        return None
+    longest = max(float(_lengths(reps[k]).sum()) for k in held)
+    near = xyz[np.max(np.abs(xyz[:, :2] - origin), axis=1) < longest + 0.5]
+    design = _free_ends(held, reps, lines, outward, near, origin, panels, config)
     if design is None:
         return None
     lengths = _lengths(design)
     edges = _edges(lines, lengths, outward)
     # every candidate point of each panel, not only its piece's (a long panel's piece
     # may be a fragment of it: a bulge or the mixed returns at its ends cut it), twice
-    near = xyz[np.max(np.abs(xyz[:, :2] - origin), axis=1) < lengths.sum() + 0.5]
     for _ in range(GATHER_ROUNDS):
         own = [_gather(near, origin, edges.reshape(4, 2), k, panels[k], config) for k in range(3)]
         if any(len(p) < MIN_PANEL_POINTS for p in own):
@@ -324,11 +352,11 @@ def _fit(
     cov_lines = np.zeros((6, 6))
     for k, c in enumerate(covs):
         cov_lines[2 * k : 2 * k + 2, 2 * k : 2 * k + 2] = c
-    seen = []
-    for k in range(3):
-        a, b = edges.reshape(4, 2)[k], edges.reshape(4, 2)[k + 1]
-        t = (own[k] - a) @ ((b - a) / max(math.dist(a, b), 1e-9))
-        seen.append(float(np.ptp(t)))
+    xy4 = edges.reshape(4, 2)
+    reach1, reach3 = _reaches(xy4[1], xy4[2], xy4[0], xy4[3], lengths, near, origin, panels,
+                              config)  # fmt: skip
+    middle = (own[1] - xy4[1]) @ ((xy4[2] - xy4[1]) / max(math.dist(xy4[1], xy4[2]), 1e-9))
+    seen = [reach1, float(np.ptp(middle)) + 2 * END_MARGIN_M, reach3]
     if any(s < MIN_SHARE_SEEN * length for s, length in zip(seen, lengths, strict=True)):
         return None
     jac = np.zeros((8, 6))
@@ -350,6 +378,94 @@ def _fit(
     return FoundBeacon(
         beacon, cov, sigma_top, panels, measured, lengths, tuple(len(p) for p in own)
     )
+
+
+def _reach(
+    xyz: NDArray[np.float64],
+    origin: NDArray[np.float64],
+    start: NDArray[np.float64],
+    toward: NDArray[np.float64],
+    limit: float,
+    panel: Panel,
+    config: SurveyInConfig,
+) -> float:
+    """How far a panel's points run from its inner edge ``start`` towards its free end
+    (unit ``toward``, looked at up to ``limit``): the end of the first unbroken run
+    (no gap wider than :data:`REACH_GAP_M`), so rock met further along the line does
+    not count."""
+    rel = xyz[:, :2] - origin - start
+    t = rel @ toward
+    off = rel @ np.array([-toward[1], toward[0]])
+    z = xyz[:, 2]
+    keep = (
+        (t > 0.0)
+        & (t < limit)
+        & (np.abs(off) <= 3.0 * config.noise_m + GATHER_SLACK_M)
+        & (z > panel.bottom_m + END_MARGIN_M)
+        & (z < panel.top_m - END_MARGIN_M)
+    )
+    ts = np.sort(t[keep])
+    if ts.size == 0 or ts[0] > REACH_GAP_M:
+        return 0.0
+    gaps = np.flatnonzero(np.diff(ts) > REACH_GAP_M)
+    return float(ts[gaps[0]] if gaps.size else ts[-1])
+
+
+def _reaches(
+    e2: NDArray[np.float64],
+    e3: NDArray[np.float64],
+    e1: NDArray[np.float64],
+    e4: NDArray[np.float64],
+    lengths: NDArray[np.float64],
+    xyz: NDArray[np.float64],
+    origin: NDArray[np.float64],
+    panels: tuple[Panel, ...],
+    config: SurveyInConfig,
+) -> tuple[float, float]:
+    """How far P1's and P3's points run from e2 and e3 towards their free ends."""
+    u1 = (e1 - e2) / max(math.dist(e1, e2), 1e-9)
+    u3 = (e4 - e3) / max(math.dist(e4, e3), 1e-9)
+    return (
+        _reach(xyz, origin, e2, u1, lengths[0] + FREE_END_LOOK_M, panels[0], config),
+        _reach(xyz, origin, e3, u3, lengths[2] + FREE_END_LOOK_M, panels[2], config),
+    )
+
+
+def _free_ends(
+    held: list[int],
+    reps: list[Beacon],
+    lines: NDArray[np.float64],
+    outward: NDArray[np.float64],
+    xyz: NDArray[np.float64],
+    origin: NDArray[np.float64],
+    panels: tuple[Panel, ...],
+    config: SurveyInConfig,
+) -> Beacon | None:
+    """Which of the designs that hold the shape it is, by where its free ends' points
+    stop. A design is refuted when points run on past a free end of it by more than
+    :data:`OVERRUN_M`, and a free end confirms it when its points stop within
+    :data:`END_TOLERANCE_M` short of it; of the designs not refuted, the one that the
+    most free ends confirm. None when none is left, or when two are left alike (a free
+    end that would tell them apart is not seen): better no survey than a wrong design,
+    whose free end is placed at the wrong length with a sigma that does not know it."""
+    scored = []
+    for k in held:
+        lengths = _lengths(reps[k])
+        e = _edges(lines, lengths, outward).reshape(4, 2)
+        reaches = _reaches(e[1], e[2], e[0], e[3], lengths, xyz, origin, panels, config)
+        deficits = (lengths[0] - reaches[0], lengths[2] - reaches[1])
+        if any(d < -OVERRUN_M for d in deficits):
+            continue
+        confirmed = sum(d <= END_TOLERANCE_M for d in deficits)
+        scored.append((confirmed, k, lengths))
+    if not scored:
+        return None
+    scored.sort(key=lambda s: -s[0])
+    best = scored[0]
+    for other in scored[1:]:
+        if other[0] == best[0] and np.max(np.abs(other[2] - best[2])) > END_TOLERANCE_M:
+            return None  # two designs alike on what was seen: ambiguous
+    return reps[best[1]]
 
 
 def _gather(
@@ -442,14 +558,14 @@ def _name(
         if match is not None:
             taken.add(match.id)
             d = b.edges - match.edges
-            prev_sig = match.edge_sigmas_m if match.edge_sigmas_m is not None else np.zeros(4)
-            prev_sig = np.where(np.isfinite(prev_sig), prev_sig, 0.0)
-            var = np.diag(f.covariance)
-            moved = []
+            prev = match.edge_sigmas_m if match.edge_sigmas_m is not None else np.full(4, np.nan)
+            moved: list[bool | None] = []
             for k in range(4):
-                vx = var[2 * k] + prev_sig[k] ** 2
-                vy = var[2 * k + 1] + prev_sig[k] ** 2
-                moved.append(bool(d[k, 0] ** 2 / vx + d[k, 1] ** 2 / vy > limit))
+                if not np.isfinite(prev[k]):
+                    moved.append(None)  # the previous survey does not say how good it was
+                    continue
+                c = f.covariance[2 * k : 2 * k + 2, 2 * k : 2 * k + 2] + prev[k] ** 2 * np.eye(2)
+                moved.append(bool(d[k] @ np.linalg.solve(c, d[k]) > limit))
             renamed = Beacon(match.id, b.edges, b.elevations, b.edge_sigmas_m, b.design)
             displacement = np.hypot(d[:, 0], d[:, 1])
             out.append(replace(f, beacon=renamed, previous=match.id, moved=tuple(moved),

@@ -46,6 +46,8 @@ def write_survey_in(
     survey = out / "beacons.csv"
     if result.beacons:
         write_survey(survey, result.survey)
+    else:  # no survey rather than an earlier run's left beside this report
+        survey.unlink(missing_ok=True)
     text = report_text(result, clouds=clouds, designs_file=designs_file)
     txt = out / "report.txt"
     write_atomic(txt, text.encode("utf-8"))
@@ -103,11 +105,12 @@ def report_text(result: SurveyIn, *, clouds: list[Path], designs_file: Path) -> 
             e, n = b.edges[k]
             line = f"  e{k + 1}   E {e:.4f}  N {n:.4f}  sigma {1000 * sig[k]:.2f} mm"
             if f.previous is not None:
-                line += (
-                    f"  moved {1000 * f.displacement_m[k]:.1f} mm: "
-                    + ("MOVED" if f.moved[k] else "not moved")
-                    + f" (at {100 * MOVED_ALPHA:g} %)"
+                verdict = (
+                    "untested (the previous survey gives no sigma_m)"
+                    if f.moved[k] is None
+                    else ("MOVED" if f.moved[k] else "not moved") + f" (at {100 * MOVED_ALPHA:g} %)"
                 )
+                line += f"  moved {1000 * f.displacement_m[k]:.1f} mm: {verdict}"
             add(line)
     if result.previous_missing:
         add("")
