@@ -307,30 +307,24 @@ def _fit(
     index: SurveyIndex,
     config: SurveyInConfig,
 ) -> FoundBeacon | None:
-    """The beacon-level fit of a whole detection (module, step 3); None when its middle
-    panel is not the length of any design its shape fits."""
+    """The beacon-level fit of a whole detection (module, step 3); None when no design
+    holds it (:func:`_fits`, :func:`_free_ends`) or a panel is seen too little."""
     panels = tuple(pieces.panels[det.panels[k]] for k in (1, 2, 3))
     # lines about a point at the beacon: in grid coordinates (70 km from the origin) an
     # angle's variance times the lever would swamp the offsets' in the propagation
     origin = det.centre
-    params, covs = zip(
-        *(_line(p.segment.points - origin, config.noise_m) for p in panels), strict=True
-    )
-    lines = np.array(params)
-    cov_lines = np.zeros((6, 6))
-    for k, c in enumerate(covs):
-        cov_lines[2 * k : 2 * k + 2, 2 * k : 2 * k + 2] = c
+    # the pieces' lines choose the design; the panels' own points fit the edges below
+    lines = np.array([_line(p.segment.points - origin, config.noise_m)[0] for p in panels])
     reps = index.representatives
     # P1's points lie from e2 towards e1, P3's from e3 towards e4
     outward = np.array(
         [panels[0].segment.centroid - det.nodes[2], panels[2].segment.centroid - det.nodes[3]]
     )
-    held = [
-        k
-        for k in det.designs
-        if _fits(_edges(lines, _lengths(reps[k]), outward).reshape(4, 2), panels, origin,
-                 _lengths(reps[k]))
-    ]  # fmt: skip
+    held = []
+    for k in det.designs:
+        lengths = _lengths(reps[k])
+        if _fits(_edges(lines, lengths, outward).reshape(4, 2), panels, origin, lengths):
+            held.append(k)
     if not held:
         return None
     longest = max(float(_lengths(reps[k]).sum()) for k in held)
@@ -380,6 +374,30 @@ def _fit(
     )
 
 
+def _on_line(
+    xyz: NDArray[np.float64],
+    origin: NDArray[np.float64],
+    start: NDArray[np.float64],
+    toward: NDArray[np.float64],
+    panel: Panel,
+    config: SurveyInConfig,
+) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
+    """Each point's position along a panel's line (from ``start``, unit ``toward``, both
+    about ``origin``), and whether it is on the panel's face: within three noise sigmas
+    and :data:`GATHER_SLACK_M` of the line, and within the panel's heights less
+    :data:`END_MARGIN_M` at the top and bottom (their mixed returns)."""
+    rel = xyz[:, :2] - origin - start
+    t = rel @ toward
+    off = rel @ np.array([-toward[1], toward[0]])
+    z = xyz[:, 2]
+    keep = (
+        (np.abs(off) <= 3.0 * config.noise_m + GATHER_SLACK_M)
+        & (z > panel.bottom_m + END_MARGIN_M)
+        & (z < panel.top_m - END_MARGIN_M)
+    )
+    return t, keep
+
+
 def _reach(
     xyz: NDArray[np.float64],
     origin: NDArray[np.float64],
@@ -393,18 +411,8 @@ def _reach(
     (unit ``toward``, looked at up to ``limit``): the end of the first unbroken run
     (no gap wider than :data:`REACH_GAP_M`), so rock met further along the line does
     not count."""
-    rel = xyz[:, :2] - origin - start
-    t = rel @ toward
-    off = rel @ np.array([-toward[1], toward[0]])
-    z = xyz[:, 2]
-    keep = (
-        (t > 0.0)
-        & (t < limit)
-        & (np.abs(off) <= 3.0 * config.noise_m + GATHER_SLACK_M)
-        & (z > panel.bottom_m + END_MARGIN_M)
-        & (z < panel.top_m - END_MARGIN_M)
-    )
-    ts = np.sort(t[keep])
+    t, keep = _on_line(xyz, origin, start, toward, panel, config)
+    ts = np.sort(t[keep & (t > 0.0) & (t < limit)])
     if ts.size == 0 or ts[0] > REACH_GAP_M:
         return 0.0
     gaps = np.flatnonzero(np.diff(ts) > REACH_GAP_M)
@@ -482,19 +490,9 @@ def _gather(
     much at the top and bottom."""
     a, b = edges[k], edges[k + 1]
     length = math.dist(a, b)
-    d = (b - a) / max(length, 1e-9)
-    rel = xyz[:, :2] - origin - a
-    t = rel @ d
-    off = rel @ np.array([-d[1], d[0]])
-    z = xyz[:, 2]
-    keep = (
-        (t > END_MARGIN_M)
-        & (t < length - END_MARGIN_M)
-        & (np.abs(off) <= 3.0 * config.noise_m + GATHER_SLACK_M)
-        & (z > panel.bottom_m + END_MARGIN_M)
-        & (z < panel.top_m - END_MARGIN_M)
-    )
-    out: NDArray[np.float64] = rel[keep] + a
+    t, keep = _on_line(xyz, origin, a, (b - a) / max(length, 1e-9), panel, config)
+    keep &= (t > END_MARGIN_M) & (t < length - END_MARGIN_M)
+    out: NDArray[np.float64] = xyz[keep, :2] - origin
     return out
 
 
