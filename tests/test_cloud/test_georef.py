@@ -392,3 +392,35 @@ def test_a_cloud_too_sparse_for_beacons_is_refused_saying_so(tmp_path: Path) -> 
     assert "points per m² on the walls, beacons need about 1200" in done.stderr
     density = float(done.stderr.split("too sparse for beacons: ")[1].split()[0])
     assert 340 <= density <= 460
+
+
+def test_the_surveys_own_sigma_m_weighs_each_control_edge(scene: CloudScenario) -> None:
+    """A survey's ``sigma_m`` per edge in place of ``--survey-sigma``: equal to it, the
+    same transformation; larger on one beacon, that beacon counts for less and the
+    transformation is less certain."""
+    from mast.cloud.georef import GeorefConfig, georeference
+    from mast.cloud.io import open_cloud
+    from mast.core.beacon import Beacon, Survey
+    from mast.io import read_survey
+
+    survey = read_survey(scene.survey)
+    cloud = open_cloud(scene.cloud)
+
+    def solved(s: Survey) -> tuple[np.ndarray, np.ndarray]:
+        result = georeference(cloud, s, GeorefConfig(survey_sigma_m=0.003))
+        assert result.solution is not None, result.refusal
+        t = result.solution.transformation
+        return t.params, t.covariance
+
+    def given(sigma: dict[str, float]) -> Survey:
+        return Survey(
+            Beacon(b.id, b.edges, b.elevations, [sigma.get(b.id, 0.003)] * 4) for b in survey
+        )
+
+    p0, c0 = solved(survey)
+    p1, c1 = solved(given({}))
+    np.testing.assert_array_equal(p0, p1)
+    np.testing.assert_array_equal(c0, c1)
+    p2, c2 = solved(given({"B02": 0.03}))
+    assert np.all(np.diag(c2) > np.diag(c0))
+    assert np.allclose(p2[:2], p0[:2], atol=0.02)

@@ -8,10 +8,12 @@ decision, must agree exactly.
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
 
+from mast.core.beacon import Beacon, Survey
 from mast.core.geometry import PanelSet
 from mast.core.noise import NoiseModel
 from mast.core.pose import Pose2D
@@ -29,9 +31,14 @@ Case = tuple[Scan, Pose2D, PanelSet, NoiseModel]
 
 def _cases(*, adjusted: bool = True) -> list[Case]:
     """Scans of the paper scene, each from the truth and from a pose a few cm off;
-    with ``adjusted``, only those whose panels determine the pose."""
+    with ``adjusted``, only those whose panels determine the pose. Every other scan's
+    survey gives each edge its own sigma (1 to 7 mm, one left to the noise model)."""
     scene = paper_scene()
-    panels = PanelSet.from_survey(scene.survey)
+    own = Survey(
+        Beacon(b.id, b.edges, edge_sigmas_m=[0.001 * (k + 1), 0.002, math.nan, 0.001 * (7 - k)])
+        for k, b in enumerate(scene.survey)
+    )
+    surveys = (PanelSet.from_survey(scene.survey), PanelSet.from_survey(own))
     rng = np.random.default_rng(11)
     out = []
     for k, shot in enumerate(scene.shots[:8]):
@@ -39,6 +46,7 @@ def _cases(*, adjusted: bool = True) -> list[Case]:
         for dx, dy, da in ((0.0, 0.0, 0.0), (0.04, -0.03, 0.003)):
             pose = Pose2D(shot.pose.easting + dx, shot.pose.northing + dy, shot.pose.azimuth + da)
             noise = NOISES[k % 2]
+            panels = surveys[(k // 2) % 2]
             every = np.arange(len(panels))
             if adjusted and isinstance(
                 adj_mod._adjust_on_panels_reference(
@@ -183,6 +191,7 @@ def test_integrity_kernels_match_the_references() -> None:
                 obs.offsets,
                 obs.panel,
                 obs.beacon,
+                obs.survey_var,
                 obs.variance_scale,
             )
             adj = obs.adjust(adj.pose, noise)
@@ -191,16 +200,28 @@ def test_integrity_kernels_match_the_references() -> None:
             integrity._standardised_reference(adj),
             rtol=1e-12,
         )
-        for survey_sigma in (0.0, 0.003):
-            n = NoiseModel(noise.range_sigma_m, noise.angle_sigma_rad, survey_sigma)
-            got = integrity.beacon_tests(obs, adj, noise=n)
-            ref = integrity._beacon_tests_reference(obs, adj, noise=n)
+        # No survey error, one sigma for every edge, and each panel its own.
+        for survey_var in (
+            np.zeros(len(obs)),
+            np.full(len(obs), 0.003**2),
+            (0.001 * (1 + obs.panel % 5)) ** 2,
+        ):
+            surveyed = replace(obs, survey_var=survey_var)
+            got = integrity.beacon_tests(surveyed, adj, noise=noise)
+            ref = integrity._beacon_tests_reference(surveyed, adj, noise=noise)
             assert [(t.beacon, t.dof, t.critical, t.failed) for t in got] == [
                 (t.beacon, t.dof, t.critical, t.failed) for t in ref
             ]
             for t_got, t_ref in zip(got, ref, strict=True):
                 assert t_got.statistic == pytest.approx(t_ref.statistic, rel=1e-9)
             failed += sum(t.failed for t in ref)
+            if not survey_var.any():
+                continue
+            _assert_scaled_close(
+                adj_mod.survey_covariance(adj, surveyed),
+                adj_mod._survey_covariance_reference(adj, surveyed),
+                1e-10,
+            )
         w = integrity.standardised_residuals(adj)
         for keys in (obs.beacon, obs.panel):
             g_names, g_groups = integrity._groups(keys, adj.residuals_m, w)
@@ -210,11 +231,6 @@ def test_integrity_kernels_match_the_references() -> None:
                 assert g.returns == r.returns
                 assert g.rms_m == pytest.approx(r.rms_m, rel=1e-12)
                 assert g.max_abs_w == r.max_abs_w
-        _assert_scaled_close(
-            adj_mod.survey_covariance(adj, obs, 0.003),
-            adj_mod._survey_covariance_reference(adj, obs, 0.003),
-            1e-10,
-        )
     assert failed > 0  # the knocked beacons failed, in both
 
 

@@ -61,11 +61,17 @@ def test_the_compiled_tests_are_the_numpy_ones_on_scans() -> None:
     returns of rock lie along the panels' lines), every beacon's counts are the same
     and its chi-squares the same to rounding."""
     scene = paper_scene()
-    panels = PanelSet.from_survey(scene.survey)
+    # Every other shot's survey gives each edge its own sigma (one left to the default).
+    own = Survey(
+        Beacon(b.id, b.edges, edge_sigmas_m=[0.001 * (k + 1), 0.004, math.nan, 0.001])
+        for k, b in enumerate(scene.survey)
+    )
+    surveys = (PanelSet.from_survey(scene.survey), PanelSet.from_survey(own))
     rng = np.random.default_rng(11)
     cfg = VerificationConfig()
     ran_on = 0
-    for shot in scene.shots[:6]:
+    for k, shot in enumerate(scene.shots[:6]):
+        panels = surveys[k % 2]
         scanner = replace(shot.scanner, range_sigma_m=0.01)
         scan = simulate_scan(scene.world, shot.pose, scanner, rng=rng).scan
         pts = scan.points()[1]
@@ -89,9 +95,12 @@ def test_the_compiled_tests_are_the_numpy_ones_on_scans() -> None:
                 on = np.isin(icp.panel, mine)
                 if np.count_nonzero(on) < 4:
                     continue
-                chi = _straight_and_fitted(mine_pts, on, icp.residual_m, icp.pose.position, noise)
+                var = panels.survey_variance(noise.survey_sigma_m)
+                chi = _straight_and_fitted(
+                    mine_pts, on, icp.residual_m, icp.panel, icp.pose.position, noise, var
+                )
                 ref = _straight_and_fitted_reference(
-                    mine_pts[on], icp.residual_m[on], icp.pose.position, noise
+                    mine_pts[on], icp.residual_m[on], icp.pose.position, noise, var[icp.panel[on]]
                 )
                 np.testing.assert_allclose(chi, ref, rtol=1e-9)
     assert ran_on > 0

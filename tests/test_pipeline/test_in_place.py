@@ -55,11 +55,17 @@ def test_the_compiled_test_is_the_numpy_one_on_scans() -> None:
     from mast.sim import paper_scene, simulate_scan
 
     scene = paper_scene()
-    panels = PanelSet.from_survey(scene.survey)
+    # Every other shot's survey gives each edge its own sigma (one left to the default).
+    own = Survey(
+        Beacon(b.id, b.edges, edge_sigmas_m=[0.001 * (k + 1), 0.004, math.nan, 0.001])
+        for k, b in enumerate(scene.survey)
+    )
+    surveys = (PanelSet.from_survey(scene.survey), PanelSet.from_survey(own))
     rng = np.random.default_rng(5)
     cfg = VerificationConfig()
     said = {True: 0, False: 0}
-    for shot in scene.shots[:6]:
+    for k, shot in enumerate(scene.shots[:6]):
+        panels = surveys[k % 2]
         scanner = replace(shot.scanner, range_sigma_m=0.01)
         scan = simulate_scan(scene.world, shot.pose, scanner, rng=rng).scan
         pts = scan.points()[1]

@@ -104,7 +104,7 @@ def live(
     from mast.live.session import Sink, run_live
     from mast.live.sources import ReplaySource, open_source
     from mast.live.stream import SourceOptions
-    from mast.report.record import ReportInputs
+    from mast.report.record import ReportInputs, survey_weighing
 
     tables, given = read_config(config, "live")
     cfg, defaults = precisions(
@@ -134,6 +134,7 @@ def live(
         defaults=frozenset(defaults),
         config_file=None if config is None else str(config),
         config_sha256=settings.sha256,
+        survey_sigmas=survey_weighing(survey, cfg.survey_sigma_m),
     )
 
     def warn(text: str) -> None:

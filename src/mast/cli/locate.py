@@ -79,7 +79,7 @@ def locate(
 
     from mast.io import read_survey
     from mast.pipeline.locator import SequenceLocator
-    from mast.report.record import ReportInputs, fix_record, fix_text
+    from mast.report.record import ReportInputs, fix_record, fix_text, survey_weighing
 
     tables, given = read_config(config, "locate")
     cfg, defaults = precisions(
@@ -111,6 +111,7 @@ def locate(
                 defaults=frozenset(defaults),
                 config_file=None if config is None else str(config),
                 config_sha256=settings.sha256,
+                survey_sigmas=survey_weighing(survey, cfg.survey_sigma_m),
             )
             source = inputs.scan_file or str(scan_path)
             tracker = SequenceLocator(survey, config=cfg, sequence=tables["sequence"])

@@ -91,7 +91,7 @@ def track(
     the scans read until then).
     """
     from mast.io import read_survey
-    from mast.report.record import ReportInputs
+    from mast.report.record import ReportInputs, survey_weighing
     from mast.runs.batch import expand_runs, track_runs
     from mast.runs.run import track_run
 
@@ -127,6 +127,7 @@ def track(
                     defaults=frozenset(defaults),
                     config_file=None if config is None else str(config),
                     config_sha256=settings.sha256,
+                    survey_sigmas=survey_weighing(survey, cfg.survey_sigma_m),
                 ),
             },
             scheduler=scheduler,
@@ -147,6 +148,7 @@ def track(
         defaults=frozenset(defaults),
         config_file=None if config is None else str(config),
         config_sha256=settings.sha256,
+        survey_sigmas=survey_weighing(survey, cfg.survey_sigma_m),
     )
 
     def warn(text: str) -> None:

@@ -67,6 +67,9 @@ class BeaconObs:
         When the scanner saw it (median time of its points).
     points : int
         Points on its panels.
+    grid_var : ndarray, shape (k,), optional
+        The survey's variance of each observed edge's coordinates (its ``sigma_m``
+        squared); None: the adjustment's one ``survey_sigma_m`` for every edge.
     """
 
     beacon: str
@@ -79,6 +82,11 @@ class BeaconObs:
     grid_top: float
     time: float | None = None
     points: int = 0
+    grid_var: NDArray[np.float64] | None = None
+
+    def survey_var(self, s2: float) -> NDArray[np.float64]:
+        """Each observed edge's surveyed variance: :attr:`grid_var`, or ``s2`` for all."""
+        return np.full(len(self.edges), s2) if self.grid_var is None else self.grid_var
 
     def moved(self, cloud_xy: NDArray[np.float64], top: float) -> BeaconObs:
         return replace(self, cloud_xy=cloud_xy, top=top)
@@ -290,18 +298,20 @@ def _covariance(
             zi = np.arange(k) * 3 + 2
             c[np.ix_(zi, zi)] = b.sigma_top**2  # one top for all its edges
             big = np.kron(np.eye(k), rot * scale)
-            c = big @ c @ big.T + s2 * np.eye(3 * k)
+            c = big @ c @ big.T + np.diag(np.repeat(b.survey_var(s2), 3))
             # the surveyed tops of one beacon: one level each, independent
         else:
             m = 2 * k + (1 if heights else 0)
             c = np.zeros((m, m))
             r2 = rot[:2, :2]
+            sv = b.survey_var(s2)
             for i in range(k):
-                c[2 * i : 2 * i + 2, 2 * i : 2 * i + 2] = r2 @ b.cloud_cov[i] @ r2.T + s2 * np.eye(
-                    2
-                )
+                c[2 * i : 2 * i + 2, 2 * i : 2 * i + 2] = r2 @ b.cloud_cov[i] @ r2.T + sv[
+                    i
+                ] * np.eye(2)
             if heights:
-                c[-1, -1] = b.sigma_top**2 + s2 / k
+                # the mean of the observed edges' surveyed tops
+                c[-1, -1] = b.sigma_top**2 + float(np.sum(sv)) / k**2
         blocks.append(c)
         spans.append((r, r + c.shape[0]))
         r += c.shape[0]

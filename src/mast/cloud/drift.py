@@ -241,7 +241,7 @@ def correct_drift(
             k = seen[o.beacon].key
             dz, var = _height_chain(t_key, dist, others, drift, s2, at=k)
             r = o.top + float(dz[k]) - o.grid_top
-            stat += r * r / (var + o.sigma_top**2 + s2)
+            stat += r * r / (var + o.sigma_top**2 + _top_var(o, s2))
             dof += 1
         return BeaconTest(o.beacon, stat, dof, beacon_critical(W_TEST_ALPHA / max(n, 1), dof), role)
 
@@ -330,8 +330,10 @@ class _Seen:
 
     def factors(self, s2: float) -> list[Any]:
         return [
-            _edge_factor(self.key, q, g, cov, s2)
-            for q, g, cov in zip(self.q, self.obs.grid_xy, self.cov, strict=True)
+            _edge_factor(self.key, q, g, cov, float(sv))
+            for q, g, cov, sv in zip(
+                self.q, self.obs.grid_xy, self.cov, self.obs.survey_var(s2), strict=True
+            )
         ]
 
     def statistic(self, values: Any, marginals: Any, s2: float) -> tuple[float, int]:
@@ -344,9 +346,10 @@ class _Seen:
         v = np.empty(2 * k)
         jac = np.empty((2 * k, 3))
         cov = np.zeros((2 * k, 2 * k))
+        sv = self.obs.survey_var(s2)
         for i, (q, g, cg) in enumerate(zip(self.q, self.obs.grid_xy, self.cov, strict=True)):
             v[2 * i : 2 * i + 2], jac[2 * i : 2 * i + 2] = _edge_error(x, q, g)
-            cov[2 * i : 2 * i + 2, 2 * i : 2 * i + 2] = cg + s2 * np.eye(2)
+            cov[2 * i : 2 * i + 2, 2 * i : 2 * i + 2] = cg + sv[i] * np.eye(2)
         total = cov + jac @ pose_cov @ jac.T
         return float(v @ np.linalg.solve(total, v)), 2 * k
 
@@ -380,6 +383,12 @@ def _edge_error(
     r = np.array([[c, -s], [s, c]])
     e: NDArray[np.float64] = r @ q + np.array([x.x(), x.y()]) - g
     return e, np.column_stack([r, r @ np.array([-q[1], q[0]])])
+
+
+def _top_var(o: BeaconObs, s2: float) -> float:
+    """The surveyed variance of a beacon's top: its observed edges' mean (``s2`` each
+    when the survey gives none of its own)."""
+    return s2 if o.grid_var is None else float(np.mean(o.grid_var))
 
 
 def _height_chain(
@@ -419,7 +428,7 @@ def _height_chain(
         cols.append(k)
         vals.append(1.0)
         rhs.append(o.grid_top - o.top)
-        w.append(1.0 / math.sqrt(o.sigma_top**2 + s2))
+        w.append(1.0 / math.sqrt(o.sigma_top**2 + _top_var(o, s2)))
     wv = np.array(w)
     a = coo_matrix((np.array(vals) * wv[rows], (rows, cols)), shape=(len(rhs), n)).tocsr()
     b = np.array(rhs) * wv

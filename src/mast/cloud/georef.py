@@ -143,7 +143,12 @@ def _usable_edges(det: Detection, beacon: str, pieces: PlanPieces, survey: Surve
 
 
 def _observation(
-    det: Detection, beacon: str, pieces: PlanPieces, survey: Survey, heights: bool
+    det: Detection,
+    beacon: str,
+    pieces: PlanPieces,
+    survey: Survey,
+    heights: bool,
+    survey_sigma_m: float,
 ) -> BeaconObs | None:
     edges = tuple(_usable_edges(det, beacon, pieces, survey))
     if not edges:
@@ -169,6 +174,9 @@ def _observation(
         grid_top,
         float(np.median(times)) if times else None,
         int(sum(len(p.segment) for p in panels)),
+        None
+        if b.edge_sigmas_m is None
+        else np.array([b.sigmas_or(survey_sigma_m)[e - 1] ** 2 for e in edges]),
     )
 
 
@@ -204,7 +212,8 @@ def georeference(
     dets = detect_beacons(pieces, ident, index)
     match = match_beacons(dets, survey, index, config.match)
     observed = {
-        b: _observation(dets[d], b, pieces, survey, heights) for d, b in match.assigned.items()
+        b: _observation(dets[d], b, pieces, survey, heights, config.survey_sigma_m)
+        for d, b in match.assigned.items()
     }
     found = {b: o for b, o in observed.items() if o is not None}
     short = {b for b, o in observed.items() if o is None}

@@ -374,7 +374,7 @@ def report_text(
             else "helmert7 (3D similarity)"
         )
     )
-    add(f"survey sigma     {1000 * result.config.survey_sigma_m:.1f} mm per coordinate")
+    add(f"survey sigma     {result.survey.sigma_text(result.config.survey_sigma_m)}")
     add(f"cloud noise      {1000 * result.pieces.segmentation.noise_m:.1f} mm (estimated in plan)")
     add(f"wall density     {_density(result.candidates.wall_density_m2)}")
     if not result.heights:

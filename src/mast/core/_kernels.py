@@ -1371,11 +1371,13 @@ def _straight_and_fitted_chi(
     origin: NDArray[np.float64],
     range_sigma: float,
     angle_sigma: float,
-    survey_sigma: float,
+    panel_of: NDArray[np.intp],
+    survey_var: NDArray[np.float64],
 ) -> tuple[float, float]:
     """``verification._straight_and_fitted_reference`` on the returns where ``on``: the
     chi-squares of their offsets from their one total-least-squares line and of their
-    residuals from their panels, each weighed by the noise across that line."""
+    residuals from their panels (``panel_of``, each panel's surveyed variance in
+    ``survey_var``), each weighed by the noise across that line."""
     mx = 0.0
     my = 0.0
     m = 0
@@ -1412,7 +1414,7 @@ def _straight_and_fitted_chi(
         var = max(var, floor)
         off = (points[i, 0] - mx) * nx + (points[i, 1] - my) * ny
         chi_line += off * off / var
-        chi_beacon += residual[i] * residual[i] / (var + survey_sigma * survey_sigma)
+        chi_beacon += residual[i] * residual[i] / (var + survey_var[panel_of[i]])
     return chi_line, chi_beacon
 
 
@@ -1433,14 +1435,15 @@ def _in_place_chi(
     range_sigma: float,
     angle_sigma: float,
     floor: float,
-    survey_sigma: float,
+    survey_var: NDArray[np.float64],
 ) -> tuple[float, int]:
     """``verification._in_place_reference``'s chi-square and its count of returns: the
     returns matched (``panel_of``, residuals ``residual``) to a beacon's panels
     (``mine``; ``number`` holds every panel's number on its beacon), less those at its
     silhouette (a neighbouring return, off the beacon, more than ``jump`` farther from
     ``origin``), within ``edge_margin`` of its free ends, or within ``min_cos`` of
-    grazing, each residual weighed by the noise across its own panel."""
+    grazing, each residual weighed by the noise across its own panel and its surveyed
+    variance (``survey_var``, per panel)."""
     n = points.shape[0]
     ours = np.zeros(n, dtype=np.bool_)
     first, last = number[mine[0]], number[mine[0]]
@@ -1487,7 +1490,7 @@ def _in_place_chi(
         across = range_sigma * max(cos_n, floor)
         spread = rho * angle_sigma
         var = across * across + spread * spread * (1.0 - cos_n * cos_n)
-        den = var + survey_sigma * survey_sigma
+        den = var + survey_var[q]
         # A noiseless model (numpy's division gives inf or NaN): the test fails.
         chi += residual[i] * residual[i] / den if den > 0.0 else math.inf
         count += 1
@@ -2745,7 +2748,7 @@ def _ray_association(
     gate_sigmas: float,
     range_sigma: float,
     angle_sigma: float,
-    survey_sigma: float,
+    survey_var: NDArray[np.float64],
     min_incidence: float,
     jump: float,
 ) -> tuple[NDArray[np.intp], NDArray[np.intp], NDArray[np.bool_]]:
@@ -2755,7 +2758,8 @@ def _ray_association(
     grazing; which segment; and whether the beam is at its owner's silhouette
     (``edges.at_silhouette``). The gate is ``gate_m`` when ``cofactor`` is not 3 x 3,
     else ``gate_sigmas`` standard deviations of the range about its surveyed panel
-    with the pose's own uncertainty along the beam (``g^T Q g``, when finite)."""
+    (``survey_var``: each segment's surveyed variance) with the pose's own uncertainty
+    along the beam (``g^T Q g``, when finite)."""
     n = angles.shape[0]
     origin = np.array([easting, northing])
     ex, ey, wx, wy, w_x_e = _crossing_terms_jit(origin, seg_a, seg_b)
@@ -2776,7 +2780,7 @@ def _ray_association(
             hit_row[i] = bj
             ray_owner[i] = owner[bj]
     with_pose = cofactor.shape[0] == 3 and cofactor.shape[1] == 3
-    rs2, ss2 = range_sigma**2, survey_sigma**2
+    rs2 = range_sigma**2
     beams = np.empty(n, dtype=np.intp)
     rows = np.empty(n, dtype=np.intp)
     edge = np.zeros(n, dtype=np.bool_)
@@ -2794,7 +2798,7 @@ def _ray_association(
             g2 = -rho * (nx * uy[i] - ny * ux[i]) / nu
             pred = _spread_jit(g0, g1, g2, cofactor)
             d = g2 * angle_sigma
-            var = rs2 + d * d + ss2
+            var = rs2 + d * d + survey_var[j]
             if math.isfinite(pred):
                 var += pred
             gate = gate_sigmas * math.sqrt(var)
@@ -2851,7 +2855,7 @@ def _beacon_statistics(
     beacon: NDArray[np.intp],
     panel: NDArray[np.intp],
     ids: NDArray[np.intp],
-    survey_variance: float,
+    survey_var: NDArray[np.float64],
     max_condition: float,
 ) -> tuple[NDArray[np.float64], NDArray[np.intp], NDArray[np.bool_]]:
     """``integrity._beacon_tests_reference``' statistics, beacon by beacon of ``ids``:
@@ -2906,6 +2910,7 @@ def _beacon_statistics(
         dwd = 0.0
         n_mine = 0
         col = np.zeros(k)
+        group_var = np.zeros(k)
         for i in range(n):
             if beacon[i] != b:
                 continue
@@ -2913,7 +2918,9 @@ def _beacon_statistics(
             d = residuals[i] - (jac[i, 0] * delta[0] + jac[i, 1] * delta[1] + jac[i, 2] * delta[2])
             col[:] = 0.0
             col[0], col[1], col[2] = jac[i, 0], jac[i, 1], jac[i, 2]
-            col[3 + np.searchsorted(panels_of, panel[i])] = lever[i]
+            at = 3 + np.searchsorted(panels_of, panel[i])
+            col[at] = lever[i]
+            group_var[at] = survey_var[i]
             wi = w[i]
             dwd += d * (wi * d)
             for r in range(k):
@@ -2923,7 +2930,7 @@ def _beacon_statistics(
         mm = np.zeros((k, k))
         mm[:3, :3] = q_rest
         for r in range(3, k):
-            mm[r, r] = survey_variance
+            mm[r, r] = group_var[r]
         lhs = np.eye(k) + mm @ kk
         z = (mm @ y).reshape(k, 1)
         if not _lu_solve_jit(lhs, z):
@@ -3019,18 +3026,20 @@ def _survey_shares(
     sigmas: NDArray[np.float64],
     cofactor: NDArray[np.float64],
     panel: NDArray[np.intp],
-    survey_variance: float,
+    survey_var: NDArray[np.float64],
 ) -> NDArray[np.float64]:
     """``adjustment._survey_covariance_reference``: ``sum_p K_p l_p (K_p l_p)^T`` times
-    the survey variance, ``K = Q G^T W`` the estimator, ``l_i = 1 / |n . u_i|`` the
-    levers of panel ``p``'s returns."""
+    panel ``p``'s surveyed variance (``survey_var``, per return), ``K = Q G^T W`` the
+    estimator, ``l_i = 1 / |n . u_i|`` the levers of panel ``p``'s returns."""
     names = np.unique(panel)
     cols = np.zeros((names.shape[0], 3))
+    group_var = np.zeros(names.shape[0])
     for i in range(angles.shape[0]):
         bearing = azimuth - angles[i]
         lever = 1.0 / abs(normals[i, 0] * math.sin(bearing) + normals[i, 1] * math.cos(bearing))
         scale = lever / sigmas[i] ** 2
         p = np.searchsorted(names, panel[i])
+        group_var[p] = survey_var[i]
         for r in range(3):
             cols[p, r] += (
                 cofactor[r, 0] * jac[i, 0] + cofactor[r, 1] * jac[i, 1] + cofactor[r, 2] * jac[i, 2]
@@ -3039,7 +3048,7 @@ def _survey_shares(
     for p in range(names.shape[0]):
         for r in range(3):
             for c in range(3):
-                out[r, c] += survey_variance * (cols[p, r] * cols[p, c])
+                out[r, c] += group_var[p] * (cols[p, r] * cols[p, c])
     return out
 
 
@@ -3058,7 +3067,7 @@ def _adjust_rounds(
     gate_sigmas: float,
     range_sigma: float,
     angle_sigma: float,
-    survey_sigma: float,
+    survey_var: NDArray[np.float64],
     min_incidence: float,
     jump: float,
     silhouette_variance: float,
@@ -3124,7 +3133,7 @@ def _adjust_rounds(
             gate_sigmas,
             range_sigma,
             angle_sigma,
-            survey_sigma,
+            survey_var,
             min_incidence,
             jump,
         )

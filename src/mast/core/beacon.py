@@ -145,6 +145,13 @@ class Beacon:
             object.__setattr__(self, "edge_sigmas_m", s)
         object.__setattr__(self, "template", BeaconTemplate.from_edges(e))
 
+    def sigmas_or(self, default_m: float) -> NDArray[np.float64]:
+        """Each edge's standard deviation, metres: the survey's ``sigma_m`` where it
+        gives one, else ``default_m`` (``--survey-sigma``)."""
+        if self.edge_sigmas_m is None:
+            return np.full(4, float(default_m))
+        return np.where(np.isnan(self.edge_sigmas_m), float(default_m), self.edge_sigmas_m)
+
     def identifiability_problems(
         self, rules: IdentifiabilityRules = IdentifiabilityRules()
     ) -> list[str]:
@@ -222,6 +229,25 @@ class Survey:
     @property
     def ids(self) -> list[str]:
         return list(self._beacons)
+
+    def edge_sigmas(self) -> NDArray[np.float64]:
+        """The ``sigma_m`` the survey gives, edge by edge (those it gives only)."""
+        given = [b.edge_sigmas_m for b in self if b.edge_sigmas_m is not None]
+        every = np.concatenate(given) if given else np.zeros(0)
+        return np.asarray(every[~np.isnan(every)])
+
+    def sigma_text(self, default_m: float) -> str:
+        """How the survey's edges are weighed, for reports: ``"3.0 mm per edge
+        coordinate"``, or the survey's own ``sigma_m`` and the default for the rest."""
+        own = self.edge_sigmas()
+        if own.size == 0:
+            return f"{1000 * default_m:.1f} mm per edge coordinate"
+        total = 4 * len(self)
+        text = (
+            f"the survey's sigma_m on {own.size} of {total} edges "
+            f"({1000 * float(own.min()):.1f} to {1000 * float(own.max()):.1f} mm)"
+        )
+        return text if own.size == total else f"{text}, {1000 * default_m:.1f} mm on the rest"
 
     def __repr__(self) -> str:
         return f"Survey({len(self)} beacons: {', '.join(self.ids)})"

@@ -4,6 +4,7 @@ points against panels."""
 from __future__ import annotations
 
 import functools
+import math
 from dataclasses import dataclass
 from typing import Any
 
@@ -115,6 +116,9 @@ class PanelSet:
     panel : ndarray of int, shape (k,)
         Panel number 1..3.
     ids : tuple of str
+    edge_sigma_m : ndarray, shape (k, 2), optional
+        The survey's standard deviation of each panel's two edges (``sigma_m``), NaN
+        where the survey leaves it out; None when it gives none.
     """
 
     a: NDArray[np.float64]
@@ -125,16 +129,20 @@ class PanelSet:
     beacon: NDArray[np.intp]
     panel: NDArray[np.intp]
     ids: tuple[str, ...]
+    edge_sigma_m: NDArray[np.float64] | None = None
 
     @classmethod
     def from_survey(cls, survey: Survey) -> PanelSet:
-        a, b, bi, pi = [], [], [], []
+        a, b, bi, pi, sig = [], [], [], [], []
         for k, beacon in enumerate(survey):
+            s = beacon.edge_sigmas_m
             for j in range(3):
                 a.append(beacon.edges[j])
                 b.append(beacon.edges[j + 1])
                 bi.append(k)
                 pi.append(j + 1)
+                sig.append((math.nan, math.nan) if s is None else (s[j], s[j + 1]))
+        given = any(b.edge_sigmas_m is not None for b in survey)
         aa = np.array(a, dtype=float).reshape(-1, 2)
         bb = np.array(b, dtype=float).reshape(-1, 2)
         v = bb - aa
@@ -150,10 +158,48 @@ class PanelSet:
             np.array(bi, dtype=np.intp),
             np.array(pi, dtype=np.intp),
             tuple(survey.ids),
+            np.array(sig, dtype=float).reshape(-1, 2) if given else None,
         )
 
     def __len__(self) -> int:
         return int(self.length.size)
+
+    def survey_variance(self, sigma_m: float) -> NDArray[np.float64]:
+        """Each panel's surveyed position variance across its face, metres squared:
+        the mean of its two edges' variances, each edge's from the survey's ``sigma_m``
+        where it gives one, else ``sigma_m`` (the one ``--survey-sigma`` for all).
+
+        A panel whose edges are off by ``d_a`` and ``d_b`` is off by
+        ``(1 - t) d_a + t d_b`` across its face at ``t`` along it; the mean of the two
+        variances is what the panel's returns share, taken as one shift of the whole
+        panel (as one ``sigma_m`` for every edge always has been)."""
+        key = float(sigma_m)
+        memo = self._survey_variances
+        hit = memo.get(key)
+        if hit is None:
+            s2 = key * key
+            if self.edge_sigma_m is None:
+                hit = np.full(len(self), s2)
+            else:
+                v = np.where(np.isnan(self.edge_sigma_m), s2, self.edge_sigma_m**2)
+                hit = 0.5 * (v[:, 0] + v[:, 1])
+            hit.setflags(write=False)
+            memo[key] = hit
+        return hit
+
+    def worst_survey_sigma(self, sigma_m: float) -> float:
+        """The largest standard deviation of any edge (``sigma_m`` for those the survey
+        leaves without one): the tolerance of tests made before it is known which panel
+        a return is on."""
+        if self.edge_sigma_m is None:
+            return float(sigma_m)
+        given = self.edge_sigma_m[~np.isnan(self.edge_sigma_m)]
+        worst = float(given.max()) if given.size else float(sigma_m)
+        return worst if given.size == self.edge_sigma_m.size else max(worst, float(sigma_m))
+
+    @functools.cached_property
+    def _survey_variances(self) -> dict[float, NDArray[np.float64]]:
+        return {}
 
     @functools.cached_property
     def _mid(self) -> NDArray[np.float64]:

@@ -16,15 +16,16 @@ def grouped_quadratic_form(
     q: NDArray[np.float64],
     lever: NDArray[np.float64],
     groups: NDArray[np.intp],
-    group_variance: float,
+    group_variance: NDArray[np.float64],
 ) -> float:
-    """``d^T C^-1 d`` for ``C = diag(variances) + g q g^T + group_variance * S``.
+    """``d^T C^-1 d`` for ``C = diag(variances) + g q g^T + S``.
 
-    ``S[i, j] = lever_i * lever_j`` where observations ``i`` and ``j`` share a
-    group (a panel whose surveyed position errs once for all its returns),
-    else 0. ``C`` is diagonal plus a low-rank part ``U M U^T`` (``U`` the
-    columns of ``g`` and one column per group holding its levers, ``M``
-    block-diagonal: ``q``, then ``group_variance`` per group), so the
+    ``S[i, j] = s_g * lever_i * lever_j`` where observations ``i`` and ``j`` share a
+    group ``g`` (a panel whose surveyed position errs once for all its returns; ``s_g``
+    its variance, ``group_variance`` given per observation), else 0. ``C`` is
+    diagonal plus a low-rank part ``U M U^T`` (``U`` the columns of ``g`` and one
+    column per group holding its levers, ``M`` block-diagonal: ``q``, then each
+    group's variance), so the
     Woodbury identity gives the form from ``k x k`` matrices, ``k`` the
     columns of ``g`` plus the groups::
 
@@ -47,7 +48,9 @@ def grouped_quadratic_form(
     u[np.arange(n), p + col.reshape(-1)] = lever
     m = np.zeros((u.shape[1], u.shape[1]))
     m[:p, :p] = q
-    m[p:, p:] = group_variance * np.eye(names.size)
+    per_group = np.zeros(names.size)
+    per_group[col.reshape(-1)] = group_variance
+    m[p:, p:] = np.diag(per_group)
     w = 1.0 / variances
     y = u.T @ (w * d)
     k = u.T @ (w[:, None] * u)

@@ -348,6 +348,9 @@ class Observations:
     offsets: NDArray[np.float64]
     panel: NDArray[np.intp]
     beacon: NDArray[np.intp]
+    survey_var: NDArray[np.float64]
+    """Each return's panel's surveyed variance across its face, m²
+    (:meth:`~mast.core.geometry.PanelSet.survey_variance`)."""
     variance_scale: NDArray[np.float64] | None = None
     """Each return's variance over the noise model's (None: all 1)."""
 
@@ -360,6 +363,7 @@ class Observations:
             self.offsets[keep],
             self.panel[keep],
             self.beacon[keep],
+            self.survey_var[keep],
             None if self.variance_scale is None else self.variance_scale[keep],
         )
 
@@ -417,15 +421,25 @@ def _ray_association(
         _floats(panels.normal[keep]),
         panels.beacon[keep],
         _NO_COFACTOR if pose_cofactor is None else _floats(pose_cofactor),
-        gate_sigmas * noise.gate_sigma_m,
+        gate_sigmas * _first_gate_sigma(panels, keep, noise),
         gate_sigmas,
         noise.range_sigma_m,
         noise.angle_sigma_rad,
-        noise.survey_sigma_m,
+        _floats(panels.survey_variance(noise.survey_sigma_m)[keep]),
         MIN_INCIDENCE_COS,
         jump_m(noise.range_sigma_m),
     )
     return beams, keep[rows], edge
+
+
+def _first_gate_sigma(panels: PanelSet, keep: NDArray[np.intp], noise: NoiseModel) -> float:
+    """The range gate's standard deviation before an adjustment gives the pose's own:
+    the range noise with the largest surveyed variance among the ``keep`` panels
+    (``noise.gate_sigma_m`` when the survey gives none of its own)."""
+    if panels.edge_sigma_m is None or keep.size == 0:
+        return noise.gate_sigma_m
+    worst = float(panels.survey_variance(noise.survey_sigma_m)[keep].max())
+    return math.sqrt(noise.range_sigma_m**2 + worst)
 
 
 #: What :func:`mast.core._kernels.ray_association` takes for "no pose uncertainty yet".
@@ -453,12 +467,13 @@ def _ray_association_reference(
     pk = keep[j[hit]]
     nrm = panels.normal[pk]
     nu = np.abs(np.einsum("ij,ij->i", nrm, dirs))
-    gate = np.full(beams.size, gate_sigmas * noise.gate_sigma_m)
+    gate = np.full(beams.size, gate_sigmas * _first_gate_sigma(panels, keep, noise))
     if pose_cofactor is not None and beams.size:
         offsets = np.einsum("ij,ij->i", nrm, panels.a[pk])
         _rho, jac, d_phi = _range_model_reference(pose, scan.angles_rad[beams], nrm, offsets)
         pred = np.einsum("ij,jk,ik->i", jac, pose_cofactor, jac)
-        var = noise.gate_variance(d_phi) + np.where(np.isfinite(pred), pred, 0.0)
+        surveyed = panels.survey_variance(noise.survey_sigma_m)[pk]
+        var = noise.variance(d_phi) + surveyed + np.where(np.isfinite(pred), pred, 0.0)
         gate = gate_sigmas * np.sqrt(var)
     ok = (np.abs(scan.ranges_m[beams] - t) <= gate) & (nu > MIN_INCIDENCE_COS)
     edge = at_silhouette(
@@ -548,11 +563,11 @@ def adjust_on_panels(
         _floats(panels.b[keep]),
         _floats(panels.normal[keep]),
         panels.beacon[keep],
-        gate_sigmas * noise.gate_sigma_m,
+        gate_sigmas * _first_gate_sigma(panels, keep, noise),
         gate_sigmas,
         noise.range_sigma_m,
         noise.angle_sigma_rad,
-        noise.survey_sigma_m,
+        _floats(panels.survey_variance(noise.survey_sigma_m)[keep]),
         MIN_INCIDENCE_COS,
         jump_m(noise.range_sigma_m),
         SILHOUETTE_VARIANCE,
@@ -575,6 +590,7 @@ def adjust_on_panels(
         np.einsum("ij,ij->i", nrm, panels.a[used_panels]),
         used_panels,
         panels.beacon[used_panels],
+        panels.survey_variance(noise.survey_sigma_m)[used_panels],
         scale,
     )
     return obs, _adjustment_of(gn)
@@ -646,19 +662,19 @@ def _adjust_on_panels_reference(
         np.einsum("ij,ij->i", nrm, panels.a[used_panels]),
         used_panels,
         panels.beacon[used_panels],
+        panels.survey_variance(noise.survey_sigma_m)[used_panels],
         used_scale,
     )
     return obs, adj
 
 
-def survey_covariance(
-    adj: Adjustment, obs: Observations, survey_sigma_m: float
-) -> NDArray[np.float64]:
+def survey_covariance(adj: Adjustment, obs: Observations) -> NDArray[np.float64]:
     """Pose covariance from the surveyed panels' own position errors.
 
-    A panel surveyed ``sigma_s`` off across its face moves every range to it by
-    ``sigma_s / |n . u|`` together; through the estimator ``K = Q G^T W`` that
-    adds ``K S K^T`` to the noise covariance (S: those shared range errors).
+    A panel surveyed ``sigma_s`` off across its face (``obs.survey_var``, its own per
+    panel) moves every range to it by ``sigma_s / |n . u|`` together; through the
+    estimator ``K = Q G^T W`` that adds ``K S K^T`` to the noise covariance (S: those
+    shared range errors).
     """
     return survey_shares(
         adj.pose.easting,
@@ -670,17 +686,15 @@ def survey_covariance(
         adj.sigmas_m,
         adj.cofactor,
         np.ascontiguousarray(obs.panel, dtype=np.intp),
-        survey_sigma_m**2,
+        _floats(obs.survey_var),
     )
 
 
-def _survey_covariance_reference(
-    adj: Adjustment, obs: Observations, survey_sigma_m: float
-) -> NDArray[np.float64]:
+def _survey_covariance_reference(adj: Adjustment, obs: Observations) -> NDArray[np.float64]:
     """:func:`survey_covariance` in numpy, the compiled kernel's reference."""
     lever = obs.survey_levers(adj.pose)
     k = adj.cofactor @ (adj.jacobian / (adj.sigmas_m**2)[:, None]).T  # (3, n)
     # Each panel's column K_p l_p, all panels at once: (3, panels).
-    _, at = np.unique(obs.panel, return_inverse=True)
+    _, first, at = np.unique(obs.panel, return_index=True, return_inverse=True)
     cols = np.stack([np.bincount(at.reshape(-1), weights=row * lever) for row in k])
-    return np.asarray(survey_sigma_m**2 * (cols @ cols.T))
+    return np.asarray((cols * obs.survey_var[first]) @ cols.T)

@@ -113,7 +113,7 @@ def beacon_tests(
         np.ascontiguousarray(obs.beacon, dtype=np.intp),
         np.ascontiguousarray(obs.panel, dtype=np.intp),
         ids.astype(np.intp),
-        noise.survey_sigma_m**2,
+        np.ascontiguousarray(obs.survey_var, dtype=float),
         MAX_TEST_CONDITION,
     )
     return [
@@ -166,7 +166,7 @@ def _beacon_tests_reference(
                 q_rest,
                 lever_all[mine],
                 obs.panel[mine],
-                noise.survey_sigma_m**2,
+                obs.survey_var[mine],
             )
         except np.linalg.LinAlgError:
             continue

@@ -493,9 +493,12 @@ def segmented(fix: Fix, scan: Scan, survey: Survey) -> tuple[Segmentation, Panel
         return fix.segmentation, fix.identification
     cfg = fix.config
     seg = segmentation_of(fix, scan)
-    index, _ = survey_index(survey, scan.range_max_m)
+    index, panels = survey_index(survey, scan.range_max_m)
     ident = identify_panels(
-        seg, index.representatives, cfg.identification, survey_sigma_m=cfg.noise.survey_sigma_m
+        seg,
+        index.representatives,
+        cfg.identification,
+        survey_sigma_m=panels.worst_survey_sigma(cfg.noise.survey_sigma_m),
     )
     return seg, ident
 
@@ -689,7 +692,7 @@ def _identified(
             seg,
             ready[0].representatives,
             cfg.identification,
-            survey_sigma_m=cfg.noise.survey_sigma_m,
+            survey_sigma_m=ready[1].worst_survey_sigma(cfg.noise.survey_sigma_m),
         )
 
 
@@ -762,7 +765,11 @@ def _locate(
         with clock("hypotheses"):
             hyps = (
                 pose_hypotheses(
-                    known, seg, index, cfg.hypotheses, survey_sigma_m=noise.survey_sigma_m
+                    known,
+                    seg,
+                    index,
+                    cfg.hypotheses,
+                    survey_sigma_m=panels.worst_survey_sigma(noise.survey_sigma_m),
                 )
                 if known.nodes
                 else []
@@ -877,10 +884,8 @@ def _locate(
             "of freedom: the returns do not fit the surveyed beacons",
             residuals=summary(obs, adj, tests),
         )
-    if noise.survey_sigma_m > 0:
-        adj = replace(
-            adj, covariance=adj.covariance + survey_covariance(adj, obs, noise.survey_sigma_m)
-        )
+    if np.any(obs.survey_var > 0):
+        adj = replace(adj, covariance=adj.covariance + survey_covariance(adj, obs))
     panels_used: dict[str, list[int]] = {}
     for k in np.unique(obs.panel):
         panels_used.setdefault(panels.ids[panels.beacon[k]], []).append(int(panels.panel[k]))

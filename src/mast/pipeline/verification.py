@@ -560,11 +560,14 @@ def _straight_and_fitted(
     points: NDArray[np.float64],
     on: NDArray[np.bool_],
     to_panels_m: NDArray[np.float64],
+    panel_of: NDArray[np.intp],
     origin: NDArray[np.float64],
     noise: NoiseModel,
+    survey_var: NDArray[np.float64],
 ) -> tuple[float, float]:
     """Chi-squares of a beacon's returns (``points`` where ``on``; ``to_panels_m`` their
-    offsets from its panels, one per point) about one straight line and about its panels.
+    offsets from its panels ``panel_of``, one per point) about one straight line and
+    about its panels (``survey_var``: each panel's surveyed variance).
 
     Each offset is weighed by the noise a return really has across the line:
     the range noise projected on the line's normal (``sigma_r * |n . u|`` for
@@ -583,7 +586,8 @@ def _straight_and_fitted(
         np.asarray(origin, dtype=float),
         noise.range_sigma_m,
         noise.angle_sigma_rad,
-        noise.survey_sigma_m,
+        np.ascontiguousarray(panel_of, dtype=np.intp),
+        np.ascontiguousarray(survey_var, dtype=float),
     )
     return float(chi_line), float(chi_beacon)
 
@@ -593,9 +597,10 @@ def _straight_and_fitted_reference(
     to_panels_m: NDArray[np.float64],
     origin: NDArray[np.float64],
     noise: NoiseModel,
+    survey_var: NDArray[np.float64],
 ) -> tuple[float, float]:
     """:func:`_straight_and_fitted` in numpy, on the returns on the beacon (the tests
-    compare the two)."""
+    compare the two); ``survey_var`` is each return's panel's surveyed variance."""
     centre = points.mean(axis=0)
     q = points - centre
     _, vecs = np.linalg.eigh(q.T @ q)
@@ -604,7 +609,7 @@ def _straight_and_fitted_reference(
     var = (noise.range_sigma_m * cos_n) ** 2 + (rho * noise.angle_sigma_rad) ** 2 * (1 - cos_n**2)
     var = np.maximum(var, (0.1 * noise.range_sigma_m) ** 2)
     chi_line = float(np.sum((q @ normal) ** 2 / var))
-    chi_beacon = float(np.sum(to_panels_m**2 / (var + noise.survey_sigma_m**2)))
+    chi_beacon = float(np.sum(to_panels_m**2 / (var + survey_var)))
     return chi_line, chi_beacon
 
 
@@ -651,7 +656,7 @@ def _in_place(
         noise.range_sigma_m,
         noise.angle_sigma_rad,
         cfg.grazing_noise_floor,
-        noise.survey_sigma_m,
+        panels.survey_variance(noise.survey_sigma_m),
     )
     return count > 0 and chi2_sf(chi, count) > cfg.straight_alpha
 
@@ -695,10 +700,11 @@ def _in_place_reference(
     # A beam within 2 degrees of grazing carries no usable range (the adjustment
     # leaves it out too): its footprint spreads along the whole panel.
     usable = cos_n > MIN_INCIDENCE_COS
-    on, rho, cos_n = on[usable], rho[usable], cos_n[usable]
+    on, k, rho, cos_n = on[usable], k[usable], rho[usable], cos_n[usable]
     across = noise.range_sigma_m * np.maximum(cos_n, cfg.grazing_noise_floor)
     var = across**2 + (rho * noise.angle_sigma_rad) ** 2 * (1 - cos_n**2)
-    chi = float(np.sum(icp.residual_m[on] ** 2 / (var + noise.survey_sigma_m**2)))
+    surveyed = panels.survey_variance(noise.survey_sigma_m)[k]
+    chi = float(np.sum(icp.residual_m[on] ** 2 / (var + surveyed)))
     return on.size > 0 and chi2_sf(chi, int(on.size)) > cfg.straight_alpha
 
 
@@ -721,6 +727,7 @@ def _stray_corner(
     gate_m: float,
     noise: NoiseModel,
     cfg: VerificationConfig,
+    survey_sigma_m: float | None = None,
 ) -> bool:
     """Whether a corner of the scan lands beside one of a beacon's node edges, not on an edge.
 
@@ -741,14 +748,16 @@ def _stray_corner(
     beacon of a turned-round pose, which is then ambiguous with the truth).
     Everything is compared in the scanner frame, where the corners and
     their covariances are (``edges_scanner``: the beacon's surveyed edges
-    mapped there by the pose).
+    mapped there by the pose; ``survey_sigma_m`` their largest standard deviation,
+    the noise model's when not given).
     """
     if not seg.corners:
         return False
     nodes = np.array([c.node for c in seg.corners])
     d = np.hypot(*(nodes[:, None, :] - edges_scanner[None, :, :]).transpose(2, 0, 1))
     near_node = np.any(d[:, 1:3] < cfg.corner_reach_m, axis=1) & ~np.any(d <= gate_m, axis=1)
-    extra = noise.gate_sigma_m**2 + noise.survey_sigma_m**2
+    surveyed = noise.survey_sigma_m if survey_sigma_m is None else survey_sigma_m
+    extra = noise.gate_sigma_m**2 + surveyed**2
     for k in np.flatnonzero(near_node):
         c = seg.corners[k]
         a, b = seg.segments[c.first], seg.segments[c.second]
@@ -841,11 +850,12 @@ def _on_their_edges(
             if not left:
                 break
             mapped = icp.pose.scanner_to_mine(node.node_scanner[None, :])[0]
-            gate = cfg.gate_sigmas * math.hypot(
-                node_sigma(node, seg), noise.survey_sigma_m, noise.range_sigma_m
-            )
+            spread = node_sigma(node, seg)
             for b in left:
-                if math.dist(mapped, index.survey[b].edges[node.edge - 1]) <= gate:
+                edge = node.edge - 1
+                surveyed = float(index.survey[b].sigmas_or(noise.survey_sigma_m)[edge])
+                gate = cfg.gate_sigmas * math.hypot(spread, surveyed, noise.range_sigma_m)
+                if math.dist(mapped, index.survey[b].edges[edge]) <= gate:
                     node_ok.add(b)
     return node_ok
 
@@ -940,11 +950,18 @@ def _support(
         if not tracked and seg is not None:
             edges_scanner = icp.pose.mine_to_scanner(index.survey[b].edges)
             gate_node = cfg.gate_sigmas * math.hypot(seg.noise_m * 3.0, noise.gate_sigma_m)
-            if _stray_corner(edges_scanner, seg, gate_node, noise, cfg):
+            worst = float(index.survey[b].sigmas_or(noise.survey_sigma_m).max())
+            if _stray_corner(edges_scanner, seg, gate_node, noise, cfg, worst):
                 continue
         if b not in fitted_memo:
             fitted_memo[b] = _straight_and_fitted(
-                points_mine, on, icp.residual_m, icp.pose.position, noise
+                points_mine,
+                on,
+                icp.residual_m,
+                icp.panel,
+                icp.pose.position,
+                noise,
+                panels.survey_variance(noise.survey_sigma_m),
             )
         chi_line, chi_beacon = fitted_memo[b]
         bent = _shows_a_bend(chi_line, chi_beacon, cfg.straight_alpha)

@@ -15,6 +15,7 @@ from typing import Any
 import numpy as np
 
 from mast import __version__
+from mast.core.beacon import Survey
 from mast.core.pose import format_dms
 from mast.core.scan import Scan
 from mast.pipeline.integrity import Residuals
@@ -65,6 +66,9 @@ class ReportInputs:
     config_sha256 : str, optional
         The SHA-256 of the effective configuration's settings text
         (:mod:`mast.io.settings`): what ``config.toml`` beside a run's results holds.
+    survey_sigmas : str, optional
+        How the survey weighs its edges when it gives its own ``sigma_m``
+        (:meth:`~mast.core.beacon.Survey.sigma_text`); None: one sigma for all.
     """
 
     scan_file: str | None = None
@@ -75,6 +79,7 @@ class ReportInputs:
     computed_utc: datetime = field(default_factory=lambda: datetime.now(UTC))
     config_file: str | None = None
     config_sha256: str | None = None
+    survey_sigmas: str | None = None
 
 
 def _r(x: float, nd: int = 6) -> float | None:
@@ -330,16 +335,26 @@ def _input_lines(fix: Fix, scan: Scan | None, inputs: ReportInputs) -> list[str]
             return " (default)"
         return f" (from {inputs.scanner})" if inputs.scanner and key != "survey_sigma_m" else ""
 
+    surveyed = (
+        f"{_mm(noise.survey_sigma_m)} mm per edge coordinate{tag('survey_sigma_m')}"
+        if inputs.survey_sigmas is None
+        else inputs.survey_sigmas
+    )
     lines += [
         f"  Range σ       {_mm(noise.range_sigma_m)} mm{tag('range_sigma_m')}",
         f"  Angle σ       {noise.angle_sigma_rad:g} rad{tag('angle_sigma_rad')}",
-        f"  Survey σ      {_mm(noise.survey_sigma_m)} mm per edge coordinate"
-        f"{tag('survey_sigma_m')}",
+        f"  Survey σ      {surveyed}",
     ]
     prior = fix.config.prior
     if prior is not None:
         lines.append(f"  Prior         {prior.pose}, radius {prior.radius_m:g} m")
     return lines
+
+
+def survey_weighing(survey: Survey, default_m: float) -> str | None:
+    """:attr:`ReportInputs.survey_sigmas` for a survey: None when it gives no
+    ``sigma_m`` of its own (the report then names the one sigma for all)."""
+    return survey.sigma_text(default_m) if survey.edge_sigmas().size else None
 
 
 def fix_text(
