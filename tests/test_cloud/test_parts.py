@@ -47,20 +47,28 @@ def test_plan_grid_merges_chunks_into_min_max_count_and_bins() -> None:
     assert int(g.bins[row[0]]) == 7
 
 
-@pytest.mark.parametrize("noise", [0.0, 0.005, 0.01])
-def test_top_edge_is_unbiased_and_its_sigma_honest(noise: float) -> None:
-    """Points spread evenly over a 0.6 m panel with Gaussian noise: the top comes back
-    within its own sigma about as often as a normal distribution says."""
+@pytest.mark.parametrize(
+    ("noise", "fall"), [(0.0, 1.0), (0.005, 1.0), (0.01, 1.0), (0.005, 0.5), (0.01, 0.5)]
+)
+def test_top_edge_is_unbiased_and_its_sigma_honest(noise: float, fall: float) -> None:
+    """Points over a 0.6 m panel with Gaussian noise, evenly or thinning out upwards to
+    ``fall`` of the bottom's density (a scanner's range and incidence change up a
+    panel): the top comes back within 0.3 of its spread, and within its own sigma
+    about as often as a normal distribution says. (Assuming an even density, as the
+    estimate once did, put it 7-14 mm low at half the density.)"""
     rng = np.random.default_rng(1)
     errs, sigs = [], []
     for _ in range(300):
-        z = rng.uniform(1.4, 2.0, 400) + rng.normal(0, noise, 400)
+        u = rng.uniform(0, 1, 400)
+        # a density falling linearly from 1 to ``fall``: its inverse distribution function
+        x = u if fall == 1.0 else (-1 + np.sqrt(1 + (fall**2 - 1) * u)) / (fall - 1)
+        z = 1.4 + 0.6 * x + rng.normal(0, noise, 400)
         top, sigma, bottom = _top_edge(z, max(noise, 0.002))
         errs.append(top - 2.0)
         sigs.append(sigma)
         assert abs(bottom - 1.4) < 0.05
     e, s = np.array(errs), np.array(sigs)
-    assert abs(float(np.mean(e))) < 3 * float(np.std(e)) / math.sqrt(e.size) + 1e-4
+    assert abs(float(np.mean(e))) < 0.3 * float(np.std(e))
     inside = float(np.mean(np.abs(e) <= 1.96 * s))
     assert 0.88 <= inside <= 0.995
 
@@ -75,7 +83,7 @@ def _beacons(
         local = np.array([[10.0 * k, 3.0 + k % 2], [10.0 * k + 0.5, 3.3 + k % 2]])
         top = 1.0 + 0.1 * k
         grid = local @ r.T + t
-        cov = np.array([np.eye(2) * sigma**2] * 2)
+        cov = np.eye(4) * sigma**2
         out.append(
             BeaconObs(
                 f"B{k}",
@@ -147,7 +155,7 @@ def _drifting_run(rng: np.random.Generator, drift: float) -> tuple[ScannerPath, 
                 f"B{k:02d}",
                 (2, 3),
                 q + slam_xyz[tb, :2] + rng.normal(0, sigma, q.shape),
-                np.array([np.eye(2) * sigma**2] * 2),
+                np.eye(4) * sigma**2,
                 1.0,
                 0.002,
                 grid + rng.normal(0, 0.003, grid.shape),
@@ -215,7 +223,7 @@ def test_a_beacon_the_rest_cannot_place_is_not_tested() -> None:
     rng = np.random.default_rng(6)
     traj, obs = _drifting_run(rng, 0.004)
     ends = [
-        replace(o, edges=(2,), cloud_xy=o.cloud_xy[:1], cloud_cov=o.cloud_cov[:1],
+        replace(o, edges=(2,), cloud_xy=o.cloud_xy[:1], cloud_cov=o.cloud_cov[:2, :2],
                 grid_xy=o.grid_xy[:1])
         for o in (obs[0], obs[-1])
     ]  # fmt: skip

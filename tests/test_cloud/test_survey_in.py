@@ -117,7 +117,7 @@ def test_bad_options_are_bad_input(
 def test_a_panel_lines_covariance_matches_its_scatter() -> None:
     """The line's angle and offset (about an origin 0.35 m away, as the fit takes them)
     vary over many noisy fits as the covariance says, their correlation's sign too."""
-    from mast.cloud.survey_in import _line
+    from mast.cloud.beacon_fit import panel_line
 
     rng = np.random.default_rng(5)
     t = np.linspace(0.0, 0.6, 300)
@@ -126,9 +126,9 @@ def test_a_panel_lines_covariance_matches_its_scatter() -> None:
     draws = []
     for _ in range(3000):
         pts = base + rng.normal(0.0, 0.0015, t.size)[:, None] * normal
-        draws.append(_line(pts, 0.0015)[0])
+        draws.append(panel_line(pts, 0.0015)[0])
     got = np.cov(np.array(draws).T)
-    _, want = _line(base + rng.normal(0.0, 0.0015, t.size)[:, None] * normal, 0.0015)
+    _, want, _ = panel_line(base + rng.normal(0.0, 0.0015, t.size)[:, None] * normal, 0.0015)
     assert np.allclose(np.diag(got), np.diag(want), rtol=0.15)
     assert np.sign(got[0, 1]) == np.sign(want[0, 1])
     assert got[0, 1] == pytest.approx(want[0, 1], rel=0.2)

@@ -55,7 +55,9 @@ class BeaconObs:
         Edge numbers observed (2 and/or 3).
     cloud_xy : ndarray, shape (k, 2)
         The edges in the cloud's plan.
-    cloud_cov : ndarray, shape (k, 2, 2)
+    cloud_cov : ndarray, shape (2k, 2k)
+        The edges' joint covariance in the cloud's plan, ``(x, y)`` of each edge in
+        turn: edges fitted with their beacon are correlated through its panels.
     top : float
         Height of the beacon's top in the cloud (nan if unknown).
     sigma_top : float
@@ -293,8 +295,8 @@ def _covariance(
         k = len(b.edges)
         if model == "helmert7":
             c = np.zeros((3 * k, 3 * k))
-            for i in range(k):
-                c[3 * i : 3 * i + 2, 3 * i : 3 * i + 2] = b.cloud_cov[i]
+            xy = np.flatnonzero(np.arange(3 * k) % 3 != 2)
+            c[np.ix_(xy, xy)] = b.cloud_cov
             zi = np.arange(k) * 3 + 2
             c[np.ix_(zi, zi)] = b.sigma_top**2  # one top for all its edges
             big = np.kron(np.eye(k), rot * scale)
@@ -305,10 +307,8 @@ def _covariance(
             c = np.zeros((m, m))
             r2 = rot[:2, :2]
             sv = b.survey_var(s2)
-            for i in range(k):
-                c[2 * i : 2 * i + 2, 2 * i : 2 * i + 2] = r2 @ b.cloud_cov[i] @ r2.T + sv[
-                    i
-                ] * np.eye(2)
+            turn = np.kron(np.eye(k), r2)
+            c[: 2 * k, : 2 * k] = turn @ b.cloud_cov @ turn.T + np.diag(np.repeat(sv, 2))
             if heights:
                 # the mean of the observed edges' surveyed tops
                 c[-1, -1] = b.sigma_top**2 + float(np.sum(sv)) / k**2

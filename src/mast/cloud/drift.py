@@ -326,15 +326,12 @@ class _Seen:
         self.key = int(np.argmin(np.abs(t_key - float(o.time))))  # type: ignore[arg-type]
         body = poses[self.key]
         self.q = [np.asarray(body.transformTo(np.asarray(p, dtype=float))) for p in o.cloud_xy]
-        self.cov = [r0 @ cov @ r0.T for cov in o.cloud_cov]
+        turn = np.kron(np.eye(len(self.q)), r0)
+        self.cov = turn @ o.cloud_cov @ turn.T
 
     def factors(self, s2: float) -> list[Any]:
-        return [
-            _edge_factor(self.key, q, g, cov, float(sv))
-            for q, g, cov, sv in zip(
-                self.q, self.obs.grid_xy, self.cov, self.obs.survey_var(s2), strict=True
-            )
-        ]
+        cov = self.cov + np.diag(np.repeat(self.obs.survey_var(s2), 2))
+        return [_edges_factor(self.key, self.q, self.obs.grid_xy, cov)]
 
     def statistic(self, values: Any, marginals: Any, s2: float) -> tuple[float, int]:
         """Squared Mahalanobis distance of the surveyed edges from where a graph solved
@@ -342,36 +339,39 @@ class _Seen:
         freedom."""
         x = values.atPose2(self.key)
         pose_cov = marginals.marginalCovariance(self.key)
-        k = len(self.q)
-        v = np.empty(2 * k)
-        jac = np.empty((2 * k, 3))
-        cov = np.zeros((2 * k, 2 * k))
-        sv = self.obs.survey_var(s2)
-        for i, (q, g, cg) in enumerate(zip(self.q, self.obs.grid_xy, self.cov, strict=True)):
-            v[2 * i : 2 * i + 2], jac[2 * i : 2 * i + 2] = _edge_error(x, q, g)
-            cov[2 * i : 2 * i + 2, 2 * i : 2 * i + 2] = cg + sv[i] * np.eye(2)
+        v, jac = _edges_error(x, self.q, self.obs.grid_xy)
+        cov = self.cov + np.diag(np.repeat(self.obs.survey_var(s2), 2))
         total = cov + jac @ pose_cov @ jac.T
-        return float(v @ np.linalg.solve(total, v)), 2 * k
+        return float(v @ np.linalg.solve(total, v)), v.size
 
 
-def _edge_factor(
-    key: int, q: NDArray[np.float64], g: NDArray[np.float64], cov: NDArray[np.float64], s2: float
+def _edges_factor(
+    key: int, qs: Sequence[NDArray[np.float64]], gs: NDArray[np.float64], cov: NDArray[np.float64]
 ) -> Any:
-    """``X(key) * q = g``: an edge seen at ``q`` in the keyframe's body frame is surveyed
-    at ``g``; ``cov`` is the edge's covariance in the grid, where the error is."""
+    """``X(key) * q_i = g_i`` for a beacon's edges together: seen at ``qs`` in the
+    keyframe's body frame, surveyed at ``gs``; ``cov`` is their joint covariance in the
+    grid, where the error is (edges fitted with their beacon are correlated)."""
     import gtsam
 
-    noise = gtsam.noiseModel.Gaussian.Covariance(cov + s2 * np.eye(2))
+    noise = gtsam.noiseModel.Gaussian.Covariance(cov)
 
     def error(
         this: object, v: object, jac: list[NDArray[np.float64]] | None
     ) -> NDArray[np.float64]:
-        e, d = _edge_error(v.atPose2(this.keys()[0]), q, g)  # type: ignore[attr-defined]
+        e, d = _edges_error(v.atPose2(this.keys()[0]), qs, gs)  # type: ignore[attr-defined]
         if jac is not None:
             jac[0] = d
         return e
 
     return gtsam.CustomFactor(noise, [key], error)
+
+
+def _edges_error(
+    x: Any, qs: Sequence[NDArray[np.float64]], gs: NDArray[np.float64]
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """:func:`_edge_error` of each edge, stacked: the errors (2k,) and Jacobian (2k, 3)."""
+    parts = [_edge_error(x, q, g) for q, g in zip(qs, gs, strict=True)]
+    return np.concatenate([p[0] for p in parts]), np.vstack([p[1] for p in parts])
 
 
 def _edge_error(

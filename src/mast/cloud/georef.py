@@ -15,6 +15,7 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -29,6 +30,7 @@ from mast.cloud.adjust import (
     check_beacons,
     rigid_solution,
 )
+from mast.cloud.beacon_fit import BeaconFit, fit_beacon
 from mast.cloud.detect import (
     BEACON_DENSITY_M2,
     Candidates,
@@ -126,6 +128,8 @@ class Georef:
 #: the node slides along P2 by centimetres (on simulated clouds 3-5 cm of P3 put e3
 #: 3-15 cm off, far beyond its covariance).
 MIN_OUTER_SHARE = 0.4
+#: The edges a beacon's fitted design gives the adjustment (the survey's inner edges).
+INNER_EDGES = (2, 3)
 
 
 def _usable_edges(det: Detection, beacon: str, pieces: PlanPieces, survey: Survey) -> list[int]:
@@ -142,6 +146,39 @@ def _usable_edges(det: Detection, beacon: str, pieces: PlanPieces, survey: Surve
     return out
 
 
+def _start(det: Detection, shape: NDArray[np.float64]) -> NDArray[np.float64]:
+    """The design ``shape`` (four edges) placed where a detection puts it: on its two
+    inner edges, or on its one edge and the direction of its identified panel."""
+    local = shape - shape.mean(axis=0)
+    if 2 in det.nodes and 3 in det.nodes:
+        seen, design = det.nodes[3] - det.nodes[2], local[2] - local[1]
+        at, here = 0.5 * (det.nodes[2] + det.nodes[3]), 0.5 * (local[1] + local[2])
+    else:
+        (e, at), p = next(iter(det.nodes.items())), det.angle_panel
+        seen = np.array([math.cos(det.angle), math.sin(det.angle)])
+        design, here = local[p] - local[p - 1], local[e - 1]
+    theta = math.atan2(seen[1], seen[0]) - math.atan2(design[1], design[0])
+    c, s = math.cos(theta), math.sin(theta)
+    rot = np.array([[c, -s], [s, c]])
+    return np.asarray(local @ rot.T + (at - rot @ here))
+
+
+def _design_fit(
+    det: Detection, shape: NDArray[np.float64], pieces: PlanPieces, xyz: NDArray[np.float64]
+) -> BeaconFit | None:
+    """The beacon fitted whole to its candidate points (:mod:`mast.cloud.beacon_fit`)."""
+    start = _start(det, shape)
+    reach = float(np.max(np.hypot(*(shape - shape.mean(axis=0)).T))) + 0.1
+    centre = start.mean(axis=0)
+    near = xyz[np.max(np.abs(xyz[:, :2] - centre), axis=1) < reach]
+    panels = [pieces.panels[k] for k in det.panels.values()]
+    heights = (
+        float(np.median([p.bottom_m for p in panels])),
+        float(np.median([p.top_m for p in panels])),
+    )
+    return fit_beacon(near, shape, start, heights, pieces.segmentation.noise_m)
+
+
 def _observation(
     det: Detection,
     beacon: str,
@@ -149,13 +186,21 @@ def _observation(
     survey: Survey,
     heights: bool,
     survey_sigma_m: float,
+    xyz: NDArray[np.float64],
 ) -> BeaconObs | None:
-    edges = tuple(_usable_edges(det, beacon, pieces, survey))
+    b = survey[beacon]
+    fit = _design_fit(det, b.edges, pieces, xyz)
+    if fit is not None:
+        edges: tuple[int, ...] = INNER_EDGES
+        cloud_xy, cloud_cov = fit.edges[[e - 1 for e in edges]], fit.edge_covariance(edges)
+    else:
+        edges = tuple(_usable_edges(det, beacon, pieces, survey))
+        cloud_xy = np.array([det.nodes[e] for e in edges])
+        cloud_cov = _block_diagonal([det.covariances[e] for e in edges])
     if not edges:
         return None
     panels = [pieces.panels[k] for k in det.panels.values()]
     top, sigma_top = beacon_top(panels)
-    b = survey[beacon]
     grid_top = math.nan
     if heights and b.elevations is not None:
         z = np.array([b.elevations[e - 1] for e in edges])
@@ -166,8 +211,8 @@ def _observation(
     return BeaconObs(
         beacon,
         edges,
-        np.array([det.nodes[e] for e in edges]),
-        np.array([det.covariances[e] for e in edges]),
+        cloud_xy,
+        cloud_cov,
         top,
         sigma_top,
         np.array([b.edges[e - 1] for e in edges]),
@@ -212,7 +257,7 @@ def georeference(
     dets = detect_beacons(pieces, ident, index)
     match = match_beacons(dets, survey, index, config.match)
     observed = {
-        b: _observation(dets[d], b, pieces, survey, heights, config.survey_sigma_m)
+        b: _observation(dets[d], b, pieces, survey, heights, config.survey_sigma_m, cand.xyz)
         for d, b in match.assigned.items()
     }
     found = {b: o for b, o in observed.items() if o is not None}
@@ -367,3 +412,11 @@ def grid_origin(result: Georef) -> NDArray[np.float64]:
     if result.solution is None:
         return np.zeros(3)
     return np.asarray(result.solution.transformation.translation, dtype=float)
+
+
+def _block_diagonal(blocks: Sequence[NDArray[np.float64]]) -> NDArray[np.float64]:
+    """Independent 2x2 covariances as one (2k, 2k) matrix."""
+    out = np.zeros((2 * len(blocks), 2 * len(blocks)))
+    for i, c in enumerate(blocks):
+        out[2 * i : 2 * i + 2, 2 * i : 2 * i + 2] = c
+    return out

@@ -40,6 +40,12 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
+from mast.cloud.beacon_fit import (
+    edges_covariance,
+    edges_from_lines,
+    panel_line,
+    points_on_panel,
+)
 from mast.cloud.detect import (
     DetectConfig,
     Panel,
@@ -52,7 +58,6 @@ from mast.cloud.io import Chunk, Cloud, open_cloud
 from mast.cloud.match import Detection, detect_beacons
 from mast.core.beacon import Beacon, Survey
 from mast.core.index import SurveyIndex
-from mast.core.lines import fit_line
 from mast.errors import InputError
 from mast.pipeline.identification import identify_panels
 
@@ -257,49 +262,6 @@ def _one_per_beacon(dets: list[Detection], pieces: PlanPieces) -> list[Detection
     return out
 
 
-def _line(
-    points: NDArray[np.float64], noise: float
-) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """A panel's line as (angle of its normal, offset) and their 2x2 covariance, from a
-    total-least-squares fit (its own residuals, never below a tenth of the noise)."""
-    fit = fit_line(points)
-    sigma = max(fit.rms, 0.1 * noise)
-    n = fit.normal
-    phi = math.atan2(n[1], n[0])
-    rho = float(fit.centroid @ n)
-    var_phi = sigma**2 / max(fit.t_spread, 1e-12)
-    var_off = sigma**2 / len(points)
-    # offset about the centroid is independent of the angle; about the origin it is not:
-    # the normal (direction turned +90 deg) turns by -direction per radian, so the offset
-    # at the origin moves by -(centroid . direction) per radian
-    lever = -float(fit.centroid @ fit.direction)
-    jac = np.array([[1.0, 0.0], [lever, 1.0]])  # d(phi, rho) / d(phi, offset at centroid)
-    cov = jac @ np.diag([var_phi, var_off]) @ jac.T
-    return np.array([phi, rho]), cov
-
-
-def _edges(
-    lines: NDArray[np.float64], lengths: NDArray[np.float64], outward: NDArray[np.float64]
-) -> NDArray[np.float64]:
-    """e1..e4 (8,) from the three lines (phi, rho each): e2 = L1 x L2, e3 = L2 x L3; e1
-    and e4 the design's P1 and P3 lengths along their lines, on the ``outward`` sides."""
-
-    def meet(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
-        na = np.array([math.cos(a[0]), math.sin(a[0])])
-        nb = np.array([math.cos(b[0]), math.sin(b[0])])
-        return np.linalg.solve(np.array([na, nb]), np.array([a[1], b[1]]))
-
-    def along(line: NDArray[np.float64], sign_ref: NDArray[np.float64]) -> NDArray[np.float64]:
-        d = np.array([-math.sin(line[0]), math.cos(line[0])])
-        return d if float(d @ sign_ref) >= 0 else -d
-
-    e2 = meet(lines[0], lines[1])
-    e3 = meet(lines[1], lines[2])
-    e1 = e2 + lengths[0] * along(lines[0], outward[0])
-    e4 = e3 + lengths[2] * along(lines[2], outward[1])
-    return np.concatenate([e1, e2, e3, e4])
-
-
 def _fit(
     det: Detection,
     pieces: PlanPieces,
@@ -314,7 +276,7 @@ def _fit(
     # angle's variance times the lever would swamp the offsets' in the propagation
     origin = det.centre
     # the pieces' lines choose the design; the panels' own points fit the edges below
-    lines = np.array([_line(p.segment.points - origin, config.noise_m)[0] for p in panels])
+    lines = np.array([panel_line(p.segment.points - origin, config.noise_m)[0] for p in panels])
     reps = index.representatives
     # P1's points lie from e2 towards e1, P3's from e3 towards e4
     outward = np.array(
@@ -323,7 +285,7 @@ def _fit(
     held = []
     for k in det.designs:
         lengths = _lengths(reps[k])
-        if _fits(_edges(lines, lengths, outward).reshape(4, 2), panels, origin, lengths):
+        if _fits(edges_from_lines(lines, lengths, outward).reshape(4, 2), panels, origin, lengths):
             held.append(k)
     if not held:
         return None
@@ -333,19 +295,16 @@ def _fit(
     if design is None:
         return None
     lengths = _lengths(design)
-    edges = _edges(lines, lengths, outward)
+    edges = edges_from_lines(lines, lengths, outward)
     # every candidate point of each panel, not only its piece's (a long panel's piece
     # may be a fragment of it: a bulge or the mixed returns at its ends cut it), twice
     for _ in range(GATHER_ROUNDS):
         own = [_gather(near, origin, edges.reshape(4, 2), k, panels[k], config) for k in range(3)]
         if any(len(p) < MIN_PANEL_POINTS for p in own):
             return None
-        params, covs = zip(*(_line(p, config.noise_m) for p in own), strict=True)
+        params, covs, _ = zip(*(panel_line(p, config.noise_m) for p in own), strict=True)
         lines = np.array(params)
-        edges = _edges(lines, lengths, outward)
-    cov_lines = np.zeros((6, 6))
-    for k, c in enumerate(covs):
-        cov_lines[2 * k : 2 * k + 2, 2 * k : 2 * k + 2] = c
+        edges = edges_from_lines(lines, lengths, outward)
     xy4 = edges.reshape(4, 2)
     reach1, reach3 = _reaches(xy4[1], xy4[2], xy4[0], xy4[3], lengths, near, origin, panels,
                               config)  # fmt: skip
@@ -353,17 +312,7 @@ def _fit(
     seen = [reach1, float(np.ptp(middle)) + 2 * END_MARGIN_M, reach3]
     if any(s < MIN_SHARE_SEEN * length for s, length in zip(seen, lengths, strict=True)):
         return None
-    jac = np.zeros((8, 6))
-    for j in range(6):
-        step = 1e-7 if j % 2 == 0 else 1e-6
-        up, down = lines.copy().reshape(-1), lines.copy().reshape(-1)
-        up[j] += step
-        down[j] -= step
-        jac[:, j] = (
-            _edges(up.reshape(3, 2), lengths, outward)
-            - _edges(down.reshape(3, 2), lengths, outward)
-        ) / (2 * step)
-    cov = jac @ cov_lines @ jac.T + config.station_sigma_m**2 * np.eye(8)
+    cov = edges_covariance(lines, covs, lengths, outward) + config.station_sigma_m**2 * np.eye(8)
     sig = np.sqrt(0.5 * (np.diag(cov)[0::2] + np.diag(cov)[1::2]))
     top, sigma_top = beacon_top(panels)
     xy = edges.reshape(4, 2) + origin
@@ -459,7 +408,7 @@ def _free_ends(
     scored = []
     for k in held:
         lengths = _lengths(reps[k])
-        e = _edges(lines, lengths, outward).reshape(4, 2)
+        e = edges_from_lines(lines, lengths, outward).reshape(4, 2)
         reaches = _reaches(e[1], e[2], e[0], e[3], lengths, xyz, origin, panels, config)
         deficits = (lengths[0] - reaches[0], lengths[2] - reaches[1])
         if any(d < -OVERRUN_M for d in deficits):
@@ -487,12 +436,18 @@ def _gather(
     """Panel ``k``'s points (plan, about ``origin``): within three noise sigmas and
     :data:`GATHER_SLACK_M` of its line, between its edges less :data:`END_MARGIN_M` at
     each (the corners' and free ends' mixed returns), and within its heights less as
-    much at the top and bottom."""
-    a, b = edges[k], edges[k + 1]
-    length = math.dist(a, b)
-    t, keep = _on_line(xyz, origin, a, (b - a) / max(length, 1e-9), panel, config)
-    keep &= (t > END_MARGIN_M) & (t < length - END_MARGIN_M)
-    out: NDArray[np.float64] = xyz[keep, :2] - origin
+    much at the top and bottom (:func:`~mast.cloud.beacon_fit.points_on_panel`)."""
+    plan = xyz[:, :2] - origin
+    keep = points_on_panel(
+        plan,
+        xyz[:, 2],
+        edges[k],
+        edges[k + 1],
+        (panel.bottom_m, panel.top_m),
+        3.0 * config.noise_m + GATHER_SLACK_M,
+        END_MARGIN_M,
+    )
+    out: NDArray[np.float64] = plan[keep]
     return out
 
 
