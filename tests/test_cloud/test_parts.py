@@ -285,3 +285,15 @@ def test_dense_clusters_and_wide_plans_are_worked_in_blocks(
     monkeypatch.setattr(detect, "RANSAC_BLOCK_POINTS", 1 << 20)
     large = detect._lines_in(wall[:20_000], 0.01, 50, 0.3)
     assert [p.tolist() for p in small] == [p.tolist() for p in large]
+
+
+def test_a_top_edge_always_has_a_spread() -> None:
+    """However the points pile up under the top (rock, a ledge), the top's sigma is never
+    zero: a zero weighed one panel's top over every other beacon's in the adjustment."""
+    rng = np.random.default_rng(3)
+    for _ in range(200):
+        n = int(rng.integers(40, 400))
+        z = np.concatenate([rng.uniform(1.4, 2.0, n), rng.normal(1.9, 0.01, 3 * n)])
+        top, sigma, _ = _top_edge(z, 0.01)
+        assert math.isfinite(top)
+        assert sigma > 1e-4

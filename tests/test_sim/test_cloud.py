@@ -11,6 +11,7 @@ import laspy
 import numpy as np
 import pytest
 
+from mast.errors import InputError
 from mast.io import read_survey
 from mast.sim.cloud import CloudOptions, CloudScenario, simulate_cloud
 
@@ -170,3 +171,34 @@ def test_same_seed_same_files(tmp_path: Path) -> None:
         assert x.read_bytes() == y.read_bytes()
     c = simulate_cloud(tmp_path / "c", seed=8, options=options)
     assert c.cloud.read_bytes() != a.cloud.read_bytes()
+
+
+def test_hard_clouds_thin_with_range_and_mount_several_designs(tmp_path: Path) -> None:
+    """``falloff_m``: the points per square metre fall as the square of the range beyond
+    it (and the truth counts the beacons' points kept); ``designs``: the paper's hat and
+    shallow random hats in turn, each identifiable."""
+    base = CloudOptions(length_m=80.0, beacons=3, density=150.0)
+    plain = simulate_cloud(tmp_path / "plain", seed=3, options=base)
+    hard = CloudOptions(
+        length_m=80.0,
+        beacons=3,
+        density=150.0,
+        falloff_m=3.0,
+        rock_behind_beacons=True,
+        designs=3,
+    )
+    thin = simulate_cloud(tmp_path / "thin", seed=3, options=hard)
+    r_plain = np.asarray(laspy.read(plain.cloud)["range"])
+    r_thin = np.asarray(laspy.read(thin.cloud)["range"])
+    near = np.mean(r_thin < 3.0) * thin.points / (np.mean(r_plain < 3.0) * plain.points)
+    far = np.mean(r_thin > 6.0) * thin.points / (np.mean(r_plain > 6.0) * plain.points)
+    assert 0.8 < near < 1.25  # as dense where the scanner is close
+    assert far < 0.25  # a quarter or less at twice the fall-off and beyond
+    survey = read_survey(thin.survey)
+    lengths = {tuple(np.round(b.template.panel_lengths, 3)) for b in survey}
+    assert len(lengths) == 3
+    assert all(not b.identifiability_problems() for b in survey)
+    counts = [b["panel_points"] for b in _truth(thin)["beacons"]]
+    assert all(sum(c) > 0 for c in counts)
+    with pytest.raises(InputError, match="falloff_m"):
+        simulate_cloud(tmp_path / "bad", seed=3, options=CloudOptions(falloff_m=-1.0))

@@ -231,6 +231,14 @@ def bench_georef(
     density: Annotated[
         float, typer.Option("--density", min=100.0, help="Points per square metre.")
     ] = 2000.0,
+    hard: Annotated[
+        bool,
+        typer.Option(
+            "--hard",
+            help="Clouds as rough as independent ones: density falling with range beyond "
+            "4 m, rough rock right up to the beacons, three designs with shallow outer panels.",
+        ),
+    ] = False,
     out: Annotated[Path | None, typer.Option("--out", help="CSV of every cloud.")] = None,
 ) -> None:
     """Simulated SLAM clouds through mast georef: beacons found, check misclosures, honest
@@ -242,6 +250,7 @@ def bench_georef(
         drift_clouds=drift_clouds,
         large_points=large_points,
         density=density,
+        hard=hard,
         out=out,
         echo=typer.echo,
     )

@@ -75,8 +75,20 @@ def _truth_grid(truth: dict[str, object], xyz: np.ndarray) -> np.ndarray:
     return out
 
 
+#: ``--hard``: the density falls with range beyond this (a scanner's, near the walls).
+HARD_FALLOFF_M = 4.0
+#: ``--hard``: beacon designs in turn (the paper's hat, then shallow random hats).
+HARD_DESIGNS = 3
+
+
 def one_cloud(
-    folder: Path, seed: int, length_m: float, beacons: int, drift: float, density: float
+    folder: Path,
+    seed: int,
+    length_m: float,
+    beacons: int,
+    drift: float,
+    density: float,
+    hard: bool = False,
 ) -> CloudFigures:
     """Simulate one cloud, georeference it (with the trajectory when it drifts), score it."""
     from mast.cloud.adjust import rigid_solution
@@ -87,9 +99,16 @@ def one_cloud(
     from mast.io.trajectory import read_trajectory
     from mast.sim.cloud import CloudOptions, simulate_cloud
 
-    sim = simulate_cloud(
-        folder, seed, CloudOptions(length_m=length_m, beacons=beacons, drift=drift, density=density)
+    options = CloudOptions(
+        length_m=length_m,
+        beacons=beacons,
+        drift=drift,
+        density=density,
+        falloff_m=HARD_FALLOFF_M if hard else None,
+        rock_behind_beacons=hard,
+        designs=HARD_DESIGNS if hard else 1,
     )
+    sim = simulate_cloud(folder, seed, options)
     truth = json.loads(sim.truth.read_text())
     ids = [b["id"] for b in truth["beacons"]]
     checks = tuple(ids[k] for k in range(2, len(ids) - 1, 4))
@@ -236,6 +255,7 @@ def run_georef_bench(
     drift_clouds: int = 6,
     large_points: int = 0,
     density: float = 2000.0,
+    hard: bool = False,
     out: Path | None = None,
     echo: Callable[[str], None] = print,
 ) -> list[CloudFigures]:
@@ -247,7 +267,7 @@ def run_georef_bench(
             drift = 0.0 if k < clouds else 0.01
             length = float(rng.uniform(300.0, 1000.0))
             beacons = int(np.clip(round(length / rng.uniform(22.0, 30.0)), 10, 40))
-            fig = one_cloud(Path(tmp) / f"c{k}", 100 + k, length, beacons, drift, density)
+            fig = one_cloud(Path(tmp) / f"c{k}", 100 + k, length, beacons, drift, density, hard)
             rows.append(fig)
             echo(
                 f"{k:3d} {length:6.0f} m {fig.beacons:3d} beacons drift {100 * drift:.0f} %: "

@@ -553,7 +553,8 @@ def _top_edge(z: NDArray[np.float64], noise: float) -> tuple[float, float, float
     # linear fit's end, twice the standard error of the band's mean density, over the
     # factor that carried the mean to the end
     rel = 2.0 / math.sqrt(max(n_band, 1)) / factor
-    sigma = math.sqrt(above / max(lam, 1e-9) ** 2 + (above / max(lam, 1e-9) * rel) ** 2)
+    reach = max(above / max(lam, 1e-9), window)  # how far the density carries the top
+    sigma = math.sqrt(above / max(lam, 1e-9) ** 2 + (reach * rel) ** 2)
     below = int(np.count_nonzero(z < float(lo) + window))
     bottom = float(lo) + window - below / max(even, 1e-9)
     return top, sigma, bottom

@@ -80,7 +80,7 @@ from mast.errors import InputError
 from mast.io.atomic import atomic_open, write_atomic
 from mast.io.beacons_csv import write_survey
 from mast.io.las import LAS_SCALE_M, LasWriter, new_las_header
-from mast.sim.design import paper_design
+from mast.sim.design import paper_design, random_design
 from mast.sim.tunnel import Roughness, Tunnel, roughen
 
 __all__ = ["CloudOptions", "CloudScenario", "simulate_cloud"]
@@ -128,6 +128,18 @@ class CloudOptions:
     max_points : int or None
         If given, the density is lowered (estimated from a sparse pilot run) so the
         cloud stays within this many points; a surplus is cut from the end.
+    falloff_m : float or None
+        If given, the density falls with range as a scanner's does: a point at range
+        ``r`` from the scanner (at its time) is kept with probability
+        ``min(1, (falloff_m / r)^2)``, so ``density`` holds within ``falloff_m`` and
+        a quarter of it at twice that. None: every surface at ``density``.
+    rock_behind_beacons : bool
+        Rough rock right up to the beacons (their free ends among its bumps); False
+        smooths the wall behind each beacon, as a surveyor's chosen spot would be.
+    designs : int
+        Beacon designs mounted in turn: 1, the paper's hat everywhere; more, the
+        paper's hat and random hats with outer panels at a shallow angle to the wall
+        (deflections 20-35 degrees, chords 0.7-1.3 m: outer panels of 0.1-0.5 m).
     """
 
     length_m: float = 300.0
@@ -140,6 +152,9 @@ class CloudOptions:
     beacon_top_m: float = 2.0
     chunk_points: int = 2_000_000
     max_points: int | None = None
+    falloff_m: float | None = None
+    rock_behind_beacons: bool = False
+    designs: int = 1
 
 
 @dataclass(frozen=True, slots=True)
@@ -415,12 +430,14 @@ class _BeaconTruth:
 
 
 def _pack(
-    parts: list[tuple[Array, Array, int]],
-) -> tuple[Array, Array, NDArray[np.uint8]]:
-    """Points, stations (one per point, or one for all) and kinds, as three arrays."""
+    parts: list[tuple[Array, Array, int, int]],
+) -> tuple[Array, Array, NDArray[np.uint8], NDArray[np.intp]]:
+    """Points, stations (one per point, or one for all), kinds and tags (a beacon
+    panel's ``3 * beacon + panel``, else -1), as four arrays."""
     xyz = np.concatenate([p[0] for p in parts])
     st = np.concatenate([np.broadcast_to(p[1], len(p[0])) for p in parts])
-    return xyz, st, np.concatenate([np.full(len(p[0]), p[2], dtype=np.uint8) for p in parts])
+    kind = np.concatenate([np.full(len(p[0]), p[2], dtype=np.uint8) for p in parts])
+    return xyz, st, kind, np.concatenate([np.full(len(p[0]), p[3], dtype=np.intp) for p in parts])
 
 
 @dataclass(eq=False)
@@ -438,34 +455,35 @@ class _Scene:
     junctions: list[dict[str, Any]] = field(default_factory=list)
 
     def batches(
-        self, rho: float, rng: np.random.Generator, step: float, counts: Array | None = None
-    ) -> Iterator[tuple[Array, Array, NDArray[np.uint8]]]:
-        """Points (true, site frame), stations and kinds, stretch by stretch."""
+        self, rho: float, rng: np.random.Generator, step: float
+    ) -> Iterator[tuple[Array, Array, NDArray[np.uint8], NDArray[np.intp]]]:
+        """Points (true, site frame), stations, kinds and tags, stretch by stretch."""
         m, L = self.main, self.length
         starts = np.arange(0.0, L, step)
         face_rough = m.walls[0].rough
         for i, s0 in enumerate(starts):
             s1 = math.inf if i == len(starts) - 1 else float(starts[i + 1])
-            parts: list[tuple[Array, Array, int]] = []
+            parts: list[tuple[Array, Array, int, int]] = []
             xyz, s, w = m.sweep(m.floor, s0, s1, rho, rng, m.floor_rough)
             keep = np.ones(len(s), dtype=bool)
             for a, b, wa, wb in self.floor_occ:
                 keep &= ~((s >= a) & (s <= b) & (w >= wa) & (w <= wb))
-            parts.append((xyz[keep], s[keep], ROCK))
+            parts.append((xyz[keep], s[keep], ROCK, -1))
             xyz, s, _ = m.sweep(m.roof, s0, s1, rho, rng, m.roof_rough)
-            parts.append((xyz, s, ROCK))
+            parts.append((xyz, s, ROCK, -1))
             for side in (0, 1):
-                parts.append((*m.wall_points(side, s0, s1, rho, rng), ROCK))
+                parts.append((*m.wall_points(side, s0, s1, rho, rng), ROCK, -1))
             for profile, a, b in self.extras:
                 if a < s1 and b > s0:
                     xyz, s, _ = m.sweep(profile, max(a, s0), min(b, s1), rho, rng, None)
-                    parts.append((xyz, s, METAL))
+                    parts.append((xyz, s, METAL, -1))
             for at in (0.0, L):
                 if s0 <= at < s1:
-                    parts.append((m.face(at, rho, rng, face_rough), np.full(1, at), ROCK))
+                    parts.append((m.face(at, rho, rng, face_rough), np.full(1, at), ROCK, -1))
             for item in self.items:
                 if s0 <= item.station < s1:
-                    parts.append((*self._item(item, rho, rng, counts), item.kind))
+                    tag = item.tag if isinstance(item, _Rect) else -1
+                    parts.append((*self._item(item, rho, rng), item.kind, tag))
             yield _pack(parts)
             for sj, d, J, nm in self.sides:  # side drifts, in pieces, seen from the junction
                 if not s0 <= sj < s1:
@@ -480,17 +498,15 @@ class _Scene:
                         pts.append(d.face(float(d.S[-1]), rho, rng, face_rough))
                     p = np.concatenate(pts)
                     p = p[np.abs((p[:, :2] - J) @ nm) >= m.width / 2]  # outside the main drift
-                    yield _pack([(p, np.full(1, sj), ROCK)])
+                    yield _pack([(p, np.full(1, sj), ROCK, -1)])
 
     def _item(
-        self, item: _Rect | _Post, rho: float, rng: np.random.Generator, counts: Array | None
+        self, item: _Rect | _Post, rho: float, rng: np.random.Generator
     ) -> tuple[Array, Array]:
         if isinstance(item, _Rect):
             n = int(rng.poisson(rho * np.linalg.norm(np.cross(item.a, item.b))))
             uv = rng.random((n, 2))
             p = item.origin + uv[:, :1] * item.a + uv[:, 1:] * item.b
-            if item.tag >= 0 and counts is not None:
-                counts[item.tag // 3, item.tag % 3] += n
         else:
             arc = math.radians(220.0)
             n = int(rng.poisson(rho * item.radius * arc * (item.z1 - item.z0)))
@@ -631,7 +647,11 @@ def _build(o: CloudOptions, rng: np.random.Generator) -> tuple[_Scene, float, fl
         raise InputError(
             f"{o.beacons} beacons do not fit in a drift of {L:g} m (3 m apart at least)"
         )
-    design, first = paper_design(), int(rng.integers(2))
+    designs = [paper_design()] + [
+        random_design(rng, chord_range_m=(0.7, 1.3), deflection_range_deg=(20.0, 35.0))
+        for _ in range(o.designs - 1)
+    ]
+    first = int(rng.integers(2))
     cum = np.concatenate([[0.0], np.cumsum(room)])
     smooth: tuple[list[tuple[float, float]], list[tuple[float, float]]] = ([], [])
     for i, virtual in enumerate(np.cumsum(gaps)[:-1]):
@@ -639,10 +659,12 @@ def _build(o: CloudOptions, rng: np.random.Generator) -> tuple[_Scene, float, fl
         s, side = allowed[k][0] + float(virtual - cum[k]), (first + i) % 2
         arc = m.wall_arc(side, s)
         point, tangent, tunnel_side = m.tunnel.wall_point(_SIDES[side], arc)
+        design = designs[i % len(designs)]
         edges = design.mounted(point, tangent, tunnel_side=tunnel_side)
         top = float(m.floor_z(np.array([s]))[0]) + o.beacon_top_m
         half = design.chord_m / 2
-        smooth[side].append((arc - half, arc + half))
+        if not o.rock_behind_beacons:
+            smooth[side].append((arc - half, arc + half))
         m.hidden[side].append((arc - half, arc + half, top - o.panel_height_m, top, False))
         lay.take(s - 1.5, s + 1.5, side, tag=i)
         for p in range(3):
@@ -885,7 +907,7 @@ def _write_cloud(
             if len(arr):
                 written += las.write(las.record(arr))
 
-        for xyz, st, kind in scene.batches(rho, rng, step, counts):
+        for xyz, st, kind, tag in scene.batches(rho, rng, step):
             n = len(st)
             sig = np.clip(st + rng.uniform(-TIME_JITTER_M, TIME_JITTER_M, n), 0.0, scene.length)
             rows = run.at(sig)
@@ -893,6 +915,14 @@ def _write_cloud(
             if o.noise_m > 0:
                 p += rng.normal(0.0, o.noise_m, (n, 3))
             rng_m = np.sqrt(np.sum((p - rows[:, 7:10]) ** 2, axis=1))
+            if o.falloff_m is not None:  # fewer points per square metre farther away
+                kept = rng.random(n) < np.minimum(1.0, (o.falloff_m / rng_m) ** 2)
+                xyz, st, kind, tag, sig, rows, p, rng_m = (
+                    a[kept] for a in (xyz, st, kind, tag, sig, rows, p, rng_m)
+                )
+                n = len(st)
+            on = tag >= 0
+            np.add.at(counts, (tag[on] // 3, tag[on] % 3), 1)
             lo, hi, att = _INTENSITY[kind].T
             inten = (lo + rng.random(n) * (hi - lo)) / (1 + att * rng_m)
             rec = np.zeros(n, dtype=dtype)
@@ -930,6 +960,11 @@ def _check(o: CloudOptions) -> None:
         ),
         (o.chunk_points >= 1000, f"chunk_points {o.chunk_points} must be at least 1000"),
         (o.max_points is None or o.max_points >= 1, "max_points must be positive"),
+        (1 <= o.designs <= 20, f"designs {o.designs} must be within 1-20"),
+        (
+            o.falloff_m is None or (math.isfinite(o.falloff_m) and o.falloff_m > 0),
+            f"falloff_m {o.falloff_m} must be a positive number of metres",
+        ),
     ]
     for ok, problem in problems:
         if not ok:

@@ -168,15 +168,21 @@ def paper_design(
 
 
 def random_design(
-    rng: np.random.Generator, *, chord_range_m: tuple[float, float] = (0.6, 2.0)
+    rng: np.random.Generator,
+    *,
+    chord_range_m: tuple[float, float] = (0.6, 2.0),
+    deflection_range_deg: tuple[float, float] = (20.0, 70.0),
 ) -> BeaconDesign:
-    """An identifiable random hat: distinct panel lengths, clockwise deflections 20-70 deg."""
+    """An identifiable random hat: distinct panel lengths, clockwise deflections in
+    ``deflection_range_deg`` (shallow ones put the outer panels at a shallow angle to the
+    wall)."""
+    lo, hi = (math.radians(v) for v in deflection_range_deg)
     for _ in range(1000):
         p = rng.uniform(1.0, 3.0, size=3)
         q = np.sort(p)
         if np.any(np.diff(q) < 0.25 * q[1:]):
             continue
-        d = -rng.uniform(math.radians(20), math.radians(70), size=2)
+        d = -rng.uniform(lo, hi, size=2)
         design = polyline_design((p[0], p[1], p[2]), (d[0], d[1]), name="random")
         scale = rng.uniform(*chord_range_m) / design.chord_m
         e = design.edges_local * scale
