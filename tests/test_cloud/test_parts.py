@@ -204,12 +204,25 @@ def test_the_drift_correction_tests_each_beacon_and_leaves_a_moved_one_out() -> 
     assert not any(t.failed for t in bent.tests if t.beacon != "B07")
     # left out, the moved beacon stays 0.3 m off rather than the cloud bending onto it
     assert 0.25 < max(np.hypot(*bent.residuals["B07"][:, :2].T)) < 0.35
+    # knocked round by 0.15 rad about its middle: its mean stays, its edges move 34 mm
+    c, s = math.cos(0.15), math.sin(0.15)
+    turned = [
+        o
+        if o.beacon != "B07"
+        else replace(
+            o,
+            grid_xy=(o.grid_xy - o.grid_xy.mean(axis=0)) @ np.array([[c, -s], [s, c]]).T
+            + o.grid_xy.mean(axis=0),
+        )
+        for o in controls
+    ]
+    assert run(turned).excluded == ("B07",)
     with pytest.raises(AdjustmentError, match="inconsistent"):
         run(controls, drift=0.00002)
     # heights: the top against the height chain solved without it, one more dof
     level = correct_drift(traj, controls, rigid, drift=0.01, survey_sigma_m=0.003, heights=True)
     assert level.excluded == ()
-    assert {t.dof for t in level.tests} == {3}  # the mean of its edges (2) and its top
+    assert {t.dof for t in level.tests} == {5}
     raised = [o if o.beacon != "B03" else replace(o, grid_top=o.grid_top + 0.3) for o in controls]
     high = correct_drift(traj, raised, rigid, drift=0.01, survey_sigma_m=0.003, heights=True)
     assert high.excluded == ("B03",)

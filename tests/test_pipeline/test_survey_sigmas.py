@@ -4,15 +4,19 @@
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 from mast.core.beacon import Beacon, Survey
 from mast.core.geometry import PanelSet
+from mast.io.beacons_csv import write_survey
+from mast.io.scan_csv import write_scan_csv
 from mast.pipeline.locator import LocatorConfig, locate
 from mast.report.record import ReportInputs, fix_text, survey_weighing
 from mast.sim import paper_scene, simulate_scan
+from tests._cli import run_mast_text
 
 
 def _with_sigmas(survey: Survey, sigmas: list[float]) -> Survey:
@@ -82,3 +86,24 @@ def test_the_report_says_how_the_survey_weighs_its_edges() -> None:
     fix = locate(scan, own)
     report = fix_text(fix, scan=scan, inputs=ReportInputs(survey_sigmas=text))
     assert f"Survey σ      {text}" in report
+
+
+def test_one_loose_edge_is_named_and_warned_of(tmp_path: Path) -> None:
+    """An edge's sigma_m far above the rest widens every beacon's identification: the
+    commands say which."""
+    scene = paper_scene()
+    sig = {b.id: [0.002, 0.002, 0.002, 0.002] for b in scene.survey}
+    first = scene.survey.ids[0]
+    sig[first][2] = 0.3
+    loose = Survey(Beacon(b.id, b.edges, b.elevations, sig[b.id]) for b in scene.survey)
+    assert loose.loose_edges(0.003) == [f"{first} e3 (0.300 m)"]
+    assert _with_sigmas(scene.survey, [0.002] * 4).loose_edges(0.003) == []
+    survey = tmp_path / "beacons.csv"
+    write_survey(survey, loose)
+    shot = scene.shots[0]
+    scan = simulate_scan(scene.world, shot.pose, shot.scanner, rng=np.random.default_rng(2)).scan
+    path = tmp_path / "scan.csv"
+    write_scan_csv(path, scan)
+    done = run_mast_text("locate", str(path), "-b", str(survey))
+    assert f"far above the rest: {first} e3 (0.300 m)" in done.stderr
+    assert done.returncode in (0, 3), done.stderr

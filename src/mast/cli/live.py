@@ -28,6 +28,7 @@ from mast.cli.options import (
     parse_near,
     precisions,
     signals_as_flag,
+    warn_loose_edges,
 )
 from mast.cli.root import (
     EXIT_NO_FIX,
@@ -118,6 +119,7 @@ def live(
         if not (math.isfinite(value) and value > 0):
             raise InputError(f"{name} must be a positive number of seconds, got {value}")
     survey = read_survey(beacons)
+    warn_loose_edges(survey, cfg.survey_sigma_m)
     options = SourceOptions(
         range_min_m=range_min, range_max_m=range_max, timeout_s=timeout, give_up_s=give_up
     )

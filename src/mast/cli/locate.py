@@ -24,6 +24,7 @@ from mast.cli.options import (
     load_scans,
     parse_near,
     precisions,
+    warn_loose_edges,
 )
 from mast.cli.root import (
     EXIT_NO_FIX,
@@ -93,6 +94,7 @@ def locate(
     if plot is not None:
         check_output_file(plot, suffixes=PLOT_SUFFIXES, inputs=[*scan_paths, beacons])
     survey = read_survey(beacons)
+    warn_loose_edges(survey, cfg.survey_sigma_m)
     numbered = len(scan_paths) > 1
     fixed = located = 0
     # What is alive once a scan is located is frozen, out of the collector's full

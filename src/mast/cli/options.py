@@ -28,6 +28,7 @@ from mast.core.scan import Scan
 from mast.errors import InputError
 
 if TYPE_CHECKING:
+    from mast.core.beacon import Survey
     from mast.pipeline.locator import LocatorConfig
     from mast.pipeline.tracking import Prior
 
@@ -275,6 +276,20 @@ def precisions(
                 err=True,
             )
     return cfg, defaults
+
+
+def warn_loose_edges(survey: Survey, default_m: float) -> None:
+    """One warning line when some surveyed edges are far looser than the rest
+    (:meth:`~mast.core.beacon.Survey.loose_edges`)."""
+    loose = survey.loose_edges(default_m)
+    if loose:
+        more = f" and {len(loose) - 3} more" if len(loose) > 3 else ""
+        typer.echo(
+            f"mast: warning: survey edge sigma_m far above the rest: {', '.join(loose[:3])}"
+            f"{more}; every beacon's identification widens to the largest (survey them "
+            "again, or leave them out)",
+            err=True,
+        )
 
 
 @contextmanager

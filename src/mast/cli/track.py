@@ -23,6 +23,7 @@ from mast.cli.options import (
     precisions,
     run_progress,
     signals_as_flag,
+    warn_loose_edges,
 )
 from mast.cli.root import (
     EXIT_BAD_INPUT,
@@ -112,6 +113,7 @@ def track(
     found = expand_runs(runs)
     check_output_folder(out)
     survey = read_survey(beacons)
+    warn_loose_edges(survey, cfg.survey_sigma_m)
     settings.write(out / "config.toml")  # once the inputs are read: a refused run leaves nothing
     if len(found) > 1 or scheduler is not None:
         outcomes = track_runs(

@@ -1,10 +1,12 @@
 """The cloud-to-grid transformation, adjusted by least squares over the beacon edges.
 
 Observations, per control beacon: its inner edges e2 and e3 found in the
-cloud's plan (intersections of the fitted panel planes, each with the 2x2
-covariance of two fitted lines meeting) and, where the survey has
-elevations, the height of its top (the mean of its panels' top edges). The
-survey's coordinates carry ``survey_sigma_m`` in each coordinate.
+cloud's plan (from the beacon-level fit of :mod:`mast.cloud.beacon_fit`, with
+their joint covariance; or two fitted lines meeting, each edge's own) and, where
+the survey has elevations, the height of its top (the mean of its panels' top
+edges). The survey's coordinates carry its own ``sigma_m`` per edge where it gives
+one (:attr:`BeaconObs.grid_var`), else ``survey_sigma_m``, in each coordinate and
+in the tops' elevations (the survey contract has no vertical sigma).
 
 Models:
 

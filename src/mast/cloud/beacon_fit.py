@@ -16,8 +16,10 @@ panel, come out as if independent. Here the whole beacon is fitted at once:
    the gate narrowing from a first slack to three noise sigmas.
 2. **Lines**: each panel's line fitted by total least squares to the points the
    placement gathers (:func:`panel_line`), with its 2 x 2 covariance from its own
-   residuals; the lines are free, so the edges are the beacon as built, and a
-   survey's own errors in the design do not leak into them.
+   residuals; the lines are free, so the edges are the beacon as built: a survey's
+   own errors in the design only move the gathering gate (3 noise sigmas and 3 mm
+   about the placed shape), which cuts a panel's points on one side only where the
+   shape is off by more than that.
 3. **Edges**: e2 = L1 x L2 and e3 = L2 x L3; e1 and e4 at the design's lengths of
    P1 and P3 along their lines (:func:`edges_from_lines`). Their 8 x 8 covariance
    follows from the six line parameters' (:func:`edges_covariance`): e2 and e3

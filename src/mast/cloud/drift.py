@@ -6,9 +6,10 @@ consecutive keyframes are joined by the SLAM's own relative pose as a GTSAM
 between factor whose standard deviation is the stated drift model (see
 :data:`HEADING_PER_ROOT_M`): ``drift`` of each step in position, and a
 heading random walk of a tenth of ``drift`` per square root of a metre. Every
-control beacon pins the keyframe at the time it was seen: its edges, in that
-keyframe's body frame, must land on the surveyed edges (a custom factor, the
-edges' covariance rotated into the grid plus the survey's). Heights are a
+control beacon pins the keyframe at the time it was seen: the mean of its edges, in
+that keyframe's body frame, must land on the mean of the surveyed edges (a custom
+factor, that mean's covariance from the edges' rotated into the grid plus the
+survey's; a beacon's own heading is left to the SLAM, see ``_Seen``). Heights are a
 separate 1D chain of offsets with the same drift per metre, pinned by the
 beacons' tops.
 
@@ -226,7 +227,7 @@ def correct_drift(
     ) -> BeaconTest[str] | None:
         """``o`` against the graph of ``others`` (a control's is solved without it); None
         when they cannot place the graph (fewer than two points: a rotation left free)."""
-        if sum(len(seen[a.beacon].q) for a in others) < 2:
+        if len(others) < 2:
             return None
         try:
             if role == "control":
@@ -310,20 +311,18 @@ def correct_drift(
     )
 
 
-#: The pose graph takes each beacon as one point, the mean of its edges (see _Seen).
-BEACON_AS_POINT = True
-
-
 class _Seen:
     """A beacon as the pose graph sees it: its edges in the body frame of the keyframe
     nearest the time it was seen (a control's own), their covariance in the grid (the
     cloud's, turned by the rigid rotation ``r0``: the factors' errors are in the grid).
 
-    With :data:`BEACON_AS_POINT` the beacon is one point, the mean of its edges, with
-    that mean's covariance: its own heading (two edges 0.6 m apart, each surveyed to a
-    few millimetres: about 10 mrad) is worse than the SLAM's over the tens of metres
-    between beacons, and a drift model looser than the SLAM (as the benchmark's is,
-    see docs/georef.md) would let it turn the graph at every control."""
+    In the graph (:meth:`factors`) the beacon is one point, the mean of its edges,
+    with that mean's covariance: its own heading (two edges 0.6 m apart, each surveyed
+    to a few millimetres: about 10 mrad) is worse than the SLAM's over the tens of
+    metres between beacons, and a drift model looser than the SLAM (as the benchmark's
+    is, see docs/georef.md) let it turn the graph at every control. Its test
+    (:meth:`statistic`) takes every edge: a beacon knocked round about its middle
+    keeps its mean and moves its edges."""
 
     def __init__(
         self,
@@ -335,32 +334,31 @@ class _Seen:
         self.obs = o
         self.key = int(np.argmin(np.abs(t_key - float(o.time))))  # type: ignore[arg-type]
         body = poses[self.key]
-        k = len(o.edges)
-        mean = np.kron(np.full((1, k), 1.0 / k), np.eye(2)) if BEACON_AS_POINT else np.eye(2 * k)
-        xy = (mean @ o.cloud_xy.reshape(-1)).reshape(-1, 2)
-        self.grid = (mean @ o.grid_xy.reshape(-1)).reshape(-1, 2)
-        self.q = [np.asarray(body.transformTo(np.asarray(p, dtype=float))) for p in xy]
+        self.q = [np.asarray(body.transformTo(np.asarray(p, dtype=float))) for p in o.cloud_xy]
         turn = np.kron(np.eye(len(self.q)), r0)
-        self.cov = turn @ mean @ o.cloud_cov @ mean.T @ turn.T
-        self.mean = mean
+        self.cov = turn @ o.cloud_cov @ turn.T
+        k = len(self.q)
+        self.mean = np.kron(np.full((1, k), 1.0 / k), np.eye(2))  # (2, 2k): the edges' mean
 
-    def _surveyed(self, s2: float) -> NDArray[np.float64]:
-        out: NDArray[np.float64] = (
-            self.mean @ np.diag(np.repeat(self.obs.survey_var(s2), 2)) @ self.mean.T
-        )
+    def _covariance(self, s2: float) -> NDArray[np.float64]:
+        """The edges' joint covariance in the grid, the survey's added."""
+        out: NDArray[np.float64] = self.cov + np.diag(np.repeat(self.obs.survey_var(s2), 2))
         return out
 
     def factors(self, s2: float) -> list[Any]:
-        return [_edges_factor(self.key, self.q, self.grid, self.cov + self._surveyed(s2))]
+        m = self.mean
+        q = [m @ np.concatenate(self.q)]
+        g = (m @ self.obs.grid_xy.reshape(-1)).reshape(1, 2)
+        return [_edges_factor(self.key, q, g, m @ self._covariance(s2) @ m.T)]
 
     def statistic(self, values: Any, marginals: Any, s2: float) -> tuple[float, int]:
         """Squared Mahalanobis distance of the surveyed edges from where a graph solved
         without this beacon (``values``, ``marginals``) puts them, and its degrees of
-        freedom."""
+        freedom (2 per edge)."""
         x = values.atPose2(self.key)
         pose_cov = marginals.marginalCovariance(self.key)
-        v, jac = _edges_error(x, self.q, self.grid)
-        total = self.cov + self._surveyed(s2) + jac @ pose_cov @ jac.T
+        v, jac = _edges_error(x, self.q, self.obs.grid_xy)
+        total = self._covariance(s2) + jac @ pose_cov @ jac.T
         return float(v @ np.linalg.solve(total, v)), v.size
 
 

@@ -236,6 +236,22 @@ class Survey:
         every = np.concatenate(given) if given else np.zeros(0)
         return np.asarray(every[~np.isnan(every)])
 
+    def loose_edges(self, default_m: float) -> list[str]:
+        """The edges whose ``sigma_m`` is more than three times the survey's median edge
+        sigma and above 1 cm, as ``"B07 e3 (0.300 m)"``: tests made before it is known
+        which beacon a corner is (the identification, the pose hypotheses) take the
+        survey's largest sigma, so one loose edge widens them for every beacon."""
+        every = np.concatenate([b.sigmas_or(default_m) for b in self]) if len(self) else np.zeros(0)
+        if every.size == 0:
+            return []
+        limit = max(0.01, 3.0 * float(np.median(every)))
+        return [
+            f"{b.id} e{k + 1} ({s:.3f} m)"
+            for b in self
+            for k, s in enumerate(b.sigmas_or(default_m))
+            if s > limit
+        ]
+
     def sigma_text(self, default_m: float) -> str:
         """How the survey's edges are weighed, for reports: ``"3.0 mm per edge
         coordinate"``, or the survey's own ``sigma_m`` and the default for the rest."""
