@@ -3,9 +3,11 @@
 
 from __future__ import annotations
 
+import json
 import math
 from pathlib import Path
 
+import jsonschema
 import numpy as np
 import pytest
 
@@ -14,7 +16,7 @@ from mast.core.geometry import PanelSet
 from mast.io.beacons_csv import write_survey
 from mast.io.scan_csv import write_scan_csv
 from mast.pipeline.locator import LocatorConfig, locate
-from mast.report.record import ReportInputs, fix_text, survey_weighing
+from mast.report.record import ReportInputs, fix_record, fix_text, survey_weighing
 from mast.sim import paper_scene, simulate_scan
 from tests._cli import run_mast_text
 
@@ -86,6 +88,10 @@ def test_the_report_says_how_the_survey_weighs_its_edges() -> None:
     fix = locate(scan, own)
     report = fix_text(fix, scan=scan, inputs=ReportInputs(survey_sigmas=text))
     assert f"Survey σ      {text}" in report
+    record = fix_record(fix, scan=scan, inputs=ReportInputs(survey_sigmas=text))
+    assert record["inputs"]["survey_sigmas"] == text
+    schema = json.loads((Path(__file__).parents[2] / "docs" / "fix.schema.json").read_text())
+    jsonschema.validate(record, schema)
 
 
 def test_one_loose_edge_is_named_and_warned_of(tmp_path: Path) -> None:

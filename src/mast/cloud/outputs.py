@@ -189,6 +189,11 @@ def transform_record(
         "chi2_bounds": list(sol.chi2_bounds),
         "sigmas_scaled": sol.scaled,
         "survey_sigma_m": result.config.survey_sigma_m,
+        **(
+            {"survey_sigmas": result.survey.sigma_text(result.config.survey_sigma_m)}
+            if result.survey.edge_sigmas().size
+            else {}
+        ),
         "beacons": roles,
         "checks": [
             {

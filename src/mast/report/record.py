@@ -130,6 +130,8 @@ def _inputs_record(fix: Fix, scan: Scan | None, inputs: ReportInputs) -> dict[st
     }
     if inputs.topic is not None:
         rec["topic"] = inputs.topic
+    if inputs.survey_sigmas is not None:
+        rec["survey_sigmas"] = inputs.survey_sigmas
     if inputs.config_sha256 is not None:
         rec.update(config_file=inputs.config_file, config_sha256=inputs.config_sha256)
     if scan is not None:
