@@ -105,3 +105,14 @@ def test_the_edges_covariance_is_the_lines_propagated() -> None:
     # in units of the two coordinates' standard deviations (correlations to 0.1)
     scale = np.sqrt(np.outer(np.diag(cov), np.diag(cov)))
     np.testing.assert_allclose(np.cov(draws.T) / scale, cov / scale, rtol=0, atol=0.1)
+
+
+def test_a_placement_that_slides_away_from_its_start_is_refused() -> None:
+    """Started 30 cm along the wall from the beacon, the shape would have to slide onto
+    it (or onto rock): refused, not taken for the beacon."""
+    rng = np.random.default_rng(8)
+    truth = _placed(0.2, np.array([10.0, 20.0]))
+    xyz = _cloud(rng, truth, 0.01, 2000.0)
+    assert fit_beacon(xyz, SHAPE, truth + np.array([0.03, -0.02]), HEIGHTS, 0.01) is not None
+    away = truth + 0.3 * (truth[3] - truth[0]) / math.dist(truth[3], truth[0])
+    assert fit_beacon(xyz, SHAPE, away, HEIGHTS, 0.01) is None

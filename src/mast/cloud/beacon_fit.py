@@ -62,6 +62,12 @@ MIN_POINTS = 30
 MAX_ROUNDS = 8
 #: A placement has settled when it moves less than this (metres, and radians times a metre).
 SETTLED_M = 1e-5
+#: A placement is refused when an edge moves farther than this from the start (the
+#: detection's corners are centimetres off at worst: farther, it slid onto rock).
+MAX_MOVE_M = 0.15
+#: ... and when the free lines' inner edges are farther than this from the placed shape's
+#: (the points it gathered are not the beacon's panels).
+MAX_DISAGREE_M = 0.05
 
 
 @dataclass(frozen=True, eq=False)
@@ -182,6 +188,9 @@ def place_design(
             break
     rot = _turn(theta)
     edges = local @ rot.T + t
+    start_rel = start - origin
+    if float(np.max(np.hypot(*(edges - start_rel).T))) > MAX_MOVE_M:
+        return None  # slid off to another surface: not the beacon the detection saw
     own = [
         plan[points_on_panel(plan, z, edges[j], edges[j + 1], heights, gate, END_MARGIN_M)] + origin
         for j in range(3)
@@ -288,6 +297,8 @@ def fit_beacon(
     ):
         return None  # panels in line: no corner
     out = edges_from_lines(lines, lengths, outward).reshape(4, 2) + origin
+    if float(np.max(np.hypot(*(out[1:3] - edges[1:3]).T))) > MAX_DISAGREE_M:
+        return None  # the free lines do not meet where the shape is: not its panels
     cov = edges_covariance(lines, [f[1] for f in fitted], lengths, outward)
     sq = sum(f[2] ** 2 * len(p) for f, p in zip(fitted, own, strict=True))
     rms = math.sqrt(sq / sum(len(p) for p in own))
