@@ -150,10 +150,8 @@ def place_design(
     origin = centre.copy()  # coordinates about the beacon: 70 km offsets would swamp
     plan = xyz[:, :2] - origin
     z = xyz[:, 2]
-    t = centre - origin
+    t = np.zeros(2)  # the placement's translation, about ``origin``
     gate = 3.0 * noise_m + FIRST_SLACK_M
-    jac_rows: NDArray[np.float64] = np.zeros((0, 3))
-    resid: NDArray[np.float64] = np.zeros(0)
     for round_ in range(MAX_ROUNDS):
         rot = _turn(theta)
         edges = local @ rot.T + t
