@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from numpy.typing import NDArray
 
 from mast.cloud.adjust import (
     AdjustmentError,
@@ -21,6 +22,7 @@ from mast.cloud.drift import DriftCorrection, correct_drift
 from mast.cloud.grid import PlanGrid, cell_keys, key_ij, pack_ij
 from mast.cloud.outputs import accuracy_class
 from mast.core.trajectory import ScannerPath
+from mast.pipeline.segmentation import Segment
 
 
 def test_cell_keys_round_trip_on_both_sides_of_the_origin() -> None:
@@ -310,3 +312,107 @@ def test_a_top_edge_always_has_a_spread() -> None:
         top, sigma, _ = _top_edge(z, 0.01)
         assert math.isfinite(top)
         assert sigma > 1e-4
+
+
+def test_a_panel_line_running_on_over_rock_stops_at_the_panel() -> None:
+    """Within a dense scan's noise band a panel's line runs on over the rock beside its
+    free end; the rock's points reach from floor to roof, the panel's stay between its
+    bottom and top: the piece is the panel's stretch alone."""
+    from mast.cloud.detect import _even_run
+
+    rng = np.random.default_rng(5)
+    panel = np.column_stack(
+        [rng.uniform(0.0, 0.2, 2000), rng.normal(0.0, 0.001, 2000), rng.uniform(0.0, 0.5, 2000)]
+    )
+    rock = np.column_stack(
+        [rng.uniform(0.25, 0.4, 500), rng.normal(0.0, 0.001, 500), rng.uniform(-0.5, 1.2, 500)]
+    )
+    xyz = np.vstack([panel, rock])
+    kept = np.sort(_even_run(xyz, 0.05))
+    assert kept.tolist() == list(range(2000))
+    # a panel alone, with a bin or two missing, is kept whole
+    gappy = panel[(panel[:, 0] < 0.08) | (panel[:, 0] > 0.13)]
+    assert _even_run(gappy, 0.05).size == gappy.shape[0]
+
+
+def _piece(index: int, xy: NDArray[np.float64]) -> Segment:
+    from mast.cloud.detect import _segment
+
+    return _segment(index, 0, np.arange(xy.shape[0]), xy, 0.001, 0.1)
+
+
+def test_a_short_piece_crossing_a_panel_does_not_cut_it() -> None:
+    """A few mixed returns in a line 7 mm long across a panel, 17 cm from its end, meet
+    it in a 'corner' whose node is anywhere along the panel (the streak's direction is
+    not known to 4 degrees): the panel keeps its whole length (it was cut to 33 cm of
+    50 there)."""
+    from mast.cloud.detect import _corners, _trimmed
+
+    rng = np.random.default_rng(6)
+    t = np.sort(rng.uniform(0.0, 0.5, 3000))
+    panel = np.column_stack([t, rng.normal(0.0, 0.001, t.size)])
+    s = np.linspace(0.0, 0.007, 40)
+    streak = np.column_stack([0.33 + 0.5 * s, 0.003 + 0.866 * s])
+    segs = [_piece(0, panel), _piece(1, streak)]
+    corners = _corners(segs, 0.001)
+    assert corners  # the streak's line meets the panel's near an end of each
+    xy = np.vstack([panel, streak])
+    segs[1] = replace(segs[1], beams=segs[1].beams + panel.shape[0])
+    trimmed = _trimmed(segs, corners, xy, 0.001, 0.1)
+    assert trimmed[0].length > 0.49
+    # a true corner still trims both pieces where their points mix
+    other = np.column_stack(
+        [0.5 + 0.3 * np.cos(1.0) * t[::3] / 0.5, 0.3 * np.sin(1.0) * t[::3] / 0.5]
+    )
+    segs = [_piece(0, panel), _piece(1, other)]
+    segs[1] = replace(segs[1], beams=segs[1].beams + panel.shape[0])
+    corner = _corners(segs, 0.001)
+    trimmed = _trimmed(segs, corner, np.vstack([panel, other]), 0.001, 0.1)
+    assert 0.48 < trimmed[0].length < 0.5
+    assert 0.28 < trimmed[1].length < 0.3
+
+
+def test_streaks_meeting_a_panel_face_do_not_shred_it() -> None:
+    """Mixed returns between a panel's vertical edge and the rock behind lie in plan
+    along the beam, in streaks tens of centimetres long that meet the panel's face
+    inside it. Each end of a piece is trimmed by its strongest corner alone: here the
+    neighbouring panel's, not the streaks' (which cut the panel to 40 cm of 50)."""
+    from mast.cloud.detect import _corners, _trimmed
+
+    rng = np.random.default_rng(7)
+    t = np.sort(rng.uniform(0.0, 0.5, 3000))
+    panel = np.column_stack([t, rng.normal(0.0, 0.001, t.size)])
+    u = rng.uniform(0.0, 0.3, 1500)
+    neighbour = np.column_stack([0.5 + np.cos(0.5) * u, np.sin(0.5) * u])
+    parts = [panel, neighbour]
+    for x0 in (0.40, 0.45):  # streaks running away from the face at 60 degrees
+        s = rng.uniform(0.005, 0.15, 150)
+        parts.append(np.column_stack([x0 - 0.5 * s, 0.866 * s]))
+    segs, first = [], 0
+    for k, p in enumerate(parts):
+        segs.append(replace(_piece(k, p), beams=_piece(k, p).beams + first))
+        first += p.shape[0]
+    corners = _corners(segs, 0.001)
+    assert sum(1 for c in corners if {c.first % 4, c.second % 4} & {2, 3}) >= 2
+    trimmed = _trimmed(segs, corners, np.vstack(parts), 0.001, 0.1)
+    assert 0.48 < trimmed[0].length < 0.5
+
+
+def test_a_piece_along_a_larger_one_is_a_duplicate_and_a_shallow_neighbour_is_not() -> None:
+    from mast.cloud.detect import _duplicates
+
+    rng = np.random.default_rng(8)
+    t = rng.uniform(0.0, 0.6, 3000)
+    middle = np.column_stack([t, rng.normal(0.0, 0.01, t.size)])
+    # a short outer panel 25 degrees off: most of its points lie in the middle's band
+    s = rng.uniform(0.0, 0.16, 300)
+    outer = np.column_stack([0.6 + np.cos(0.44) * s, np.sin(0.44) * s])
+    xy = np.vstack([middle, outer])
+    pieces = [np.arange(3000), np.arange(3000, 3300)]
+    rows_near_middle = np.flatnonzero(np.abs(xy[:, 1]) < 0.03)
+    # the outer panel's points found again along its line hold many of the middle's
+    pieces[1] = np.union1d(pieces[1], rows_near_middle[xy[rows_near_middle, 0] > 0.52])
+    # a streak crossing the middle at 2 degrees found the middle's points again
+    along = rows_near_middle[(xy[rows_near_middle, 0] > 0.1) & (xy[rows_near_middle, 0] < 0.4)]
+    pieces.append(along)
+    assert _duplicates(pieces, xy, xy.shape[0]).tolist() == [False, False, True]

@@ -13,16 +13,18 @@ cells and the candidate points, not the cloud):
    short columns, machines stand on the floor.
 3. **Candidates.** The points of those cells.
 
-The candidates are then reduced to plan: clusters of touching cells are
-ordered along their own spanning tree and split into straight pieces by
-binary segmentation (each cut must buy more than the BIC-like penalty of the
-2D segmentation); every piece is fitted with a vertical plane in 3D and kept
-only when it is vertical, flat to the noise and at least ``min_panel_height_m``
-tall; its top edge is found from where the point density along the height
-halves (the level whose count above equals the density times the height
-above a reference; unbiased for any symmetric noise). Neighbouring pieces whose
-lines meet near their ends form corners, and the corners go to the same panel
-identification as ``mast locate`` (:func:`mast.pipeline.identification.identify_panels`).
+The candidates are then reduced to plan: clusters of touching cells are split
+into straight pieces by sequential RANSAC (:func:`_lines_in`), each piece cut
+to its most populous run of heights and to its longest stretch of even heights
+along its line (:func:`_even_run`: a panel's line running on over the rock);
+every piece is fitted with a vertical plane in 3D and kept only when it is
+vertical, flat to the noise and at least ``min_panel_height_m`` tall, and not
+mostly the points of a larger piece (:data:`DUPLICATE_SHARE`); its top edge is
+found from where the point density along the height halves (the level whose
+count above equals the density times the height above a reference; unbiased
+for any symmetric noise). Neighbouring pieces whose lines meet near their ends
+form corners, and the corners go to the same panel identification as ``mast
+locate`` (:func:`mast.pipeline.identification.identify_panels`).
 """
 
 from __future__ import annotations
@@ -509,6 +511,29 @@ def _main_run(z: NDArray[np.float64], bin_m: float) -> NDArray[np.intp]:
     return np.asarray(max(np.split(order, cuts), key=len), dtype=np.intp)
 
 
+def _even_run(xyz: NDArray[np.float64], bin_m: float) -> NDArray[np.intp]:
+    """The points of a plan piece along its longest stretch of even heights: its points
+    in ``bin_m`` bins along its line, the stretch of neighbouring bins whose lowest and
+    highest points stay within three bins of the next one's, the most populous such
+    stretch. A panel's line may run on over the rock beside it (within the noise band
+    of a flat, dense scan the rock crosses it for centimetres), whose points reach from
+    floor to roof: with them, the piece is no panel."""
+    line = fit_line(xyz[:, :2])
+    t = (xyz[:, :2] - line.centroid) @ line.direction
+    k = np.floor((t - float(t.min())) / bin_m).astype(np.intp)
+    order = np.argsort(k, kind="stable")
+    ks, z = k[order], xyz[order, 2]
+    first = np.flatnonzero(np.r_[True, np.diff(ks) > 0])
+    lo, hi = np.minimum.reduceat(z, first), np.maximum.reduceat(z, first)
+    tol = 3.0 * bin_m
+    same = (np.diff(ks[first]) <= 2) & (np.abs(np.diff(lo)) <= tol) & (np.abs(np.diff(hi)) <= tol)
+    runs = np.split(np.arange(first.size), np.flatnonzero(~same) + 1)
+    ends = np.r_[first, ks.size]
+    counts = [int(ends[r[-1] + 1] - ends[r[0]]) for r in runs]
+    best = runs[int(np.argmax(counts))]
+    return np.asarray(order[ends[best[0]] : ends[best[-1] + 1]], dtype=np.intp)
+
+
 def _top_edge(z: NDArray[np.float64], noise: float) -> tuple[float, float, float]:
     """Top edge of a panel from its points' heights, and its standard deviation; and
     the bottom edge.
@@ -622,6 +647,49 @@ def _reversed(seg: Segment, index: int) -> Segment:
     )
 
 
+#: Lines closer to parallel than this sine (3 degrees) meet nowhere in particular.
+NEARLY_PARALLEL_SINE = 0.05
+#: A piece whose points are more than this share another, larger piece's, along nearly
+#: the same line (:data:`NEARLY_PARALLEL_SINE`), is that piece.
+DUPLICATE_SHARE = 0.5
+#: A panel's points, top, its standard deviation and bottom.
+_Tall = tuple[NDArray[np.intp], float, float, float]
+
+
+def _not_a_plane(tilt: float, rms: float, noise: float, cfg: DetectConfig) -> str | None:
+    if tilt > cfg.max_tilt_deg:
+        return "not_vertical"
+    if rms > 3.0 * noise:
+        return "not_flat"
+    return None
+
+
+def _duplicates(
+    pieces: list[NDArray[np.intp]], xy: NDArray[np.float64], n: int
+) -> NDArray[np.bool_]:
+    """Which pieces are mostly the points of a larger one along nearly its line (a short
+    streak of mixed returns crossing a panel at a shallow angle finds the panel's points
+    again): left out, or their 'corners' with the panel would cut it short. A short
+    panel at a shallow corner shares many points with its neighbour too, but not its
+    line."""
+    owner = np.full(n, -1, dtype=np.intp)
+    directions = [fit_line(xy[rows]).direction for rows in pieces]
+    out = np.zeros(len(pieces), dtype=bool)
+    for k in sorted(range(len(pieces)), key=lambda k: -pieces[k].size):
+        rows = pieces[k]
+        held = owner[rows]
+        held = held[held >= 0]
+        if held.size > DUPLICATE_SHARE * rows.size:
+            j = int(np.bincount(held).argmax())
+            (a0, a1), (b0, b1) = directions[k], directions[j]
+            sine = abs(float(a0 * b1 - a1 * b0))
+            if sine < NEARLY_PARALLEL_SINE:
+                out[k] = True
+                continue
+        owner[rows[owner[rows] < 0]] = k
+    return out
+
+
 def plan_pieces(cand: Candidates, cfg: DetectConfig = DetectConfig()) -> PlanPieces:
     """Clusters, straight pieces, vertical panels and their corners (module docstring).
 
@@ -636,6 +704,7 @@ def plan_pieces(cand: Candidates, cfg: DetectConfig = DetectConfig()) -> PlanPie
         "not_flat": 0,
         "too_short": 0,
         "too_tall": 0,
+        "duplicate": 0,
     }
     if xyz.shape[0] == 0:
         return PlanPieces(Segmentation((), (), cfg.noise_m or 0.0), (), rejected)
@@ -660,30 +729,60 @@ def plan_pieces(cand: Candidates, cfg: DetectConfig = DetectConfig()) -> PlanPie
             rows = group[rows]
             pieces.append((int(label[group[0]]), rows[_main_run(xyz[rows, 2], cfg.bin_m)]))
     kept: list[tuple[int, NDArray[np.intp], float, float]] = []
+    failed: list[tuple[int, NDArray[np.intp], str]] = []
     for cluster, rows in pieces:
         if rows.size < cfg.min_points:
             rejected["too_few_points"] += 1
             continue
         tilt, rms = _plane(xyz[rows])
-        if tilt > cfg.max_tilt_deg:
-            rejected["not_vertical"] += 1
-            continue
-        if rms > 3.0 * noise:
-            rejected["not_flat"] += 1
+        why = _not_a_plane(tilt, rms, noise, cfg)
+        if why is not None:
+            failed.append((cluster, rows, why))
             continue
         kept.append((cluster, rows, tilt, rms))
     if cfg.noise_m is None and kept:
         noise = _panel_noise(kept, xyz, tree, noise)
-    panels: list[Panel] = []
-    for cluster, rows, tilt, rms in kept:
+
+    def as_panel(rows: NDArray[np.intp]) -> _Tall | str:
         # the piece's points found again among all candidates, its noise's tails with them
         rows = _near_line(rows, xyz, tree, 3.0 * noise, 1.0)
         top, sigma_top, bottom = _top_edge(xyz[rows, 2], noise)
         if top - bottom < cfg.min_panel_height_m:
-            rejected["too_short"] += 1
-            continue
+            return "too_short"
         if top - bottom > cfg.max_panel_height_m:
-            rejected["too_tall"] += 1
+            return "too_tall"
+        return rows, top, sigma_top, bottom
+
+    tall: list[tuple[int, float, float, _Tall]] = []
+    for cluster, rows, tilt, rms in kept:
+        done = as_panel(rows)
+        if isinstance(done, str):
+            failed.append((cluster, rows, done))
+        else:
+            tall.append((cluster, tilt, rms, done))
+    # a piece that is no panel as a whole may be one along a stretch of even heights: a
+    # panel's line runs on over the rock beside it (in a dense scan's narrow band the
+    # rough rock crosses it for centimetres), and the rock reaches from floor to roof
+    for cluster, rows, why in failed:
+        sub = rows[_even_run(xyz[rows], cfg.bin_m)]
+        if cfg.min_points <= sub.size < rows.size:
+            tilt, rms = _plane(xyz[sub])
+            if _not_a_plane(tilt, rms, noise, cfg) is None:
+                done = as_panel(sub)
+                if not isinstance(done, str):
+                    tall.append((cluster, tilt, rms, done))
+                    continue
+        rejected[why] += 1
+    # a piece that finds mostly points a larger one holds is that piece (a short streak
+    # of mixed returns crossing a panel finds the panel again): it is left out, or its
+    # corners with the panel would cut the panel short
+    duplicate = _duplicates([t[3][0] for t in tall], xy, xyz.shape[0])
+    rejected["duplicate"] = int(np.count_nonzero(duplicate))
+    panels: list[Panel] = []
+    for (cluster, tilt, rms, (rows, top, sigma_top, bottom)), dup in zip(
+        tall, duplicate, strict=True
+    ):
+        if dup:
             continue
         # a free end may lose a cell or two where it meets the wall (the column test)
         seg = _segment(len(panels), cluster, rows, xy[rows], noise, 2.0 * cfg.cell_m)
@@ -783,19 +882,37 @@ def _trimmed(
     then slides along them by centimetres). Leaving out, from both, every point
     within that distance of the node along its own line (which the noise across
     it hardly moves) keeps the fits unbiased. Points past the node are left out too.
+    A node that is nowhere in particular (:data:`NEARLY_PARALLEL_SINE`) trims nothing,
+    and each end of a piece is trimmed by one corner alone, its strongest.
     """
     n = len(segs)
-    drop: dict[int, NDArray[np.bool_]] = {}
+    # each end of a piece is trimmed by one corner alone, the one with the piece of the
+    # most points: a streak of mixed returns meeting a panel's face along the beam
+    # makes a 'corner' inside the panel, weaker than its neighbour's
+    ends: dict[tuple[int, float], tuple[int, NDArray[np.bool_]]] = {}
     for c in corners:
-        reach = 3.0 * noise / max(abs(math.sin(c.deflection)), 0.05) + 3.0 * noise
-        for k in (c.first, c.second):
-            sg = segs[k % n]
+        if (
+            abs(math.sin(c.deflection)) < NEARLY_PARALLEL_SINE
+            or max(segs[c.first % n].sigma_direction, segs[c.second % n].sigma_direction)
+            > NEARLY_PARALLEL_SINE
+        ):
+            # two lines that nearly coincide, or one whose direction is not known to a
+            # few degrees (a few mixed returns, millimetres long): their node may be
+            # anywhere along the other
+            continue
+        reach = 3.0 * noise / abs(math.sin(c.deflection)) + 3.0 * noise
+        for k in (c.first % n, c.second % n):
+            sg = segs[k]
             t = (sg.points - c.node) @ sg.direction
             # and every point past the node: a panel ends at its corner (what lies
             # beyond, within the line's band, is the neighbour or the wall)
             side = 1.0 if float(np.median(t)) >= 0 else -1.0
-            near = (np.abs(t) < reach) | (side * t < 0)
-            drop[k % n] = drop.get(k % n, np.zeros(len(sg), bool)) | near
+            other = len(segs[c.second % n if k == c.first % n else c.first % n])
+            if (k, side) not in ends or other > ends[(k, side)][0]:
+                ends[(k, side)] = (other, (np.abs(t) < reach) | (side * t < 0))
+    drop: dict[int, NDArray[np.bool_]] = {}
+    for (k, _), (_, near) in ends.items():
+        drop[k] = drop.get(k, np.zeros(len(segs[k]), bool)) | near
     out = []
     for k, sg in enumerate(segs):
         gone = drop.get(k)
