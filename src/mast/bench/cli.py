@@ -259,6 +259,14 @@ def bench_georef(
 @bench_app.command("survey-in")
 def bench_survey_in(
     scenes: Annotated[int, typer.Option("--scenes", min=1, help="Simulated TLS scenes.")] = 12,
+    far_scenes: Annotated[
+        int,
+        typer.Option(
+            "--far-scenes",
+            min=0,
+            help="More scenes, of stations 45-50 m apart (beacons up to 25 m away).",
+        ),
+    ] = 0,
     seed: Annotated[int, typer.Option("--seed", help="First scene's seed.")] = 0,
     out: Annotated[Path | None, typer.Option("--out", help="CSV of every beacon.")] = None,
 ) -> None:
@@ -268,7 +276,7 @@ def bench_survey_in(
 
     if out is not None:
         check_output_file(out, suffixes=(".csv",))
-    run_survey_in_bench(scenes=scenes, seed=seed, out=out, echo=typer.echo)
+    run_survey_in_bench(scenes=scenes, far_scenes=far_scenes, seed=seed, out=out, echo=typer.echo)
 
 
 @bench_app.command("dense")

@@ -2,7 +2,9 @@
 
 Each scene is a drift with beacons of several designs on rough rock
 (:func:`mast.sim.tls.simulate_tls`), scanned from two or three tripod stations by a
-phase-based scanner (1-2 mm range noise, 4 or 6 mm at 10 m). Per scene:
+phase-based scanner (1-2 mm range noise, 4 or 6 mm at 10 m); ``far_scenes`` more, each
+scanned from two stations 45-50 m apart in a 90-100 m drift (beacons up to 25 m from the
+nearer, drawn apart from the first scenes so that those keep theirs). Per scene:
 
 * **Eligible** beacons: within 25 m of a station, every panel showing at least
   :data:`MIN_PANEL_POINTS` points in the scans (a panel no station sees cannot be
@@ -42,6 +44,9 @@ MIN_PANEL_POINTS = 50
 SAME_M = 0.25
 #: The reach the targets speak of: found within 25 m of a station, errors within 15 m.
 FOUND_REACH_M, ERROR_REACH_M = 25.0, 15.0
+#: The far scenes' seed offset: two stations 45-50 m apart in a 90-100 m drift, so that
+#: beacons stand up to 25 m from the nearer.
+FAR_SEED = 1000
 #: How far the moved beacon is moved on the re-survey.
 MOVE_M = 0.008
 #: What a real scan adds to the simulator's ideal one: each station's setup 1 mm off per
@@ -63,6 +68,8 @@ class SurveyInFigures:
     moved_named: int = 0
     still_named: int = 0
     resurveys: int = 0
+    eligible_far: int = 0
+    found_far: int = 0
     edges_near: list[float] = field(default_factory=list)
     edges_far: list[float] = field(default_factory=list)
     elevations_near: list[float] = field(default_factory=list)
@@ -74,6 +81,7 @@ class SurveyInFigures:
 def run_survey_in_bench(
     *,
     scenes: int = 12,
+    far_scenes: int = 0,
     seed: int = 0,
     out: Path | None = None,
     echo: Callable[[str], object] = print,
@@ -87,16 +95,18 @@ def run_survey_in_bench(
     f = SurveyInFigures()
     rows: list[dict[str, object]] = []
     rng = np.random.default_rng(seed)
+    far = np.random.default_rng(seed + FAR_SEED)  # the scenes above keep their draws
     with tempfile.TemporaryDirectory(prefix="mast-bench-survey-in-") as tmp:
-        for k in range(scenes):
+        for k in range(scenes + far_scenes):
+            r = rng if k < scenes else far
             o = TlsOptions(
-                length_m=float(rng.uniform(35.0, 55.0)),
-                beacons=int(rng.integers(4, 7)),
+                length_m=float(r.uniform(35.0, 55.0) if k < scenes else r.uniform(90.0, 100.0)),
+                beacons=int(r.integers(4, 7) if k < scenes else r.integers(6, 9)),
                 designs=3,
-                stations=int(rng.integers(2, 4)),
-                range_noise_m=float(rng.uniform(0.001, 0.002)),
-                step_rad=float(rng.choice([0.0004, 0.0006])),
-                roughness_m=float(rng.uniform(0.02, 0.05)),
+                stations=int(r.integers(2, 4)) if k < scenes else 2,
+                range_noise_m=float(r.uniform(0.001, 0.002)),
+                step_rad=float(r.choice([0.0004, 0.0006])),
+                roughness_m=float(r.uniform(0.02, 0.05)),
                 station_sigma_m=STATION_SIGMA_M,
                 panel_bow_m=PANEL_BOW_M,
                 beam_exit_m=BEAM_EXIT_M,
@@ -159,6 +169,9 @@ def run_survey_in_bench(
                     }
                 )
             f.found += len(matched & eligible)
+            far_ones = {b for b in eligible if near_station[b] > ERROR_REACH_M}
+            f.eligible_far += len(far_ones)
+            f.found_far += len(matched & far_ones)
             # the re-survey: one found beacon moved by 8 mm in the previous survey
             if matched:
                 moved = sorted(matched)[0]
@@ -202,7 +215,7 @@ def _report(f: SurveyInFigures, echo: Callable[[str], object]) -> None:
     echo(
         f"{f.scenes} scenes: {f.found} of {f.eligible} eligible beacons found with their "
         f"design ({100 * f.found / max(f.eligible, 1):.1f} %), wrong design {f.wrong_design}, "
-        f"invented {f.invented}"
+        f"invented {f.invented}; beyond {ERROR_REACH_M:g} m {f.found_far} of {f.eligible_far}"
     )
     echo(
         f"edge horizontal error RMS within {ERROR_REACH_M:g} m {1000 * _rms(f.edges_near):.2f} mm "
