@@ -317,8 +317,9 @@ def test_a_top_edge_always_has_a_spread() -> None:
 def test_a_panel_line_running_on_over_rock_stops_at_the_panel() -> None:
     """Within a dense scan's noise band a panel's line runs on over the rock beside its
     free end; the rock's points reach from floor to roof, the panel's stay between its
-    bottom and top: the piece is the panel's stretch alone."""
-    from mast.cloud.detect import _even_run
+    bottom and top: the panel is a stretch of its own. The wall above a panel, in the
+    same band, is a run of heights of its own."""
+    from mast.cloud.detect import _even_stretches, _height_runs
 
     rng = np.random.default_rng(5)
     panel = np.column_stack(
@@ -327,12 +328,29 @@ def test_a_panel_line_running_on_over_rock_stops_at_the_panel() -> None:
     rock = np.column_stack(
         [rng.uniform(0.25, 0.4, 500), rng.normal(0.0, 0.001, 500), rng.uniform(-0.5, 1.2, 500)]
     )
-    xyz = np.vstack([panel, rock])
-    kept = np.sort(_even_run(xyz, 0.05))
-    assert kept.tolist() == list(range(2000))
-    # a panel alone, with a bin or two missing, is kept whole
+    parts = _even_stretches(np.vstack([panel, rock]), 0.05)
+    assert sorted(np.sort(p).tolist() for p in parts) == [
+        list(range(2000)),
+        list(range(2000, 2500)),
+    ]
+    # a panel alone, with a bin or two missing and a few rock points, is one stretch
     gappy = panel[(panel[:, 0] < 0.08) | (panel[:, 0] > 0.13)]
-    assert _even_run(gappy, 0.05).size == gappy.shape[0]
+    stray = np.column_stack([rng.uniform(0, 0.2, 20), np.zeros(20), rng.uniform(-0.5, 1.2, 20)])
+    assert [p.size for p in _even_stretches(np.vstack([gappy, stray]), 0.05)] == [
+        gappy.shape[0] + 20
+    ]
+    # sparse: bins grow until they hold enough points to say
+    sparse = panel[:60]
+    assert len(_even_stretches(sparse, 0.05)) == 1
+    # the wall above the panel, along its line for metres, is a run of its own
+    wall = np.column_stack(
+        [rng.uniform(-1.0, 3.0, 1500), rng.normal(0.0, 0.01, 1500), rng.uniform(1.1, 1.35, 1500)]
+    )
+    runs = _height_runs(np.vstack([panel, wall])[:, 2], 0.05)
+    assert sorted(np.sort(r).tolist() for r in runs) == [
+        list(range(2000)),
+        list(range(2000, 3500)),
+    ]
 
 
 def _piece(index: int, xy: NDArray[np.float64]) -> Segment:

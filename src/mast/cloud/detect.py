@@ -15,11 +15,12 @@ cells and the candidate points, not the cloud):
 
 The candidates are then reduced to plan: clusters of touching cells are split
 into straight pieces by sequential RANSAC (:func:`_lines_in`), each piece cut
-to its most populous run of heights and to its longest stretch of even heights
-along its line (:func:`_even_run`: a panel's line running on over the rock);
+into its runs of heights (:func:`_height_runs`: the wall or a pipe above a panel);
 every piece is fitted with a vertical plane in 3D and kept only when it is
-vertical, flat to the noise and at least ``min_panel_height_m`` tall, and not
-mostly the points of a larger piece (:data:`DUPLICATE_SHARE`); its top edge is
+vertical, flat to the noise and at least ``min_panel_height_m`` tall (or, failing
+that, where a stretch of even heights along its line is: :func:`_even_stretches`, a
+panel's line running on over the rock beside it), and not mostly the points of a
+larger piece (:data:`DUPLICATE_SHARE`); its top edge is
 found from where the point density along the height halves (the level whose
 count above equals the density times the height above a reference; unbiased
 for any symmetric noise). Neighbouring pieces whose lines meet near their ends
@@ -503,35 +504,48 @@ def _lines_in(
     return out
 
 
-def _main_run(z: NDArray[np.float64], bin_m: float) -> NDArray[np.intp]:
-    """The points of a plan piece in its most populous run of heights (gaps of more than
-    three empty bins cut it): a pipe above a panel shares its plan line, not its heights."""
+def _height_runs(z: NDArray[np.float64], bin_m: float) -> list[NDArray[np.intp]]:
+    """The points of a plan piece in runs of heights (gaps of more than three empty bins
+    cut them): a pipe above a panel, or the rock of the wall above it, shares its plan
+    line, not its heights."""
     order = np.argsort(z)
     cuts = np.flatnonzero(np.diff(z[order]) > 3.0 * bin_m) + 1
-    return np.asarray(max(np.split(order, cuts), key=len), dtype=np.intp)
+    return [np.asarray(r, dtype=np.intp) for r in np.split(order, cuts)]
 
 
-def _even_run(xyz: NDArray[np.float64], bin_m: float) -> NDArray[np.intp]:
-    """The points of a plan piece along its longest stretch of even heights: its points
-    in ``bin_m`` bins along its line, the stretch of neighbouring bins whose lowest and
-    highest points stay within three bins of the next one's, the most populous such
-    stretch. A panel's line may run on over the rock beside it (within the noise band
-    of a flat, dense scan the rock crosses it for centimetres), whose points reach from
-    floor to roof: with them, the piece is no panel."""
+def _even_stretches(xyz: NDArray[np.float64], bin_m: float) -> list[NDArray[np.intp]]:
+    """A plan piece's points cut into stretches of even heights along its line: its
+    points in bins along the line (``bin_m``, or longer where fewer than
+    :data:`EVEN_BIN_POINTS` points would fall in one), neighbouring bins whose lowest and
+    highest points stay within three ``bin_m`` of each other in one stretch. A
+    panel's line may run on over the rock beside or behind it (within the noise band
+    the rock crosses it for centimetres or metres), whose points reach from floor to
+    roof: with them, the piece would be no panel."""
     line = fit_line(xyz[:, :2])
     t = (xyz[:, :2] - line.centroid) @ line.direction
-    k = np.floor((t - float(t.min())) / bin_m).astype(np.intp)
-    order = np.argsort(k, kind="stable")
+    span = float(np.ptp(t))
+    width = max(bin_m, EVEN_BIN_POINTS * span / max(t.size, 1))
+    bins = max(1, round(span / width))  # the last bin is no sliver of a few points
+    k = np.minimum((t - float(t.min())) * (bins / max(span, 1e-12)), bins - 1).astype(np.intp)
+    order = np.lexsort((xyz[:, 2], k))
     ks, z = k[order], xyz[order, 2]
     first = np.flatnonzero(np.r_[True, np.diff(ks) > 0])
-    lo, hi = np.minimum.reduceat(z, first), np.maximum.reduceat(z, first)
+    count = np.diff(np.r_[first, ks.size])
+    # a bin's heights by its 10th and 90th percentiles: a few rock points in the band
+    # above or below a panel do not move them
+    lo = z[first + (0.1 * (count - 1)).astype(np.intp)]
+    hi = z[first + (0.9 * (count - 1)).astype(np.intp)]
     tol = 3.0 * bin_m
     same = (np.diff(ks[first]) <= 2) & (np.abs(np.diff(lo)) <= tol) & (np.abs(np.diff(hi)) <= tol)
-    runs = np.split(np.arange(first.size), np.flatnonzero(~same) + 1)
     ends = np.r_[first, ks.size]
-    counts = [int(ends[r[-1] + 1] - ends[r[0]]) for r in runs]
-    best = runs[int(np.argmax(counts))]
-    return np.asarray(order[ends[best[0]] : ends[best[-1] + 1]], dtype=np.intp)
+    return [
+        np.asarray(order[ends[r[0]] : ends[r[-1] + 1]], dtype=np.intp)
+        for r in np.split(np.arange(first.size), np.flatnonzero(~same) + 1)
+    ]
+
+
+#: Fewest points a bin of :func:`_even_stretches` is made to hold.
+EVEN_BIN_POINTS = 20
 
 
 def _top_edge(z: NDArray[np.float64], noise: float) -> tuple[float, float, float]:
@@ -727,7 +741,9 @@ def plan_pieces(cand: Candidates, cfg: DetectConfig = DetectConfig()) -> PlanPie
             continue
         for rows in _lines_in(xy[group], noise, cfg.min_points, 2.0 * cfg.cell_m):
             rows = group[rows]
-            pieces.append((int(label[group[0]]), rows[_main_run(xyz[rows, 2], cfg.bin_m)]))
+            for run in _height_runs(xyz[rows, 2], cfg.bin_m):
+                if run.size >= cfg.min_points:
+                    pieces.append((int(label[group[0]]), rows[run]))
     kept: list[tuple[int, NDArray[np.intp], float, float]] = []
     failed: list[tuple[int, NDArray[np.intp], str]] = []
     for cluster, rows in pieces:
@@ -764,15 +780,18 @@ def plan_pieces(cand: Candidates, cfg: DetectConfig = DetectConfig()) -> PlanPie
     # panel's line runs on over the rock beside it (in a dense scan's narrow band the
     # rough rock crosses it for centimetres), and the rock reaches from floor to roof
     for cluster, rows, why in failed:
-        sub = rows[_even_run(xyz[rows], cfg.bin_m)]
-        if cfg.min_points <= sub.size < rows.size:
+        for part in _even_stretches(xyz[rows], cfg.bin_m):
+            sub = rows[part]
+            if not cfg.min_points <= sub.size < rows.size:
+                continue
             tilt, rms = _plane(xyz[sub])
             if _not_a_plane(tilt, rms, noise, cfg) is None:
                 done = as_panel(sub)
                 if not isinstance(done, str):
                     tall.append((cluster, tilt, rms, done))
-                    continue
-        rejected[why] += 1
+                    why = ""
+        if why:
+            rejected[why] += 1
     # a piece that finds mostly points a larger one holds is that piece (a short streak
     # of mixed returns crossing a panel finds the panel again): it is left out, or its
     # corners with the panel would cut the panel short
