@@ -516,8 +516,8 @@ def _height_runs(z: NDArray[np.float64], bin_m: float) -> list[NDArray[np.intp]]
 def _even_stretches(xyz: NDArray[np.float64], bin_m: float) -> list[NDArray[np.intp]]:
     """A plan piece's points cut into stretches of even heights along its line: its
     points in bins along the line (``bin_m``, or longer where fewer than
-    :data:`EVEN_BIN_POINTS` points would fall in one), neighbouring bins whose lowest and
-    highest points stay within three ``bin_m`` of each other in one stretch. A
+    :data:`EVEN_BIN_POINTS` points would fall in one), neighbouring bins whose 10th and
+    90th height percentiles stay within three ``bin_m`` of each other in one stretch. A
     panel's line may run on over the rock beside or behind it (within the noise band
     the rock crosses it for centimetres or metres), whose points reach from floor to
     roof: with them, the piece would be no panel."""
