@@ -180,7 +180,7 @@ def one_cloud(
             ]
             if after:
                 d = np.concatenate([a - g for a, g in zip(after, grid, strict=True)])
-                check_h = 1000 * float(np.max(np.hypot(d[:, 0], d[:, 1])))
+                check_h = max(checks_h)
                 check_v = 1000 * float(np.max(np.abs(d[:, 2])))
             rigid = rigid_solution(list(result.controls), "4", result.config.survey_sigma_m, True)
             moved = [

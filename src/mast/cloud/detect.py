@@ -920,15 +920,15 @@ def _trimmed(
             # anywhere along the other
             continue
         reach = 3.0 * noise / abs(math.sin(c.deflection)) + 3.0 * noise
-        for k in (c.first % n, c.second % n):
+        a, b = c.first % n, c.second % n
+        for k, j in ((a, b), (b, a)):
             sg = segs[k]
             t = (sg.points - c.node) @ sg.direction
             # and every point past the node: a panel ends at its corner (what lies
             # beyond, within the line's band, is the neighbour or the wall)
             side = 1.0 if float(np.median(t)) >= 0 else -1.0
-            other = len(segs[c.second % n if k == c.first % n else c.first % n])
-            if (k, side) not in ends or other > ends[(k, side)][0]:
-                ends[(k, side)] = (other, (np.abs(t) < reach) | (side * t < 0))
+            if (k, side) not in ends or len(segs[j]) > ends[(k, side)][0]:
+                ends[(k, side)] = (len(segs[j]), (np.abs(t) < reach) | (side * t < 0))
     drop: dict[int, NDArray[np.bool_]] = {}
     for (k, _), (_, near) in ends.items():
         drop[k] = drop.get(k, np.zeros(len(segs[k]), bool)) | near
