@@ -183,3 +183,25 @@ def test_a_previous_survey_without_sigmas_leaves_movement_untested(
         "untested (the previous survey gives no sigma_m)"
         in (tmp_path / "o" / "report.txt").read_text()
     )
+
+
+def test_the_scans_spacing_on_a_panel_is_its_columns_not_its_one_shadow() -> None:
+    """A panel's points run on across gaps of the scan's own spacing: a far, oblique
+    panel's columns are centimetres apart, a near one's points millimetres; one gap
+    where something shadows a near panel is not its spacing."""
+    from mast.cloud.detect import Panel, _segment
+    from mast.cloud.survey_in import column_spacing
+
+    rng = np.random.default_rng(4)
+
+    def spacing(x: np.ndarray) -> float:
+        xy = np.column_stack([np.sort(x), rng.normal(0.0, 0.0015, x.size)])
+        seg = _segment(0, 0, np.arange(x.size), xy, 0.0015, 0.1)
+        return column_spacing(Panel(seg, 0.0, 0.0015, 0.5, 2.0, 0.001, 1.5, None))
+
+    columns = np.repeat(np.arange(0.0, 0.6, 0.028), 40) + rng.normal(0.0, 0.001, 22 * 40)
+    assert 0.02 < spacing(columns) < 0.03
+    dense = rng.uniform(0.0, 0.6, 3000)
+    assert spacing(dense) < 0.002
+    shadowed = dense[(dense < 0.2) | (dense > 0.3)]
+    assert spacing(shadowed) < 0.002

@@ -93,8 +93,10 @@ END_MARGIN_M = 0.01
 END_TOLERANCE_M = 0.015
 #: Points running on this far past a design's free end refute it.
 OVERRUN_M = 0.01
-#: A panel's points are one run until a gap wider than this along its line.
+#: A panel's points are one run until a gap wider than this along its line, or than
+#: :data:`REACH_GAP_SPACINGS` times the scan's spacing on it (:func:`column_spacing`).
 REACH_GAP_M = 0.02
+REACH_GAP_SPACINGS = 1.5
 #: How far past a design's free end its points are looked for.
 FREE_END_LOOK_M = 0.05
 #: Fewest points a panel's line is fitted to.
@@ -357,15 +359,36 @@ def _reach(
     config: SurveyInConfig,
 ) -> float:
     """How far a panel's points run from its inner edge ``start`` towards its free end
-    (unit ``toward``, looked at up to ``limit``): the end of the first unbroken run
-    (no gap wider than :data:`REACH_GAP_M`), so rock met further along the line does
-    not count."""
+    (unit ``toward``, looked at up to ``limit``): the end of the first unbroken run (no
+    gap wider than :data:`REACH_GAP_M`, or the scan's spacing on the panel), so rock
+    met further along the line does not count."""
     t, keep = _on_line(xyz, origin, start, toward, panel, config)
     ts = np.sort(t[keep & (t > 0.0) & (t < limit)])
-    if ts.size == 0 or ts[0] > REACH_GAP_M:
+    gap = max(REACH_GAP_M, REACH_GAP_SPACINGS * column_spacing(panel))
+    if ts.size == 0 or ts[0] > gap:
         return 0.0
-    gaps = np.flatnonzero(np.diff(ts) > REACH_GAP_M)
+    gaps = np.flatnonzero(np.diff(ts) > gap)
     return float(ts[gaps[0]] if gaps.size else ts[-1])
+
+
+def column_spacing(panel: Panel) -> float:
+    """The scan's spacing along a panel: the gaps between its piece's points along its
+    line, their median weighted by their own widths. A near panel's points lie
+    millimetres apart; an oblique one at 20 m is seen in columns centimetres apart; a
+    gap where something shadows part of a panel is one gap, not the spacing."""
+    seg = panel.segment
+    gaps = np.sort(np.diff((seg.points - seg.centroid) @ seg.direction))
+    if gaps.size == 0 or gaps[-1] <= 0.0:
+        return 0.0
+    cum = np.cumsum(gaps)
+    return float(gaps[min(int(np.searchsorted(cum, 0.5 * cum[-1])), gaps.size - 1)])
+
+
+def _end_tolerance(panel: Panel) -> float:
+    """How far short of a design's free end a panel's points may stop and confirm it:
+    :data:`END_TOLERANCE_M`, or the margin kept from the boundary and one of the scan's
+    spacings on the panel where that is wider."""
+    return max(END_TOLERANCE_M, END_MARGIN_M + column_spacing(panel))
 
 
 def _reaches(
@@ -401,11 +424,12 @@ def _free_ends(
     """Which of the designs that hold the shape it is, by where its free ends' points
     stop. A design is refuted when points run on past a free end of it by more than
     :data:`OVERRUN_M`, and a free end confirms it when its points stop within
-    :data:`END_TOLERANCE_M` short of it; of the designs not refuted, the one that the
+    :func:`_end_tolerance` short of it; of the designs not refuted, the one that the
     most free ends confirm. None when none is left, or when two are left alike (a free
     end that would tell them apart is not seen): better no survey than a wrong design,
     whose free end is placed at the wrong length with a sigma that does not know it."""
     scored = []
+    tols = (_end_tolerance(panels[0]), _end_tolerance(panels[2]))
     for k in held:
         lengths = _lengths(reps[k])
         e = edges_from_lines(lines, lengths, outward).reshape(4, 2)
@@ -413,7 +437,7 @@ def _free_ends(
         deficits = (lengths[0] - reaches[0], lengths[2] - reaches[1])
         if any(d < -OVERRUN_M for d in deficits):
             continue
-        confirmed = sum(d <= END_TOLERANCE_M for d in deficits)
+        confirmed = sum(d <= tol for d, tol in zip(deficits, tols, strict=True))
         scored.append((confirmed, k, lengths))
     if not scored:
         return None
