@@ -434,3 +434,93 @@ def test_a_piece_along_a_larger_one_is_a_duplicate_and_a_shallow_neighbour_is_no
     along = rows_near_middle[(xy[rows_near_middle, 0] > 0.1) & (xy[rows_near_middle, 0] < 0.4)]
     pieces.append(along)
     assert _duplicates(pieces, xy, xy.shape[0]).tolist() == [False, False, True]
+
+
+def test_a_far_panel_cut_apart_by_the_clusters_is_joined_again() -> None:
+    """At 18 m an oblique panel is seen in scan columns 7 cm apart; where the column
+    cells leave an empty cell between two columns, its pieces fall in clusters of
+    their own. Pieces on one line, with the same heights, across gaps of a few cells,
+    are one piece again; a piece around a corner joins their cluster (its corner with
+    them is looked for there); a piece above them, or too far along, stays apart."""
+    from mast.cloud.detect import _joined
+
+    rng = np.random.default_rng(9)
+
+    def column(x: float, y: float, z0: float = 0.0) -> NDArray[np.float64]:
+        z = np.linspace(z0, z0 + 0.5, 40)
+        return np.column_stack([np.full(40, x), np.full(40, y), z]) + rng.normal(
+            0.0, [0.0015, 0.0015, 0.0], (40, 3)
+        )
+
+    parts = [
+        [column(x, 0.0) for x in (0.0, 0.07, 0.14)],  # cluster 1
+        [column(x, 0.0) for x in (0.28, 0.35)],  # a column lost: a 14 cm gap
+        [column(x, 0.0) for x in (0.42, 0.49, 0.56)],
+        [column(0.64 + 0.07 * k * math.cos(0.5), 0.07 * k * math.sin(0.5)) for k in range(4)],
+        [column(x, 0.0, 0.8) for x in (0.7, 0.77)],  # the rock above, on the same line
+        [column(x, 0.0) for x in (1.1, 1.17)],  # 54 cm on
+    ]
+    xyz = np.vstack([np.vstack(p) for p in parts])
+    pieces, first = [], 0
+    for cluster, p in enumerate(parts, start=1):
+        n = 40 * len(p)
+        pieces.append((cluster, np.arange(first, first + n)))
+        first += n
+    out = _joined(pieces, xyz, 0.0015, 0.2, 0.05)
+    assert len(out) == 4
+    (c1, panel), (c4, _), (c5, above), (c6, far) = sorted(out, key=lambda p: p[1][0])
+    assert panel.tolist() == list(range(40 * 8))
+    assert c1 == c4 == 1  # the corner's piece is in the panel's cluster
+    assert (c5, above.size) == (5, 80)
+    assert (c6, far.size) == (6, 80)
+    # three noises off the line, the pieces are not one
+    bent = xyz.copy()
+    bent[pieces[1][1], 1] += 0.006
+    assert len(_joined(pieces, bent, 0.0015, 0.2, 0.05)) == 5
+
+
+def test_lone_columns_find_their_neighbours_further_off_and_rock_does_not() -> None:
+    """A far panel's columns stand two cells apart with nothing between them: each finds
+    two level neighbours within three cells. A column in rock, every cell around it
+    holding points, needs two level neighbours of its eight."""
+    from mast.cloud import detect
+
+    panel = [(0, 0), (2, 1), (3, 2), (5, 3), (6, 4)]
+    rock = [(20, 0), (22, 0), (24, 0)]
+    around = [(19, 0), (21, 0), (20, 1), (20, -1)]  # points, but no panel-like column
+    ij = np.array(panel + rock + around)
+    keys = pack_ij(ij)
+    order = np.argsort(keys)
+    keys = keys[order]
+    found = np.array([True] * 8 + [False] * 4)[order]
+    zlo = np.where(found, 1.5, 0.0)
+    zhi = np.where(found, 2.0, 3.0)
+    ok = detect._level_with_neighbours(keys, found, zlo, zhi, detect.DetectConfig())
+    by_cell = {tuple(c): bool(v) for c, v in zip(key_ij(keys).tolist(), ok, strict=True)}
+    assert all(by_cell[c] for c in panel)
+    assert not by_cell[(20, 0)]  # rock around it: the nearer test, and it has none level
+    assert not any(by_cell[c] for c in around)
+    # an uneven column among lone ones is not level with them
+    zhi_uneven = zhi.copy()
+    zhi_uneven[np.flatnonzero(keys == pack_ij(np.array([[3, 2]])))[0]] = 2.4
+    ok = detect._level_with_neighbours(keys, found, zlo, zhi_uneven, detect.DetectConfig())
+    assert not ok[keys == pack_ij(np.array([[3, 2]]))][0]
+
+
+def test_a_cell_holding_only_a_panel_takes_the_floor_and_roof_around_it() -> None:
+    """From far off a panel shadows the rock behind it, and the floor and roof in front
+    of it lie in the next cells: its own cell's lowest and highest points are its
+    bottom and top, which would make it floor to roof. The cells around say where the
+    floor and roof are."""
+    from mast.cloud.detect import _floor_and_roof_around
+
+    floor = PlanGrid(np.zeros(2), 0.5)
+    pts = [[0.25, 0.25, 1.5], [0.25, 0.25, 2.0]]  # the panel alone
+    pts += [[0.75, 0.25, 0.0], [0.75, 0.25, 4.5], [-0.25, 0.25, 0.1], [-0.25, 0.25, 4.4]]
+    pts += [[5.25, 5.25, 1.0], [5.25, 5.25, 3.0]]  # a cell with no neighbour
+    floor.add(np.array(pts))
+    around = _floor_and_roof_around(floor)
+    row, _ = around.at(np.array([[0.25, 0.25], [5.25, 5.25]]))
+    assert around.zmin[row].tolist() == [0.0, 1.0]
+    assert around.zmax[row].tolist() == [4.5, 3.0]
+    assert floor.zmin[floor.at(np.array([[0.25, 0.25]]))[0]][0] == 1.5  # not changed

@@ -3,19 +3,24 @@
 Three passes over the cloud, each one chunk at a time (memory follows the
 cells and the candidate points, not the cloud):
 
-1. **Floor and roof.** The lowest and highest point of every 0.5 m plan cell.
+1. **Floor and roof.** The lowest and highest point of every 0.5 m plan cell and
+   its eight neighbours (a cell holding nothing but a far panel, which shadows the
+   rock behind it, takes the floor and roof in front of it).
 2. **Columns.** Of the points in the *band* (``clearance`` above the floor and
    below the roof of their cell, or ``--band Z0,Z1`` in the cloud's frame),
    every 5 cm plan cell keeps its lowest and highest z and which 5 cm height
    bins hold points. A panel's cell holds one unbroken column that starts and
    ends inside the band, at least a panel's height tall: rock walls run from
    floor to roof, floors and roofs are left out by the band, pipes and ducts are
-   short columns, machines stand on the floor.
+   short columns, machines stand on the floor. A column is level with two of its
+   eight neighbours, or, where it stands alone (a far panel's scan columns are
+   centimetres apart), with two within three cells.
 3. **Candidates.** The points of those cells.
 
 The candidates are then reduced to plan: clusters of touching cells are split
 into straight pieces by sequential RANSAC (:func:`_lines_in`), each piece cut
-into its runs of heights (:func:`_height_runs`: the wall or a pipe above a panel);
+into its runs of heights (:func:`_height_runs`: the wall or a pipe above a panel),
+and pieces of one line that the clusters cut apart joined again (:func:`_joined`);
 every piece is fitted with a vertical plane in 3D and kept only when it is
 vertical, flat to the noise and at least ``min_panel_height_m`` tall (or, failing
 that, where a stretch of even heights along its line is: :func:`_even_stretches`, a
@@ -37,7 +42,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from numpy.typing import NDArray
 
-from mast.cloud.grid import EIGHT, PlanGrid, cell_keys, key_ij, neighbours, pack_ij
+from mast.cloud.grid import EIGHT, PlanGrid, cell_keys, key_ij, neighbours, pack_ij, within
 from mast.cloud.io import Cloud
 from mast.core.lines import fit_line, intersect_lines, plan_noise_from_neighbours
 from mast.errors import InputError
@@ -106,6 +111,20 @@ class Candidates:
     """The walls' point density, points per square metre (:func:`wall_density`)."""
 
 
+def _floor_and_roof_around(floor: PlanGrid) -> PlanGrid:
+    """The floor grid with each cell's floor and roof the lowest and highest of it and
+    its eight neighbours. A cell at a wall may hold nothing but a panel: from far off,
+    the panel shadows the rock behind it, and the floor and roof in front of it lie in
+    the next cells. Its own lowest and highest point would make the panel floor to roof
+    (a wall, never a panel)."""
+    zmin = floor.zmin.copy()
+    zmax = floor.zmax.copy()
+    for hit, pos in neighbours(floor.keys):
+        zmin[hit] = np.minimum(zmin[hit], floor.zmin[pos[hit]])
+        zmax[hit] = np.maximum(zmax[hit], floor.zmax[pos[hit]])
+    return replace(floor, zmin=zmin, zmax=zmax)
+
+
 def _band_limits(
     floor: PlanGrid, xyz: NDArray[np.float64], cfg: DetectConfig
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
@@ -136,6 +155,7 @@ def find_candidates(
         if progress:
             progress("floor and roof", read, cloud.count * 3)
     assert floor is not None
+    floor = _floor_and_roof_around(floor)
     columns = PlanGrid(floor.origin, cfg.cell_m)
     done = 0
     # every step-th point of the band, for the walls' density (a known share of them)
@@ -341,6 +361,10 @@ def _dilated(
     )
 
 
+#: How far (in cells) :func:`_level_with_neighbours` looks for a lone column's neighbours.
+LEVEL_REACH_CELLS = 3
+
+
 def _level_with_neighbours(
     keys: NDArray[np.int64],
     found: NDArray[np.bool_],
@@ -350,18 +374,36 @@ def _level_with_neighbours(
 ) -> NDArray[np.bool_]:
     """Columns with two or more neighbours (of the 8) whose columns start and end at the
     same heights (within 3 bins): a panel's top and bottom are level along it, the
-    bits of rough rock that pass for a column in one cell are not."""
+    bits of rough rock that pass for a column in one cell are not.
+
+    A lone column, with at most one of its 8 neighbours holding other points, may find
+    its two within :data:`LEVEL_REACH_CELLS` cells instead: an oblique panel far from
+    the scanner is seen in scan columns centimetres apart, a cell or two empty between
+    them. Rock is seen in every cell around it, and keeps the nearer test.
+    """
     rows = np.flatnonzero(found)
     k = keys[rows]
-    agree = np.zeros(rows.size, np.int64)
     tol = 3.0 * cfg.bin_m
-    for hit, pos in neighbours(k):
-        same = (np.abs(zhi[rows[pos]] - zhi[rows]) <= tol) & (
-            np.abs(zlo[rows[pos]] - zlo[rows]) <= tol
-        )
-        agree += hit & same
+
+    def agreeing(offsets: tuple[tuple[int, int], ...]) -> NDArray[np.int64]:
+        agree = np.zeros(rows.size, np.int64)
+        for hit, pos in neighbours(k, offsets):
+            same = (np.abs(zhi[rows[pos]] - zhi[rows]) <= tol) & (
+                np.abs(zlo[rows[pos]] - zlo[rows]) <= tol
+            )
+            agree += hit & same
+        return agree
+
+    near = agreeing(EIGHT)
+    occupied = np.zeros(rows.size, np.int64)
+    for hit, _ in neighbours(keys):
+        occupied += hit[rows]
+    lone = occupied - near <= 1
+    ok = near >= 2
+    if np.any(lone & ~ok):
+        ok |= lone & (agreeing(within(LEVEL_REACH_CELLS)) >= 2)
     out = np.zeros(found.size, bool)
-    out[rows] = agree >= 2
+    out[rows] = ok
     return out
 
 
@@ -501,6 +543,87 @@ def _lines_in(
             break
         out.append(left[inl])
         left = np.delete(left, inl)
+    return out
+
+
+#: Pieces of different clusters are joined across gaps of up to this many column cells.
+JOIN_GAP_CELLS = 4
+#: A joined piece's points are this many times the noise about its line, at most (RMS).
+JOIN_RMS_NOISE = 1.5
+
+
+def _joined(
+    pieces: list[tuple[int, NDArray[np.intp]]],
+    xyz: NDArray[np.float64],
+    noise: float,
+    gap_m: float,
+    bin_m: float,
+) -> list[tuple[int, NDArray[np.intp]]]:
+    """Pieces of one panel that the clusters cut apart, joined.
+
+    An oblique panel far from the scanner is seen in scan columns centimetres apart;
+    where the column cells leave a cell empty between two columns, the panel falls
+    into clusters of its own. Two pieces of different clusters are one when their ends
+    are within ``gap_m``, their heights agree (lowest and highest within three
+    ``bin_m``), and their points together lie on one line: no gap wider than ``gap_m``
+    along it and an RMS of at most :data:`JOIN_RMS_NOISE` noises about it. Closest
+    ends first; a piece joins a chain of pieces as a whole.
+
+    The clusters of any two pieces whose ends meet so, on one line or not, become one:
+    a corner is looked for between pieces of one cluster, and where the corner's own
+    columns fell out of the column cells, its two panels lie in clusters apart.
+    """
+    if len(pieces) < 2:
+        return pieces
+    from scipy.spatial import cKDTree
+
+    xy = xyz[:, :2]
+    ends = np.zeros((2 * len(pieces), 2))
+    zlim = np.zeros((len(pieces), 2))
+    for k, (_, rows) in enumerate(pieces):
+        line = fit_line(xy[rows])
+        t = (xy[rows] - line.centroid) @ line.direction
+        ends[2 * k] = line.centroid + t.min() * line.direction
+        ends[2 * k + 1] = line.centroid + t.max() * line.direction
+        zlim[k] = xyz[rows, 2].min(), xyz[rows, 2].max()
+    pairs = cKDTree(ends).query_pairs(gap_m, output_type="ndarray")
+    if pairs.size == 0:
+        return pieces
+    a, b = pairs[:, 0] // 2, pairs[:, 1] // 2
+    cluster = np.array([c for c, _ in pieces])
+    ok = (cluster[a] != cluster[b]) & np.all(np.abs(zlim[a] - zlim[b]) <= 3.0 * bin_m, axis=1)
+    gap = np.hypot(*(ends[pairs[:, 0]] - ends[pairs[:, 1]]).T)
+    order = np.flatnonzero(ok)[np.argsort(gap[ok], kind="stable")]
+    chain = list(range(len(pieces)))  # the chain each piece is in (its first piece)
+    members: dict[int, list[int]] = {k: [k] for k in range(len(pieces))}
+    for i, j in zip(a[order].tolist(), b[order].tolist(), strict=True):
+        ci, cj = chain[i], chain[j]
+        if ci == cj:
+            continue
+        rows = np.concatenate([pieces[k][1] for k in members[ci] + members[cj]])
+        line = fit_line(xy[rows])
+        q = xy[rows] - line.centroid
+        t = np.sort(q @ line.direction)
+        if line.rms > JOIN_RMS_NOISE * noise or np.max(np.diff(t)) > gap_m:
+            continue
+        for k in members[cj]:
+            chain[k] = ci
+        members[ci] += members.pop(cj)
+    # the clusters of two pieces whose ends meet become one (the lowest label)
+    parent = {int(c): int(c) for c in cluster}
+
+    def root(c: int) -> int:
+        while parent[c] != c:
+            c = parent[c]
+        return c
+
+    for i, j in zip(a[ok].tolist(), b[ok].tolist(), strict=True):
+        ri, rj = root(int(cluster[i])), root(int(cluster[j]))
+        parent[max(ri, rj)] = min(ri, rj)
+    out = []
+    for chain_members in members.values():
+        rows = np.concatenate([pieces[k][1] for k in chain_members])
+        out.append((root(int(cluster[chain_members[0]])), rows))
     return out
 
 
@@ -744,6 +867,7 @@ def plan_pieces(cand: Candidates, cfg: DetectConfig = DetectConfig()) -> PlanPie
             for run in _height_runs(xyz[rows, 2], cfg.bin_m):
                 if run.size >= cfg.min_points:
                     pieces.append((int(label[group[0]]), rows[run]))
+    pieces = _joined(pieces, xyz, noise, JOIN_GAP_CELLS * cfg.cell_m, cfg.bin_m)
     kept: list[tuple[int, NDArray[np.intp], float, float]] = []
     failed: list[tuple[int, NDArray[np.intp], str]] = []
     for cluster, rows in pieces:

@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["EIGHT", "PlanGrid", "cell_keys", "key_ij", "neighbours", "pack_ij"]
+__all__ = ["EIGHT", "PlanGrid", "cell_keys", "key_ij", "neighbours", "pack_ij", "within"]
 
 _SHIFT = np.int64(1 << 30)  # keys stay positive: (i + 2^30) << 32 < 2^63
 
@@ -36,14 +36,21 @@ EIGHT: tuple[tuple[int, int], ...] = tuple(
 )
 
 
+def within(cells: int) -> tuple[tuple[int, int], ...]:
+    """The offsets of the cells within ``cells`` of one (a square block but its centre);
+    ``within(1)`` is :data:`EIGHT`."""
+    r = range(-cells, cells + 1)
+    return tuple((di, dj) for di in r for dj in r if (di, dj) != (0, 0))
+
+
 def neighbours(
-    keys: NDArray[np.int64],
+    keys: NDArray[np.int64], offsets: tuple[tuple[int, int], ...] = EIGHT
 ) -> list[tuple[NDArray[np.bool_], NDArray[np.intp]]]:
-    """For each of the eight neighbours in turn: whether each of the (sorted) ``keys``
-    has that neighbour among them, and where it is."""
+    """For each neighbour in turn (the eight, or ``offsets``): whether each of the
+    (sorted) ``keys`` has that neighbour among them, and where it is."""
     ij = key_ij(keys)
     out = []
-    for off in EIGHT:
+    for off in offsets:
         nk = pack_ij(ij + np.array(off))
         pos = np.minimum(np.searchsorted(keys, nk), max(keys.size - 1, 0)).astype(np.intp)
         hit = (keys[pos] == nk) if keys.size else np.zeros(0, bool)
