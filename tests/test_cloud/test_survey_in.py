@@ -205,3 +205,32 @@ def test_the_scans_spacing_on_a_panel_is_its_columns_not_its_one_shadow() -> Non
     assert spacing(dense) < 0.002
     shadowed = dense[(dense < 0.2) | (dense > 0.3)]
     assert spacing(shadowed) < 0.002
+
+
+def test_beacons_16_m_from_the_nearer_station_are_surveyed_in(tmp_path: Path) -> None:
+    """Two stations 47 m apart: beacons 16-17 m from the nearer one are seen in scan
+    columns centimetres apart (their cells alone, their floor and roof in the next
+    cells), and are surveyed in with their designs (docs/survey-in.md, "Far scenes")."""
+    import json
+
+    from mast.cloud.survey_in import SurveyInConfig, survey_in
+
+    options = TlsOptions(length_m=95.0, beacons=6, designs=2, stations=2, step_rad=0.0006)
+    scene = simulate_tls(tmp_path, 1, options)
+    truth = read_survey(scene.survey)
+    points = {
+        b["id"]: b["points_per_panel"] for b in json.loads(scene.truth.read_text())["beacons"]
+    }
+    stations = np.array([s[:2] for s in scene.stations])
+    far = [
+        b
+        for b in truth
+        if np.min(np.hypot(*(stations - b.edges.mean(axis=0)).T)) > 15.0 and min(points[b.id]) >= 50
+    ]
+    assert len(far) == 2
+    config = SurveyInConfig(noise_m=options.range_noise_m, station_sigma_m=0.0)
+    found = survey_in([scene.e57], read_survey(scene.designs, apart=False), config).beacons
+    for b in far:
+        fb = min(found, key=lambda f: math.dist(f.beacon.edges.mean(axis=0), b.edges.mean(axis=0)))
+        assert fb.beacon.design == b.design
+        assert np.max(np.hypot(*(fb.beacon.edges - b.edges).T)) < 0.005
