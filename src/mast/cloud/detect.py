@@ -396,8 +396,8 @@ def _level_with_neighbours(
 
     near = agreeing(EIGHT)
     occupied = np.zeros(rows.size, np.int64)
-    for hit, _ in neighbours(keys):
-        occupied += hit[rows]
+    for hit, _ in neighbours(k, among=keys):
+        occupied += hit
     lone = occupied - near <= 1
     ok = near >= 2
     if np.any(lone & ~ok):

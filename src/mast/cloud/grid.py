@@ -30,30 +30,31 @@ def pack_ij(ij: NDArray[np.int64]) -> NDArray[np.int64]:
     return np.asarray((ij[:, 0] << np.int64(32)) | ij[:, 1], dtype=np.int64)
 
 
-#: The offsets of a cell's eight neighbours.
-EIGHT: tuple[tuple[int, int], ...] = tuple(
-    (di, dj) for di in (-1, 0, 1) for dj in (-1, 0, 1) if (di, dj) != (0, 0)
-)
-
-
 def within(cells: int) -> tuple[tuple[int, int], ...]:
-    """The offsets of the cells within ``cells`` of one (a square block but its centre);
-    ``within(1)`` is :data:`EIGHT`."""
+    """The offsets of the cells within ``cells`` of one (a square block but its centre)."""
     r = range(-cells, cells + 1)
     return tuple((di, dj) for di in r for dj in r if (di, dj) != (0, 0))
 
 
+#: The offsets of a cell's eight neighbours.
+EIGHT = within(1)
+
+
 def neighbours(
-    keys: NDArray[np.int64], offsets: tuple[tuple[int, int], ...] = EIGHT
+    keys: NDArray[np.int64],
+    offsets: tuple[tuple[int, int], ...] = EIGHT,
+    among: NDArray[np.int64] | None = None,
 ) -> list[tuple[NDArray[np.bool_], NDArray[np.intp]]]:
-    """For each neighbour in turn (the eight, or ``offsets``): whether each of the
-    (sorted) ``keys`` has that neighbour among them, and where it is."""
+    """For each neighbour in turn (the eight, or ``offsets``): whether each of ``keys``
+    has that neighbour among the sorted ``among`` (``keys`` themselves, sorted, when not
+    given), and where it is there."""
+    pool = keys if among is None else among
     ij = key_ij(keys)
     out = []
     for off in offsets:
         nk = pack_ij(ij + np.array(off))
-        pos = np.minimum(np.searchsorted(keys, nk), max(keys.size - 1, 0)).astype(np.intp)
-        hit = (keys[pos] == nk) if keys.size else np.zeros(0, bool)
+        pos = np.minimum(np.searchsorted(pool, nk), max(pool.size - 1, 0)).astype(np.intp)
+        hit = (pool[pos] == nk) if pool.size else np.zeros(nk.size, bool)
         out.append((hit, pos))
     return out
 
