@@ -130,6 +130,13 @@ class Transformation:
         )
         return out
 
+    def to_cloud(self, xyz: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Grid points in the cloud's frame (the inverse of :meth:`apply`)."""
+        out: NDArray[np.float64] = (xyz - self.translation) @ self.rotation / self.scale + (
+            self.centre
+        )
+        return out
+
     def matrix(self) -> NDArray[np.float64]:
         """The 4x4 homogeneous matrix, cloud to grid."""
         m = np.eye(4)

@@ -44,7 +44,8 @@ from mast.cloud.detect import (
 from mast.cloud.drift import DriftCorrection, correct_drift
 from mast.cloud.io import Cloud
 from mast.cloud.match import Detection, Match, MatchConfig, detect_beacons, match_beacons
-from mast.core.beacon import Survey
+from mast.cloud.sought import seek_beacon
+from mast.core.beacon import Beacon, Survey
 from mast.core.index import SurveyIndex
 from mast.core.noise import DEFAULT_SURVEY_SIGMA_M
 from mast.core.trajectory import ScannerPath
@@ -57,6 +58,8 @@ MODELS = ("4", "helmert7")
 #: Why a beacon matched to no detection is not used (until :func:`explain_missing` says
 #: whether it lies outside the cloud or in it unseen).
 NOT_FOUND = "not found in the cloud"
+#: How a beacon detection missed was found (:mod:`mast.cloud.sought`).
+SOUGHT = "not detected on its own: found where the control beacons put it"
 
 
 @dataclass(frozen=True, slots=True)
@@ -200,29 +203,95 @@ def _observation(
     if not edges:
         return None
     panels = [pieces.panels[k] for k in det.panels.values()]
-    top, sigma_top = beacon_top(panels)
+    times = [p.time_s for p in panels if p.time_s is not None]
+    return _beacon_obs(
+        b,
+        edges,
+        cloud_xy,
+        cloud_cov,
+        beacon_top(panels),
+        float(np.median(times)) if times else None,
+        int(sum(len(p.segment) for p in panels)),
+        heights,
+        survey_sigma_m,
+    )
+
+
+def _beacon_obs(
+    b: Beacon,
+    edges: tuple[int, ...],
+    cloud_xy: NDArray[np.float64],
+    cloud_cov: NDArray[np.float64],
+    top: tuple[float, float],
+    time: float | None,
+    points: int,
+    heights: bool,
+    survey_sigma_m: float,
+) -> BeaconObs:
+    """A found beacon's observation of its surveyed ``edges``, with the survey's side."""
     grid_top = math.nan
     if heights and b.elevations is not None:
         z = np.array([b.elevations[e - 1] for e in edges])
         # the observed edges' tops, or the beacon's others where those are blank
         z = z[np.isfinite(z)] if np.any(np.isfinite(z)) else b.elevations[np.isfinite(b.elevations)]
         grid_top = float(np.mean(z))
-    times = [p.time_s for p in panels if p.time_s is not None]
     return BeaconObs(
-        beacon,
+        b.id,
         edges,
         cloud_xy,
         cloud_cov,
-        top,
-        sigma_top,
+        top[0],
+        top[1],
         np.array([b.edges[e - 1] for e in edges]),
         grid_top,
-        float(np.median(times)) if times else None,
-        int(sum(len(p.segment) for p in panels)),
+        time,
+        points,
         None
         if b.edge_sigmas_m is None
         else np.array([b.sigmas_or(survey_sigma_m)[e - 1] ** 2 for e in edges]),
     )
+
+
+def _sought(
+    missing: Sequence[Beacon],
+    solution: Solution,
+    cand: Candidates,
+    noise_m: float,
+    config: GeorefConfig,
+    heights: bool,
+) -> dict[str, BeaconObs]:
+    """The surveyed beacons detection missed, looked for where ``solution`` puts them
+    (:mod:`mast.cloud.sought`)."""
+    tr = solution.transformation
+    out = {}
+    for b in missing:
+        z = b.elevations if b.elevations is not None else np.full(4, math.nan)
+        z = np.where(np.isfinite(z), z, tr.translation[2])
+        predicted = tr.to_cloud(np.column_stack([b.edges, z]))[:, :2]
+        found = seek_beacon(
+            cand.xyz,
+            cand.time,
+            b.edges,
+            predicted,
+            noise_m,
+            float(np.max(b.sigmas_or(config.survey_sigma_m))),
+            config.detect,
+        )
+        if found is None:
+            continue
+        fit = found.fit
+        out[b.id] = _beacon_obs(
+            b,
+            INNER_EDGES,
+            fit.edges[[e - 1 for e in INNER_EDGES]],
+            fit.edge_covariance(INNER_EDGES),
+            (found.top, found.sigma_top),
+            found.time,
+            found.points,
+            heights,
+            config.survey_sigma_m,
+        )
+    return out
 
 
 def georeference(
@@ -288,6 +357,27 @@ def georeference(
                 # solution is only where the pose graph starts ("before" in the report)
                 solution = rigid_solution(controls, config.model, config.survey_sigma_m, heights)
                 refusal = None
+    sought: set[str] = set()
+    if solution is not None and refusal is None and trajectory is None:
+        missing = [b for b in survey if b.id not in found]
+        extra = _sought(missing, solution, cand, pieces.segmentation.noise_m, config, heights)
+        more = [o for b, o in extra.items() if b not in config.checks]
+        try:
+            if more:
+                solution = adjust_transformation(
+                    controls + more,
+                    model=config.model,
+                    survey_sigma_m=config.survey_sigma_m,
+                    heights=heights,
+                )
+        except AdjustmentError:
+            extra = {}  # they do not fit with the rest: the transformation stays the first
+        else:
+            controls += more
+            checks_obs += [o for b, o in extra.items() if b in config.checks]
+            found.update(extra)
+            short -= set(extra)
+            sought = set(extra)
     drift = None
     if solution is not None:
         checks = check_beacons(solution, checks_obs, survey_sigma_m=config.survey_sigma_m)
@@ -320,7 +410,7 @@ def georeference(
             "outlier: its removal alone makes the rest fit",
         )
     )
-    beacons = _fates(survey, found, config, excluded, short)
+    beacons = _fates(survey, found, config, excluded, short, sought)
     if refusal is not None and refusal.reason == "too_few":
         refusal = _too_sparse(refusal, cand.wall_density_m2)
     return Georef(
@@ -359,6 +449,7 @@ def _fates(
     config: GeorefConfig,
     excluded: dict[str, str],
     short: set[str],
+    sought: set[str],
 ) -> list[FoundBeacon]:
     out = []
     for b in survey:
@@ -375,11 +466,11 @@ def _fates(
         elif obs is None:
             out.append(FoundBeacon(b.id, "not_found", None, NOT_FOUND))
         elif b.id in config.checks:
-            out.append(FoundBeacon(b.id, "check", obs))
+            out.append(FoundBeacon(b.id, "check", obs, SOUGHT if b.id in sought else ""))
         elif b.id in excluded:
             out.append(FoundBeacon(b.id, "excluded", obs, excluded[b.id]))
         else:
-            out.append(FoundBeacon(b.id, "control", obs))
+            out.append(FoundBeacon(b.id, "control", obs, SOUGHT if b.id in sought else ""))
     return out
 
 
