@@ -15,8 +15,9 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from functools import partial
 
 import numpy as np
 from numpy.typing import NDArray
@@ -44,7 +45,7 @@ from mast.cloud.detect import (
 from mast.cloud.drift import DriftCorrection, correct_drift
 from mast.cloud.io import Cloud
 from mast.cloud.match import Detection, Match, MatchConfig, detect_beacons, match_beacons
-from mast.cloud.sought import seek_beacon
+from mast.cloud.sought import measure_top, seek_beacon
 from mast.core.beacon import Beacon, Survey
 from mast.core.index import SurveyIndex
 from mast.core.noise import DEFAULT_SURVEY_SIGMA_M
@@ -54,10 +55,18 @@ from mast.pipeline.identification import identify_panels
 
 __all__ = ["FoundBeacon", "Georef", "GeorefConfig", "georeference"]
 
+Points = NDArray[np.float64]
+
 MODELS = ("4", "helmert7")
 #: Why a beacon matched to no detection is not used (until :func:`explain_missing` says
 #: whether it lies outside the cloud or in it unseen).
 NOT_FOUND = "not found in the cloud"
+#: With a trajectory, the beacons detection missed are looked for where the drift
+#: correction puts them this many times, the correction solved again with those found.
+SOUGHT_ROUNDS = 2
+#: How far (per coordinate, standard deviation) the drift correction's prediction of a
+#: beacon may be off: the simulated 1 % drifts' inner checks were up to 8 cm off.
+DRIFT_PREDICTION_M = 0.04
 #: How a beacon detection missed was found (:mod:`mast.cloud.sought`).
 SOUGHT = "not detected on its own: found where the control beacons put it"
 
@@ -190,6 +199,7 @@ def _observation(
     heights: bool,
     survey_sigma_m: float,
     xyz: NDArray[np.float64],
+    cfg: DetectConfig,
 ) -> BeaconObs | None:
     b = survey[beacon]
     fit = _design_fit(det, b.edges, pieces, xyz)
@@ -204,12 +214,15 @@ def _observation(
         return None
     panels = [pieces.panels[k] for k in det.panels.values()]
     times = [p.time_s for p in panels if p.time_s is not None]
+    # the top from the fitted panels' points where it can be (its run of heights, not
+    # wherever the pieces' points stop), else from the pieces' tops
+    top = None if fit is None else measure_top(xyz, fit.edges, pieces.segmentation.noise_m, cfg)
     return _beacon_obs(
         b,
         edges,
         cloud_xy,
         cloud_cov,
-        beacon_top(panels),
+        beacon_top(panels) if top is None else top,
         float(np.median(times)) if times else None,
         int(sum(len(p.segment) for p in panels)),
         heights,
@@ -252,29 +265,44 @@ def _beacon_obs(
     )
 
 
+def _rigid_to_cloud(solution: Solution) -> Callable[[Points], Points]:
+    """Grid edges (E, N and Z, Z nan where unknown) to the cloud's plan by ``solution``."""
+    tr = solution.transformation
+
+    def to_cloud(grid: Points) -> Points:
+        z = np.where(np.isfinite(grid[:, 2]), grid[:, 2], tr.translation[2])
+        return np.asarray(tr.to_cloud(np.column_stack([grid[:, :2], z]))[:, :2])
+
+    return to_cloud
+
+
+def _drift_to_cloud(drift: DriftCorrection, path: ScannerPath, grid: Points) -> Points:
+    """Grid edges (E, N, Z rows) to the cloud's plan by the drift correction."""
+    return drift.to_cloud(grid[:, :2], path)
+
+
 def _sought(
     missing: Sequence[Beacon],
-    solution: Solution,
+    to_cloud: Callable[[Points], Points],
+    prediction_sigma_m: float,
     cand: Candidates,
     noise_m: float,
     config: GeorefConfig,
     heights: bool,
 ) -> dict[str, BeaconObs]:
-    """The surveyed beacons detection missed, looked for where ``solution`` puts them
-    (:mod:`mast.cloud.sought`)."""
-    tr = solution.transformation
+    """The surveyed beacons detection missed, looked for where ``to_cloud`` (grid E, N,
+    Z rows to the cloud's plan) puts them, that prediction ``prediction_sigma_m`` off
+    beyond the survey's own sigma (:mod:`mast.cloud.sought`)."""
     out = {}
     for b in missing:
         z = b.elevations if b.elevations is not None else np.full(4, math.nan)
-        z = np.where(np.isfinite(z), z, tr.translation[2])
-        predicted = tr.to_cloud(np.column_stack([b.edges, z]))[:, :2]
         found = seek_beacon(
             cand.xyz,
             cand.time,
             b.edges,
-            predicted,
+            to_cloud(np.column_stack([b.edges, z])),
             noise_m,
-            float(np.max(b.sigmas_or(config.survey_sigma_m))),
+            math.hypot(float(np.max(b.sigmas_or(config.survey_sigma_m))), prediction_sigma_m),
             config.detect,
         )
         if found is None:
@@ -326,7 +354,9 @@ def georeference(
     dets = detect_beacons(pieces, ident, index)
     match = match_beacons(dets, survey, index, config.match)
     observed = {
-        b: _observation(dets[d], b, pieces, survey, heights, config.survey_sigma_m, cand.xyz)
+        b: _observation(
+            dets[d], b, pieces, survey, heights, config.survey_sigma_m, cand.xyz, config.detect
+        )
         for d, b in match.assigned.items()
     }
     found = {b: o for b, o in observed.items() if o is not None}
@@ -358,9 +388,22 @@ def georeference(
                 solution = rigid_solution(controls, config.model, config.survey_sigma_m, heights)
                 refusal = None
     sought: set[str] = set()
-    if solution is not None and refusal is None and trajectory is None:
+    noise = pieces.segmentation.noise_m
+
+    def seek(to_cloud: Callable[[Points], Points], off_m: float) -> dict[str, BeaconObs]:
         missing = [b for b in survey if b.id not in found]
-        extra = _sought(missing, solution, cand, pieces.segmentation.noise_m, config, heights)
+        extra = _sought(missing, to_cloud, off_m, cand, noise, config, heights)
+        return extra
+
+    def take(extra: dict[str, BeaconObs]) -> None:
+        controls.extend(o for b, o in extra.items() if b not in config.checks)
+        checks_obs.extend(o for b, o in extra.items() if b in config.checks)
+        found.update(extra)
+        short.difference_update(extra)
+        sought.update(extra)
+
+    if solution is not None and refusal is None and trajectory is None:
+        extra = seek(_rigid_to_cloud(solution), 0.0)
         more = [o for b, o in extra.items() if b not in config.checks]
         try:
             if more:
@@ -371,16 +414,11 @@ def georeference(
                     heights=heights,
                 )
         except AdjustmentError:
-            extra = {}  # they do not fit with the rest: the transformation stays the first
+            pass  # they do not fit with the rest: the transformation stays the first
         else:
-            controls += more
-            checks_obs += [o for b, o in extra.items() if b in config.checks]
-            found.update(extra)
-            short -= set(extra)
-            sought = set(extra)
+            take(extra)
     drift = None
     if solution is not None:
-        checks = check_beacons(solution, checks_obs, survey_sigma_m=config.survey_sigma_m)
         if trajectory is not None:
             if cand.time is None:
                 raise InputError(
@@ -402,6 +440,26 @@ def georeference(
                 )
             except AdjustmentError as err:
                 refusal = err
+            for _ in range(SOUGHT_ROUNDS):
+                if drift is None:
+                    break
+                extra = seek(partial(_drift_to_cloud, drift, trajectory), DRIFT_PREDICTION_M)
+                if not extra:
+                    break
+                try:
+                    drift = correct_drift(
+                        trajectory,
+                        controls + [o for b, o in extra.items() if b not in config.checks],
+                        solution.transformation,
+                        drift=config.drift,
+                        survey_sigma_m=config.survey_sigma_m,
+                        heights=heights,
+                        checks=checks_obs + [o for b, o in extra.items() if b in config.checks],
+                    )
+                except AdjustmentError:
+                    break  # they do not fit with the rest: the correction stays the last
+                take(extra)
+        checks = check_beacons(solution, checks_obs, survey_sigma_m=config.survey_sigma_m)
     excluded = (
         dict.fromkeys(drift.excluded, "outlier: fails its test against the drift-corrected rest")
         if drift is not None

@@ -12,6 +12,9 @@ millimetres to centimetres off; there its design is fitted to the candidate poin
 directly, as a surveyor's software looks for a target where the orientation says it
 must be. Per beacon (:func:`seek_beacon`):
 
+0. **Snap.** The predicted edges moved, within three sigmas of the prediction (at
+   least a centimetre), to where most points lie within two noise sigmas of its
+   panels: a drift correction's prediction may be centimetres off.
 1. **Heights.** The candidate points within a gate of the predicted panels, in
    height bins of :data:`BIN_M`: a bin is the panels' when at least
    :data:`ON_SHARE` of its points lie within two sigmas of the predicted lines (the
@@ -28,8 +31,13 @@ must be. Per beacon (:func:`seek_beacon`):
    across it, about 1.7 times), and each panel's points run over at least
    :data:`MIN_SPAN_SHARE` of the panel's width inside its margins (a design whose
    panels are not there is not confirmed by stray points on its lines).
-4. **The top** from the fitted panels' points up to three sigmas above the run
-   (:func:`mast.cloud.detect._top_edge`, as for a detected panel).
+4. **The top**: a step in the count of the points on the fitted lines per height,
+   from the panels' density below to whatever runs on above (rock in a panel's plane),
+   blurred by a normal spread; the top, the blur and both densities fitted by least
+   squares about the run's end, the top's standard deviation from the counts' Poisson
+   information (:func:`_top_step`). A top taken from wherever a piece's points stop
+   ran 0.56 m up into the rock on one simulated beacon; a detected beacon's top is
+   measured this way too, about its fitted edges (:func:`measure_top`).
 
 The transformation's prediction only says where to look: the edges are the fit's,
 its covariance its own, and a beacon found here goes through the same tests as a
@@ -48,7 +56,7 @@ from scipy import special
 from mast.cloud.beacon_fit import END_MARGIN_M, BeaconFit, fit_beacon, points_on_panel
 from mast.cloud.detect import DetectConfig
 
-__all__ = ["Sought", "seek_beacon"]
+__all__ = ["Sought", "measure_top", "seek_beacon"]
 
 #: Height bins of the panels' run.
 BIN_M = 0.05
@@ -66,7 +74,13 @@ MAX_RMS_NOISE = 1.25
 MIN_SPAN_SHARE = 0.5
 #: Height bins of the top's step, and how far either side of the run's end it is fitted.
 STEP_BIN_M = 0.005
-STEP_WINDOW_M = 0.1
+STEP_WINDOW_M = 0.15
+#: The blurs of the top's step tried, in noise sigmas.
+STEP_BLURS = (0.75, 1.0, 1.25, 1.5, 2.0, 2.5)
+#: The prediction is first moved to where most points lie on its panels, within three
+#: of its sigmas (:func:`_snapped`), in steps of this; after it, it is taken to be this
+#: far off.
+SNAP_STEP_M = 0.01
 #: Points looked at around the predicted beacon: its reach and this.
 REACH_SLACK_M = 0.3
 
@@ -152,6 +166,36 @@ def _panel_heights(
     return lo, hi
 
 
+def _snapped(
+    plan: NDArray[np.float64], predicted: NDArray[np.float64], noise_m: float, reach_m: float
+) -> NDArray[np.float64]:
+    """The predicted edges moved (within ``reach_m``, on a grid of :data:`SNAP_STEP_M`,
+    then a fifth of it about the best) to where most points lie within two noise sigmas
+    of their panels."""
+    lines = []
+    for j in range(3):
+        a, b = predicted[j], predicted[j + 1]
+        length = math.dist(a, b)
+        d = (b - a) / max(length, 1e-12)
+        n = np.array([-d[1], d[0]])
+        lines.append(((plan - a) @ d, (plan - a) @ n, d, n, length))
+
+    def best(shifts: NDArray[np.float64]) -> NDArray[np.float64]:
+        count = np.zeros(len(shifts))
+        for t, off, d, n, length in lines:
+            ts, os_ = t[:, None] - shifts @ d, off[:, None] - shifts @ n
+            on = (np.abs(os_) <= 2.0 * noise_m) & (ts > END_MARGIN_M) & (ts < length - END_MARGIN_M)
+            count += on.sum(axis=0)
+        return np.asarray(shifts[int(np.argmax(count))])
+
+    steps = max(1, math.ceil(reach_m / SNAP_STEP_M))
+    r = np.arange(-steps, steps + 1) * SNAP_STEP_M
+    shift = best(np.array([(x, y) for x in r for y in r]))
+    fine = np.arange(-2, 3) * (0.2 * SNAP_STEP_M)
+    shift = best(np.array([(shift[0] + x, shift[1] + y) for x in fine for y in fine]))
+    return np.asarray(predicted + shift)
+
+
 def _spans(
     plan: NDArray[np.float64],
     z: NDArray[np.float64],
@@ -193,8 +237,8 @@ def seek_beacon(
     if len(near) == 0:
         return None
     plan, z = near[:, :2], near[:, 2]
-    sigma = math.hypot(noise_m, prediction_sigma_m)
-    heights = _panel_heights(plan, z, predicted, sigma, cfg)
+    predicted = _snapped(plan, predicted, noise_m, max(3.0 * prediction_sigma_m, SNAP_STEP_M))
+    heights = _panel_heights(plan, z, predicted, math.hypot(noise_m, SNAP_STEP_M), cfg)
     if heights is None:
         return None
     fit = fit_beacon(near, shape, predicted, heights, noise_m)
@@ -213,38 +257,97 @@ def seek_beacon(
     return Sought(fit, top, sigma_top, when, int(sum(fit.points)))
 
 
+def measure_top(
+    xyz: NDArray[np.float64], edges: NDArray[np.float64], noise_m: float, cfg: DetectConfig
+) -> tuple[float, float] | None:
+    """The top edge of a beacon fitted at ``edges`` (four, plan) among the candidate
+    points ``xyz``, and its standard deviation (steps 1 and 4 of the module docstring,
+    about the fitted lines); None when its panels' run of heights is not found."""
+    centre = edges.mean(axis=0)
+    reach = float(np.max(np.hypot(*(edges - centre).T))) + REACH_SLACK_M
+    near = xyz[np.max(np.abs(xyz[:, :2] - centre), axis=1) < reach]
+    plan, z = near[:, :2], near[:, 2]
+    heights = _panel_heights(plan, z, edges, noise_m, cfg)
+    if heights is None:
+        return None
+    on = np.isfinite(_offsets(plan, z, edges, 2.0 * noise_m))
+    return _top_step(z[on], heights[1], noise_m)
+
+
+def _step_fit(
+    count: NDArray[np.float64],
+    mid: NDArray[np.float64],
+    noise_m: float,
+    weight: NDArray[np.float64],
+) -> tuple[float, float, float, float] | None:
+    """The step (top, blur, density below, density above) whose counts per bin at
+    heights ``mid`` fit ``count`` best by least squares weighted by ``weight``: every
+    top on a grid of a fifth of a bin, every blur of :data:`STEP_BLURS`, the densities
+    solved for each."""
+    lo, hi = float(mid[0]), float(mid[-1])
+    best: tuple[float, float, float, float, float] | None = None
+    for spread in STEP_BLURS:
+        blur = max(spread * noise_m, 0.5 * STEP_BIN_M)
+        tops = np.arange(lo + 2 * blur, hi - 2 * blur, 0.2 * STEP_BIN_M)
+        a = special.ndtr((tops[:, None] - mid) / blur)  # the share below each top
+        c = 1.0 - a
+        # count = dense a + rest c for every top at once
+        wa, wc = a * weight, c * weight
+        saa, scc, sac = (wa * a).sum(1), (wc * c).sum(1), (wa * c).sum(1)
+        san, scn = wa @ count, wc @ count
+        det = saa * scc - sac**2
+        ok = det > 1e-12
+        dense = np.where(ok, (scc * san - sac * scn) / np.where(ok, det, 1.0), 0.0)
+        rest = np.where(ok, (saa * scn - sac * san) / np.where(ok, det, 1.0), 0.0)
+        sse = (weight * (dense[:, None] * a + rest[:, None] * c - count) ** 2).sum(1)
+        sse = np.where(ok & (dense > rest) & (rest >= -1.0), sse, np.inf)
+        k = int(np.argmin(sse))
+        if np.isfinite(sse[k]) and (best is None or sse[k] < best[0]):
+            best = (float(sse[k]), float(tops[k]), blur, float(dense[k]), float(rest[k]))
+    return None if best is None else best[1:]
+
+
 def _top_step(z: NDArray[np.float64], near: float, noise_m: float) -> tuple[float, float] | None:
     """The top edge of panels whose points (heights ``z``, those on their lines) end
     near ``near``, and its standard deviation: a step in the points' count per height,
     from the panels' density below to whatever lies on their lines above (rock running
-    on in a panel's plane), blurred by the noise. Fitted by least squares on counts in
-    :data:`STEP_BIN_M` bins over :data:`STEP_WINDOW_M` either side of ``near``; its
-    standard deviation from the counts' Poisson information. None when no step down is
-    there."""
+    on in a panel's plane), blurred by a normal spread of the points' heights (the
+    noise, and whatever else spreads the edge: its width is fitted too). Fitted to the
+    counts in :data:`STEP_BIN_M` bins over :data:`STEP_WINDOW_M` either side of
+    ``near`` by least squares, then again weighted by the first fit's Poisson variances
+    (a count's variance is its mean: unweighted, the many points below the top would
+    outweigh the few above, and the top's spread would exceed its Cramér-Rao bound);
+    its standard deviation from the counts' Poisson information, the densities and the
+    blur estimated with it. None when no step down is there."""
     lo, hi = near - STEP_WINDOW_M, near + STEP_WINDOW_M
     zz = z[(z >= lo) & (z < hi)]
     bins = round(2 * STEP_WINDOW_M / STEP_BIN_M)
-    count = np.bincount(((zz - lo) / STEP_BIN_M).astype(np.intp), minlength=bins)[:bins]
-    mid = lo + (np.arange(bins) + 0.5) * STEP_BIN_M
-    blur = max(noise_m, 0.5 * STEP_BIN_M)
-    best: tuple[float, float, float, float] | None = None
-    for top in np.arange(lo + 3 * blur, hi - 3 * blur, 0.2 * STEP_BIN_M):
-        below = special.ndtr((top - mid) / blur)
-        design = np.column_stack([below, 1.0 - below])
-        (dense, rest), *_ = np.linalg.lstsq(design, count, rcond=None)
-        sse = float(np.sum((design @ np.array([dense, rest]) - count) ** 2))
-        if dense > rest >= -1.0 and (best is None or sse < best[0]):
-            best = (sse, float(top), float(dense), max(float(rest), 0.0))
+    k = ((zz - lo) / STEP_BIN_M).astype(np.intp)
+    count = np.bincount(k, minlength=bins)[:bins].astype(np.float64)
+    mid = np.asarray(lo + (np.arange(bins) + 0.5) * STEP_BIN_M, dtype=np.float64)
+    first = _step_fit(count, mid, noise_m, np.ones(bins))
+    if first is None:
+        return None
+    top, blur, inner, outer = first
+    below = special.ndtr((top - mid) / blur)
+    mu = np.maximum(inner * below + max(outer, 0.0) * (1.0 - below), 0.5)
+    best = _step_fit(count, mid, noise_m, 1.0 / mu)
     if best is None:
         return None
-    _, top, dense, rest = best
-    # the count per bin is Poisson with mean mu: information on the top sum(mu'^2 / mu)
-    below = special.ndtr((top - mid) / blur)
-    mu = np.maximum(dense * below + rest * (1.0 - below), 0.5)
-    slope = (
-        (dense - rest) * np.exp(-0.5 * ((top - mid) / blur) ** 2) / (blur * math.sqrt(2 * math.pi))
-    )
-    information = float(np.sum(slope**2 / mu))
-    if information <= 0:
+    top, blur, inner, rest_fit = best
+    outer = max(rest_fit, 0.0)
+    # the count per bin is Poisson with mean mu: the Fisher information of (top, blur,
+    # dense, rest) is J' diag(1 / mu) J; the top's variance is its share of the inverse
+    u = (top - mid) / blur
+    below = special.ndtr(u)
+    mu = np.maximum(inner * below + outer * (1.0 - below), 0.5)
+    bump = (inner - outer) * np.exp(-0.5 * u**2) / (blur * math.sqrt(2 * math.pi))
+    jac = np.column_stack([bump, -bump * u, below, 1.0 - below])
+    information = jac.T @ (jac / mu[:, None])
+    try:
+        var = float(np.linalg.inv(information)[0, 0])
+    except np.linalg.LinAlgError:
         return None
-    return top, max(1.0 / math.sqrt(information), 0.2 * STEP_BIN_M)
+    if not var > 0:
+        return None
+    return top, max(math.sqrt(var), 0.2 * STEP_BIN_M)
