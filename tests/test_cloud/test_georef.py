@@ -424,3 +424,82 @@ def test_the_surveys_own_sigma_m_weighs_each_control_edge(scene: CloudScenario) 
     p2, c2 = solved(given({"B02": 0.03}))
     assert np.all(np.diag(c2) > np.diag(c0))
     assert np.allclose(p2[:2], p0[:2], atol=0.02)
+
+
+def _unmatched(monkeypatch: pytest.MonkeyPatch, beacons: set[str]) -> None:
+    """Detection misses ``beacons``: their detections are matched to nothing."""
+    import dataclasses
+
+    import mast.cloud.georef as georef_module
+
+    real = georef_module.match_beacons
+
+    def missing(*args: Any, **kwargs: Any) -> Any:
+        match = real(*args, **kwargs)
+        kept = {d: b for d, b in match.assigned.items() if b not in beacons}
+        return dataclasses.replace(match, assigned=kept)
+
+    monkeypatch.setattr(georef_module, "match_beacons", missing)
+
+
+def test_beacons_detection_missed_are_found_where_the_others_put_them(
+    scene: CloudScenario, truth: dict[str, Any], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A control and a check detection missed are sought where the transformation from
+    the rest puts them, and found where they are; a surveyed beacon where the cloud has
+    none (B02's design 3 m along the wall from it) is not."""
+    from mast.cloud.georef import SOUGHT, GeorefConfig, georeference
+    from mast.cloud.io import open_cloud
+    from mast.core.beacon import Beacon, Survey
+    from mast.io import read_survey
+
+    survey = read_survey(scene.survey)
+    b2 = survey["B02"]
+    along = (b2.edges[3] - b2.edges[0]) / np.hypot(*(b2.edges[3] - b2.edges[0]))
+    ghost = Beacon("B99", b2.edges + 3.0 * along, b2.elevations)
+    survey = Survey([*survey, ghost])
+    _unmatched(monkeypatch, {"B02", "B03"})
+    result = georeference(open_cloud(scene.cloud), survey, GeorefConfig(checks=("B03",)))
+    assert result.refusal is None, result.refusal
+    fates = {fb.beacon: fb for fb in result.beacons}
+    assert fates["B02"].role == "control"
+    assert fates["B02"].why == SOUGHT
+    assert fates["B03"].role == "check"
+    assert fates["B03"].why == SOUGHT
+    assert fates["B99"].role == "not_found"
+    local = {b["id"]: np.array(b["edges_local"]) for b in truth["beacons"]}
+    for b in ("B02", "B03"):
+        obs = fates[b].obs
+        assert obs is not None
+        assert np.max(np.hypot(*(obs.cloud_xy - local[b][1:3, :2]).T)) < 0.01
+        assert abs(obs.top - local[b][0, 2]) < 0.015
+    assert not result.checks[0].failed
+
+
+def test_with_drift_a_beacon_detection_missed_is_found_where_the_correction_puts_it(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from mast.cloud.georef import SOUGHT, GeorefConfig, georeference
+    from mast.cloud.io import open_cloud
+    from mast.io import read_survey
+    from mast.io.trajectory import read_trajectory
+
+    scene = simulate_cloud(
+        tmp_path / "sim", 4, CloudOptions(length_m=160.0, beacons=7, density=1500.0, drift=0.01)
+    )
+    truth = json.loads(scene.truth.read_text())
+    _unmatched(monkeypatch, {"B05"})
+    result = georeference(
+        open_cloud(scene.cloud),
+        read_survey(scene.survey),
+        GeorefConfig(),
+        trajectory=read_trajectory(scene.trajectory),
+    )
+    assert result.refusal is None
+    assert result.drift is not None
+    found = {fb.beacon: fb for fb in result.beacons}["B05"]
+    assert found.role == "control"
+    assert found.why == SOUGHT
+    assert found.obs is not None
+    local = np.array(next(b for b in truth["beacons"] if b["id"] == "B05")["edges_local"])
+    assert np.max(np.hypot(*(found.obs.cloud_xy - local[1:3, :2]).T)) < 0.01
