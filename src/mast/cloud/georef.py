@@ -9,7 +9,10 @@
 4. :func:`mast.cloud.adjust.adjust_transformation`: the transformation with its
    tests, check beacons after it;
 5. with a trajectory, :func:`mast.cloud.drift.correct_drift`: a pose graph that
-   bends the cloud onto the beacons along the run.
+   bends the cloud onto the beacons along the run;
+6. :mod:`mast.cloud.sought`: the surveyed beacons detection missed, looked for where
+   the transformation (or the drift correction) puts them, and stages 4-5 again with
+   those found.
 """
 
 from __future__ import annotations
@@ -392,8 +395,7 @@ def georeference(
 
     def seek(to_cloud: Callable[[Points], Points], off_m: float) -> dict[str, BeaconObs]:
         missing = [b for b in survey if b.id not in found]
-        extra = _sought(missing, to_cloud, off_m, cand, noise, config, heights)
-        return extra
+        return _sought(missing, to_cloud, off_m, cand, noise, config, heights)
 
     def take(extra: dict[str, BeaconObs]) -> None:
         controls.extend(o for b, o in extra.items() if b not in config.checks)
