@@ -474,6 +474,11 @@ def test_beacons_detection_missed_are_found_where_the_others_put_them(
         assert np.max(np.hypot(*(obs.cloud_xy - local[b][1:3, :2]).T)) < 0.01
         assert abs(obs.top - local[b][0, 2]) < 0.015
     assert not result.checks[0].failed
+    from mast.cloud.georef import explain_missing
+    from mast.cloud.outputs import _before_after, report_text
+
+    text = report_text(result, explain_missing(result), _before_after(result, None), None)
+    assert "2 not detected on its own, found where the others put it" in text
 
 
 def test_with_drift_a_beacon_detection_missed_is_found_where_the_correction_puts_it(

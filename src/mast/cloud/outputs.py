@@ -22,7 +22,7 @@ from numpy.typing import NDArray
 from mast import __version__
 from mast.cloud.detect import BEACON_DENSITY_M2
 from mast.cloud.drift import DriftCorrection
-from mast.cloud.georef import FoundBeacon, Georef, explain_missing, grid_origin
+from mast.cloud.georef import SOUGHT, FoundBeacon, Georef, explain_missing, grid_origin
 from mast.core.stats import variance_bounds
 from mast.io.atomic import atomic_open, write_atomic
 from mast.report.html import CSS, axis_label, escape, inline_svg, new_figure, plot_origin
@@ -390,11 +390,13 @@ def report_text(
     counts: dict[str, int] = {}
     for fb in beacons:
         counts[fb.role] = counts.get(fb.role, 0) + 1
+    sought = sum(fb.why == SOUGHT for fb in beacons)
     add(
         "  "
         + ", ".join(f"{k.replace('_', ' ')} {v}" for k, v in sorted(counts.items()))
         + f"; {len(result.detections)} beacon shape(s) found in the cloud, "
         f"{len(result.pieces.panels)} vertical panel(s)"
+        + (f"; {sought} not detected on its own, found where the others put it" if sought else "")
     )
     for fb in beacons:
         pts = "" if fb.obs is None else f"{fb.obs.points:6d} pts"
