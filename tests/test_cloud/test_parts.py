@@ -19,7 +19,7 @@ from mast.cloud.adjust import (
 )
 from mast.cloud.detect import _top_edge
 from mast.cloud.drift import DriftCorrection, correct_drift
-from mast.cloud.grid import PlanGrid, cell_keys, key_ij, pack_ij
+from mast.cloud.grid import PlanGrid, PlanIndex, cell_keys, key_ij, pack_ij
 from mast.cloud.outputs import accuracy_class
 from mast.core.trajectory import ScannerPath
 from mast.pipeline.segmentation import Segment
@@ -35,6 +35,17 @@ def test_cell_keys_round_trip_on_both_sides_of_the_origin() -> None:
     xy = np.array([[-0.26, 0.35], [10.0, -3.0]])
     back = key_ij(cell_keys(xy, np.zeros(2), 0.05))
     assert np.array_equal(back, np.floor(xy / 0.05).astype(int))
+
+
+def test_plan_index_squares_are_the_points_a_full_scan_finds_in_order() -> None:
+    rng = np.random.default_rng(3)
+    xy = rng.uniform(0, 50, (20_000, 2)) + [452_000.0, 7_101_000.0]
+    xy[:50, 0] = xy[50, 0]  # ties in x
+    index = PlanIndex(xy)
+    for centre in [*xy[rng.integers(0, len(xy), 20)], np.array([0.0, 0.0])]:
+        for half in (0.01, 0.7, 3.0):
+            full = np.flatnonzero(np.max(np.abs(xy - centre), axis=1) < half)
+            np.testing.assert_array_equal(index.square(centre, half), full)
 
 
 def test_plan_grid_merges_chunks_into_min_max_count_and_bins() -> None:

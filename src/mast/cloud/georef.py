@@ -46,6 +46,7 @@ from mast.cloud.detect import (
     plan_pieces,
 )
 from mast.cloud.drift import DriftCorrection, correct_drift
+from mast.cloud.grid import PlanIndex
 from mast.cloud.io import Cloud
 from mast.cloud.match import Detection, Match, MatchConfig, detect_beacons, match_beacons
 from mast.cloud.sought import measure_top, seek_beacon
@@ -179,13 +180,16 @@ def _start(det: Detection, shape: NDArray[np.float64]) -> NDArray[np.float64]:
 
 
 def _design_fit(
-    det: Detection, shape: NDArray[np.float64], pieces: PlanPieces, xyz: NDArray[np.float64]
+    det: Detection,
+    shape: NDArray[np.float64],
+    pieces: PlanPieces,
+    xyz: NDArray[np.float64],
+    index: PlanIndex,
 ) -> BeaconFit | None:
     """The beacon fitted whole to its candidate points (:mod:`mast.cloud.beacon_fit`)."""
     start = _start(det, shape)
     reach = float(np.max(np.hypot(*(shape - shape.mean(axis=0)).T))) + 0.1
-    centre = start.mean(axis=0)
-    near = xyz[np.max(np.abs(xyz[:, :2] - centre), axis=1) < reach]
+    near = xyz[index.square(start.mean(axis=0), reach)]
     panels = [pieces.panels[k] for k in det.panels.values()]
     heights = (
         float(np.median([p.bottom_m for p in panels])),
@@ -202,10 +206,11 @@ def _observation(
     heights: bool,
     survey_sigma_m: float,
     xyz: NDArray[np.float64],
+    index: PlanIndex,
     cfg: DetectConfig,
 ) -> BeaconObs | None:
     b = survey[beacon]
-    fit = _design_fit(det, b.edges, pieces, xyz)
+    fit = _design_fit(det, b.edges, pieces, xyz, index)
     if fit is not None:
         edges: tuple[int, ...] = INNER_EDGES
         cloud_xy, cloud_cov = fit.edges[[e - 1 for e in edges]], fit.edge_covariance(edges)
@@ -219,7 +224,10 @@ def _observation(
     times = [p.time_s for p in panels if p.time_s is not None]
     # the top from the fitted panels' points where it can be (its run of heights, not
     # wherever the pieces' points stop), else from the pieces' tops
-    top = None if fit is None else measure_top(xyz, fit.edges, pieces.segmentation.noise_m, cfg)
+    top = None
+    if fit is not None:
+        near = xyz[index.square(fit.edges.mean(axis=0), _reach(fit.edges))]
+        top = measure_top(near, fit.edges, pieces.segmentation.noise_m, cfg)
     return _beacon_obs(
         b,
         edges,
@@ -284,11 +292,18 @@ def _drift_to_cloud(drift: DriftCorrection, path: ScannerPath, grid: Points) -> 
     return drift.to_cloud(grid[:, :2], path)
 
 
+def _reach(edges: NDArray[np.float64]) -> float:
+    """Half the side of a square about a beacon's edges that holds every point the
+    searches of :mod:`mast.cloud.sought` look at, however far they snap."""
+    return float(np.max(np.hypot(*(edges - edges.mean(axis=0)).T))) + 1.0
+
+
 def _sought(
     missing: Sequence[Beacon],
     to_cloud: Callable[[Points], Points],
     prediction_sigma_m: float,
     cand: Candidates,
+    index: PlanIndex,
     noise_m: float,
     config: GeorefConfig,
     heights: bool,
@@ -299,11 +314,13 @@ def _sought(
     out = {}
     for b in missing:
         z = b.elevations if b.elevations is not None else np.full(4, math.nan)
+        predicted = to_cloud(np.column_stack([b.edges, z]))
+        rows = index.square(predicted.mean(axis=0), _reach(predicted))
         found = seek_beacon(
-            cand.xyz,
-            cand.time,
+            cand.xyz[rows],
+            None if cand.time is None else cand.time[rows],
             b.edges,
-            to_cloud(np.column_stack([b.edges, z])),
+            predicted,
             noise_m,
             math.hypot(float(np.max(b.sigmas_or(config.survey_sigma_m))), prediction_sigma_m),
             config.detect,
@@ -356,9 +373,18 @@ def georeference(
     )
     dets = detect_beacons(pieces, ident, index)
     match = match_beacons(dets, survey, index, config.match)
+    plan = PlanIndex(cand.xyz[:, :2])
     observed = {
         b: _observation(
-            dets[d], b, pieces, survey, heights, config.survey_sigma_m, cand.xyz, config.detect
+            dets[d],
+            b,
+            pieces,
+            survey,
+            heights,
+            config.survey_sigma_m,
+            cand.xyz,
+            plan,
+            config.detect,
         )
         for d, b in match.assigned.items()
     }
@@ -395,7 +421,7 @@ def georeference(
 
     def seek(to_cloud: Callable[[Points], Points], off_m: float) -> dict[str, BeaconObs]:
         missing = [b for b in survey if b.id not in found]
-        return _sought(missing, to_cloud, off_m, cand, noise, config, heights)
+        return _sought(missing, to_cloud, off_m, cand, plan, noise, config, heights)
 
     def take(extra: dict[str, BeaconObs]) -> None:
         controls.extend(o for b, o in extra.items() if b not in config.checks)

@@ -12,7 +12,16 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["EIGHT", "PlanGrid", "cell_keys", "key_ij", "neighbours", "pack_ij", "within"]
+__all__ = [
+    "EIGHT",
+    "PlanGrid",
+    "PlanIndex",
+    "cell_keys",
+    "key_ij",
+    "neighbours",
+    "pack_ij",
+    "within",
+]
 
 _SHIFT = np.int64(1 << 30)  # keys stay positive: (i + 2^30) << 32 < 2^63
 
@@ -127,3 +136,20 @@ class PlanGrid:
     def centres(self) -> NDArray[np.float64]:
         """Plan centre of every cell."""
         return np.asarray(self.origin + (key_ij(self.keys) + 0.5) * self.cell_m, dtype=float)
+
+
+class PlanIndex:
+    """Points in plan, sorted by x once, for the points in many small squares: a slice
+    by x, then a test of y (a beacon's neighbourhood among millions of candidates)."""
+
+    def __init__(self, xy: NDArray[np.float64]) -> None:
+        self.order = np.argsort(xy[:, 0], kind="stable")
+        self.x = np.ascontiguousarray(xy[self.order, 0])
+        self.y = np.ascontiguousarray(xy[self.order, 1])
+
+    def square(self, centre: NDArray[np.float64], half_m: float) -> NDArray[np.intp]:
+        """Rows (in order) of the points nearer than ``half_m`` to ``centre`` in x and in y."""
+        lo = int(np.searchsorted(self.x, centre[0] - half_m, side="right"))
+        hi = int(np.searchsorted(self.x, centre[0] + half_m, side="left"))
+        inside = np.abs(self.y[lo:hi] - centre[1]) < half_m
+        return np.asarray(np.sort(self.order[lo:hi][inside]), dtype=np.intp)
