@@ -134,3 +134,19 @@ def test_the_top_step_is_unbiased_and_its_sigma_honest_with_rock_running_on_abov
     rms = float(np.sqrt(np.mean(np.square(scores))))
     assert 0.8 < rms < 1.25, rms
     assert abs(float(np.mean(scores))) < 0.2
+
+
+def test_noisy_clouds_and_loose_predictions_are_no_error() -> None:
+    from mast.cloud.sought import _top_step
+
+    rng = np.random.default_rng(11)
+    # a noise as wide as the step's window leaves no step to place, not a crash
+    z = rng.uniform(TOP - 0.6, TOP, 3000) + rng.normal(0, 0.03, 3000)
+    for noise in (0.03, 0.04, 0.1):
+        got = _top_step(z, TOP, noise)
+        assert got is None or abs(got[0] - TOP) < 0.05
+    # a survey sigma of 0.2 m: the snap stays within 15 cm, the beacon is found
+    xyz, truth = _scene(rng, 0.3, np.array([10.0, 20.0]))
+    found = seek_beacon(xyz, None, SHAPE, truth + 0.05, NOISE, 0.2, DetectConfig())
+    assert found is not None
+    assert np.max(np.hypot(*(found.fit.edges - truth).T)) < 0.02

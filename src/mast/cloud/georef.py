@@ -190,12 +190,16 @@ def _design_fit(
     start = _start(det, shape)
     reach = float(np.max(np.hypot(*(shape - shape.mean(axis=0)).T))) + 0.1
     near = xyz[index.square(start.mean(axis=0), reach)]
+    return fit_beacon(near, shape, start, _heights(det, pieces), pieces.segmentation.noise_m)
+
+
+def _heights(det: Detection, pieces: PlanPieces) -> tuple[float, float]:
+    """A detected beacon's bottom and top as its pieces give them (medians)."""
     panels = [pieces.panels[k] for k in det.panels.values()]
-    heights = (
+    return (
         float(np.median([p.bottom_m for p in panels])),
         float(np.median([p.top_m for p in panels])),
     )
-    return fit_beacon(near, shape, start, heights, pieces.segmentation.noise_m)
 
 
 def _observation(
@@ -227,7 +231,7 @@ def _observation(
     top = None
     if fit is not None:
         near = xyz[index.square(fit.edges.mean(axis=0), _reach(fit.edges))]
-        top = measure_top(near, fit.edges, pieces.segmentation.noise_m, cfg)
+        top = measure_top(near, fit.edges, pieces.segmentation.noise_m, cfg, _heights(det, pieces))
     return _beacon_obs(
         b,
         edges,
@@ -471,7 +475,15 @@ def georeference(
             for _ in range(SOUGHT_ROUNDS):
                 if drift is None:
                     break
-                extra = seek(partial(_drift_to_cloud, drift, trajectory), DRIFT_PREDICTION_M)
+                extra = {
+                    b: o
+                    for b, o in seek(
+                        partial(_drift_to_cloud, drift, trajectory), DRIFT_PREDICTION_M
+                    ).items()
+                    # seen while the trajectory ran (a partial one: not beyond its ends)
+                    if o.time is not None
+                    and trajectory.time[0] - 1.0 <= o.time <= trajectory.time[-1] + 1.0
+                }
                 if not extra:
                     break
                 try:

@@ -81,6 +81,10 @@ STEP_BLURS = (0.75, 1.0, 1.25, 1.5, 2.0, 2.5)
 #: of its sigmas (:func:`_snapped`), in steps of this; after it, it is taken to be this
 #: far off.
 SNAP_STEP_M = 0.01
+#: ... never farther than this (the beacon-level fit's own reach), in blocks of this
+#: many shifts at once.
+MAX_SNAP_M = 0.15
+SNAP_BLOCK = 64
 #: Points looked at around the predicted beacon: its reach and this.
 REACH_SLACK_M = 0.3
 
@@ -134,9 +138,11 @@ def _panel_heights(
     predicted: NDArray[np.float64],
     sigma_m: float,
     cfg: DetectConfig,
+    among: tuple[float, float] | None = None,
 ) -> tuple[float, float] | None:
     """The panels' run of heights about the predicted edges (step 1 of the module), or
-    None when no run as tall as a panel is there."""
+    None when no run as tall as a panel is there; with ``among`` (bottom, top), the
+    longest run that reaches into those heights."""
     off = _offsets(plan, z, predicted, 3.0 * sigma_m + GATE_SLACK_M)
     gated = np.isfinite(off)
     zg = z[gated]
@@ -155,6 +161,10 @@ def _panel_heights(
     starts = np.flatnonzero(bridged & ~np.r_[False, bridged[:-1]])
     ends = np.flatnonzero(bridged & ~np.r_[bridged[1:], False])
     for s, e in zip(starts, ends, strict=True):
+        if among is not None and not (
+            z0 + s * BIN_M < among[1] and z0 + (e + 1) * BIN_M > among[0]
+        ):
+            continue
         held = int(count[s : e + 1].sum())
         if best is None or held > best[0]:
             best = (held, int(s), int(e))
@@ -182,13 +192,19 @@ def _snapped(
 
     def best(shifts: NDArray[np.float64]) -> NDArray[np.float64]:
         count = np.zeros(len(shifts))
-        for t, off, d, n, length in lines:
-            ts, os_ = t[:, None] - shifts @ d, off[:, None] - shifts @ n
-            on = (np.abs(os_) <= 2.0 * noise_m) & (ts > END_MARGIN_M) & (ts < length - END_MARGIN_M)
-            count += on.sum(axis=0)
+        for first in range(0, len(shifts), SNAP_BLOCK):  # points x shifts, in blocks
+            block = shifts[first : first + SNAP_BLOCK]
+            for t, off, d, n, length in lines:
+                ts, os_ = t[:, None] - block @ d, off[:, None] - block @ n
+                on = (
+                    (np.abs(os_) <= 2.0 * noise_m)
+                    & (ts > END_MARGIN_M)
+                    & (ts < length - END_MARGIN_M)
+                )
+                count[first : first + SNAP_BLOCK] += on.sum(axis=0)
         return np.asarray(shifts[int(np.argmax(count))])
 
-    steps = max(1, math.ceil(reach_m / SNAP_STEP_M))
+    steps = max(1, math.ceil(min(reach_m, MAX_SNAP_M) / SNAP_STEP_M))
     r = np.arange(-steps, steps + 1) * SNAP_STEP_M
     shift = best(np.array([(x, y) for x in r for y in r]))
     fine = np.arange(-2, 3) * (0.2 * SNAP_STEP_M)
@@ -253,21 +269,26 @@ def seek_beacon(
         return None
     top, sigma_top = edge
     inside = on & (z >= heights[0]) & (z <= top)
-    when = None if time is None else float(np.median(time[box][inside]))
+    when = None if time is None or not inside.any() else float(np.median(time[box][inside]))
     return Sought(fit, top, sigma_top, when, int(sum(fit.points)))
 
 
 def measure_top(
-    xyz: NDArray[np.float64], edges: NDArray[np.float64], noise_m: float, cfg: DetectConfig
+    xyz: NDArray[np.float64],
+    edges: NDArray[np.float64],
+    noise_m: float,
+    cfg: DetectConfig,
+    among: tuple[float, float],
 ) -> tuple[float, float] | None:
     """The top edge of a beacon fitted at ``edges`` (four, plan) among the candidate
     points ``xyz``, and its standard deviation (steps 1 and 4 of the module docstring,
-    about the fitted lines); None when its panels' run of heights is not found."""
+    about the fitted lines, the run of heights one that reaches into ``among``, the
+    heights its detection gave); None when its panels' run of heights is not found."""
     centre = edges.mean(axis=0)
     reach = float(np.max(np.hypot(*(edges - centre).T))) + REACH_SLACK_M
     near = xyz[np.max(np.abs(xyz[:, :2] - centre), axis=1) < reach]
     plan, z = near[:, :2], near[:, 2]
-    heights = _panel_heights(plan, z, edges, noise_m, cfg)
+    heights = _panel_heights(plan, z, edges, noise_m, cfg, among)
     if heights is None:
         return None
     on = np.isfinite(_offsets(plan, z, edges, 2.0 * noise_m))
@@ -289,6 +310,8 @@ def _step_fit(
     for spread in STEP_BLURS:
         blur = max(spread * noise_m, 0.5 * STEP_BIN_M)
         tops = np.arange(lo + 2 * blur, hi - 2 * blur, 0.2 * STEP_BIN_M)
+        if tops.size == 0:
+            continue  # a blur as wide as the window: no step to place in it
         a = special.ndtr((tops[:, None] - mid) / blur)  # the share below each top
         c = 1.0 - a
         # count = dense a + rest c for every top at once
