@@ -120,14 +120,14 @@ class DriftCorrection:
         """Where the grid points ``grid_xy`` (one beacon's edges, E and N) are in the
         cloud's plan: taken back by the correction at the keyframe from which they are
         nearest the scanner (when it passed them, and its points of them were taken)."""
-        c, s = np.cos(self.rotation), np.sin(self.rotation)
-        rel = grid_xy.mean(axis=0) - self.translation
-        back = np.column_stack([c * rel[:, 0] + s * rel[:, 1], -s * rel[:, 0] + c * rel[:, 1]])
-        here = _pose_at(path, self.time)[:, :2]
-        k = int(np.argmin(np.hypot(*(back - here).T)))
-        ck, sk = c[k], s[k]
-        rel = grid_xy - self.translation[k]
-        return np.column_stack([ck * rel[:, 0] + sk * rel[:, 1], -sk * rel[:, 0] + ck * rel[:, 1]])
+
+        def back(rel: NDArray[np.float64], rot: NDArray[np.float64]) -> NDArray[np.float64]:
+            c, s = np.cos(rot), np.sin(rot)  # grid = R p + t, so p = R^T (grid - t)
+            return np.column_stack([c * rel[:, 0] + s * rel[:, 1], -s * rel[:, 0] + c * rel[:, 1]])
+
+        middle = back(grid_xy.mean(axis=0) - self.translation, self.rotation)
+        k = int(np.argmin(np.hypot(*(middle - _pose_at(path, self.time)[:, :2]).T)))
+        return back(grid_xy - self.translation[k], np.full(len(grid_xy), self.rotation[k]))
 
     def at_beacon(self, obs: BeaconObs) -> NDArray[np.float64]:
         """The beacon's edges (E, N, Z of its top) after the correction at its time."""

@@ -49,7 +49,7 @@ from mast.cloud.drift import DriftCorrection, correct_drift
 from mast.cloud.grid import PlanIndex
 from mast.cloud.io import Cloud
 from mast.cloud.match import Detection, Match, MatchConfig, detect_beacons, match_beacons
-from mast.cloud.sought import measure_top, seek_beacon
+from mast.cloud.sought import measure_top, reach_m, seek_beacon
 from mast.core.beacon import Beacon, Survey
 from mast.core.index import SurveyIndex
 from mast.core.noise import DEFAULT_SURVEY_SIGMA_M
@@ -185,12 +185,14 @@ def _design_fit(
     pieces: PlanPieces,
     xyz: NDArray[np.float64],
     index: PlanIndex,
+    heights: tuple[float, float],
 ) -> BeaconFit | None:
-    """The beacon fitted whole to its candidate points (:mod:`mast.cloud.beacon_fit`)."""
+    """The beacon fitted whole to its candidate points (:mod:`mast.cloud.beacon_fit`)
+    between ``heights``."""
     start = _start(det, shape)
     reach = float(np.max(np.hypot(*(shape - shape.mean(axis=0)).T))) + 0.1
     near = xyz[index.square(start.mean(axis=0), reach)]
-    return fit_beacon(near, shape, start, _heights(det, pieces), pieces.segmentation.noise_m)
+    return fit_beacon(near, shape, start, heights, pieces.segmentation.noise_m)
 
 
 def _heights(det: Detection, pieces: PlanPieces) -> tuple[float, float]:
@@ -214,7 +216,8 @@ def _observation(
     cfg: DetectConfig,
 ) -> BeaconObs | None:
     b = survey[beacon]
-    fit = _design_fit(det, b.edges, pieces, xyz, index)
+    span = _heights(det, pieces)
+    fit = _design_fit(det, b.edges, pieces, xyz, index, span)
     if fit is not None:
         edges: tuple[int, ...] = INNER_EDGES
         cloud_xy, cloud_cov = fit.edges[[e - 1 for e in edges]], fit.edge_covariance(edges)
@@ -230,8 +233,8 @@ def _observation(
     # wherever the pieces' points stop), else from the pieces' tops
     top = None
     if fit is not None:
-        near = xyz[index.square(fit.edges.mean(axis=0), _reach(fit.edges))]
-        top = measure_top(near, fit.edges, pieces.segmentation.noise_m, cfg, _heights(det, pieces))
+        near = xyz[index.square(fit.edges.mean(axis=0), reach_m(fit.edges))]
+        top = measure_top(near, fit.edges, pieces.segmentation.noise_m, cfg, span)
     return _beacon_obs(
         b,
         edges,
@@ -296,12 +299,6 @@ def _drift_to_cloud(drift: DriftCorrection, path: ScannerPath, grid: Points) -> 
     return drift.to_cloud(grid[:, :2], path)
 
 
-def _reach(edges: NDArray[np.float64]) -> float:
-    """Half the side of a square about a beacon's edges that holds every point the
-    searches of :mod:`mast.cloud.sought` look at, however far they snap."""
-    return float(np.max(np.hypot(*(edges - edges.mean(axis=0)).T))) + 1.0
-
-
 def _sought(
     missing: Sequence[Beacon],
     to_cloud: Callable[[Points], Points],
@@ -319,7 +316,7 @@ def _sought(
     for b in missing:
         z = b.elevations if b.elevations is not None else np.full(4, math.nan)
         predicted = to_cloud(np.column_stack([b.edges, z]))
-        rows = index.square(predicted.mean(axis=0), _reach(predicted))
+        rows = index.square(predicted.mean(axis=0), reach_m(predicted))
         found = seek_beacon(
             cand.xyz[rows],
             None if cand.time is None else cand.time[rows],

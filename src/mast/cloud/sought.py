@@ -56,7 +56,7 @@ from scipy import special
 from mast.cloud.beacon_fit import END_MARGIN_M, BeaconFit, fit_beacon, points_on_panel
 from mast.cloud.detect import DetectConfig
 
-__all__ = ["Sought", "measure_top", "seek_beacon"]
+__all__ = ["Sought", "measure_top", "reach_m", "seek_beacon"]
 
 #: Height bins of the panels' run.
 BIN_M = 0.05
@@ -110,6 +110,17 @@ class Sought:
     sigma_top: float
     time: float | None
     points: int
+
+
+def reach_m(edges: NDArray[np.float64]) -> float:
+    """Half the side of the square about a beacon's edges (plan) whose points are
+    looked at: its farthest edge from their middle and :data:`REACH_SLACK_M`."""
+    return float(np.max(np.hypot(*(edges - edges.mean(axis=0)).T))) + REACH_SLACK_M
+
+
+def _around(xyz: NDArray[np.float64], edges: NDArray[np.float64]) -> NDArray[np.bool_]:
+    """Which points lie in the square of :func:`reach_m` about ``edges``."""
+    return np.asarray(np.max(np.abs(xyz[:, :2] - edges.mean(axis=0)), axis=1) < reach_m(edges))
 
 
 def _offsets(
@@ -246,9 +257,7 @@ def seek_beacon(
     ``xyz`` (times ``time``) where ``predicted`` (its four edges in the cloud's plan)
     puts it, or None when it is not there (module docstring). ``prediction_sigma_m``:
     the prediction's standard deviation per coordinate (the survey's, at least)."""
-    centre = predicted.mean(axis=0)
-    reach = float(np.max(np.hypot(*(predicted - centre).T))) + REACH_SLACK_M
-    box = np.max(np.abs(xyz[:, :2] - centre), axis=1) < reach
+    box = _around(xyz, predicted)
     near = xyz[box]
     if len(near) == 0:
         return None
@@ -284,9 +293,7 @@ def measure_top(
     points ``xyz``, and its standard deviation (steps 1 and 4 of the module docstring,
     about the fitted lines, the run of heights one that reaches into ``among``, the
     heights its detection gave); None when its panels' run of heights is not found."""
-    centre = edges.mean(axis=0)
-    reach = float(np.max(np.hypot(*(edges - centre).T))) + REACH_SLACK_M
-    near = xyz[np.max(np.abs(xyz[:, :2] - centre), axis=1) < reach]
+    near = xyz[_around(xyz, edges)]
     plan, z = near[:, :2], near[:, 2]
     heights = _panel_heights(plan, z, edges, noise_m, cfg, among)
     if heights is None:
