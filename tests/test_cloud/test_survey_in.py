@@ -4,6 +4,7 @@ top within their sigmas, ids kept from a previous survey, a moved beacon named."
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 from pathlib import Path
 from subprocess import CompletedProcess
 
@@ -234,3 +235,84 @@ def test_beacons_16_m_from_the_nearer_station_are_surveyed_in(tmp_path: Path) ->
         fb = min(found, key=lambda f: math.dist(f.beacon.edges.mean(axis=0), b.edges.mean(axis=0)))
         assert fb.beacon.design == b.design
         assert np.max(np.hypot(*(fb.beacon.edges - b.edges).T)) < 0.005
+
+
+@pytest.fixture(scope="module")
+def edge_on(tmp_path_factory: pytest.TempPathFactory) -> tuple[TlsScenario, list[Beacon]]:
+    """A far scene in which a station 17 m away sees a beacon's middle panel edge-on: a
+    couple of columns of points on it, their mixed returns at its edges (a beam 3.5 mm
+    wide at the exit) leave no piece of its own (the survey-in benchmark's far scene 2)."""
+    import json
+
+    options = TlsOptions(length_m=95.5, beacons=6, designs=3, stations=2, range_noise_m=0.0018,
+                         step_rad=0.0006, roughness_m=0.0275, station_sigma_m=0.001,
+                         panel_bow_m=0.001, beam_exit_m=0.0035)  # fmt: skip
+    scene = simulate_tls(tmp_path_factory.mktemp("edge-on"), 14, options)
+    points = {
+        b["id"]: b["points_per_panel"] for b in json.loads(scene.truth.read_text())["beacons"]
+    }
+    thin = [b for b in read_survey(scene.survey) if 50 <= points[b.id][1] < 300
+            and min(points[b.id]) >= 50]  # fmt: skip
+    assert thin
+    return scene, thin
+
+
+def _surveyed_in(scene: TlsScenario) -> list[Beacon]:
+    from mast.cloud.survey_in import SurveyInConfig, survey_in
+
+    config = SurveyInConfig(noise_m=0.0018, station_sigma_m=0.001)
+    found = survey_in([scene.e57], read_survey(scene.designs, apart=False), config).beacons
+    return [f.beacon for f in found]
+
+
+def test_a_beacon_whose_middle_panel_is_seen_edge_on_is_surveyed_in(
+    edge_on: tuple[TlsScenario, list[Beacon]], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Its outer panels and its design place the middle panel; its columns there fit it
+    (docs/survey-in.md, "A middle panel seen edge-on"). Without that search it is missed,
+    and nothing found is not a beacon of the scene."""
+    from mast.cloud import survey_in as module
+
+    scene, thin = edge_on
+    truth = read_survey(scene.survey)
+    found = _surveyed_in(scene)
+    for b in found:
+        t = _nearest(truth, b)
+        assert b.design == t.design
+        assert np.max(np.hypot(*(b.edges - t.edges).T)) < 0.005
+    for b in thin:
+        fb = _nearest(Survey(found), b)
+        assert np.max(np.hypot(*(fb.edges - b.edges).T)) < 0.005, b.id
+    monkeypatch.setattr(module, "_middle_edge_on", lambda *args: [])
+    without = Survey(_surveyed_in(scene))
+    assert any(
+        math.dist(_nearest(without, b).edges.mean(axis=0), b.edges.mean(axis=0)) > 0.25
+        for b in thin
+    )
+
+
+def test_outer_panels_without_a_middle_one_between_them_are_no_beacon(
+    edge_on: tuple[TlsScenario, list[Beacon]], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The same scene with the thin middle panels' points taken out of the candidates: the
+    outer panels alone at their design's angle are not surveyed as a beacon."""
+    from mast.cloud import survey_in as module
+    from mast.cloud.detect import Candidates
+
+    scene, thin = edge_on
+    real = module.find_candidates
+
+    def without_middles(*args: object, **kwargs: object) -> Candidates:
+        cand = real(*args, **kwargs)  # type: ignore[arg-type]
+        keep = np.ones(cand.xyz.shape[0], dtype=bool)
+        for b in thin:
+            a, d = b.edges[1], b.edges[2] - b.edges[1]
+            t = np.clip((cand.xyz[:, :2] - a) @ d / float(d @ d), 0.0, 1.0)
+            keep &= np.hypot(*(cand.xyz[:, :2] - a - t[:, None] * d).T) > 0.05
+        return replace(cand, xyz=cand.xyz[keep], core=cand.core[keep],
+                       time=None if cand.time is None else cand.time[keep])  # fmt: skip
+
+    monkeypatch.setattr(module, "find_candidates", without_middles)
+    found = Survey(_surveyed_in(scene))
+    for b in thin:
+        assert math.dist(_nearest(found, b).edges.mean(axis=0), b.edges.mean(axis=0)) > 0.25

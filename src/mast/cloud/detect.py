@@ -48,7 +48,15 @@ from mast.core.lines import fit_line, intersect_lines, plan_noise_from_neighbour
 from mast.errors import InputError
 from mast.pipeline.segmentation import Corner, Segment, Segmentation
 
-__all__ = ["Candidates", "DetectConfig", "Panel", "PlanPieces", "find_candidates", "plan_pieces"]
+__all__ = [
+    "Candidates",
+    "DetectConfig",
+    "Panel",
+    "PlanPieces",
+    "find_candidates",
+    "panel_from_points",
+    "plan_pieces",
+]
 
 Progress = Callable[[str, int, int], None]
 
@@ -791,6 +799,30 @@ NEARLY_PARALLEL_SINE = 0.05
 DUPLICATE_SHARE = 0.5
 #: A panel's points, top, its standard deviation and bottom.
 _Tall = tuple[NDArray[np.intp], float, float, float]
+
+
+def panel_from_points(
+    xyz: NDArray[np.float64], noise: float, cfg: DetectConfig = DetectConfig()
+) -> Panel | str:
+    """A :class:`Panel` of points gathered on one face by other means than the piece
+    search (where a design says a panel must stand), tested as the pieces' are: its
+    plane vertical and flat (:func:`_plane`), its top and bottom (:func:`_top_edge`)
+    within the heights a panel may have. Otherwise the reason, as in
+    :attr:`PlanPieces.rejected`."""
+    if xyz.shape[0] < cfg.min_points:
+        return "too_few_points"
+    tilt, rms = _plane(xyz)
+    why = _not_a_plane(tilt, rms, noise, cfg)
+    if why is not None:
+        return why
+    top, sigma_top, bottom = _top_edge(xyz[:, 2], noise)
+    if top - bottom < cfg.min_panel_height_m:
+        return "too_short"
+    if top - bottom > cfg.max_panel_height_m:
+        return "too_tall"
+    rows = np.arange(xyz.shape[0])
+    seg = _segment(-1, -1, rows, xyz[:, :2], noise, 2.0 * cfg.cell_m)
+    return Panel(seg, tilt, rms, top - bottom, top, sigma_top, bottom, None)
 
 
 def _not_a_plane(tilt: float, rms: float, noise: float, cfg: DetectConfig) -> str | None:

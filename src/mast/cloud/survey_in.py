@@ -33,7 +33,7 @@ that were bolted up, one beacon per design in any frame (``DESIGNS.csv``).
 from __future__ import annotations
 
 import math
-from collections.abc import Iterator, Sequence
+from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -47,19 +47,22 @@ from mast.cloud.beacon_fit import (
     points_on_panel,
 )
 from mast.cloud.detect import (
+    NEARLY_PARALLEL_SINE,
     DetectConfig,
     Panel,
     PlanPieces,
     beacon_top,
     find_candidates,
+    panel_from_points,
     plan_pieces,
 )
+from mast.cloud.grid import PlanIndex
 from mast.cloud.io import Chunk, Cloud, open_cloud
 from mast.cloud.match import Detection, detect_beacons
 from mast.core.beacon import Beacon, Survey
 from mast.core.index import SurveyIndex
 from mast.errors import InputError
-from mast.pipeline.identification import identify_panels
+from mast.pipeline.identification import IdentificationConfig, identify_panels
 
 __all__ = [
     "MOVED_ALPHA",
@@ -103,6 +106,18 @@ FREE_END_LOOK_M = 0.05
 MIN_PANEL_POINTS = 30
 #: Detections whose centres are closer than this are one beacon.
 ONE_BEACON_M = 0.3
+#: A beacon's outer panels may meet at their design's angle give or take this, plus
+#: three of their lines' standard deviations, when its middle panel is sought between
+#: them (a beacon bolted up is its design to a degree or two).
+EDGE_ON_ANGLE_RAD = math.radians(2.0)
+#: Where the outer panels and the design put a middle panel seen edge-on, its points
+#: are gathered this much wider than a fitted line's (the design's angles as built).
+EDGE_ON_GATE_M = 0.01
+#: A beacon's panels' tops agree within this (levelled and cut alike).
+TOP_AGREE_M = 0.03
+#: A middle panel seen edge-on has points in this share of the 5 cm height bins between
+#: its outer panels' bottom and top (a column of it, not rock crossing its plane).
+EDGE_ON_HEIGHT_SHARE = 0.75
 
 
 @dataclass(frozen=True, slots=True)
@@ -234,12 +249,15 @@ def survey_in(
     dets = detect_beacons(pieces, ident, index)
     found: list[FoundBeacon] = []
     rejected = 0
-    for det in _one_per_beacon([d for d in dets if d.whole and len(d.panels) == 3], pieces):
-        fit = _fit(det, pieces, cand.xyz, index, config)
+    whole = _one_per_beacon([d for d in dets if d.whole and len(d.panels) == 3], pieces)
+    for det in whole:
+        panels = tuple(pieces.panels[det.panels[k]] for k in (1, 2, 3))
+        fit = _fit(panels, (det.nodes[2], det.nodes[3]), det.designs, cand.xyz, index, config)
         if fit is None:
             rejected += 1
             continue
         found.append(fit)
+    found += _middle_edge_on(pieces, cand.xyz, index, config, [d.centre for d in whole])
     # a corner of a beacon surveyed whole (from another piece or station) is not "in part"
     parts = _one_per_beacon([d for d in dets if not d.whole], pieces)
     partial = sum(
@@ -248,6 +266,142 @@ def survey_in(
     )
     named, missing = _name(found, previous)
     return SurveyIn(tuple(named), designs, pieces, cloud.count, partial, rejected, missing)
+
+
+def _middle_edge_on(
+    pieces: PlanPieces,
+    xyz: NDArray[np.float64],
+    index: SurveyIndex,
+    config: SurveyInConfig,
+    detected: list[NDArray[np.float64]],
+) -> list[FoundBeacon]:
+    """Beacons whose middle panel a station saw edge-on (module, step 2): a couple of
+    columns of points, too few and too close together for a piece of its own, so no
+    corner finds the beacon. Two panels whose lines meet at a design's angle between
+    P1 and P3, with their points where that design's P1 and P3 would lie, place its
+    middle panel; its points are gathered there and tested as a piece's (vertical, flat,
+    at the outer panels' heights, filling them), and the beacon is fitted as one found
+    whole (:func:`_fit`: the middle panel's own line must meet the others at the
+    design's length). Nowhere near a whole beacon found from corners."""
+    reps = index.representatives
+    panels = pieces.panels
+    if len(panels) < 2 or xyz.shape[0] == 0:
+        return []
+    plan = PlanIndex(xyz[:, :2])
+    centroids = np.array([p.segment.centroid for p in panels])
+    taken = list(detected)
+    found: list[FoundBeacon] = []
+    shapes = []
+    for rep in reps:
+        e = rep.edges
+        units = np.diff(e, axis=0) / np.hypot(*np.diff(e, axis=0).T)[:, None]
+        shapes.append((units, _lengths(rep)))
+    span = max(float(lengths.sum()) for _, lengths in shapes)
+    order = sorted(range(len(panels)), key=lambda i: -len(panels[i].segment.points))
+    for i in order:
+        a = panels[i]
+        for j in np.flatnonzero(np.hypot(*(centroids - centroids[i]).T) <= span):
+            b = panels[int(j)]
+            if j == i or abs(a.top_m - b.top_m) > TOP_AGREE_M:
+                continue
+            for sign in (1.0, -1.0):
+                placed = _placed(a, b, sign, shapes)
+                if not placed:
+                    continue
+                centre = 0.5 * (placed[0][1][1] + placed[0][1][2])
+                if any(math.dist(centre, t) <= ONE_BEACON_M for t in taken):
+                    continue
+                middle = _middle_panel(placed, a, b, xyz, plan, config)
+                if middle is None:
+                    continue
+                edges = placed[0][1]
+                fit = _fit(
+                    (a, middle, b),
+                    (edges[1], edges[2]),
+                    [k for k, _ in placed],
+                    xyz[plan.square(centre, span + 0.5)],
+                    index,
+                    config,
+                )
+                if fit is not None:
+                    found.append(fit)
+                    taken.append(centre)
+    return found
+
+
+def _placed(
+    a: Panel,
+    b: Panel,
+    sign: float,
+    shapes: list[tuple[NDArray[np.float64], NDArray[np.float64]]],
+) -> list[tuple[int, NDArray[np.float64]]]:
+    """The designs (number, their four edges in plan) that panel ``a`` as P1 (directed
+    from e1 to e2 by ``sign``) and ``b`` as P3 would make: the design turned onto
+    ``a``'s line, ``b``'s line at its P3's angle (:data:`EDGE_ON_ANGLE_RAD`), e2 on
+    ``a``'s line and e3 on ``b``'s at the middle panel's length apart, and each panel's
+    points between its edges."""
+    out = []
+    d1 = sign * a.segment.direction
+    tol = EDGE_ON_ANGLE_RAD + 3.0 * math.hypot(a.segment.sigma_direction,
+                                               b.segment.sigma_direction)  # fmt: skip
+    for k, (units, lengths) in enumerate(shapes):
+        u1 = units[0]
+        c, s = float(u1 @ d1), float(u1[0] * d1[1] - u1[1] * d1[0])
+        turn = np.array([[c, -s], [s, c]])
+        d2, d3 = turn @ units[1], turn @ units[2]
+        d3b = b.segment.direction if float(d3 @ b.segment.direction) > 0 else -b.segment.direction
+        if abs(math.atan2(d3[0] * d3b[1] - d3[1] * d3b[0], float(d3 @ d3b))) > tol:
+            continue
+        system = np.column_stack([d1, -d3b])
+        if abs(float(np.linalg.det(system))) < NEARLY_PARALLEL_SINE:
+            continue
+        st = np.linalg.solve(system, b.segment.centroid - a.segment.centroid - lengths[1] * d2)
+        e2 = a.segment.centroid + st[0] * d1
+        e3 = e2 + lengths[1] * d2
+        edges = np.array([e2 - lengths[0] * d1, e2, e3, e3 + lengths[2] * d3b])
+        if _between(a, edges[0], edges[1]) and _between(b, edges[2], edges[3]):
+            out.append((k, edges))
+    return out
+
+
+def _between(panel: Panel, a: NDArray[np.float64], b: NDArray[np.float64]) -> bool:
+    """Whether nine in ten of a panel's points lie between ``a`` and ``b`` (give or take
+    :data:`PANEL_SLACK_M`) along the line through them."""
+    length = max(math.dist(a, b), 1e-9)
+    t = (panel.segment.points - a) @ ((b - a) / length)
+    return bool(np.mean((t > -PANEL_SLACK_M) & (t < length + PANEL_SLACK_M)) >= 0.9)
+
+
+def _middle_panel(
+    placed: list[tuple[int, NDArray[np.float64]]],
+    a: Panel,
+    b: Panel,
+    xyz: NDArray[np.float64],
+    plan: PlanIndex,
+    config: SurveyInConfig,
+) -> Panel | None:
+    """The middle panel's points where the first of the ``placed`` designs puts it,
+    between P1's and P3's heights, as a :class:`Panel`; None unless they are one
+    (:func:`~mast.cloud.detect.panel_from_points`) at those heights, and fill them
+    (:data:`EDGE_ON_HEIGHT_SHARE`)."""
+    edges = placed[0][1]
+    centre = 0.5 * (edges[1] + edges[2])
+    near = xyz[plan.square(centre, math.dist(edges[1], edges[2]))]
+    heights = (max(a.bottom_m, b.bottom_m), min(a.top_m, b.top_m))
+    gate = 3.0 * config.noise_m + GATHER_SLACK_M + EDGE_ON_GATE_M
+    keep = points_on_panel(near[:, :2], near[:, 2], edges[1], edges[2], heights, gate,
+                           END_MARGIN_M)  # fmt: skip
+    if np.count_nonzero(keep) < MIN_PANEL_POINTS:
+        return None
+    panel = panel_from_points(near[keep], config.noise_m, replace(config.detect,
+                              noise_m=config.noise_m))  # fmt: skip
+    if isinstance(panel, str) or abs(panel.top_m - 0.5 * (a.top_m + b.top_m)) > TOP_AGREE_M:
+        return None
+    bins = np.arange(heights[0], heights[1], 0.05)
+    filled = np.unique(np.searchsorted(bins, near[keep, 2])).size
+    if filled < EDGE_ON_HEIGHT_SHARE * bins.size:
+        return None
+    return panel
 
 
 def _points(det: Detection, pieces: PlanPieces) -> int:
@@ -265,27 +419,29 @@ def _one_per_beacon(dets: list[Detection], pieces: PlanPieces) -> list[Detection
 
 
 def _fit(
-    det: Detection,
-    pieces: PlanPieces,
+    panels: tuple[Panel, ...],
+    inner: tuple[NDArray[np.float64], NDArray[np.float64]],
+    designs: Iterable[int],
     xyz: NDArray[np.float64],
     index: SurveyIndex,
     config: SurveyInConfig,
 ) -> FoundBeacon | None:
-    """The beacon-level fit of a whole detection (module, step 3); None when no design
-    holds it (:func:`_fits`, :func:`_free_ends`) or a panel is seen too little."""
-    panels = tuple(pieces.panels[det.panels[k]] for k in (1, 2, 3))
+    """The beacon-level fit of a whole beacon, its panels P1-P3 with e2 and e3 where they
+    were found (``inner``) and the ``designs`` its shape may be (module, step 3); None
+    when no design holds it (:func:`_fits`, :func:`_free_ends`) or a panel is seen too
+    little."""
     # lines about a point at the beacon: in grid coordinates (70 km from the origin) an
     # angle's variance times the lever would swamp the offsets' in the propagation
-    origin = det.centre
+    origin = 0.5 * (inner[0] + inner[1])
     # the pieces' lines choose the design; the panels' own points fit the edges below
     lines = np.array([panel_line(p.segment.points - origin, config.noise_m)[0] for p in panels])
     reps = index.representatives
     # P1's points lie from e2 towards e1, P3's from e3 towards e4
     outward = np.array(
-        [panels[0].segment.centroid - det.nodes[2], panels[2].segment.centroid - det.nodes[3]]
+        [panels[0].segment.centroid - inner[0], panels[2].segment.centroid - inner[1]]
     )
     held = []
-    for k in det.designs:
+    for k in designs:
         lengths = _lengths(reps[k])
         if _fits(edges_from_lines(lines, lengths, outward).reshape(4, 2), panels, origin, lengths):
             held.append(k)
@@ -308,6 +464,8 @@ def _fit(
         lines = np.array(params)
         edges = edges_from_lines(lines, lengths, outward)
     xy4 = edges.reshape(4, 2)
+    if not _angles_hold(xy4, design, covs):
+        return None
     reach1, reach3 = _reaches(xy4[1], xy4[2], xy4[0], xy4[3], lengths, near, origin, panels,
                               config)  # fmt: skip
     middle = (own[1] - xy4[1]) @ ((xy4[2] - xy4[1]) / max(math.dist(xy4[1], xy4[2]), 1e-9))
@@ -494,6 +652,31 @@ def _fits(
         if np.mean(inside) < 0.9:
             return False
     return True
+
+
+def _angles_hold(
+    edges: NDArray[np.float64], design: Beacon, covs: Sequence[NDArray[np.float64]]
+) -> bool:
+    """Whether the fitted panels meet at their design's angles: Table 1's test of a
+    corner (:class:`~mast.pipeline.identification.IdentificationConfig`: four sigmas of
+    the two lines' angles, never under half a degree), on the lines fitted to all of a
+    panel's points. A corner's pieces passed it; a middle panel seen edge-on, placed by
+    its outer panels, has not, and a couple of columns with mixed returns in them turn
+    its line by a degree while their scatter says a hundredth."""
+    test = IdentificationConfig()
+    for k in (0, 1):
+        turn = _deflection(edges, k) - _deflection(design.edges, k)
+        turn = math.remainder(turn, math.tau)
+        sigma = math.sqrt(float(covs[k][0, 0] + covs[k + 1][0, 0]))
+        if abs(turn) > max(test.min_deflection_tol_rad, test.sigmas * sigma):
+            return False
+    return True
+
+
+def _deflection(edges: NDArray[np.float64], k: int) -> float:
+    """The turn from panel ``k`` to panel ``k + 1`` (0-based) along the edges, radians."""
+    a, b = edges[k + 1] - edges[k], edges[k + 2] - edges[k + 1]
+    return math.atan2(float(a[0] * b[1] - a[1] * b[0]), float(a @ b))
 
 
 def _lengths(b: Beacon) -> NDArray[np.float64]:
