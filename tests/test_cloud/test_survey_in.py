@@ -283,7 +283,7 @@ def test_a_beacon_whose_middle_panel_is_seen_edge_on_is_surveyed_in(
     for b in thin:
         fb = _nearest(Survey(found), b)
         assert np.max(np.hypot(*(fb.edges - b.edges).T)) < 0.005, b.id
-    monkeypatch.setattr(module, "_middle_edge_on", lambda *args: [])
+    monkeypatch.setattr(module, "_middle_edge_on", lambda *args: ([], []))
     without = Survey(_surveyed_in(scene))
     assert any(
         math.dist(_nearest(without, b).edges.mean(axis=0), b.edges.mean(axis=0)) > 0.25
@@ -316,3 +316,24 @@ def test_outer_panels_without_a_middle_one_between_them_are_no_beacon(
     found = Survey(_surveyed_in(scene))
     for b in thin:
         assert math.dist(_nearest(found, b).edges.mean(axis=0), b.edges.mean(axis=0)) > 0.25
+
+
+def test_a_middle_panel_seen_edge_on_whose_beacon_is_refused_is_reported_where_it_is(
+    edge_on: tuple[TlsScenario, list[Beacon]], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A beacon whose middle panel's columns do not meet its outer panels at the design's
+    angles is not surveyed; the report says where it stands, to scan it again."""
+    from mast.cloud import survey_in as module
+    from mast.cloud.survey_in_outputs import report_text
+
+    scene, thin = edge_on
+    monkeypatch.setattr(module, "_angles_hold", lambda *args: False)
+    config = module.SurveyInConfig(noise_m=0.0018, station_sigma_m=0.001)
+    designs = read_survey(scene.designs, apart=False)
+    result = module.survey_in([scene.e57], designs, config)
+    assert not result.beacons
+    for b in thin:
+        assert any(math.dist(c, b.edges.mean(axis=0)) < 0.25 for c in result.edge_on), b.id
+    text = report_text(result, clouds=[scene.e57], designs_file=scene.designs)
+    c = result.edge_on[0]
+    assert f"a middle panel seen edge-on at E {c[0]:.3f} N {c[1]:.3f}" in text

@@ -75,6 +75,8 @@ class SurveyInFigures:
     elevations_near: list[float] = field(default_factory=list)
     inside: int = 0
     coordinates: int = 0
+    edge_on: int = 0  # middle panels seen edge-on, their beacon refused (reported)
+    edge_on_astray: int = 0  # of those, none at a beacon
     seconds: list[float] = field(default_factory=list)
 
 
@@ -169,6 +171,9 @@ def run_survey_in_bench(
                     }
                 )
             f.found += len(matched & eligible)
+            for c in result.edge_on:
+                f.edge_on += 1
+                f.edge_on_astray += all(math.dist(c, t.edges.mean(axis=0)) > SAME_M for t in truth)
             far_ones = {b for b in eligible if near_station[b] > ERROR_REACH_M}
             f.eligible_far += len(far_ones)
             f.found_far += len(matched & far_ones)
@@ -198,6 +203,7 @@ def run_survey_in_bench(
             echo(
                 f"scene {k}: {len(matched & eligible)} of {len(eligible)} eligible found, "
                 f"{len(result.beacons)} surveyed, {result.partial} in part, "
+                f"{len(result.edge_on)} edge-on refused, "
                 f"{scene.points} points, {f.seconds[-1]:.1f} s"
             )
     if out is not None:
@@ -222,6 +228,10 @@ def _report(f: SurveyInFigures, echo: Callable[[str], object]) -> None:
         f"({len(f.edges_near)} edges; worst {1000 * max(f.edges_near, default=math.nan):.2f} mm), "
         f"beyond {1000 * _rms(f.edges_far):.2f} mm ({len(f.edges_far)} edges); elevation RMS "
         f"within {ERROR_REACH_M:g} m {1000 * _rms(f.elevations_near):.2f} mm"
+    )
+    echo(
+        f"middle panels seen edge-on, their beacon refused and reported: {f.edge_on} "
+        f"({f.edge_on_astray} not at a beacon)"
     )
     echo(
         f"edge coordinates inside +-1.96 sigma_m: {f.inside} of {f.coordinates} "

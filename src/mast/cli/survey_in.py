@@ -77,8 +77,9 @@ def survey_in(
     result = run(clouds, the_designs, config, previous=before)
     files = write_survey_in(result, out, clouds=clouds, designs_file=designs)
     typer.echo(
-        f"{len(result.beacons)} beacon(s) surveyed in, {result.partial} seen in part; "
-        f"report in {files.report_txt}"
+        f"{len(result.beacons)} beacon(s) surveyed in, {result.partial} seen in part"
+        + (f", {len(result.edge_on)} with a middle panel seen edge-on" if result.edge_on else "")
+        + f"; report in {files.report_txt}"
     )
     for f in result.beacons:
         b = f.beacon

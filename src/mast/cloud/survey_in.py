@@ -201,6 +201,9 @@ class SurveyIn:
     partial: int  # beacons seen in part (one corner): not surveyed
     rejected: int  # whole shapes whose middle panel is not their design's
     previous_missing: tuple[str, ...] = ()
+    #: Where a middle panel seen edge-on stood between outer panels of a design and the
+    #: beacon could not be fitted (its columns' line off the design's angles): plan.
+    edge_on: tuple[NDArray[np.float64], ...] = ()
 
     @property
     def survey(self) -> Survey:
@@ -257,7 +260,8 @@ def survey_in(
             rejected += 1
             continue
         found.append(fit)
-    found += _middle_edge_on(pieces, cand.xyz, index, config, [d.centre for d in whole])
+    edge_on, refused = _middle_edge_on(pieces, cand.xyz, index, config, [d.centre for d in whole])
+    found += edge_on
     # a corner of a beacon surveyed whole (from another piece or station) is not "in part"
     parts = _one_per_beacon([d for d in dets if not d.whole], pieces)
     partial = sum(
@@ -265,7 +269,9 @@ def survey_in(
         for d in parts
     )
     named, missing = _name(found, previous)
-    return SurveyIn(tuple(named), designs, pieces, cloud.count, partial, rejected, missing)
+    return SurveyIn(
+        tuple(named), designs, pieces, cloud.count, partial, rejected, missing, tuple(refused)
+    )
 
 
 def _middle_edge_on(
@@ -274,7 +280,7 @@ def _middle_edge_on(
     index: SurveyIndex,
     config: SurveyInConfig,
     detected: list[NDArray[np.float64]],
-) -> list[FoundBeacon]:
+) -> tuple[list[FoundBeacon], list[NDArray[np.float64]]]:
     """Beacons whose middle panel a station saw edge-on (module, step 2): a couple of
     columns of points, too few and too close together for a piece of its own, so no
     corner finds the beacon. Two panels whose lines meet at a design's angle between
@@ -282,15 +288,17 @@ def _middle_edge_on(
     middle panel; its points are gathered there and tested as a piece's (vertical, flat,
     at the outer panels' heights, filling them), and the beacon is fitted as one found
     whole (:func:`_fit`: the middle panel's own line must meet the others at the
-    design's length). Nowhere near a whole beacon found from corners."""
+    design's length). Nowhere near a whole beacon found from corners. With the beacons
+    found, the places where a middle panel stood and the fit refused the beacon."""
     reps = index.representatives
     panels = pieces.panels
     if len(panels) < 2 or xyz.shape[0] == 0:
-        return []
+        return [], []
     plan = PlanIndex(xyz[:, :2])
     centroids = np.array([p.segment.centroid for p in panels])
     taken = list(detected)
     found: list[FoundBeacon] = []
+    refused: list[NDArray[np.float64]] = []
     shapes = []
     for rep in reps:
         e = rep.edges
@@ -326,7 +334,10 @@ def _middle_edge_on(
                 if fit is not None:
                     found.append(fit)
                     taken.append(centre)
-    return found
+                elif all(math.dist(centre, r) > ONE_BEACON_M for r in refused):
+                    refused.append(centre)
+    # a place refused from one couple of panels may be surveyed from another
+    return found, [r for r in refused if all(math.dist(r, t) > ONE_BEACON_M for t in taken)]
 
 
 def _placed(

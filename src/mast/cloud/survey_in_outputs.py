@@ -77,6 +77,12 @@ def report_text(result: SurveyIn, *, clouds: list[Path], designs_file: Path) -> 
         f"corner: scan them from another station); {result.rejected} shape(s) that no "
         "design holds, left out"
     )
+    for c in result.edge_on:
+        add(
+            f"  a middle panel seen edge-on at E {c[0]:.3f} N {c[1]:.3f}, between outer panels "
+            "of a design: its columns do not fit the design's angles (mixed returns); scan "
+            "it from another station"
+        )
     for f in result.beacons:
         b = f.beacon
         add("")
