@@ -337,3 +337,57 @@ def test_a_middle_panel_seen_edge_on_whose_beacon_is_refused_is_reported_where_i
     text = report_text(result, clouds=[scene.e57], designs_file=scene.designs)
     c = result.edge_on[0]
     assert f"a middle panel seen edge-on at E {c[0]:.3f} N {c[1]:.3f}" in text
+
+
+def _face(a: np.ndarray, b: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """Points on the vertical face from ``a`` to ``b`` (plan), 1.5-2.0 m high."""
+    t = rng.uniform(0.0, 1.0, 600)
+    xy = a + t[:, None] * (b - a) + rng.normal(0.0, 0.0005, (600, 2))
+    return np.column_stack([xy, rng.uniform(1.5, 2.0, 600)])
+
+
+@pytest.mark.parametrize("turn_deg", [0.0, 100.0, 179.0, -120.0])
+def test_outer_panels_place_their_designs_middle_panel_and_no_mirror_of_it(
+    turn_deg: float,
+) -> None:
+    """P1 and P3 seen, their design turned onto them places e1-e4 where they are, whichever
+    way P1's piece runs; P3 taken for P1 (the beacon read backwards, a mirror image) is
+    not placed where the beacon is."""
+    from mast.cloud.detect import panel_from_points
+    from mast.cloud.survey_in import _placed
+
+    rng = np.random.default_rng(3)
+    design = np.array([[0.0, 0.0], [0.3, 0.16], [0.9, 0.16], [1.08, 0.06]])
+    c, s = math.cos(math.radians(turn_deg)), math.sin(math.radians(turn_deg))
+    edges = design @ np.array([[c, s], [-s, c]]) + [100.0, -40.0]
+    units = np.diff(design, axis=0) / np.hypot(*np.diff(design, axis=0).T)[:, None]
+    shapes = [(units, np.hypot(*np.diff(design, axis=0).T))]
+    p1 = panel_from_points(_face(edges[0], edges[1], rng), 0.0005)
+    p3 = panel_from_points(_face(edges[2], edges[3], rng), 0.0005)
+    assert not isinstance(p1, str)
+    assert not isinstance(p3, str)
+    placed = [e for sign in (1.0, -1.0) for _, e in _placed(p1, p3, sign, shapes)]
+    assert len(placed) == 1
+    assert np.max(np.hypot(*(placed[0] - edges).T)) < 0.003
+    backwards = [e for sign in (1.0, -1.0) for _, e in _placed(p3, p1, sign, shapes)]
+    assert all(np.max(np.hypot(*(e - edges).T)) > 0.05 for e in backwards)
+
+
+def test_a_fitted_beacon_holds_its_designs_angles_to_half_a_degree_across_north() -> None:
+    """Table 1's corner test on the fitted lines: a beacon turned to any heading (its
+    panels' directions wrapping through +-180 deg) holds; one corner off by 1 deg does not,
+    unless its lines are that uncertain."""
+    from mast.cloud.survey_in import _angles_hold
+
+    design = Beacon("d", np.array([[0.0, 0.0], [0.3, 0.16], [0.9, 0.16], [1.08, 0.06]]))
+    sharp = [np.diag([1e-8, 1e-8])] * 3
+    for turn in (0.0, 2.9, math.pi, -3.1):
+        c, s = math.cos(turn), math.sin(turn)
+        edges = design.edges @ np.array([[c, s], [-s, c]])
+        assert _angles_hold(edges, design, sharp)
+        bent = edges.copy()
+        d = bent[3] - bent[2]
+        k, m = math.cos(math.radians(1.0)), math.sin(math.radians(1.0))
+        bent[3] = bent[2] + np.array([[k, -m], [m, k]]) @ d
+        assert not _angles_hold(bent, design, sharp)
+        assert _angles_hold(bent, design, [np.diag([1e-4, 1e-8])] * 3)

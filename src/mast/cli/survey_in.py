@@ -76,9 +76,10 @@ def survey_in(
     check_output_folder(out)
     result = run(clouds, the_designs, config, previous=before)
     files = write_survey_in(result, out, clouds=clouds, designs_file=designs)
+    edge_on = len(result.edge_on)
     typer.echo(
         f"{len(result.beacons)} beacon(s) surveyed in, {result.partial} seen in part"
-        + (f", {len(result.edge_on)} with a middle panel seen edge-on" if result.edge_on else "")
+        + (f", {edge_on} refused with a middle panel seen edge-on" if edge_on else "")
         + f"; report in {files.report_txt}"
     )
     for f in result.beacons:

@@ -108,11 +108,17 @@ MIN_PANEL_POINTS = 30
 ONE_BEACON_M = 0.3
 #: A beacon's outer panels may meet at their design's angle give or take this, plus
 #: three of their lines' standard deviations, when its middle panel is sought between
-#: them (a beacon bolted up is its design to a degree or two).
+#: them: only where to look (the fitted beacon's angles are then held to Table 1's
+#: half a degree, :func:`_angles_hold`).
 EDGE_ON_ANGLE_RAD = math.radians(2.0)
 #: Where the outer panels and the design put a middle panel seen edge-on, its points
 #: are gathered this much wider than a fitted line's (the design's angles as built).
 EDGE_ON_GATE_M = 0.01
+#: A middle panel seen edge-on is gathered from this far below its outer panels' bottom
+#: to as far above their top (a face running from floor to roof is no panel), and its
+#: plane is looked at this far past e2 and e3 (:func:`_runs_on`).
+EDGE_ON_REACH_M = 0.1
+EDGE_ON_LOOK_M = 0.1
 #: A beacon's panels' tops agree within this (levelled and cut alike).
 TOP_AGREE_M = 0.03
 #: A middle panel seen edge-on has points in this share of the 5 cm height bins between
@@ -260,7 +266,8 @@ def survey_in(
             rejected += 1
             continue
         found.append(fit)
-    edge_on, refused = _middle_edge_on(pieces, cand.xyz, index, config, [d.centre for d in whole])
+    used = {k for d in whole for k in d.panels.values()}
+    edge_on, refused = _middle_edge_on(pieces, cand.xyz, index, config, whole, used)
     found += edge_on
     # a corner of a beacon surveyed whole (from another piece or station) is not "in part"
     parts = _one_per_beacon([d for d in dets if not d.whole], pieces)
@@ -279,7 +286,8 @@ def _middle_edge_on(
     xyz: NDArray[np.float64],
     index: SurveyIndex,
     config: SurveyInConfig,
-    detected: list[NDArray[np.float64]],
+    detected: list[Detection],
+    used: set[int],
 ) -> tuple[list[FoundBeacon], list[NDArray[np.float64]]]:
     """Beacons whose middle panel a station saw edge-on (module, step 2): a couple of
     columns of points, too few and too close together for a piece of its own, so no
@@ -288,15 +296,20 @@ def _middle_edge_on(
     middle panel; its points are gathered there and tested as a piece's (vertical, flat,
     at the outer panels' heights, filling them), and the beacon is fitted as one found
     whole (:func:`_fit`: the middle panel's own line must meet the others at the
-    design's length). Nowhere near a whole beacon found from corners. With the beacons
-    found, the places where a middle panel stood and the fit refused the beacon."""
+    design's length). Nowhere near a whole beacon found from corners, and never with a
+    panel of one (``used``). With the beacons found, the places where a middle panel
+    stood and the fit refused the beacon.
+
+    A design whose P1 and P3 are parallel (a U or a Z) is not placed this way: two
+    parallel lines do not say where along them the middle panel lies."""
     reps = index.representatives
     panels = pieces.panels
-    if len(panels) < 2 or xyz.shape[0] == 0:
+    if len(panels) < 2 or not reps or xyz.shape[0] == 0:
         return [], []
     plan = PlanIndex(xyz[:, :2])
     centroids = np.array([p.segment.centroid for p in panels])
-    taken = list(detected)
+    taken = [d.centre for d in detected]
+    used = set(used)
     found: list[FoundBeacon] = []
     refused: list[NDArray[np.float64]] = []
     shapes = []
@@ -310,32 +323,32 @@ def _middle_edge_on(
         a = panels[i]
         for j in np.flatnonzero(np.hypot(*(centroids - centroids[i]).T) <= span):
             b = panels[int(j)]
-            if j == i or abs(a.top_m - b.top_m) > TOP_AGREE_M:
+            if j == i or {i, int(j)} & used or abs(a.top_m - b.top_m) > TOP_AGREE_M:
                 continue
             for sign in (1.0, -1.0):
-                placed = _placed(a, b, sign, shapes)
-                if not placed:
-                    continue
-                centre = 0.5 * (placed[0][1][1] + placed[0][1][2])
-                if any(math.dist(centre, t) <= ONE_BEACON_M for t in taken):
-                    continue
-                middle = _middle_panel(placed, a, b, xyz, plan, config)
-                if middle is None:
-                    continue
-                edges = placed[0][1]
-                fit = _fit(
-                    (a, middle, b),
-                    (edges[1], edges[2]),
-                    [k for k, _ in placed],
-                    xyz[plan.square(centre, span + 0.5)],
-                    index,
-                    config,
-                )
-                if fit is not None:
-                    found.append(fit)
-                    taken.append(centre)
-                elif all(math.dist(centre, r) > ONE_BEACON_M for r in refused):
-                    refused.append(centre)
+                for edges in (e for _, e in _placed(a, b, sign, shapes)):
+                    centre = 0.5 * (edges[1] + edges[2])
+                    if any(math.dist(centre, t) <= ONE_BEACON_M for t in taken):
+                        break
+                    middle = _middle_panel(edges, a, b, xyz, plan, config)
+                    if middle is None:
+                        continue
+                    fit = _fit(
+                        (a, middle, b),
+                        (edges[1], edges[2]),
+                        [k for k, _ in _placed(a, b, sign, shapes)],
+                        xyz[plan.square(centre, span + 0.5)],
+                        index,
+                        config,
+                        top_from=(0, 2),
+                    )
+                    if fit is not None:
+                        found.append(fit)
+                        taken.append(centre)
+                        used.update((i, int(j)))
+                    elif all(math.dist(centre, r) > ONE_BEACON_M for r in refused):
+                        refused.append(centre)
+                    break
     # a place refused from one couple of panels may be surveyed from another
     return found, [r for r in refused if all(math.dist(r, t) > ONE_BEACON_M for t in taken)]
 
@@ -384,35 +397,71 @@ def _between(panel: Panel, a: NDArray[np.float64], b: NDArray[np.float64]) -> bo
 
 
 def _middle_panel(
-    placed: list[tuple[int, NDArray[np.float64]]],
+    edges: NDArray[np.float64],
     a: Panel,
     b: Panel,
     xyz: NDArray[np.float64],
     plan: PlanIndex,
     config: SurveyInConfig,
 ) -> Panel | None:
-    """The middle panel's points where the first of the ``placed`` designs puts it,
-    between P1's and P3's heights, as a :class:`Panel`; None unless they are one
-    (:func:`~mast.cloud.detect.panel_from_points`) at those heights, and fill them
-    (:data:`EDGE_ON_HEIGHT_SHARE`)."""
-    edges = placed[0][1]
+    """The middle panel's points where a design placed between ``a`` (P1) and ``b`` (P3)
+    puts it (``edges``, plan), as a :class:`Panel`; None unless they are one
+    (:func:`~mast.cloud.detect.panel_from_points`, on every point of its face from
+    :data:`EDGE_ON_REACH_M` below the outer panels to as far above: a surface running
+    from floor to roof is none), its top the outer panels' (:data:`TOP_AGREE_M`), they
+    fill its heights (:data:`EDGE_ON_HEIGHT_SHARE`), and its plane does not run on past
+    e2 or e3 (:func:`_runs_on`). Its bottom and top are then the outer panels'."""
     centre = 0.5 * (edges[1] + edges[2])
-    near = xyz[plan.square(centre, math.dist(edges[1], edges[2]))]
-    heights = (max(a.bottom_m, b.bottom_m), min(a.top_m, b.top_m))
+    near = xyz[plan.square(centre, math.dist(edges[1], edges[2]) + EDGE_ON_LOOK_M)]
+    shared = (max(a.bottom_m, b.bottom_m), min(a.top_m, b.top_m))
+    wide = (shared[0] - EDGE_ON_REACH_M, shared[1] + EDGE_ON_REACH_M)
     gate = 3.0 * config.noise_m + GATHER_SLACK_M + EDGE_ON_GATE_M
-    keep = points_on_panel(near[:, :2], near[:, 2], edges[1], edges[2], heights, gate,
-                           END_MARGIN_M)  # fmt: skip
+    keep = points_on_panel(near[:, :2], near[:, 2], edges[1], edges[2], wide, gate, END_MARGIN_M)
     if np.count_nonzero(keep) < MIN_PANEL_POINTS:
         return None
-    panel = panel_from_points(near[keep], config.noise_m, replace(config.detect,
-                              noise_m=config.noise_m))  # fmt: skip
+    detect = replace(config.detect, noise_m=config.noise_m)
+    panel = panel_from_points(near[keep], config.noise_m, detect)
     if isinstance(panel, str) or abs(panel.top_m - 0.5 * (a.top_m + b.top_m)) > TOP_AGREE_M:
         return None
-    bins = np.arange(heights[0], heights[1], 0.05)
-    filled = np.unique(np.searchsorted(bins, near[keep, 2])).size
+    z = near[keep, 2]
+    bins = np.arange(shared[0], shared[1], 0.05)
+    inside = z[(z >= shared[0]) & (z < shared[1])]
+    filled = np.unique(np.searchsorted(bins, inside, side="right")).size
     if filled < EDGE_ON_HEIGHT_SHARE * bins.size:
         return None
-    return panel
+    if _runs_on(near, edges, shared, gate, inside.size):
+        return None
+    # its points are gathered again between the outer panels' heights (a beacon's panels
+    # are cut alike; a couple of columns' own bottom and top are the least sure of three)
+    return replace(panel, bottom_m=shared[0], top_m=shared[1])
+
+
+def _runs_on(
+    near: NDArray[np.float64],
+    edges: NDArray[np.float64],
+    heights: tuple[float, float],
+    gate: float,
+    count: int,
+) -> bool:
+    """Whether the middle panel's plane runs on past e2 or e3: points on its line from
+    where the outer panels' own points clear it (its gate over the sine of the corner's
+    angle) to :data:`EDGE_ON_LOOK_M` further, at its heights, at half its own density
+    or more. A panel ends at its edges; a flat face that runs on is no middle panel."""
+    e2, e3 = edges[1], edges[2]
+    length = math.dist(e2, e3)
+    u = (e3 - e2) / max(length, 1e-9)
+    t = (near[:, :2] - e2) @ u
+    off = (near[:, :2] - e2) @ np.array([-u[1], u[0]])
+    level = (near[:, 2] > heights[0]) & (near[:, 2] < heights[1]) & (np.abs(off) <= gate)
+    density = count / max(length, 1e-9)
+    for k, ahead in ((0, -t), (2, t - length)):
+        outer = edges[k + 1] - edges[k]
+        sine = abs(float(outer[0] * u[1] - outer[1] * u[0])) / max(float(np.hypot(*outer)), 1e-9)
+        clear = min(max(OVERRUN_M, gate / max(sine, 0.1)), 0.1)
+        past = np.count_nonzero(level & (ahead > clear) & (ahead < clear + EDGE_ON_LOOK_M))
+        if past >= 0.5 * density * EDGE_ON_LOOK_M:
+            return True
+    return False
 
 
 def _points(det: Detection, pieces: PlanPieces) -> int:
@@ -436,11 +485,14 @@ def _fit(
     xyz: NDArray[np.float64],
     index: SurveyIndex,
     config: SurveyInConfig,
+    *,
+    top_from: tuple[int, ...] = (0, 1, 2),
 ) -> FoundBeacon | None:
     """The beacon-level fit of a whole beacon, its panels P1-P3 with e2 and e3 where they
-    were found (``inner``) and the ``designs`` its shape may be (module, step 3); None
-    when no design holds it (:func:`_fits`, :func:`_free_ends`) or a panel is seen too
-    little."""
+    were found (``inner``) and the ``designs`` its shape may be (module, step 3); its top
+    from the panels ``top_from`` (0-based). None when no design holds it (:func:`_fits`,
+    :func:`_free_ends`), a panel is seen too little or has too few points, or the panels
+    do not meet at the design's angles (:func:`_angles_hold`)."""
     # lines about a point at the beacon: in grid coordinates (70 km from the origin) an
     # angle's variance times the lever would swamp the offsets' in the propagation
     origin = 0.5 * (inner[0] + inner[1])
@@ -485,7 +537,7 @@ def _fit(
         return None
     cov = edges_covariance(lines, covs, lengths, outward) + config.station_sigma_m**2 * np.eye(8)
     sig = np.sqrt(0.5 * (np.diag(cov)[0::2] + np.diag(cov)[1::2]))
-    top, sigma_top = beacon_top(panels)
+    top, sigma_top = beacon_top([panels[k] for k in top_from])
     xy = edges.reshape(4, 2) + origin
     measured = np.array(seen)
     beacon = Beacon("?", xy, np.full(4, top), sig, design.design or design.id)

@@ -80,8 +80,8 @@ def report_text(result: SurveyIn, *, clouds: list[Path], designs_file: Path) -> 
     for c in result.edge_on:
         add(
             f"  a middle panel seen edge-on at E {c[0]:.3f} N {c[1]:.3f}, between outer panels "
-            "of a design: its columns do not fit the design's angles (mixed returns); scan "
-            "it from another station"
+            "of a design, not surveyed: its points do not fit the design (too few, too "
+            "short, or off its angles: mixed returns); scan it from another station"
         )
     for f in result.beacons:
         b = f.beacon
