@@ -481,6 +481,44 @@ def test_beacons_detection_missed_are_found_where_the_others_put_them(
     assert "2 not detected on its own, found where the others put it" in text
 
 
+def test_a_beacon_sought_is_fitted_to_every_point_of_its_panels_not_only_the_candidates(
+    scene: CloudScenario, truth: dict[str, Any], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The column test keeps a panel's points only where it finds panel-like columns:
+    here it keeps the outer third of B02's P1 and nothing else of it. Sought, B02 is
+    fitted to the whole panel from the cloud (one more pass about it), not to that
+    third."""
+    import dataclasses
+
+    import mast.cloud.georef as georef_module
+    from mast.cloud.detect import Candidates
+    from mast.cloud.georef import SOUGHT, GeorefConfig, georeference
+    from mast.cloud.io import open_cloud
+    from mast.io import read_survey
+
+    local = np.array(next(b for b in truth["beacons"] if b["id"] == "B02")["edges_local"])
+    e1, e2 = local[0, :2], local[1, :2]
+    real = georef_module.find_candidates
+
+    def thinned(*args: Any, **kwargs: Any) -> Candidates:
+        cand: Candidates = real(*args, **kwargs)
+        d = e2 - e1
+        t = (cand.xyz[:, :2] - e1) @ d / float(d @ d)
+        off = np.abs((cand.xyz[:, :2] - e1) @ np.array([-d[1], d[0]])) / math.hypot(*d)
+        keep = ~((off < 0.05) & (t > 0.33) & (t < 1.2))
+        time = None if cand.time is None else cand.time[keep]
+        return dataclasses.replace(cand, xyz=cand.xyz[keep], core=cand.core[keep], time=time)
+
+    monkeypatch.setattr(georef_module, "find_candidates", thinned)
+    _unmatched(monkeypatch, {"B02"})
+    result = georeference(open_cloud(scene.cloud), read_survey(scene.survey), GeorefConfig())
+    found = {fb.beacon: fb for fb in result.beacons}["B02"]
+    assert found.why == SOUGHT
+    assert found.obs is not None
+    assert np.max(np.hypot(*(found.obs.cloud_xy - local[1:3, :2]).T)) < 0.006
+    assert found.obs.points > 0
+
+
 def test_with_drift_a_beacon_detection_missed_is_found_where_the_correction_puts_it(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:

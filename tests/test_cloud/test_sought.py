@@ -150,3 +150,37 @@ def test_noisy_clouds_and_loose_predictions_are_no_error() -> None:
     found = seek_beacon(xyz, None, SHAPE, truth + 0.05, NOISE, 0.2, DetectConfig())
     assert found is not None
     assert np.max(np.hypot(*(found.fit.edges - truth).T)) < 0.02
+
+
+def test_the_points_about_the_beacons_sought_are_every_point_there_in_one_pass() -> None:
+    """:func:`points_near` keeps every point (and its time) within the squares about the
+    places, in chunks as a file is read, and nothing far from them."""
+    from collections.abc import Iterator
+    from pathlib import Path
+
+    from mast.cloud.detect import points_near
+    from mast.cloud.io import Chunk, Cloud
+
+    rng = np.random.default_rng(9)
+    xyz = np.column_stack([rng.uniform(-50.0, 50.0, (200_000, 2)), rng.uniform(0, 4, 200_000)])
+    time = np.arange(xyz.shape[0], dtype=float)
+
+    class Memory(Cloud):
+        path, count, time_field = Path("memory.las"), xyz.shape[0], "gps_time"
+
+        def chunks(self, size: int = 2_000_000) -> Iterator[Chunk]:
+            for k in range(0, xyz.shape[0], 30_000):
+                yield Chunk(xyz[k : k + 30_000], time[k : k + 30_000])
+
+    centres = np.array([[3.3, -7.1], [-20.05, 41.6], [3.6, -6.9]])
+    half = 0.8
+    near, times = points_near(Memory(), centres, half)
+    assert times is not None
+    inside = np.any(np.max(np.abs(xyz[:, None, :2] - centres[None]), axis=2) < half, axis=1)
+    kept = set(times.astype(int).tolist())
+    assert set(np.flatnonzero(inside).tolist()) <= kept
+    assert np.array_equal(xyz[times.astype(int)], near)
+    # a few more than the squares hold (the cells they touch), never beyond those cells
+    far = np.min(np.max(np.abs(near[:, None, :2] - centres[None]), axis=2), axis=1)
+    assert np.all(far < half + 0.25)
+    assert len(kept) < 2 * int(inside.sum())

@@ -56,6 +56,7 @@ __all__ = [
     "find_candidates",
     "panel_from_points",
     "plan_pieces",
+    "points_near",
 ]
 
 Progress = Callable[[str, int, int], None]
@@ -228,6 +229,54 @@ DENSITY_QUERIES = 5000
 #: each) georef found 2 of 18 beacons at 600 points/m^2, 15 at 900, 16 at 1 200 and all
 #: 18 at 1 500 and 2 000.
 BEACON_DENSITY_M2 = 1200.0
+
+
+#: Cell of the plan grid that marks where :func:`points_near` keeps a cloud's points.
+NEAR_CELL_M = 0.25
+
+
+def points_near(
+    cloud: Cloud,
+    centres: NDArray[np.float64],
+    half_m: float,
+    cfg: DetectConfig = DetectConfig(),
+    progress: Progress | None = None,
+) -> tuple[NDArray[np.float64], NDArray[np.float64] | None]:
+    """Every point of ``cloud`` (and its time) within ``half_m`` in plan, per coordinate,
+    of any of ``centres``, in one more pass: the cells of :data:`NEAR_CELL_M` that the
+    squares touch are marked, and a chunk's points in a marked cell are kept (a few
+    more than the squares hold: cut them with :class:`~mast.cloud.grid.PlanIndex`).
+    The candidates of passes 1-3 keep only panel-like columns' points, and a panel a
+    column test cut short keeps half of them; what is fitted where the survey says a
+    beacon stands is better fitted to all of them."""
+    centres = np.asarray(centres, dtype=float).reshape(-1, 2)
+    if centres.shape[0] == 0 or cloud.count == 0:
+        return np.empty((0, 3)), None
+    origin = centres[0].copy()
+    lo = np.floor((centres - half_m - origin) / NEAR_CELL_M).astype(np.int64)
+    hi = np.floor((centres + half_m - origin) / NEAR_CELL_M).astype(np.int64)
+    squares = []
+    for a, b in zip(lo, hi, strict=True):
+        i, j = np.meshgrid(np.arange(a[0], b[0] + 1), np.arange(a[1], b[1] + 1))
+        squares.append(pack_ij(np.column_stack([i.ravel(), j.ravel()])))
+    marked = np.unique(np.concatenate(squares))
+    xyz: list[NDArray[np.float64]] = []
+    times: list[NDArray[np.float64]] = []
+    timed = True
+    read = 0
+    for chunk in cloud.chunks(cfg.chunk_points):
+        keys = cell_keys(chunk.xyz[:, :2], origin, NEAR_CELL_M)
+        at = np.minimum(np.searchsorted(marked, keys), marked.size - 1)
+        hit = marked[at] == keys
+        xyz.append(chunk.xyz[hit])
+        if chunk.time is None:
+            timed = False
+        else:
+            times.append(chunk.time[hit])
+        read += chunk.xyz.shape[0]
+        if progress:
+            progress("beacons' neighbourhoods", read, cloud.count)
+    return np.concatenate(xyz), (np.concatenate(times) if timed and times else None)
 
 
 def wall_density(sample: NDArray[np.float64], step: int) -> float:
@@ -808,7 +857,8 @@ def panel_from_points(
     search (where a design says a panel must stand), tested as the pieces' are: its
     plane vertical and flat (:func:`_plane`), its top and bottom (:func:`_top_edge`)
     within the heights a panel may have. Otherwise the reason, as in
-    :attr:`PlanPieces.rejected`."""
+    :attr:`PlanPieces.rejected`. Its segment's ``beams`` index ``xyz`` (not the
+    candidates), and its ``index`` and ``run`` are -1: it is in no segmentation."""
     if xyz.shape[0] < cfg.min_points:
         return "too_few_points"
     tilt, rms = _plane(xyz)

@@ -44,6 +44,7 @@ from mast.cloud.detect import (
     beacon_top,
     find_candidates,
     plan_pieces,
+    points_near,
 )
 from mast.cloud.drift import DriftCorrection, correct_drift
 from mast.cloud.grid import PlanIndex
@@ -71,6 +72,10 @@ SOUGHT_ROUNDS = 2
 #: How far (per coordinate, standard deviation) the drift correction's prediction of a
 #: beacon may be off: the simulated 1 % drifts' inner checks were up to 8 cm off.
 DRIFT_PREDICTION_M = 0.04
+#: The beacons sought are fitted to every point of the cloud about them (one more pass,
+#: :func:`~mast.cloud.detect.points_near`), this far beyond their first predicted place
+#: for the later drift rounds' predictions and the snap (at most 15 cm).
+NEIGHBOURHOOD_SLACK_M = 0.25
 #: How a beacon detection missed was found (:mod:`mast.cloud.sought`).
 SOUGHT = "not detected on its own: found where the control beacons put it"
 
@@ -299,24 +304,54 @@ def _drift_to_cloud(drift: DriftCorrection, path: ScannerPath, grid: Points) -> 
     return drift.to_cloud(grid[:, :2], path)
 
 
+def _predicted(b: Beacon, to_cloud: Callable[[Points], Points]) -> Points:
+    """A surveyed beacon's edges in the cloud's plan where ``to_cloud`` puts them."""
+    z = b.elevations if b.elevations is not None else np.full(4, math.nan)
+    return to_cloud(np.column_stack([b.edges, z]))
+
+
+@dataclass(frozen=True, eq=False)
+class _Near:
+    """Every point of the cloud about the beacons sought (and their times), indexed."""
+
+    xyz: Points
+    time: NDArray[np.float64] | None
+    index: PlanIndex
+
+    @classmethod
+    def read(
+        cls,
+        cloud: Cloud,
+        places: Sequence[Points],
+        config: GeorefConfig,
+        progress: Progress | None,
+    ) -> _Near:
+        half = max(reach_m(p) for p in places) + NEIGHBOURHOOD_SLACK_M
+        centres = np.array([p.mean(axis=0) for p in places])
+        xyz, time = points_near(cloud, centres, half, config.detect, progress)
+        return cls(xyz, time, PlanIndex(xyz[:, :2]))
+
+
 def _sought(
     missing: Sequence[Beacon],
     to_cloud: Callable[[Points], Points],
     prediction_sigma_m: float,
     cand: Candidates,
     index: PlanIndex,
+    near: _Near,
     noise_m: float,
     config: GeorefConfig,
     heights: bool,
 ) -> dict[str, BeaconObs]:
     """The surveyed beacons detection missed, looked for where ``to_cloud`` (grid E, N,
     Z rows to the cloud's plan) puts them, that prediction ``prediction_sigma_m`` off
-    beyond the survey's own sigma (:mod:`mast.cloud.sought`)."""
+    beyond the survey's own sigma, among the candidates, their edges fitted to all the
+    cloud's points about them (:mod:`mast.cloud.sought`)."""
     out = {}
     for b in missing:
-        z = b.elevations if b.elevations is not None else np.full(4, math.nan)
-        predicted = to_cloud(np.column_stack([b.edges, z]))
-        rows = index.square(predicted.mean(axis=0), reach_m(predicted))
+        predicted = _predicted(b, to_cloud)
+        half = reach_m(predicted)
+        rows = index.square(predicted.mean(axis=0), half)
         found = seek_beacon(
             cand.xyz[rows],
             None if cand.time is None else cand.time[rows],
@@ -325,6 +360,7 @@ def _sought(
             noise_m,
             math.hypot(float(np.max(b.sigmas_or(config.survey_sigma_m))), prediction_sigma_m),
             config.detect,
+            near.xyz[near.index.square(predicted.mean(axis=0), half + NEIGHBOURHOOD_SLACK_M)],
         )
         if found is None:
             continue
@@ -419,10 +455,17 @@ def georeference(
                 refusal = None
     sought: set[str] = set()
     noise = pieces.segmentation.noise_m
+    near: _Near | None = None
 
     def seek(to_cloud: Callable[[Points], Points], off_m: float) -> dict[str, BeaconObs]:
+        nonlocal near
         missing = [b for b in survey if b.id not in found]
-        return _sought(missing, to_cloud, off_m, cand, plan, noise, config, heights)
+        if not missing:
+            return {}
+        if near is None:  # one more pass, about the beacons missing at the first search
+            places = [_predicted(b, to_cloud) for b in missing]
+            near = _Near.read(cloud, places, config, progress)
+        return _sought(missing, to_cloud, off_m, cand, plan, near, noise, config, heights)
 
     def take(extra: dict[str, BeaconObs]) -> None:
         controls.extend(o for b, o in extra.items() if b not in config.checks)
