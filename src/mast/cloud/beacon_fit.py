@@ -136,7 +136,7 @@ def place_design(
     noise_m: float,
 ) -> tuple[NDArray[np.float64], list[NDArray[np.float64]]] | None:
     """Place the design ``shape`` (its four edges, shape (4, 2), in any frame) at the
-    points ``xyz`` (the cloud's candidates near the beacon, z up), starting from
+    points ``xyz`` (the cloud's points near the beacon, z up), starting from
     ``start`` (the four edges where a first estimate puts them). Returns the placed
     edges and each panel's points (plan) gathered from them; None when a panel is seen
     too little (fewer than :data:`MIN_POINTS` on the middle panel or on the outer two

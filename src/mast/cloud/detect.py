@@ -238,45 +238,41 @@ NEAR_CELL_M = 0.25
 def points_near(
     cloud: Cloud,
     centres: NDArray[np.float64],
-    half_m: float,
+    half_m: NDArray[np.float64],
     cfg: DetectConfig = DetectConfig(),
     progress: Progress | None = None,
-) -> tuple[NDArray[np.float64], NDArray[np.float64] | None]:
-    """Every point of ``cloud`` (and its time) within ``half_m`` in plan, per coordinate,
-    of any of ``centres``, in one more pass: the cells of :data:`NEAR_CELL_M` that the
-    squares touch are marked, and a chunk's points in a marked cell are kept (a few
-    more than the squares hold: cut them with :class:`~mast.cloud.grid.PlanIndex`).
+) -> NDArray[np.float64]:
+    """Every point of ``cloud`` within ``half_m`` (one per centre) in plan, per
+    coordinate, of one of ``centres``, in one more pass: the cells of
+    :data:`NEAR_CELL_M` that the squares touch are marked, and a chunk's points in a
+    marked cell are kept (a few more than the squares hold: cut them with
+    :class:`~mast.cloud.grid.PlanIndex`).
+
     The candidates of passes 1-3 keep only panel-like columns' points, and a panel a
     column test cut short keeps half of them; what is fitted where the survey says a
     beacon stands is better fitted to all of them."""
     centres = np.asarray(centres, dtype=float).reshape(-1, 2)
     if centres.shape[0] == 0 or cloud.count == 0:
-        return np.empty((0, 3)), None
+        return np.empty((0, 3))
+    half = np.asarray(half_m, dtype=float).reshape(-1, 1)
     origin = centres[0].copy()
-    lo = np.floor((centres - half_m - origin) / NEAR_CELL_M).astype(np.int64)
-    hi = np.floor((centres + half_m - origin) / NEAR_CELL_M).astype(np.int64)
+    lo = np.floor((centres - half - origin) / NEAR_CELL_M).astype(np.int64)
+    hi = np.floor((centres + half - origin) / NEAR_CELL_M).astype(np.int64)
     squares = []
     for a, b in zip(lo, hi, strict=True):
         i, j = np.meshgrid(np.arange(a[0], b[0] + 1), np.arange(a[1], b[1] + 1))
         squares.append(pack_ij(np.column_stack([i.ravel(), j.ravel()])))
     marked = np.unique(np.concatenate(squares))
-    xyz: list[NDArray[np.float64]] = []
-    times: list[NDArray[np.float64]] = []
-    timed = True
+    xyz: list[NDArray[np.float64]] = [np.empty((0, 3))]
     read = 0
     for chunk in cloud.chunks(cfg.chunk_points):
         keys = cell_keys(chunk.xyz[:, :2], origin, NEAR_CELL_M)
         at = np.minimum(np.searchsorted(marked, keys), marked.size - 1)
-        hit = marked[at] == keys
-        xyz.append(chunk.xyz[hit])
-        if chunk.time is None:
-            timed = False
-        else:
-            times.append(chunk.time[hit])
+        xyz.append(chunk.xyz[marked[at] == keys])
         read += chunk.xyz.shape[0]
         if progress:
             progress("beacons' neighbourhoods", read, cloud.count)
-    return np.concatenate(xyz), (np.concatenate(times) if timed and times else None)
+    return np.concatenate(xyz)
 
 
 def wall_density(sample: NDArray[np.float64], step: int) -> float:

@@ -50,7 +50,7 @@ from mast.cloud.drift import DriftCorrection, correct_drift
 from mast.cloud.grid import PlanIndex
 from mast.cloud.io import Cloud
 from mast.cloud.match import Detection, Match, MatchConfig, detect_beacons, match_beacons
-from mast.cloud.sought import measure_top, reach_m, seek_beacon
+from mast.cloud.sought import MAX_SNAP_M, measure_top, reach_m, seek_beacon
 from mast.core.beacon import Beacon, Survey
 from mast.core.index import SurveyIndex
 from mast.core.noise import DEFAULT_SURVEY_SIGMA_M
@@ -73,9 +73,11 @@ SOUGHT_ROUNDS = 2
 #: beacon may be off: the simulated 1 % drifts' inner checks were up to 8 cm off.
 DRIFT_PREDICTION_M = 0.04
 #: The beacons sought are fitted to every point of the cloud about them (one more pass,
-#: :func:`~mast.cloud.detect.points_near`), this far beyond their first predicted place
-#: for the later drift rounds' predictions and the snap (at most 15 cm).
-NEIGHBOURHOOD_SLACK_M = 0.25
+#: :func:`~mast.cloud.detect.points_near`), read this far beyond the square about their
+#: first predicted place: the snap (:data:`~mast.cloud.sought.MAX_SNAP_M`) and the later
+#: drift rounds' predictions moving (a beacon whose square is not inside what was read
+#: is fitted to the candidates alone).
+NEIGHBOURHOOD_SLACK_M = 0.3
 #: How a beacon detection missed was found (:mod:`mast.cloud.sought`).
 SOUGHT = "not detected on its own: found where the control beacons put it"
 
@@ -312,11 +314,13 @@ def _predicted(b: Beacon, to_cloud: Callable[[Points], Points]) -> Points:
 
 @dataclass(frozen=True, eq=False)
 class _Near:
-    """Every point of the cloud about the beacons sought (and their times), indexed."""
+    """Every point of the cloud in squares about the beacons sought, indexed: the
+    squares' centres and half sides, to say whether a later prediction's is inside."""
 
     xyz: Points
-    time: NDArray[np.float64] | None
     index: PlanIndex
+    centres: Points
+    half_m: NDArray[np.float64]
 
     @classmethod
     def read(
@@ -326,10 +330,23 @@ class _Near:
         config: GeorefConfig,
         progress: Progress | None,
     ) -> _Near:
-        half = max(reach_m(p) for p in places) + NEIGHBOURHOOD_SLACK_M
+        """One more pass, about ``places`` (each beacon's four predicted edges, plan)."""
+        if not places:
+            return cls(np.empty((0, 3)), PlanIndex(np.empty((0, 2))), np.empty((0, 2)),
+                       np.empty(0))  # fmt: skip
         centres = np.array([p.mean(axis=0) for p in places])
-        xyz, time = points_near(cloud, centres, half, config.detect, progress)
-        return cls(xyz, time, PlanIndex(xyz[:, :2]))
+        half = np.array([reach_m(p) for p in places]) + NEIGHBOURHOOD_SLACK_M
+        xyz = points_near(cloud, centres, half, config.detect, progress)
+        return cls(xyz, PlanIndex(xyz[:, :2]), centres, half)
+
+    def square(self, centre: Points, half_m: float) -> Points | None:
+        """Every point in the square about ``centre``, or None when no square read holds
+        it (the prediction moved since: the candidates alone serve)."""
+        inside = np.all(np.abs(self.centres - centre) + half_m <= self.half_m[:, None], axis=1)
+        if not np.any(inside):
+            return None
+        out: Points = self.xyz[self.index.square(centre, half_m)]
+        return out
 
 
 def _sought(
@@ -352,6 +369,8 @@ def _sought(
         predicted = _predicted(b, to_cloud)
         half = reach_m(predicted)
         rows = index.square(predicted.mean(axis=0), half)
+        if len(rows) < config.detect.min_points:
+            continue  # nothing panel-like there: not in the cloud, or not seen
         found = seek_beacon(
             cand.xyz[rows],
             None if cand.time is None else cand.time[rows],
@@ -360,7 +379,7 @@ def _sought(
             noise_m,
             math.hypot(float(np.max(b.sigmas_or(config.survey_sigma_m))), prediction_sigma_m),
             config.detect,
-            near.xyz[near.index.square(predicted.mean(axis=0), half + NEIGHBOURHOOD_SLACK_M)],
+            near.square(predicted.mean(axis=0), half + MAX_SNAP_M),
         )
         if found is None:
             continue
@@ -464,6 +483,12 @@ def georeference(
             return {}
         if near is None:  # one more pass, about the beacons missing at the first search
             places = [_predicted(b, to_cloud) for b in missing]
+            # only where the candidates hold something: not beyond the cloud's ends
+            places = [
+                p
+                for p in places
+                if len(plan.square(p.mean(axis=0), reach_m(p))) >= config.detect.min_points
+            ]
             near = _Near.read(cloud, places, config, progress)
         return _sought(missing, to_cloud, off_m, cand, plan, near, noise, config, heights)
 

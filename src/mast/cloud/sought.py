@@ -8,9 +8,10 @@ cloud): the rock above a panel runs on in its plane and the piece is not vertica
 an outer panel at 20-35 degrees to the middle one is swallowed by its line, a short
 panel falls apart in fragments. Once the beacons detection did find fix the
 transformation, every other surveyed beacon has a predicted place in the cloud,
-millimetres to centimetres off; there its design is fitted to the candidate points
-directly, as a surveyor's software looks for a target where the orientation says it
-must be. Per beacon (:func:`seek_beacon`):
+millimetres to centimetres off; there its design is fitted directly (to every
+point of the cloud about it where georef read them, see :func:`seek_beacon`), as a
+surveyor's software looks for a target where the orientation says it must be. Per
+beacon (:func:`seek_beacon`):
 
 0. **Snap.** The predicted edges moved, within three sigmas of the prediction (at
    least a centimetre), to where most points lie within two noise sigmas of its
@@ -102,7 +103,7 @@ class Sought:
     time : float or None
         Median time of its panel points.
     points : int
-        Points on its panels.
+        Points on its panels (every point, with ``every``; else the candidates).
     """
 
     fit: BeaconFit
