@@ -158,10 +158,11 @@ def test_the_report_renders_in_chromium(georef: Path, tmp_path: Path) -> None:
 
 
 def test_too_few_beacons_is_refused_with_its_reason(scene: CloudScenario, tmp_path: Path) -> None:
-    # an earlier run's result in the folder must not outlive the refusal
+    # an earlier run's result in the folder (written over: --force) must not outlive the
+    # refusal
     for stale in ("georeferenced.laz", "transform.json", "plan.png"):
         (tmp_path / stale).write_bytes(b"old")
-    done = _georef(scene.cloud, scene.survey, tmp_path, "--check", "B01,B02,B03,B04")
+    done = _georef(scene.cloud, scene.survey, tmp_path, "--check", "B01,B02,B03,B04", "--force")
     assert done.returncode == 3, done.stderr
     assert "too_few" in done.stderr
     assert "1 control beacon" in done.stderr

@@ -92,6 +92,29 @@ def test_a_run_writes_every_file_and_places_every_scan(tracked: Path, drive: Pat
     assert 0 < fixed < 250  # the drive leaves the beacons behind: odometry carries the rest
 
 
+def test_a_second_run_into_a_run_folder_is_refused_unless_forced(
+    tracked: Path, drive: Path, tmp_path: Path
+) -> None:
+    """``--out`` naming a folder that holds an earlier run: one line naming it and
+    ``--force``, exit 2, the earlier run untouched; with ``--force`` the run is written."""
+    before = {p.name: p.stat().st_mtime_ns for p in tracked.iterdir()}
+    r = _track(drive / "scans.bag", drive, tracked)
+    assert r.returncode == 2
+    (line,) = r.stderr.strip().splitlines()
+    assert str(tracked) in line
+    assert "--force" in line
+    assert {p.name: p.stat().st_mtime_ns for p in tracked.iterdir()} == before
+    copy = tmp_path / "copy"
+    copy.mkdir()
+    (copy / "old.txt").write_text("an earlier run\n")
+    forced = run_mast_text(
+        "track", str(drive / "scans.bag"), "-b", str(drive / "beacons.csv"),
+        "--out", str(copy), "--range-sigma", "0.012", "--force",
+    )  # fmt: skip
+    assert forced.returncode == 0, forced.stderr
+    assert (copy / "trajectory.csv").exists()
+
+
 def test_a_run_repeated_with_its_config_toml_gives_the_same_results(
     tracked: Path, drive: Path, tmp_path: Path
 ) -> None:

@@ -10,6 +10,7 @@ import typer
 
 from mast.cli.options import (
     BeaconsOption,
+    ForceOption,
     SurveySigmaOption,
 )
 from mast.cli.root import (
@@ -92,6 +93,7 @@ def georef(
         ),
     ] = None,
     survey_sigma: SurveySigmaOption = None,
+    force: ForceOption = False,
 ) -> None:
     """Put a 3D SLAM point cloud into the mine grid from the beacons it shows.
 
@@ -126,7 +128,7 @@ def georef(
             "--trajectory corrects drift in plan and height with the 4-parameter model; "
             "--model helmert7's tilt and scale would not be carried by the pose graph"
         )
-    check_output_folder(out)
+    check_output_folder(out, force=force)
     run = run_georef(cloud, beacons, out, config, trajectory_path=trajectory, time_field=time_field)
     r = run.result
     roles = [b.role for b in r.beacons]

@@ -153,6 +153,10 @@ RangeMaxOption = Annotated[
     float | None,
     typer.Option("--range-max", help="Longest valid range, metres [default: the bag's, or none]."),
 ]
+ForceOption = Annotated[
+    bool,
+    typer.Option("--force", help="Write into an --out folder that holds files already."),
+]
 SurveySigmaOption = Annotated[
     float | None,
     typer.Option(

@@ -11,6 +11,7 @@ import typer
 from mast.cli.options import (
     AngleSigmaOption,
     BeaconsOption,
+    ForceOption,
     RangeSigmaOption,
     SurveySigmaOption,
     cell_progress,
@@ -118,6 +119,7 @@ def plan(
             "the job is; write nothing.",
         ),
     ] = False,
+    force: ForceOption = False,
 ) -> None:
     """Predict where along a drift a scanner gets a fix, how precise, and where beacons help.
 
@@ -175,7 +177,7 @@ def plan(
             f"{along:.0f} m of drift, {stations} stations); {beacons}: {len(survey)} beacons"
         )
         return
-    check_output_folder(out)
+    check_output_folder(out, force=force)
     with cell_progress("plan") as update:
         result = run_plan(
             drift,

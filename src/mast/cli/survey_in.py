@@ -7,6 +7,7 @@ from typing import Annotated
 
 import typer
 
+from mast.cli.options import ForceOption
 from mast.cli.root import EXIT_NO_FIX, app
 from mast.errors import InputError
 from mast.io.outputs import check_output_folder
@@ -51,6 +52,7 @@ def survey_in(
             "metres, added to every edge's sigma_m.",
         ),
     ] = 0.001,
+    force: ForceOption = False,
 ) -> None:
     """Survey beacons in from terrestrial laser scans already in the mine grid: each
     beacon's design found, its four edges and top fitted from its panels' points.
@@ -73,7 +75,7 @@ def survey_in(
             "station_sigma_m", "--station-sigma", 1)) from None  # fmt: skip
     the_designs = read_survey(designs, apart=False)
     before = read_survey(previous) if previous is not None else None
-    check_output_folder(out)
+    check_output_folder(out, force=force)
     result = run(clouds, the_designs, config, previous=before)
     files = write_survey_in(result, out, clouds=clouds, designs_file=designs)
     edge_on = len(result.edge_on)

@@ -13,6 +13,7 @@ import typer
 from mast.cli.options import (
     AngleSigmaOption,
     BeaconsOption,
+    ForceOption,
     RangeMaxOption,
     RangeMinOption,
     RangeSigmaOption,
@@ -79,6 +80,7 @@ def track(
         int | None,
         typer.Option("--workers", min=1, help="Processes of the local cluster [default: cores]."),
     ] = None,
+    force: ForceOption = False,
 ) -> None:
     """Place every scan of a run in the mine grid: fixes from beacons, odometry between
     them, smoothed in a pose graph; writes fixes.jsonl, trajectory.csv and .tum, map.las,
@@ -111,7 +113,7 @@ def track(
         if not given.exists():
             raise InputError("run not found", path=given)
     found = expand_runs(runs)
-    check_output_folder(out)
+    check_output_folder(out, force=force)
     survey = read_survey(beacons)
     warn_loose_edges(survey, cfg.survey_sigma_m)
     settings.write(out / "config.toml")  # once the inputs are read: a refused run leaves nothing

@@ -34,10 +34,19 @@ def _same_file(a: Path, b: Path) -> bool:
         return False
 
 
-def check_output_folder(path: Path, *, option: str = "--out") -> Path:
-    """Make sure ``path`` is a folder that can be written into, creating it if missing."""
+def check_output_folder(path: Path, *, option: str = "--out", force: bool | None = None) -> Path:
+    """Make sure ``path`` is a folder that can be written into, creating it if missing.
+
+    ``force`` given (a run's folder): a folder that holds files already is refused unless
+    it is True, so that a second run does not write over the first without a word."""
     if path.exists() and not path.is_dir():
         raise InputError(f"{option} must be a folder, and this is a file", path=path)
+    if force is False and path.is_dir() and any(path.iterdir()):
+        raise InputError(
+            f"holds files already (an earlier run?): give {option} an empty or new folder, "
+            "or --force to write over them",
+            path=path,
+        )
     try:
         path.mkdir(parents=True, exist_ok=True)
     except OSError as err:
