@@ -261,6 +261,27 @@ def test_implausible_surveys_are_named(
         read_survey(write_text("b.csv", content), rules=None)
 
 
+def test_a_survey_in_millimetres_says_so_through_the_mast_process(tmp_path: Path) -> None:
+    """The paper's hat with its coordinates in millimetres: one line naming the file, the
+    line and the panel, asking whether the survey is in millimetres; exit 2."""
+    from tests._cli import run_mast_text
+
+    design = np.array([[0.0, 0.0], [0.3, 0.16], [0.9, 0.16], [1.08, 0.06]])
+    rows = ["beacon,edge,easting,northing"]
+    for b, shift in (("B1", 0.0), ("B2", 10.0)):
+        for k, (e, n) in enumerate(1000.0 * (design + [25_000.0 + shift, 71_000.0]), 1):
+            rows.append(f"{b},{k},{e:.1f},{n:.1f}")
+    survey = tmp_path / "mm.csv"
+    survey.write_text("\n".join(rows) + "\n")
+    scan = tmp_path / "scan.csv"
+    scan.write_text("angle_rad,range_m\n0.0,5.0\n0.01,5.0\n0.02,5.0\n")
+    done = run_mast_text("locate", str(scan), "-b", str(survey))
+    assert done.returncode == 2
+    (line,) = done.stderr.strip().splitlines()
+    assert f"{survey}, line 3: beacon 'B1': panel P1 (edges 1-2) is 340 m long" in line
+    assert "is the survey in millimetres?" in line
+
+
 def test_a_survey_of_too_many_beacons_is_named(
     write_text: Callable[..., Path], monkeypatch: pytest.MonkeyPatch
 ) -> None:

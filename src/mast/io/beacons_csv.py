@@ -23,6 +23,8 @@ from mast.io.atomic import atomic_open
 __all__ = ["COINCIDENT_M", "read_survey", "write_survey"]
 
 _DEFAULT_RULES = IdentifiabilityRules()
+#: A panel longer than this is no beacon's (they are tens of centimetres), metres.
+MAX_PANEL_M = 10.0
 #: Two surveyed edge points closer than this are one point surveyed twice, metres.
 COINCIDENT_M = 1e-3
 
@@ -44,7 +46,19 @@ def _crosses(
 
 
 def _check_shape(bid: str, xy: NDArray[np.float64], lines: list[int], path: Path) -> None:
-    """Refuse a beacon with two edges at one point or whose panels cross (folded on itself)."""
+    """Refuse a beacon with two edges at one point, whose panels cross (folded on itself),
+    or with a panel longer than :data:`MAX_PANEL_M` (a survey in millimetres, most
+    likely: say so)."""
+    for k in range(3):
+        length = math.dist(xy[k], xy[k + 1])
+        if length > MAX_PANEL_M:
+            raise InputError(
+                f"beacon {quoted(bid)}: panel P{k + 1} (edges {k + 1}-{k + 2}) is {length:.6g} m "
+                "long where a beacon's panels are tens of centimetres: is the survey in "
+                "millimetres? Easting and northing are metres",
+                path=path,
+                line=lines[k + 1],
+            )
     for i in range(4):
         for j in range(i + 1, 4):
             if math.dist(xy[i], xy[j]) < COINCIDENT_M:
