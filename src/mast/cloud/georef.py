@@ -331,10 +331,7 @@ class _Near:
         progress: Progress | None,
     ) -> _Near:
         """One more pass, about ``places`` (each beacon's four predicted edges, plan)."""
-        if not places:
-            return cls(np.empty((0, 3)), PlanIndex(np.empty((0, 2))), np.empty((0, 2)),
-                       np.empty(0))  # fmt: skip
-        centres = np.array([p.mean(axis=0) for p in places])
+        centres = np.array([p.mean(axis=0) for p in places]).reshape(-1, 2)
         half = np.array([reach_m(p) for p in places]) + NEIGHBOURHOOD_SLACK_M
         xyz = points_near(cloud, centres, half, config.detect, progress)
         return cls(xyz, PlanIndex(xyz[:, :2]), centres, half)
@@ -349,28 +346,40 @@ class _Near:
         return out
 
 
-def _sought(
+def _looked_for(
     missing: Sequence[Beacon],
     to_cloud: Callable[[Points], Points],
+    index: PlanIndex,
+    min_points: int,
+) -> list[tuple[Beacon, Points, NDArray[np.intp]]]:
+    """The beacons detection missed, each with its edges where ``to_cloud`` (grid E, N,
+    Z rows to the cloud's plan) puts them and the candidates about them, where those
+    are ``min_points`` or more: elsewhere nothing panel-like is there (beyond the cloud's
+    ends, or not seen), and nothing is looked for or read."""
+    out = []
+    for b in missing:
+        predicted = _predicted(b, to_cloud)
+        rows = index.square(predicted.mean(axis=0), reach_m(predicted))
+        if len(rows) >= min_points:
+            out.append((b, predicted, rows))
+    return out
+
+
+def _sought(
+    looked: Sequence[tuple[Beacon, Points, NDArray[np.intp]]],
     prediction_sigma_m: float,
     cand: Candidates,
-    index: PlanIndex,
     near: _Near,
     noise_m: float,
     config: GeorefConfig,
     heights: bool,
 ) -> dict[str, BeaconObs]:
-    """The surveyed beacons detection missed, looked for where ``to_cloud`` (grid E, N,
-    Z rows to the cloud's plan) puts them, that prediction ``prediction_sigma_m`` off
-    beyond the survey's own sigma, among the candidates, their edges fitted to all the
-    cloud's points about them (:mod:`mast.cloud.sought`)."""
+    """The surveyed beacons detection missed (:func:`_looked_for`), looked for where they
+    were predicted, that prediction ``prediction_sigma_m`` off beyond the survey's own
+    sigma, among the candidates, their edges fitted to all the cloud's points about them
+    (:mod:`mast.cloud.sought`)."""
     out = {}
-    for b in missing:
-        predicted = _predicted(b, to_cloud)
-        half = reach_m(predicted)
-        rows = index.square(predicted.mean(axis=0), half)
-        if len(rows) < config.detect.min_points:
-            continue  # nothing panel-like there: not in the cloud, or not seen
+    for b, predicted, rows in looked:
         found = seek_beacon(
             cand.xyz[rows],
             None if cand.time is None else cand.time[rows],
@@ -379,7 +388,7 @@ def _sought(
             noise_m,
             math.hypot(float(np.max(b.sigmas_or(config.survey_sigma_m))), prediction_sigma_m),
             config.detect,
-            near.square(predicted.mean(axis=0), half + MAX_SNAP_M),
+            near.square(predicted.mean(axis=0), reach_m(predicted) + MAX_SNAP_M),
         )
         if found is None:
             continue
@@ -479,18 +488,12 @@ def georeference(
     def seek(to_cloud: Callable[[Points], Points], off_m: float) -> dict[str, BeaconObs]:
         nonlocal near
         missing = [b for b in survey if b.id not in found]
-        if not missing:
+        looked = _looked_for(missing, to_cloud, plan, config.detect.min_points)
+        if not looked:
             return {}
-        if near is None:  # one more pass, about the beacons missing at the first search
-            places = [_predicted(b, to_cloud) for b in missing]
-            # only where the candidates hold something: not beyond the cloud's ends
-            places = [
-                p
-                for p in places
-                if len(plan.square(p.mean(axis=0), reach_m(p))) >= config.detect.min_points
-            ]
-            near = _Near.read(cloud, places, config, progress)
-        return _sought(missing, to_cloud, off_m, cand, plan, near, noise, config, heights)
+        if near is None:  # one more pass, about the beacons looked for at the first search
+            near = _Near.read(cloud, [p for _, p, _ in looked], config, progress)
+        return _sought(looked, off_m, cand, near, noise, config, heights)
 
     def take(extra: dict[str, BeaconObs]) -> None:
         controls.extend(o for b, o in extra.items() if b not in config.checks)

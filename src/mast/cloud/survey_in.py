@@ -59,7 +59,7 @@ from mast.cloud.detect import (
 from mast.cloud.grid import PlanIndex
 from mast.cloud.io import Chunk, Cloud, open_cloud
 from mast.cloud.match import Detection, detect_beacons
-from mast.core.beacon import Beacon, Survey
+from mast.core.beacon import Beacon, BeaconTemplate, Survey
 from mast.core.index import SurveyIndex
 from mast.errors import InputError
 from mast.pipeline.identification import IdentificationConfig, identify_panels
@@ -312,11 +312,7 @@ def _middle_edge_on(
     used = set(used)
     found: list[FoundBeacon] = []
     refused: list[NDArray[np.float64]] = []
-    shapes = []
-    for rep in reps:
-        e = rep.edges
-        units = np.diff(e, axis=0) / np.hypot(*np.diff(e, axis=0).T)[:, None]
-        shapes.append((units, _lengths(rep)))
+    shapes = [(rep.template.directions, rep.template.panel_lengths) for rep in reps]
     span = max(float(lengths.sum()) for _, lengths in shapes)
     order = sorted(range(len(panels)), key=lambda i: -len(panels[i].segment.points))
     for i in order:
@@ -326,7 +322,8 @@ def _middle_edge_on(
             if j == i or {i, int(j)} & used or abs(a.top_m - b.top_m) > TOP_AGREE_M:
                 continue
             for sign in (1.0, -1.0):
-                for edges in (e for _, e in _placed(a, b, sign, shapes)):
+                placed = _placed(a, b, sign, shapes)
+                for _, edges in placed:
                     centre = 0.5 * (edges[1] + edges[2])
                     if any(math.dist(centre, t) <= ONE_BEACON_M for t in taken):
                         break
@@ -336,7 +333,7 @@ def _middle_edge_on(
                     fit = _fit(
                         (a, middle, b),
                         (edges[1], edges[2]),
-                        [k for k, _ in _placed(a, b, sign, shapes)],
+                        [k for k, _ in placed],
                         xyz[plan.square(centre, span + 0.5)],
                         index,
                         config,
@@ -505,17 +502,17 @@ def _fit(
     )
     held = []
     for k in designs:
-        lengths = _lengths(reps[k])
+        lengths = reps[k].template.panel_lengths
         if _fits(edges_from_lines(lines, lengths, outward).reshape(4, 2), panels, origin, lengths):
             held.append(k)
     if not held:
         return None
-    longest = max(float(_lengths(reps[k]).sum()) for k in held)
+    longest = max(float(reps[k].template.panel_lengths.sum()) for k in held)
     near = xyz[np.max(np.abs(xyz[:, :2] - origin), axis=1) < longest + 0.5]
     design = _free_ends(held, reps, lines, outward, near, origin, panels, config)
     if design is None:
         return None
-    lengths = _lengths(design)
+    lengths = design.template.panel_lengths
     edges = edges_from_lines(lines, lengths, outward)
     # every candidate point of each panel, not only its piece's (a long panel's piece
     # may be a fragment of it: a bulge or the mixed returns at its ends cut it), twice
@@ -652,7 +649,7 @@ def _free_ends(
     scored = []
     tols = (_end_tolerance(panels[0]), _end_tolerance(panels[2]))
     for k in held:
-        lengths = _lengths(reps[k])
+        lengths = reps[k].template.panel_lengths
         e = edges_from_lines(lines, lengths, outward).reshape(4, 2)
         reaches = _reaches(e[1], e[2], e[0], e[3], lengths, xyz, origin, panels, config)
         deficits = (lengths[0] - reaches[0], lengths[2] - reaches[1])
@@ -727,23 +724,13 @@ def _angles_hold(
     its outer panels, has not, and a couple of columns with mixed returns in them turn
     its line by a degree while their scatter says a hundredth."""
     test = IdentificationConfig()
+    fitted = BeaconTemplate.from_edges(edges).deflections
     for k in (0, 1):
-        turn = _deflection(edges, k) - _deflection(design.edges, k)
-        turn = math.remainder(turn, math.tau)
+        turn = math.remainder(float(fitted[k] - design.template.deflections[k]), math.tau)
         sigma = math.sqrt(float(covs[k][0, 0] + covs[k + 1][0, 0]))
         if abs(turn) > max(test.min_deflection_tol_rad, test.sigmas * sigma):
             return False
     return True
-
-
-def _deflection(edges: NDArray[np.float64], k: int) -> float:
-    """The turn from panel ``k`` to panel ``k + 1`` (0-based) along the edges, radians."""
-    a, b = edges[k + 1] - edges[k], edges[k + 2] - edges[k + 1]
-    return math.atan2(float(a[0] * b[1] - a[1] * b[0]), float(a @ b))
-
-
-def _lengths(b: Beacon) -> NDArray[np.float64]:
-    return np.asarray(np.hypot(*np.diff(b.edges, axis=0).T))
 
 
 def _name(
