@@ -28,6 +28,7 @@ __all__ = [
     "MAX_BEACONS",
     "MAX_BEAMS",
     "MAX_COORDINATE_M",
+    "MAX_CRS_BYTES",
     "MAX_ELEVATION_M",
     "MAX_LINE_BYTES",
     "MAX_METADATA_BYTES",
@@ -52,6 +53,8 @@ MAX_LINE_BYTES = 4 * 1024 * 1024
 MAX_BAG_CHUNK_BYTES = 128 * 1024 * 1024
 #: A ROS 2 bag's ``metadata.yaml`` (a few KB in practice): 1 MiB.
 MAX_METADATA_BYTES = 1024 * 1024
+#: A WKT file given to ``--crs`` (a projected CRS's WKT is 1-2 KB): 1 MiB.
+MAX_CRS_BYTES = 1024 * 1024
 #: Beams in one scan (a 360-degree scan at 0.01 degrees is 36 000): 1 000 000.
 MAX_BEAMS = 1_000_000
 #: Beacons in one survey (a whole mine holds thousands): 100 000.

@@ -17,6 +17,10 @@ int32 reaches at :data:`LAS_SCALE_M`; each caller names that problem its own way
 ``gps_time`` in a LAS 1.4 file is **Adjusted Standard GPS Time** when the header's
 global encoding says so (bit 0): :func:`gps_adjusted_time` converts Unix stamps to
 it with the leap seconds.
+
+A grid's coordinate reference system (``--crs``, :class:`mast.io.crs.GridCrs`) goes
+into the header as the OGC WKT VLR with the WKT bit set, which LAS 1.4 defines: a
+header given one is made LAS 1.4 whatever version it would have had.
 """
 
 from __future__ import annotations
@@ -37,6 +41,8 @@ from mast.io.atomic import commit, discard, part_path
 
 if TYPE_CHECKING:
     import laspy
+
+    from mast.io.crs import GridCrs
 
 __all__ = [
     "INT32_MAX",
@@ -137,6 +143,7 @@ def new_las_header(
     wkt: bool = False,
     extra: Sequence[laspy.ExtraBytesParams] = (),
     created: datetime.date | None = None,
+    crs: GridCrs | None = None,
 ) -> laspy.LasHeader:
     """A LAS header (1.4 unless told) at :data:`LAS_SCALE_M` (0.1 mm) on every axis.
 
@@ -163,9 +170,16 @@ def new_las_header(
     created : datetime.date, optional
         The creation date; today (laspy's default) without it. A simulator fixes it so
         that the same seed writes the same bytes.
+    crs : GridCrs, optional
+        The grid's CRS: written as the OGC WKT VLR (:meth:`GridCrs.las_wkt`) with the
+        WKT bit set, in LAS 1.4 (an earlier ``version`` is raised to it: the WKT bit is
+        1.4's). Without it, no CRS is recorded.
     """
     import laspy
+    from laspy.vlrs.known import WktCoordinateSystemVlr
 
+    if crs is not None and _version(version) < (1, 4):
+        version = "1.4"
     header = laspy.LasHeader(point_format=point_format, version=version)
     for dim in extra:
         header.add_extra_dim(dim)
@@ -173,14 +187,21 @@ def new_las_header(
     header.scales = np.full(3, LAS_SCALE_M)
     if gps_standard:
         header.global_encoding.gps_time_type = laspy.header.GpsTimeType.STANDARD
-    if wkt:
+    if wkt or crs is not None:
         header.global_encoding.wkt = True
+    if crs is not None:
+        header.vlrs.append(WktCoordinateSystemVlr(crs.las_wkt()))
     if created is not None:
         header.creation_date = created
     if system is not None:
         header.system_identifier = system
     header.generating_software = software
     return header
+
+
+def _version(text: str) -> tuple[int, ...]:
+    """``"1.4"`` -> ``(1, 4)``."""
+    return tuple(int(part) for part in str(text).split("."))
 
 
 def las_integers(
