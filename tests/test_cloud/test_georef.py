@@ -17,6 +17,8 @@ from mast.sim.cloud import CloudOptions, CloudScenario, simulate_cloud
 from tests._cli import run_mast_text
 
 DOCS = Path(__file__).resolve().parents[2] / "docs"
+#: The grid the module's georef names (--crs, a WKT file): UTM 35S with EGM96 heights.
+GRID_CRS = "EPSG:32735+5773"
 
 
 @pytest.fixture(scope="module")
@@ -37,7 +39,11 @@ def truth(scene: CloudScenario) -> dict[str, Any]:
 @pytest.fixture(scope="module")
 def georef(scene: CloudScenario, tmp_path_factory: pytest.TempPathFactory) -> Path:
     out = tmp_path_factory.mktemp("georef")
-    done = _georef(scene.cloud, scene.survey, out, "--check", "B03")
+    from pyproj import CRS
+
+    wkt = out.parent / "grid.wkt"
+    wkt.write_text(CRS.from_user_input(GRID_CRS).to_wkt(pretty=True), encoding="utf-8")
+    done = _georef(scene.cloud, scene.survey, out, "--check", "B03", "--crs", str(wkt))
     assert done.returncode == 0, done.stderr
     assert "check B03" in done.stdout
     return out
@@ -92,6 +98,24 @@ def test_the_laz_keeps_every_attribute_and_is_in_the_grid(
     # the transformation's own error at the far ends of a 100 m cloud: millimetres
     assert float(np.max(np.abs(err[:, :2]))) < 0.03
     assert float(np.max(np.abs(err[:, 2]))) < 0.03
+
+
+def test_the_crs_given_is_in_the_cloud_transform_json_and_the_reports(georef: Path) -> None:
+    import laspy
+    from pyproj import CRS
+
+    grid = CRS.from_user_input(GRID_CRS)
+    header = laspy.read(georef / "georeferenced.laz").header
+    assert header.global_encoding.wkt
+    crs = header.parse_crs()
+    assert crs is not None
+    assert crs.equals(grid)
+    record = json.loads((georef / "transform.json").read_text())
+    assert record["crs"]["name"] == grid.name
+    assert CRS.from_wkt(record["crs"]["wkt"]).equals(grid)
+    assert "epsg" not in record["crs"]  # a compound CRS is no single EPSG entry
+    for name in ("report.txt", "report.html"):
+        assert f"grid CRS         {grid.name}" in (georef / name).read_text(encoding="utf-8")
 
 
 def test_transform_json_validates_and_matches_the_truth(

@@ -27,7 +27,7 @@ def scene(tmp_path_factory: pytest.TempPathFactory) -> TlsScenario:
 @pytest.fixture(scope="module")
 def surveyed(scene: TlsScenario, tmp_path_factory: pytest.TempPathFactory) -> Path:
     out = tmp_path_factory.mktemp("survey")
-    done = _survey_in(scene, out)
+    done = _survey_in(scene, out, "--crs", "local:Mine Grid A")
     assert done.returncode == 0, done.stderr
     return out
 
@@ -69,6 +69,7 @@ def test_the_report_names_each_panel_and_edge(surveyed: Path) -> None:
     for word in ("P1", "P2", "P3", "plane RMS", "tilt", "length seen", "e4", "sigma"):
         assert word in text
     assert (surveyed / "report.html").read_text().startswith("<!DOCTYPE html>")
+    assert "grid CRS         Mine Grid A (local grid)" in text
 
 
 def test_a_previous_survey_keeps_its_ids_and_names_the_beacon_that_moved(

@@ -48,10 +48,12 @@ def test_plan_writes_the_four_outputs_and_suggests(tmp_path: Path) -> None:
     again = run_mast_text(
         "plan", "--drift", str(EXAMPLE / "drift.dxf"), "-b", str(out / "proposed_beacons.csv"),
         "--scanner", "lms1xx-0.25", "--out", str(tmp_path / "again"), "--step", "6",
-        "--scans-per-cell", "1", "--target-sigma", "0.02",
+        "--scans-per-cell", "1", "--target-sigma", "0.02", "--crs", "EPSG:32735",
     )  # fmt: skip
     assert again.returncode == 0, again.stderr
     redone = json.loads((tmp_path / "again" / "summary.json").read_text())
+    assert "crs" not in summary
+    assert redone["crs"]["epsg"] == 32735
     assert redone["covered_share"] == pytest.approx(summary["covered_share"], abs=0.1)
 
     import ezdxf

@@ -10,8 +10,10 @@ import typer
 
 from mast.cli.options import (
     BeaconsOption,
+    CrsOption,
     ForceOption,
     SurveySigmaOption,
+    grid_crs,
 )
 from mast.cli.root import (
     EXIT_NO_FIX,
@@ -93,12 +95,14 @@ def georef(
         ),
     ] = None,
     survey_sigma: SurveySigmaOption = None,
+    crs: CrsOption = None,
     force: ForceOption = False,
 ) -> None:
     """Put a 3D SLAM point cloud into the mine grid from the beacons it shows.
 
     Writes into --out: georeferenced.laz (every attribute kept), transform.json
-    (docs/transform.schema.json), beacons_found.csv, report.txt, report.html and plan.png.
+    (docs/transform.schema.json), beacons_found.csv, report.txt, report.html and plan.png;
+    --crs names the grid in the cloud, transform.json and the reports.
 
     Exit status 0 georeferenced, 3 refused (too few beacons, an ambiguous match, beacons
     that disagree: the reports and beacons_found.csv say why), 2 bad input, 4 an output
@@ -128,8 +132,17 @@ def georef(
             "--trajectory corrects drift in plan and height with the 4-parameter model; "
             "--model helmert7's tilt and scale would not be carried by the pose graph"
         )
+    grid = grid_crs(crs)
     check_output_folder(out, force=force)
-    run = run_georef(cloud, beacons, out, config, trajectory_path=trajectory, time_field=time_field)
+    run = run_georef(
+        cloud,
+        beacons,
+        out,
+        config,
+        trajectory_path=trajectory,
+        time_field=time_field,
+        crs=grid,
+    )
     r = run.result
     roles = [b.role for b in r.beacons]
     typer.echo(

@@ -12,6 +12,7 @@ from mast.cli.options import (
     AngleSigmaOption,
     AzimuthToleranceOption,
     BeaconsOption,
+    CrsOption,
     NearOption,
     OutputFormat,
     RadiusOption,
@@ -21,6 +22,7 @@ from mast.cli.options import (
     ScannerOption,
     SurveySigmaOption,
     TopicOption,
+    grid_crs,
     load_scans,
     parse_near,
     precisions,
@@ -70,8 +72,11 @@ def locate(
     azimuth_tolerance: AzimuthToleranceOption = 30.0,
     survey_sigma: SurveySigmaOption = None,
     config: ConfigOption = None,
+    crs: CrsOption = None,
 ) -> None:
     """Fix position and azimuth from one scan, several, or every scan of a bag.
+
+    --crs names the grid in each JSON record (its crs object) and in the report.
 
     Exit status 0 when a scan is fixed (with several scans or a bag: at least
     one), 3 when none is, 2 for bad input, 4 when an output cannot be written.
@@ -89,6 +94,7 @@ def locate(
     settings = effective({"locator": cfg, "sequence": tables["sequence"]}, "locate")
     if near is not None:
         cfg = replace(cfg, prior=parse_near(near, radius, azimuth_tolerance))
+    grid = grid_crs(crs)
     if scan_paths.count(Path("-")) > 1:
         raise InputError("standard input ('-') can be read only once")
     if plot is not None:
@@ -114,6 +120,7 @@ def locate(
                 config_file=None if config is None else str(config),
                 config_sha256=settings.sha256,
                 survey_sigmas=survey_weighing(survey, cfg.survey_sigma_m),
+                crs=grid,
             )
             source = inputs.scan_file or str(scan_path)
             tracker = SequenceLocator(survey, config=cfg, sequence=tables["sequence"])

@@ -29,6 +29,7 @@ from mast.errors import InputError
 
 if TYPE_CHECKING:
     from mast.core.beacon import Survey
+    from mast.io.crs import GridCrs
     from mast.pipeline.locator import LocatorConfig
     from mast.pipeline.tracking import Prior
 
@@ -112,6 +113,15 @@ def check_range_limits(range_min: float | None, range_max: float | None) -> None
             raise InputError(f"{name} must be a non-negative number, got {value}")
 
 
+def grid_crs(text: str | None) -> GridCrs | None:
+    """The ``--crs`` given, checked (:func:`mast.io.crs.parse_crs`); None without one."""
+    if text is None:
+        return None
+    from mast.io.crs import parse_crs
+
+    return parse_crs(text, option="--crs")
+
+
 def default_text(value: float) -> str:
     return f"{value:g}"
 
@@ -152,6 +162,15 @@ RangeMinOption = Annotated[
 RangeMaxOption = Annotated[
     float | None,
     typer.Option("--range-max", help="Longest valid range, metres [default: the bag's, or none]."),
+]
+CrsOption = Annotated[
+    str | None,
+    typer.Option(
+        "--crs",
+        help="The grid's coordinate reference system, written into the outputs: an EPSG "
+        "code (EPSG:32735), a WKT file, a WKT or PROJ string, or local:NAME for a mine's "
+        "local grid [default: none recorded].",
+    ),
 ]
 ForceOption = Annotated[
     bool,

@@ -11,10 +11,12 @@ import typer
 from mast.cli.options import (
     AngleSigmaOption,
     BeaconsOption,
+    CrsOption,
     ForceOption,
     RangeSigmaOption,
     SurveySigmaOption,
     cell_progress,
+    grid_crs,
 )
 from mast.cli.root import (
     app,
@@ -119,13 +121,15 @@ def plan(
             "the job is; write nothing.",
         ),
     ] = False,
+    crs: CrsOption = None,
     force: ForceOption = False,
 ) -> None:
     """Predict where along a drift a scanner gets a fix, how precise, and where beacons help.
 
     Writes plan.csv (one row per cell and heading), plan.png, plan.dxf and
     summary.json into --out; with --suggest also proposed_beacons.csv (the
-    survey with the new beacons, for mast plan and mast locate).
+    survey with the new beacons, for mast plan and mast locate); --crs names the grid
+    in summary.json.
     Exit status 0, 2 for bad input, 4 when an output cannot be written.
     """
     from mast.io import read_survey
@@ -165,6 +169,7 @@ def plan(
         seed=seed,
         **({} if survey_sigma is None else {"survey_sigma_m": survey_sigma}),
     )
+    grid = grid_crs(crs)
     survey = read_survey(beacons)
     if check:
         from mast.io.drift import read_drift
@@ -190,6 +195,7 @@ def plan(
             candidate_step_m=candidate_step,
             progress=update,
             echo=lambda text: typer.echo(text, err=True),
+            crs=grid,
         )
     f = result.figures
     worst = "none" if f["worst_sigma_m"] is None else f"{1000 * f['worst_sigma_m']:.1f} mm"

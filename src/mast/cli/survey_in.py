@@ -7,7 +7,7 @@ from typing import Annotated
 
 import typer
 
-from mast.cli.options import ForceOption
+from mast.cli.options import CrsOption, ForceOption, grid_crs
 from mast.cli.root import EXIT_NO_FIX, app
 from mast.errors import InputError
 from mast.io.outputs import check_output_folder
@@ -52,13 +52,14 @@ def survey_in(
             "metres, added to every edge's sigma_m.",
         ),
     ] = 0.001,
+    crs: CrsOption = None,
     force: ForceOption = False,
 ) -> None:
     """Survey beacons in from terrestrial laser scans already in the mine grid: each
     beacon's design found, its four edges and top fitted from its panels' points.
 
     Writes into --out: beacons.csv (the survey contract with elevation, sigma_m and
-    design), report.txt and report.html.
+    design), report.txt and report.html; --crs names the grid in the reports.
 
     Exit status 0 with beacons surveyed, 3 when no beacon is found, 2 for bad input, 4
     when an output cannot be written.
@@ -73,11 +74,12 @@ def survey_in(
     except ValueError as err:
         raise InputError(str(err).replace("noise_m", "--noise", 1).replace(
             "station_sigma_m", "--station-sigma", 1)) from None  # fmt: skip
+    grid = grid_crs(crs)
     the_designs = read_survey(designs, apart=False)
     before = read_survey(previous) if previous is not None else None
     check_output_folder(out, force=force)
     result = run(clouds, the_designs, config, previous=before)
-    files = write_survey_in(result, out, clouds=clouds, designs_file=designs)
+    files = write_survey_in(result, out, clouds=clouds, designs_file=designs, crs=grid)
     edge_on = len(result.edge_on)
     typer.echo(
         f"{len(result.beacons)} beacon(s) surveyed in, {result.partial} seen in part"

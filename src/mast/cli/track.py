@@ -13,6 +13,7 @@ import typer
 from mast.cli.options import (
     AngleSigmaOption,
     BeaconsOption,
+    CrsOption,
     ForceOption,
     RangeMaxOption,
     RangeMinOption,
@@ -21,6 +22,7 @@ from mast.cli.options import (
     SurveySigmaOption,
     TopicOption,
     check_range_limits,
+    grid_crs,
     precisions,
     run_progress,
     signals_as_flag,
@@ -80,11 +82,13 @@ def track(
         int | None,
         typer.Option("--workers", min=1, help="Processes of the local cluster [default: cores]."),
     ] = None,
+    crs: CrsOption = None,
     force: ForceOption = False,
 ) -> None:
     """Place every scan of a run in the mine grid: fixes from beacons, odometry between
     them, smoothed in a pose graph; writes fixes.jsonl, trajectory.csv and .tum, map.las,
-    map.dxf and report.html into --out.
+    map.dxf, report.html, fixes.geojson, trajectory.geojson and fixes_points.csv into
+    --out; --crs names the grid in the records, the map, the GeoJSON and the report.
 
     Several runs (or a folder of them) are tracked in parallel on Dask, one run per
     task, each into --out/<run name>/, with --out/index.csv listing them.
@@ -109,6 +113,7 @@ def track(
     )
     settings = effective({"locator": cfg, "track": run_config}, "track")
     check_range_limits(range_min, range_max)
+    grid = grid_crs(crs)
     for given in runs:
         if not given.exists():
             raise InputError("run not found", path=given)
@@ -132,6 +137,7 @@ def track(
                     config_file=None if config is None else str(config),
                     config_sha256=settings.sha256,
                     survey_sigmas=survey_weighing(survey, cfg.survey_sigma_m),
+                    crs=grid,
                 ),
             },
             scheduler=scheduler,
@@ -153,6 +159,7 @@ def track(
         config_file=None if config is None else str(config),
         config_sha256=settings.sha256,
         survey_sigmas=survey_weighing(survey, cfg.survey_sigma_m),
+        crs=grid,
     )
 
     def warn(text: str) -> None:

@@ -8,7 +8,8 @@ original attribute kept.
 * **LAS/LAZ** is streamed (``laspy.open(...).chunk_iterator``); the copy keeps the
   point format, every dimension (extra bytes included) and the non-CRS VLRs,
   with new scales and offsets for grid coordinates (the old CRS is dropped: it
-  described the local frame).
+  described the local frame; the grid's, given, is written instead, the copy then
+  LAS 1.4 for its WKT VLR).
 * **PLY** binary files are memory-mapped (plyfile), so they stream too; ASCII
   PLY is read whole.
 * **E57** is read one scan at a time (pye57 has no partial reads), each scan
@@ -30,6 +31,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from mast.errors import InputError, OutputError
+from mast.io.crs import GridCrs
 from mast.io.las import LasWriter, las_integers, las_offsets, new_las_header
 
 __all__ = [
@@ -67,9 +69,16 @@ class Cloud:
         raise NotImplementedError
 
     def write_georeferenced(
-        self, out: Path, transform: Transform, origin: NDArray[np.float64], size: int = 2_000_000
+        self,
+        out: Path,
+        transform: Transform,
+        origin: NDArray[np.float64],
+        size: int = 2_000_000,
+        *,
+        crs: GridCrs | None = None,
     ) -> int:  # pragma: no cover - abstract
-        """Write every point moved by ``transform`` (its attributes kept) as LAZ/LAS."""
+        """Write every point moved by ``transform`` (its attributes kept) as LAZ/LAS, with
+        the grid's ``crs`` when given."""
         raise NotImplementedError
 
     def bad(self, problem: str) -> InputError:
@@ -164,7 +173,13 @@ class _LasCloud(Cloud):
             )
 
     def write_georeferenced(
-        self, out: Path, transform: Transform, origin: NDArray[np.float64], size: int = 2_000_000
+        self,
+        out: Path,
+        transform: Transform,
+        origin: NDArray[np.float64],
+        size: int = 2_000_000,
+        *,
+        crs: GridCrs | None = None,
     ) -> int:
         import laspy
 
@@ -177,6 +192,7 @@ class _LasCloud(Cloud):
                 point_format=old.point_format,
                 version=str(old.version),
                 gps_standard=False,
+                crs=crs,
             )
             header.global_encoding.gps_time_type = old.global_encoding.gps_time_type
             for vlr in old.vlrs:
@@ -236,13 +252,19 @@ class _ColumnCloud(Cloud):
             yield chunk
 
     def write_georeferenced(
-        self, out: Path, transform: Transform, origin: NDArray[np.float64], size: int = 2_000_000
+        self,
+        out: Path,
+        transform: Transform,
+        origin: NDArray[np.float64],
+        size: int = 2_000_000,
+        *,
+        crs: GridCrs | None = None,
     ) -> int:
         las: LasWriter | None = None
         try:
             for cols, lo, hi, chunk in self._slices(size):
                 if las is None:
-                    las = LasWriter(out, self._header(cols, origin))
+                    las = LasWriter(out, self._header(cols, origin, crs))
                 rec = las.zeros(hi - lo)
                 _set_xyz(rec, transform(chunk.xyz, chunk.time), out)
                 for name, values in cols.items():
@@ -257,7 +279,9 @@ class _ColumnCloud(Cloud):
             raise
         return 0 if las is None else las.close()
 
-    def _header(self, cols: dict[str, NDArray[Any]], origin: NDArray[np.float64]) -> Any:
+    def _header(
+        self, cols: dict[str, NDArray[Any]], origin: NDArray[np.float64], crs: GridCrs | None
+    ) -> Any:
         import laspy
 
         colour = all(k in self._las_names for k in ("red", "green", "blue"))
@@ -272,6 +296,7 @@ class _ColumnCloud(Cloud):
             system="MAST georef",
             point_format=7 if colour else 6,
             extra=extra,
+            crs=crs,
         )
 
 

@@ -25,6 +25,7 @@ from mast.cloud.drift import DriftCorrection
 from mast.cloud.georef import SOUGHT, FoundBeacon, Georef, explain_missing, grid_origin
 from mast.core.stats import variance_bounds
 from mast.io.atomic import atomic_open, write_atomic
+from mast.io.crs import GridCrs
 from mast.report.html import CSS, axis_label, escape, inline_svg, new_figure, plot_origin
 
 __all__ = ["ACCURACY_CLASSES", "Outputs", "accuracy_class", "write_outputs"]
@@ -106,8 +107,11 @@ def write_outputs(
     *,
     progress: Callable[[str, int, int], None] | None = None,
     survey_file: str = "",
+    crs: GridCrs | None = None,
 ) -> Outputs:
-    """Write everything into ``out``; a refusal writes only the beacons and the reports."""
+    """Write everything into ``out``; a refusal writes only the beacons and the reports.
+    The grid's ``crs`` (``--crs``), given, goes into the cloud, ``transform.json`` and
+    the reports."""
     drift = result.drift
     beacons = explain_missing(result)
     # refused: no fitted coordinates or residuals from a solution that is not given
@@ -137,12 +141,12 @@ def write_outputs(
 
         cloud_path = out / "georeferenced.laz"
         written = result.cloud.write_georeferenced(
-            cloud_path, move, grid_origin(result), result.config.detect.chunk_points
+            cloud_path, move, grid_origin(result), result.config.detect.chunk_points, crs=crs
         )
         transform_path = out / "transform.json"
         write_atomic(
             transform_path,
-            (json.dumps(transform_record(result, drift, res), indent=2) + "\n").encode(),
+            (json.dumps(transform_record(result, drift, res, crs=crs), indent=2) + "\n").encode(),
         )
         plan_path = out / "plan.png"
         pts = np.concatenate(sample) if sample else np.zeros((0, 2))
@@ -151,7 +155,7 @@ def write_outputs(
         svg = _svg_of(plan)
     beacons_path = out / "beacons_found.csv"
     _write_beacons(beacons_path, result, beacons, res)
-    text = report_text(result, beacons, res, drift, survey_file=survey_file)
+    text = report_text(result, beacons, res, drift, survey_file=survey_file, crs=crs)
     txt_path = out / "report.txt"
     write_atomic(txt_path, text.encode("utf-8"))
     html_path = out / "report.html"
@@ -162,9 +166,14 @@ def write_outputs(
 
 
 def transform_record(
-    result: Georef, drift: DriftCorrection | None, res: dict[str, dict[str, Any]]
+    result: Georef,
+    drift: DriftCorrection | None,
+    res: dict[str, dict[str, Any]],
+    *,
+    crs: GridCrs | None = None,
 ) -> dict[str, Any]:
-    """The ``transform.json`` object (docs/transform.schema.json)."""
+    """The ``transform.json`` object (docs/transform.schema.json); ``crs`` (the grid's,
+    :meth:`GridCrs.record`) only when given."""
     sol = result.solution
     assert sol is not None
     t = sol.transformation
@@ -213,6 +222,8 @@ def transform_record(
         "mast_version": __version__,
         "computed_utc": datetime.now(tz=UTC).strftime("%Y-%m-%dT%H:%M:%SZ"),
     }
+    if crs is not None:
+        rec["crs"] = crs.record()
     if drift is not None:
         after = [
             float(np.max(np.hypot(r["after"][:, 0], r["after"][:, 1])))
@@ -362,6 +373,7 @@ def report_text(
     drift: DriftCorrection | None,
     *,
     survey_file: str = "",
+    crs: GridCrs | None = None,
 ) -> str:
     """The adjustment report as plain text (the HTML page shows the same)."""
     lines: list[str] = []
@@ -370,6 +382,8 @@ def report_text(
     add("=" * 34)
     add(f"cloud            {result.cloud.path}  ({result.cloud.count} points)")
     add(f"survey           {survey_file or '(given)'}  ({len(result.survey)} beacons)")
+    if crs is not None:
+        add(f"grid CRS         {crs.line()}")
     model = result.config.model
     add(
         "model            "

@@ -12,6 +12,7 @@ from mast.cloud.georef import Georef, GeorefConfig, georeference
 from mast.cloud.io import open_cloud
 from mast.cloud.outputs import Outputs, write_outputs
 from mast.errors import InputError
+from mast.io.crs import GridCrs
 
 __all__ = ["GeorefRun", "run_georef"]
 
@@ -33,8 +34,11 @@ def run_georef(
     trajectory_path: Path | None = None,
     time_field: str | None = None,
     progress: Callable[[str, int, int], None] | None = None,
+    crs: GridCrs | None = None,
 ) -> GeorefRun:
-    """Read, georeference, write; a refusal still writes the beacons and the reports."""
+    """Read, georeference, write; a refusal still writes the beacons and the reports.
+    The grid's ``crs``, given, is written into every output that holds grid
+    coordinates."""
     from mast.io import read_survey
     from mast.io.trajectory import read_trajectory
 
@@ -48,5 +52,5 @@ def run_georef(
             path=cloud_path,
         )
     result = georeference(cloud, survey, config, trajectory=trajectory, progress=progress)
-    outputs = write_outputs(result, out, progress=progress, survey_file=str(survey_path))
+    outputs = write_outputs(result, out, progress=progress, survey_file=str(survey_path), crs=crs)
     return GeorefRun(result, outputs)

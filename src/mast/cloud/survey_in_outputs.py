@@ -7,7 +7,7 @@
   vertical (said when beyond :data:`TILT_WARNING_DEG`: the paper asks for levelled,
   vertical panels), its measured length beside the design's, the panels' tops and how
   well they agree, and each edge with its sigma; with a previous survey, each edge's
-  displacement and whether it moved.
+  displacement and whether it moved; the grid's CRS (``--crs``) when given.
 """
 
 from __future__ import annotations
@@ -23,6 +23,7 @@ from mast import __version__
 from mast.cloud.survey_in import MOVED_ALPHA, SAME_BEACON_M, SurveyIn
 from mast.io.atomic import write_atomic
 from mast.io.beacons_csv import write_survey
+from mast.io.crs import GridCrs
 from mast.report.html import CSS, escape
 
 __all__ = ["TILT_WARNING_DEG", "SurveyInFiles", "write_survey_in"]
@@ -39,16 +40,22 @@ class SurveyInFiles:
 
 
 def write_survey_in(
-    result: SurveyIn, out: Path, *, clouds: list[Path], designs_file: Path
+    result: SurveyIn,
+    out: Path,
+    *,
+    clouds: list[Path],
+    designs_file: Path,
+    crs: GridCrs | None = None,
 ) -> SurveyInFiles:
-    """Write the survey and the reports into ``out`` (created)."""
+    """Write the survey and the reports into ``out`` (created); the reports name the
+    grid's ``crs`` when given."""
     out.mkdir(parents=True, exist_ok=True)
     survey = out / "beacons.csv"
     if result.beacons:
         write_survey(survey, result.survey)
     else:  # no survey rather than an earlier run's left beside this report
         survey.unlink(missing_ok=True)
-    text = report_text(result, clouds=clouds, designs_file=designs_file)
+    text = report_text(result, clouds=clouds, designs_file=designs_file, crs=crs)
     txt = out / "report.txt"
     write_atomic(txt, text.encode("utf-8"))
     html = out / "report.html"
@@ -61,7 +68,9 @@ def write_survey_in(
     return SurveyInFiles(survey, txt, html)
 
 
-def report_text(result: SurveyIn, *, clouds: list[Path], designs_file: Path) -> str:
+def report_text(
+    result: SurveyIn, *, clouds: list[Path], designs_file: Path, crs: GridCrs | None = None
+) -> str:
     lines: list[str] = []
     add = lines.append
     add("MAST survey-in: beacon edges from terrestrial laser scans")
@@ -69,6 +78,8 @@ def report_text(result: SurveyIn, *, clouds: list[Path], designs_file: Path) -> 
     add(f"clouds           {', '.join(str(c) for c in clouds)}  ({result.points} points)")
     add(f"designs          {designs_file}  ({', '.join(result.designs.ids)})")
     add(f"noise            {1000 * result.pieces.segmentation.noise_m:.2f} mm (given)")
+    if crs is not None:
+        add(f"grid CRS         {crs.line()}")
     when = datetime.now(UTC).strftime("%Y-%m-%d %H:%M:%S")
     add(f"computed         {when} UTC, mast {__version__}")
     add("")

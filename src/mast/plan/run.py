@@ -11,6 +11,7 @@ from typing import Any
 from mast.core.beacon import Survey
 from mast.errors import OutputError
 from mast.io.beacons_csv import write_survey
+from mast.io.crs import GridCrs
 from mast.io.drift import read_drift
 from mast.plan.predict import Plan, PlanSettings, predict
 from mast.plan.suggest import suggest
@@ -45,8 +46,10 @@ def run_plan(
     candidate_step_m: float | None = None,
     progress: Callable[[int, int], None] | None = None,
     echo: Callable[[str], None] = print,
+    crs: GridCrs | None = None,
 ) -> PlanResult:
-    """Read the drift, predict (and improve) the layout, write the outputs into ``out``."""
+    """Read the drift, predict (and improve) the layout, write the outputs into ``out``;
+    ``summary.json`` names the grid's ``crs`` when given."""
     from mast.plan.outputs import (
         summary,
         write_plan_csv,
@@ -74,6 +77,8 @@ def run_plan(
             raise OutputError(f"cannot write: {err.strerror or err}", path=path) from None
         written.append(path)
     figures = summary(plan, before=before)
+    if crs is not None:
+        figures["crs"] = crs.record()
     write_plan_csv(out / "plan.csv", plan)
     title = f"{drift_path.name}: {scanner.name}, {len(plan.survey)} beacons"
     if plan.proposed:

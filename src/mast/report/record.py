@@ -18,6 +18,7 @@ from mast import __version__
 from mast.core.beacon import Survey
 from mast.core.pose import format_dms
 from mast.core.scan import Scan
+from mast.io.crs import GridCrs
 from mast.pipeline.integrity import Residuals
 from mast.pipeline.locator import NO_FIX_REASONS, Fix
 
@@ -69,6 +70,9 @@ class ReportInputs:
     survey_sigmas : str, optional
         How the survey weighs its edges when it gives its own ``sigma_m``
         (:meth:`~mast.core.beacon.Survey.sigma_text`); None: one sigma for all.
+    crs : GridCrs, optional
+        The grid's coordinate reference system (``--crs``): the record's ``crs``
+        object and a line of the report; None: none recorded.
     """
 
     scan_file: str | None = None
@@ -80,6 +84,7 @@ class ReportInputs:
     config_file: str | None = None
     config_sha256: str | None = None
     survey_sigmas: str | None = None
+    crs: GridCrs | None = None
 
 
 def _r(x: float, nd: int = 6) -> float | None:
@@ -169,7 +174,7 @@ def fix_record(
     ``reference_variance``, ``beacons``, ``points_used``, the precisions used
     and ``software``; ``reason`` and ``detail`` when there is no fix (values
     then ``null``). In a sequence (``index`` given) the scan's ``stamp_ns`` and
-    ``frame_id`` are added when ``scan`` is.
+    ``frame_id`` are added when ``scan`` is; ``crs`` when the inputs name one.
     """
     inputs = inputs or ReportInputs()
     rec: dict[str, Any] = {}
@@ -263,6 +268,8 @@ def fix_record(
             "azimuth_deg": fix.config.prior.pose.azimuth_deg,
             "radius_m": fix.config.prior.radius_m,
         }
+    if inputs.crs is not None:
+        rec["crs"] = inputs.crs.record()
     rec["inputs"] = _inputs_record(fix, scan, inputs)
     rec["software"] = f"mast {__version__}"
     rec["computed_utc"] = inputs.computed_utc.isoformat(timespec="seconds").replace("+00:00", "Z")
@@ -326,6 +333,8 @@ def _input_lines(fix: Fix, scan: Scan | None, inputs: ReportInputs) -> list[str]
         )
     if inputs.survey_file is not None:
         lines.append(f"  Survey file   {inputs.survey_file}")
+    if inputs.crs is not None:
+        lines.append(f"  Grid CRS      {inputs.crs.line()}")
     if inputs.scanner is not None:
         lines.append(f"  Scanner       {inputs.scanner}")
     if inputs.config_sha256 is not None:

@@ -12,6 +12,10 @@
   the mine grid, streamed scan by scan;
 * ``map.dxf`` (:func:`write_map_dxf`): a plan for CAD: walls, surveyed
   beacons, trajectory and fixes on named layers, in metres;
+* ``fixes.geojson`` and ``fixes_points.csv`` (:class:`FixExports`): every fix from
+  beacons as a GeoJSON Point and as a row of a point list survey packages import;
+  ``trajectory.geojson`` (:func:`write_trajectory_geojson`): the placed trajectory,
+  one LineString per unbroken stretch, for GIS;
 * ``report.html`` (:func:`write_report_html`): one self-contained page
   (figures inline as SVG, no network) with the run's counts, figures of the
   trajectory, its precision and the fixes' global tests, and a table of fixes.
@@ -21,7 +25,8 @@ metres; azimuth clockwise from grid north. A TUM or GTSAM heading (yaw) is
 counter-clockwise from +E, so ``yaw = 90° − azimuth``.
 
 Every writer raises :class:`~mast.errors.OutputError` naming the file when it
-cannot be written.
+cannot be written. The grid's CRS (``--crs``), when given, is stated in ``map.las``,
+the GeoJSON and the report.
 """
 
 from __future__ import annotations
@@ -29,6 +34,7 @@ from __future__ import annotations
 import itertools
 import math
 from collections.abc import Iterable, Iterator, Mapping, Sequence
+from contextlib import ExitStack
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
@@ -42,8 +48,10 @@ from mast.core.beacon import Survey
 from mast.core.pose import format_dms
 from mast.core.trajectory import PlacedScan, Trajectory
 from mast.errors import InputError, OutputError
-from mast.io.atomic import write_lines
+from mast.io.atomic import atomic_open, write_lines
+from mast.io.crs import GridCrs
 from mast.io.dxf import add_dxf_beacons, new_dxf, save_dxf
+from mast.io.geojson import FeatureCollectionWriter, line_string, point
 from mast.io.las import (
     INT32_MAX,
     LAS_SCALE_M,
@@ -53,6 +61,7 @@ from mast.io.las import (
     las_offsets,
     new_las_header,
 )
+from mast.io.point_list import PointListWriter
 from mast.report.html import (
     CSS,
     axis_label,
@@ -67,9 +76,12 @@ from mast.runs.model import RunSummary
 __all__ = [
     "DXF_LAYERS",
     "MAX_TABLE_ROWS",
+    "FixExports",
     "LasMapWriter",
+    "fix_name",
     "write_map_dxf",
     "write_report_html",
+    "write_trajectory_geojson",
 ]
 
 #: The LAS offset is rounded to a multiple of this (metres): a round number a reader
@@ -197,6 +209,8 @@ class LasMapWriter:
         (0.1 mm), so UTM-sized coordinates keep 0.1 mm: LAS stores each
         coordinate as an int32 multiple of the scale from the offset, which
         reaches ±214 km around the origin.
+    crs : GridCrs, optional
+        The grid's coordinate reference system (``--crs``).
 
     Notes
     -----
@@ -209,7 +223,8 @@ class LasMapWriter:
     1980-01-06 minus 10^9, :func:`gps_adjusted_time`), converted from the
     scans' Unix (UTC) stamps with the leap seconds; the header's global
     encoding says so (bit 0, GPS time type, set), as it also sets the WKT bit
-    that LAS 1.4 requires with format 6. No coordinate reference system is
+    that LAS 1.4 requires with format 6. The grid's CRS, when given, is the
+    OGC WKT VLR (:func:`mast.io.las.new_las_header`); without it none is
     recorded: the mine grid is the survey's.
 
     Examples
@@ -222,7 +237,9 @@ class LasMapWriter:
                 las.add(p.scan, p.stamp_ns, p.pose.scanner_to_mine(pts))
     """
 
-    def __init__(self, path: str | Path, *, origin_e: float, origin_n: float) -> None:
+    def __init__(
+        self, path: str | Path, *, origin_e: float, origin_n: float, crs: GridCrs | None = None
+    ) -> None:
         import laspy
 
         if not (math.isfinite(origin_e) and math.isfinite(origin_n)):
@@ -238,6 +255,7 @@ class LasMapWriter:
             system="MAST survey run",
             wkt=True,
             extra=[scan_index],
+            crs=crs,
         )
         self._offset = offsets
         self._las = LasWriter(self.path, header)
@@ -341,6 +359,126 @@ class LasMapWriter:
     def close(self) -> int:
         """Finalise the header (counts, bounds) and close the file; the points written."""
         return self._las.close()
+
+
+# --------------------------------------------------------------------------- GIS and survey
+
+
+def fix_name(scan: int) -> str:
+    """A fix's point name in the exports: ``F`` and its scan index (``F123``)."""
+    return f"F{scan}"
+
+
+class FixExports:
+    """``fixes.geojson`` and ``fixes_points.csv``, written fix by fix as a run goes
+    (whole or not at all, :mod:`mast.io.atomic`).
+
+    ``fixes.geojson`` is a FeatureCollection of one Point per fix from beacons
+    (:mod:`mast.io.geojson`: grid coordinates, the grid's CRS member when given) with
+    the fix's name, scan, stamp, azimuth, sigmas, reference variance, global test
+    and beacons; ``fixes_points.csv`` the same fixes as a point list
+    (:mod:`mast.io.point_list`). Both hold the fix's own pose, as ``fixes.jsonl``
+    does, not the smoothed trajectory's.
+
+    Parameters
+    ----------
+    out : Path
+        The run's folder.
+    crs : GridCrs, optional
+        The grid's CRS.
+    """
+
+    def __init__(self, out: Path, crs: GridCrs | None = None) -> None:
+        self._out = out
+        self._crs = crs
+        self._stack = ExitStack()
+        self.count = 0
+
+    def __enter__(self) -> FixExports:
+        with ExitStack() as stack:
+            gj = stack.enter_context(
+                atomic_open(self._out / "fixes.geojson", "w", encoding="utf-8")
+            )
+            pl = stack.enter_context(
+                atomic_open(self._out / "fixes_points.csv", "w", newline="", encoding="utf-8")
+            )
+            self._geojson = FeatureCollectionWriter(gj, crs=self._crs, name="fixes")
+            self._points = PointListWriter(pl)
+            self._stack = stack.pop_all()
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        if exc_type is None:
+            self._geojson.close()
+        self._stack.__exit__(exc_type, exc, tb)
+
+    def add(self, record: Mapping[str, Any]) -> None:
+        """A fix record of a sequence (:func:`mast.report.record.fix_record` with its
+        ``scan``); one that is not a fix is passed over."""
+        if record.get("status") != "fix":
+            return
+        scan = int(record["scan"])
+        name = fix_name(scan)
+        e, n = float(record["easting"]), float(record["northing"])
+        az = float(record["azimuth_deg"])
+        sigma_e, sigma_n, sigma_az = (
+            record.get(k) for k in ("sigma_easting_m", "sigma_northing_m", "sigma_azimuth_deg")
+        )
+        self._geojson.add(
+            point(e, n),
+            {
+                "name": name,
+                "scan": scan,
+                "stamp_ns": record.get("stamp_ns"),
+                "azimuth_deg": az,
+                "azimuth_dms": format_dms(az),
+                "sigma_easting_m": sigma_e,
+                "sigma_northing_m": sigma_n,
+                "sigma_azimuth_deg": sigma_az,
+                "reference_variance": record.get("reference_variance"),
+                "chi2_test": record.get("chi2_test"),
+                "beacons": ",".join(str(b) for b in record.get("beacons") or ()),
+            },
+        )
+        self._points.add(name, e, n, None, az, sigma_e, sigma_n, sigma_az)
+        self.count += 1
+
+
+def write_trajectory_geojson(
+    path: str | Path, placed: Iterable[PlacedScan], crs: GridCrs | None = None
+) -> int:
+    """Write ``trajectory.geojson``; the stretches written.
+
+    One LineString Feature per unbroken stretch of at least two placed scans
+    (consecutive scan indices: the path is not drawn across a break; a stretch of one
+    scan makes no line and is left out, it is in ``trajectory.csv``), with its first
+    and last scan and stamp, its scans and its fixes. Grid coordinates of the smoothed
+    poses, the grid's CRS member when given (:mod:`mast.io.geojson`).
+    """
+    poses = _Poses.of(placed)
+    with atomic_open(path, "w", encoding="utf-8") as fh:
+        lines = FeatureCollectionWriter(fh, crs=crs, name="trajectory")
+        for k, span in enumerate(poses.spans()):
+            if span.stop - span.start < 2:
+                continue
+            lines.add(
+                line_string(poses.xy[span]),
+                {
+                    "stretch": k,
+                    "first_scan": int(poses.scan[span.start]),
+                    "last_scan": int(poses.scan[span.stop - 1]),
+                    "first_stamp_ns": int(poses.stamp_ns[span.start]),
+                    "last_stamp_ns": int(poses.stamp_ns[span.stop - 1]),
+                    "scans": span.stop - span.start,
+                    "fixes": int(np.count_nonzero(poses.fix[span])),
+                },
+            )
+        return lines.close()
 
 
 # --------------------------------------------------------------------------- DXF
@@ -716,6 +854,7 @@ def _summary_rows(
     poses: _Poses,
     t0_ns: int | None,
     t1_ns: int | None,
+    crs: GridCrs | None,
 ) -> list[tuple[str, str]]:
     n_odo = int(np.count_nonzero(~poses.fix))
 
@@ -732,6 +871,8 @@ def _summary_rows(
         ("Not placed", f"{max(summary.scans - summary.placed, 0)}"),
         ("Messages skipped (not decodable)", f"{summary.skipped}"),
     ]
+    if crs is not None:
+        rows.insert(2, ("Grid CRS", crs.line()))
     if t0_ns is not None and t1_ns is not None:
         rows.append(
             ("Recorded", f"{_utc(t0_ns)}, {(t1_ns - t0_ns) / 1e9:.1f} s from first to last scan")
@@ -752,6 +893,7 @@ def write_report_html(
     wall_points: ArrayLike,
     *,
     max_table_rows: int = MAX_TABLE_ROWS,
+    crs: GridCrs | None = None,
 ) -> None:
     """Write ``report.html``: one self-contained page about a run.
 
@@ -774,6 +916,8 @@ def write_report_html(
         :data:`MAX_FIGURE_POINTS` are drawn (evenly thinned).
     max_table_rows : int
         The table of fixes stops after this many rows, with a note.
+    crs : GridCrs, optional
+        The grid's CRS, named in the summary.
 
     Notes
     -----
@@ -820,7 +964,7 @@ def write_report_html(
         f"<p class='sub'>{escape(summary.run)}</p>",
         "<h2>Summary</h2><table class='summary'>",
     ]
-    for key, value in _summary_rows(summary, poses, t0, t1):
+    for key, value in _summary_rows(summary, poses, t0, t1, crs):
         parts.append(f"<tr><th>{escape(key)}</th><td>{escape(value)}</td></tr>")
     parts.append("</table>")
 

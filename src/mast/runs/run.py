@@ -42,6 +42,9 @@ RUN_FILES = (
     "map.las",
     "map.dxf",
     "report.html",
+    "fixes.geojson",
+    "fixes_points.csv",
+    "trajectory.geojson",
 )
 
 #: Keys of a fix record kept for the report's table (the whole record is in fixes.jsonl).
@@ -113,7 +116,8 @@ def track_run(
     topic : str, optional
         The LaserScan topic (needed when the bag has several).
     inputs : ReportInputs, optional
-        What to state in each record about the inputs.
+        What to state in each record about the inputs; its ``crs`` (the grid's) also
+        goes into the map, the GeoJSON and the report.
     range_limits : (min, max)
         Override the bag's range limits, metres.
     warn : callable
@@ -172,6 +176,7 @@ def track_run(
         # passes (mast.core.heap); again every thousand scans, what the run has kept.
         with (
             atomic_open(out / "fixes.jsonl", "w", encoding="utf-8") as fh,
+            outputs.FixExports(out, inputs.crs) as exports,
             QuietCollector() as heap,
         ):
             try:
@@ -182,6 +187,7 @@ def track_run(
                     step = tracker.step(i, scan)
                     rec = fix_record(step.fix, source=str(bag), index=i, scan=scan, inputs=inputs)
                     fh.write(json.dumps(rec) + "\n")
+                    exports.add(rec)
                     for p in smoother.push(Node.of(step)):
                         placed.append(p)
                     summary.scans += 1
@@ -228,13 +234,16 @@ def track_run(
     try:
         write_trajectory_csv(out / "trajectory.csv", placed)
         write_trajectory_tum(out / "trajectory.tum", placed)
+        outputs.write_trajectory_geojson(out / "trajectory.geojson", placed, inputs.crs)
         origin = _origin(survey, placed)
         sample: list[NDArray[np.float64]] = []
         wall_lines: list[NDArray[np.float64]] = []
         points = 0
         poses = iter(placed)
         here = next(poses, None)
-        with outputs.LasMapWriter(out / "map.las", origin_e=origin[0], origin_n=origin[1]) as las:
+        with outputs.LasMapWriter(
+            out / "map.las", origin_e=origin[0], origin_n=origin[1], crs=inputs.crs
+        ) as las:
             for i, scan in enumerate(scans(lambda _: None)):
                 if i >= summary.scans or here is None:
                     break  # an interrupted run maps what it read
@@ -262,7 +271,9 @@ def track_run(
         )
         summary.elapsed_s = time.perf_counter() - t0
         wall_points = np.vstack(sample) if sample else np.zeros((0, 2))
-        outputs.write_report_html(out / "report.html", summary, placed, table, survey, wall_points)
+        outputs.write_report_html(
+            out / "report.html", summary, placed, table, survey, wall_points, crs=inputs.crs
+        )
     except OSError as err:
         raise OutputError(
             f"cannot write the run's files: {err.strerror or err}", path=out
