@@ -18,6 +18,7 @@ from mast.cli import (  # noqa: F401 - imported to register each command
     live,
     locate,
     plan,
+    ros2,
     scanners,
     simulate,
     survey_in,

@@ -17,6 +17,7 @@ class Command(StrEnum):
     locate = "locate"
     track = "track"
     live = "live"
+    ros2 = "ros2"
 
 
 @app.command()
@@ -33,7 +34,7 @@ def config(
 ) -> None:
     """Print the settings a command runs with, as a TOML file for --config: every
     setting with its default, or those of a --config file (checked, and completed with
-    the defaults it leaves out). Edit a copy and give it to locate, track or live with
+    the defaults it leaves out). Edit a copy and give it to locate, track, live or ros2 with
     --config; their JSON records name it by the SHA-256 printed in its first lines.
 
     Example: mast config --for track --out site.toml

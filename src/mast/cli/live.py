@@ -7,9 +7,10 @@ import contextlib
 import math
 import signal
 import sys
-from dataclasses import replace
+from collections.abc import Callable
+from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 
@@ -38,6 +39,13 @@ from mast.cli.root import (
 from mast.cli.settings import ConfigOption, effective, read_config
 from mast.errors import InputError
 from mast.io.outputs import check_output_file
+
+if TYPE_CHECKING:
+    from mast.core.beacon import Survey
+    from mast.live.session import Sink
+    from mast.live.stream import Source
+    from mast.pipeline.locator import LocatorConfig, SequenceConfig
+    from mast.report.record import ReportInputs
 
 
 @app.command()
@@ -99,27 +107,21 @@ def live(
     complete) or when the scanner cannot be reached (status 2). Exit status 3 when no
     scan was fixed, 4 when an output cannot be written.
     """
-    import json
-
-    from mast.io import read_survey
-    from mast.live.session import Sink, run_live
     from mast.live.sources import ReplaySource, open_source
     from mast.live.stream import SourceOptions
-    from mast.report.record import ReportInputs, survey_weighing
 
-    tables, given = read_config(config, "live")
-    cfg, defaults = precisions(
-        range_sigma, angle_sigma, scanner, survey_sigma, base=tables["locator"], given=given
+    setup = stream_setup(
+        "live",
+        source,
+        beacons,
+        config=config,
+        precision=(range_sigma, angle_sigma, scanner, survey_sigma),
+        near=(near, radius, azimuth_tolerance),
+        range_limits=(range_min, range_max),
     )
-    settings = effective({"locator": cfg, "sequence": tables["sequence"]}, "live")
-    if near is not None:
-        cfg = replace(cfg, prior=parse_near(near, radius, azimuth_tolerance))
-    check_range_limits(range_min, range_max)
     for name, value in (("--timeout", timeout), ("--give-up", give_up)):
         if not (math.isfinite(value) and value > 0):
             raise InputError(f"{name} must be a positive number of seconds, got {value}")
-    survey = read_survey(beacons)
-    warn_loose_edges(survey, cfg.survey_sigma_m)
     options = SourceOptions(
         range_min_m=range_min, range_max_m=range_max, timeout_s=timeout, give_up_s=give_up
     )
@@ -129,32 +131,9 @@ def live(
             raise InputError("--record: name the recording *.mcap (lower case)", path=record)
         replayed = [stream.path] if isinstance(stream, ReplaySource) else []
         check_output_file(record, suffixes=(".mcap",), option="--record", inputs=replayed)
-    inputs = ReportInputs(
-        scan_file=source,
-        survey_file=str(beacons),
-        scanner=scanner,
-        defaults=frozenset(defaults),
-        config_file=None if config is None else str(config),
-        config_sha256=settings.sha256,
-        survey_sigmas=survey_weighing(survey, cfg.survey_sigma_m),
-    )
 
-    def warn(text: str) -> None:
-        typer.echo(f"mast: warning: {text}", err=True)
-
-    def emit(record_: dict[str, object]) -> None:
-        sys.stdout.write(json.dumps(record_) + "\n")
-        sys.stdout.flush()
-
-    from mast.cli.warmup import compile_all
-
-    compile_all()  # the first scan is located as fast as the rest
-    sinks: list[Sink] = []
-    with contextlib.ExitStack() as stack:
-        # Ctrl-C and SIGTERM (a vehicle's service manager) only ask the run to end between
-        # two scans: never in the middle of writing the recording, nor while closing it
-        # (the handlers are restored last, after the recording is closed).
-        interrupt, caught = stack.enter_context(signals_as_flag())
+    def open_sinks(stack: contextlib.ExitStack[bool | None]) -> list[Sink]:
+        sinks: list[Sink] = []
         if record is not None:
             from mast.live.record import McapRecorder
 
@@ -165,28 +144,124 @@ def live(
             from mast.live.view import LiveView
 
             try:
-                viewer = LiveView(survey, host=view_host, port=view_port)
+                viewer = LiveView(setup.survey, host=view_host, port=view_port)
             except Exception as err:  # foxglove raises its own kinds for a port in use
                 raise InputError(
                     f"--view: cannot serve on {view_host}:{view_port}: {err}"
                 ) from None
             stack.callback(viewer.close)
             sinks.append(viewer)
-            warn(f"live view for Foxglove on ws://{view_host}:{viewer.port}")
+            _warn(f"live view for Foxglove on ws://{view_host}:{viewer.port}")
+        return sinks
+
+    run_stream(
+        setup,
+        stream,
+        open_sinks,
+        max_scans=max_scans,
+        interrupted=f"; {record} holds the scans received" if record else "",
+    )
+
+
+@dataclass(frozen=True, slots=True)
+class StreamSetup:
+    """What a command that locates a stream (``live``, ``ros2``) was asked for."""
+
+    source: str
+    survey: Survey
+    config: LocatorConfig
+    sequence: SequenceConfig
+    inputs: ReportInputs
+
+
+def stream_setup(
+    command: str,
+    source: str,
+    beacons: Path,
+    *,
+    config: Path | None,
+    precision: tuple[float | None, float | None, str | None, float | None],
+    near: tuple[str | None, float, float],
+    range_limits: tuple[float | None, float | None],
+) -> StreamSetup:
+    """The locator's settings (the config file's, then the options'), the survey and the
+    report's inputs of a stream command; bad options are InputErrors."""
+    from mast.io import read_survey
+    from mast.report.record import ReportInputs, survey_weighing
+
+    range_sigma, angle_sigma, scanner, survey_sigma = precision
+    tables, given = read_config(config, command)
+    cfg, defaults = precisions(
+        range_sigma, angle_sigma, scanner, survey_sigma, base=tables["locator"], given=given
+    )
+    settings = effective({"locator": cfg, "sequence": tables["sequence"]}, command)
+    near_text, radius, azimuth_tolerance = near
+    if near_text is not None:
+        cfg = replace(cfg, prior=parse_near(near_text, radius, azimuth_tolerance))
+    check_range_limits(*range_limits)
+    survey = read_survey(beacons)
+    warn_loose_edges(survey, cfg.survey_sigma_m)
+    inputs = ReportInputs(
+        scan_file=source,
+        survey_file=str(beacons),
+        scanner=scanner,
+        defaults=frozenset(defaults),
+        config_file=None if config is None else str(config),
+        config_sha256=settings.sha256,
+        survey_sigmas=survey_weighing(survey, cfg.survey_sigma_m),
+    )
+    return StreamSetup(source, survey, cfg, tables["sequence"], inputs)
+
+
+def _warn(text: str) -> None:
+    typer.echo(f"mast: warning: {text}", err=True)
+
+
+def run_stream(
+    setup: StreamSetup,
+    stream: Source,
+    open_sinks: Callable[[contextlib.ExitStack[bool | None]], list[Sink]],
+    *,
+    max_scans: int | None,
+    interrupted: str = "",
+    ready: Callable[[], None] | None = None,
+) -> None:
+    """Locate ``stream`` as it arrives (:func:`mast.live.session.run_live`): records on
+    standard output, the sinks ``open_sinks`` opens fed and closed, the summary on
+    standard error and the exit status of ``mast live --help``. ``ready`` is called once
+    Ctrl-C and SIGTERM are handled and the sinks are open, before the first scan."""
+    import json
+
+    from mast.cli.warmup import compile_all
+    from mast.live.session import run_live
+
+    def emit(record_: dict[str, object]) -> None:
+        sys.stdout.write(json.dumps(record_) + "\n")
+        sys.stdout.flush()
+
+    compile_all()  # the first scan is located as fast as the rest
+    with contextlib.ExitStack() as stack:
+        # Ctrl-C and SIGTERM (a vehicle's service manager) only ask the run to end between
+        # two scans: never in the middle of writing a recording, nor while closing it
+        # (the handlers are restored last, after the sinks are closed).
+        interrupt, caught = stack.enter_context(signals_as_flag())
+        sinks = open_sinks(stack)
+        if ready is not None:
+            ready()
         summary = run_live(
             stream,
-            survey,
+            setup.survey,
             emit=emit,
-            config=cfg,
-            sequence=tables["sequence"],
-            inputs=inputs,
+            config=setup.config,
+            sequence=setup.sequence,
+            inputs=setup.inputs,
             sinks=tuple(sinks),
             max_scans=max_scans,
-            warn=warn,
+            warn=_warn,
             interrupt=interrupt,
         )
     typer.echo(
-        f"mast: {source}: {summary.received} scans received, {summary.located} located, "
+        f"mast: {setup.source}: {summary.received} scans received, {summary.located} located, "
         f"{summary.fixed} fixed, {summary.dropped} dropped"
         + (f", {summary.malformed} malformed skipped" if summary.malformed else "")
         + (f", {summary.reconnects} reconnections" if summary.reconnects else "")
@@ -197,10 +272,7 @@ def live(
         silence_stdout()
         return
     if summary.interrupted:
-        typer.echo(
-            "mast: interrupted" + (f"; {record} holds the scans received" if record else ""),
-            err=True,
-        )
+        typer.echo("mast: interrupted" + interrupted, err=True)
         raise typer.Exit(128 + (caught[0] if caught else signal.SIGINT))
     if summary.fixed == 0:
         raise typer.Exit(EXIT_NO_FIX)

@@ -32,6 +32,7 @@ COMMAND_TABLES: dict[str, tuple[str, ...]] = {
     "locate": ("locator", "sequence"),
     "track": ("locator", "track"),
     "live": ("locator", "sequence"),
+    "ros2": ("locator", "sequence"),
 }
 
 

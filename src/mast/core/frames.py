@@ -17,9 +17,11 @@ from numpy.typing import NDArray
 from mast.core.pose import normalize_azimuth
 
 __all__ = [
+    "UNOBSERVED_VARIANCE",
     "azimuth_of_yaw",
     "body_jacobian",
     "ena_to_xy_yaw_covariance",
+    "ros_pose_covariance",
     "yaw_of_azimuth",
     "yaw_quaternion",
 ]
@@ -48,6 +50,21 @@ def ena_to_xy_yaw_covariance(covariance: NDArray[np.float64]) -> NDArray[np.floa
     return np.asarray(
         covariance * np.outer(_AZIMUTH_TO_YAW_SIGN, _AZIMUTH_TO_YAW_SIGN), dtype=float
     )
+
+
+#: Variance ROS messages give the axes a 2D fix does not observe (z, roll and pitch):
+#: large, ROS's convention for "ignore this axis" (m² and rad²).
+UNOBSERVED_VARIANCE = 1e6
+
+
+def ros_pose_covariance(covariance: NDArray[np.float64]) -> NDArray[np.float64]:
+    """A (3, 3) covariance over (E, N, A) as ROS's (6, 6) over (x, y, z, roll, pitch,
+    yaw) of a ``geometry_msgs/PoseWithCovariance``: the axes a 2D fix leaves unobserved
+    get :data:`UNOBSERVED_VARIANCE`."""
+    c = np.asarray(covariance, dtype=float)
+    full = np.diag([0.0, 0.0, UNOBSERVED_VARIANCE, UNOBSERVED_VARIANCE, UNOBSERVED_VARIANCE, 0.0])
+    full[np.ix_([0, 1, 5], [0, 1, 5])] = ena_to_xy_yaw_covariance((c + c.T) / 2)
+    return full
 
 
 def body_jacobian(yaw_rad: float) -> NDArray[np.float64]:

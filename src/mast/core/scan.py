@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -149,6 +150,54 @@ class Scan:
             angles, r = angles[::-1], r[::-1]
             inten = None if inten is None else inten[::-1]
         return cls(angles, r, inten, range_min, range_max, stamp_ns, frame_id)
+
+    @classmethod
+    def from_message(cls, msg: Any) -> Scan:
+        """Build a scan from a ``sensor_msgs/LaserScan`` message of any binding (a bag's,
+        a DDS sample's): its fields checked as a damaged message needs."""
+        stamp = msg.header.stamp
+        n = len(msg.ranges)
+        a0, a1, inc = float(msg.angle_min), float(msg.angle_max), float(msg.angle_increment)
+        # angle_max is redundant: where it disagrees with angle_min + (n - 1) * increment by
+        # more than one increment (drivers differ by that much), a field is damaged, and
+        # every beam's angle would be wrong (a rotated scan fixes a rotated pose).
+        if n > 1 and all(map(math.isfinite, (a0, a1, inc))):
+            off = a0 + (n - 1) * inc - a1
+            if abs(off) > 1.01 * abs(inc) + 1e-5:
+                raise InputError(
+                    f"angle_min {a0:.9g} + {n - 1} x angle_increment {inc:.9g} misses "
+                    f"angle_max {a1:.9g} by {off:.3g} rad; the message is damaged"
+                )
+        return cls.from_laserscan(
+            angle_min=a0,
+            angle_increment=inc,
+            ranges=np.asarray(msg.ranges, dtype=float),
+            range_min=float(msg.range_min) if math.isfinite(msg.range_min) else 0.0,
+            range_max=float(msg.range_max) if msg.range_max > msg.range_min else math.inf,
+            intensities=np.asarray(msg.intensities, dtype=float),
+            stamp_ns=int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec),
+            frame_id=str(msg.header.frame_id),
+        )
+
+    def message_fields(self) -> dict[str, Any]:
+        """The scan as the fields of a ``sensor_msgs/LaserScan`` (float32 arrays, as a
+        driver sends them; ``stamp`` as (sec, nanosec)); its beams must be evenly spaced."""
+        if not self.is_uniform:
+            raise InputError("beams are not evenly spaced; a LaserScan needs that")
+        inten = self.intensities
+        return {
+            "stamp": divmod(int(self.stamp_ns), 1_000_000_000),
+            "frame_id": self.frame_id,
+            "angle_min": float(self.angles_rad[0]),
+            "angle_max": float(self.angles_rad[-1]),
+            "angle_increment": float(self.angle_increment if len(self) > 1 else 0.0),
+            "time_increment": 0.0,
+            "scan_time": 0.0,
+            "range_min": float(self.range_min_m),
+            "range_max": float(self.range_max_m),
+            "ranges": np.asarray(self.ranges_m, dtype=np.float32),
+            "intensities": np.zeros(0, np.float32) if inten is None else inten.astype(np.float32),
+        }
 
     def __len__(self) -> int:
         return int(self.ranges_m.size)

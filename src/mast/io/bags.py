@@ -8,15 +8,12 @@ and sqlite3 (``.db3``) or MCAP storage. No ROS installation is needed.
 from __future__ import annotations
 
 import functools
-import math
 import os
 import tempfile
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path, PurePosixPath
 from typing import Any, Literal
-
-import numpy as np
 
 from mast import limits
 from mast.core.scan import Scan
@@ -374,31 +371,8 @@ def _read_tolerant(
 
 
 def _to_scan(msg: Any, path: Path, index: int) -> Scan:
-    stamp = msg.header.stamp
-    n = len(msg.ranges)
-    a0, a1, inc = float(msg.angle_min), float(msg.angle_max), float(msg.angle_increment)
-    # angle_max is redundant: where it disagrees with angle_min + (n - 1) * increment by
-    # more than one increment (drivers differ by that much), a field is damaged, and
-    # every beam's angle would be wrong (a rotated scan fixes a rotated pose).
-    if n > 1 and all(map(math.isfinite, (a0, a1, inc))):
-        off = a0 + (n - 1) * inc - a1
-        if abs(off) > 1.01 * abs(inc) + 1e-5:
-            raise InputError(
-                f"message {index}: angle_min {a0:.9g} + {n - 1} x angle_increment {inc:.9g} "
-                f"misses angle_max {a1:.9g} by {off:.3g} rad; the message is damaged",
-                path=path,
-            )
     try:
-        return Scan.from_laserscan(
-            angle_min=float(msg.angle_min),
-            angle_increment=float(msg.angle_increment),
-            ranges=np.asarray(msg.ranges, dtype=float),
-            range_min=float(msg.range_min) if math.isfinite(msg.range_min) else 0.0,
-            range_max=float(msg.range_max) if msg.range_max > msg.range_min else math.inf,
-            intensities=np.asarray(msg.intensities, dtype=float),
-            stamp_ns=int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec),
-            frame_id=str(msg.header.frame_id),
-        )
+        return Scan.from_message(msg)
     except InputError as err:
         raise InputError(f"message {index}: {err.problem}", path=path) from None
 
@@ -481,31 +455,20 @@ def _write_scans(
 
 def laserscan_bytes(store: Any, scan: Scan, seq: int, *, ros1: bool) -> bytes:
     """``scan`` as a serialised ``LaserScan`` (ROS 1, or ROS 2 CDR) of ``store``'s types."""
-    if not scan.is_uniform:
-        raise InputError(f"scan {seq}: beams are not evenly spaced; a LaserScan needs that")
+    try:
+        f = scan.message_fields()
+    except InputError as err:
+        raise InputError(f"scan {seq}: {err.problem}") from None
     LaserScan = store.types[LASERSCAN]
     Header = store.types["std_msgs/msg/Header"]
     Time = store.types["builtin_interfaces/msg/Time"]
-    inc = scan.angle_increment if len(scan) > 1 else 0.0
-    sec, nsec = divmod(int(scan.stamp_ns), 1_000_000_000)
-    header_kw: dict[str, Any] = {"stamp": Time(sec=sec, nanosec=nsec), "frame_id": scan.frame_id}
+    sec, nsec = f.pop("stamp")
+    header_kw: dict[str, Any] = {
+        "stamp": Time(sec=sec, nanosec=nsec),
+        "frame_id": f.pop("frame_id"),
+    }
     if ros1:
         header_kw["seq"] = seq
-    msg = LaserScan(
-        header=Header(**header_kw),
-        angle_min=float(scan.angles_rad[0]),
-        angle_max=float(scan.angles_rad[-1]),
-        angle_increment=float(inc),
-        time_increment=0.0,
-        scan_time=0.0,
-        range_min=float(scan.range_min_m),
-        range_max=float(scan.range_max_m),
-        ranges=np.asarray(scan.ranges_m, dtype=np.float32),
-        intensities=(
-            np.asarray(scan.intensities, dtype=np.float32)
-            if scan.intensities is not None
-            else np.zeros(0, dtype=np.float32)
-        ),
-    )
+    msg = LaserScan(header=Header(**header_kw), **f)
     raw = store.serialize_ros1(msg, LASERSCAN) if ros1 else store.serialize_cdr(msg, LASERSCAN)
     return bytes(raw)

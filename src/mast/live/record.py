@@ -7,7 +7,7 @@ Topics (ROS 2 Humble types, CDR):
 * ``/mast/pose``, ``geometry_msgs/msg/PoseWithCovarianceStamped``: each fix in
   frame ``mine_grid`` (x easting, y northing, z 0; yaw counter-clockwise from
   east, ``90° - azimuth``), its covariance in ROS order (x, y, z, roll, pitch,
-  yaw; unknown axes 0);
+  yaw; 1e6 on the axes a 2D fix does not observe, z, roll and pitch);
 * ``/mast/fix``, ``std_msgs/msg/String``: every record written to standard
   output (fix or no fix), as its JSON.
 
@@ -23,9 +23,7 @@ import threading
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
-from mast.core.frames import ena_to_xy_yaw_covariance, yaw_of_azimuth, yaw_quaternion
+from mast.core.frames import ros_pose_covariance, yaw_of_azimuth, yaw_quaternion
 from mast.core.scan import Scan
 from mast.io.atomic import commit, discard, part_path
 from mast.io.bags import LASERSCAN, laserscan_bytes
@@ -93,10 +91,7 @@ class McapRecorder:
         t = self._store.types
         sec, nsec = divmod(int(scan.stamp_ns), 1_000_000_000)
         yaw = yaw_of_azimuth(fix.pose.azimuth)
-        c = np.asarray(fix.adjustment.covariance, dtype=float)
-        c = (c + c.T) / 2
-        cov = np.zeros((6, 6))
-        cov[np.ix_([0, 1, 5], [0, 1, 5])] = ena_to_xy_yaw_covariance(c)
+        cov = ros_pose_covariance(fix.adjustment.covariance)
         return t[_POSE](
             header=t["std_msgs/msg/Header"](
                 stamp=t["builtin_interfaces/msg/Time"](sec=sec, nanosec=nsec), frame_id=MINE_FRAME

@@ -183,13 +183,13 @@ def run_live(
                 summary.located += 1
                 summary.fixed += step.fix.ok
                 summary.track_lost += step.track_lost
+                for sink in sinks:  # first: a pose on the robot's bus is the urgent output
+                    sink.fix(scan, step.fix, record)
                 try:
                     emit(record)
                 except BrokenPipeError:
                     summary.pipe_closed = True
                     break
-                for sink in sinks:
-                    sink.fix(scan, step.fix, record)
                 heap.step()
     except KeyboardInterrupt:
         summary.interrupted = True

@@ -1,0 +1,234 @@
+"""A ROS 2 participant over DDS, without a ROS installation: scans in, poses out.
+
+``mast ros2`` joins a DDS domain through Eclipse Cyclone DDS's Python binding and
+speaks ROS 2's wire format (:mod:`mast.live.ros2_msgs`), so any ROS 2 node of any
+middleware that speaks RTPS sees it as one of its own:
+
+* :class:`Ros2Source` subscribes to a ``sensor_msgs/LaserScan`` topic, best effort
+  (it takes reliable and best-effort publishers alike), and yields each scan as it
+  arrives; the live loop (:func:`mast.live.session.run_live`) locates the newest one
+  first, exactly as for a scanner on TCP.
+* :class:`Ros2Publisher` publishes each fix as ``geometry_msgs/PoseWithCovarianceStamped``
+  on ``/mast/pose`` and the grid-to-scanner transform on ``/tf``, and every located
+  scan's JSON record as ``std_msgs/String`` on ``/mast/fix``: reliable, keeping the last
+  10 for a transient-local subscriber that joins late (a volatile one, ROS's default,
+  gets the poses from then on).
+* :class:`ScanPublisher` publishes scans as a ROS 2 driver does (the tests, the
+  benchmark and ``mast emulate ros2``).
+
+The DDS domain is ``--domain-id`` (ROS_DOMAIN_ID's meaning); Cyclone DDS reads its
+network configuration from ``CYCLONEDDS_URI`` as usual.
+"""
+
+from __future__ import annotations
+
+import json
+import threading
+import time
+from collections.abc import Callable, Iterator
+from typing import Any
+
+from cyclonedds.core import Policy, Qos, ReadCondition, SampleState, WaitSet
+from cyclonedds.domain import DomainParticipant
+from cyclonedds.pub import DataWriter
+from cyclonedds.sub import DataReader
+from cyclonedds.topic import Topic
+from cyclonedds.util import duration
+
+from mast.core.scan import Scan
+from mast.errors import InputError
+from mast.live.ros2_msgs import (
+    LaserScan,
+    PoseWithCovarianceStamped,
+    String,
+    TFMessage,
+    dds_topic,
+    laserscan_message,
+    pose_message,
+    tf_message,
+)
+from mast.live.stream import Received, Source, SourceOptions
+from mast.pipeline.locator import Fix
+
+__all__ = ["Ros2Publisher", "Ros2Source", "ScanPublisher", "participant"]
+
+#: ROS 2's domain ids: 0-232 (the port mapping of RTPS leaves no room above).
+MAX_DOMAIN_ID = 232
+
+# Writers use plain CDR (XCDR1), as every ROS 2 middleware does; readers take either.
+_XCDR1 = Policy.DataRepresentation(use_cdrv0_representation=True)
+_EITHER = Policy.DataRepresentation(use_cdrv0_representation=True, use_xcdrv2_representation=True)
+
+
+def participant(domain_id: int) -> DomainParticipant:
+    """A DDS participant in ROS 2 domain ``domain_id``; a domain that cannot be joined
+    (a bad ``CYCLONEDDS_URI``, no usable network interface) is an InputError."""
+    if not 0 <= domain_id <= MAX_DOMAIN_ID:
+        raise InputError(f"--domain-id {domain_id}: ROS 2 domains are 0-{MAX_DOMAIN_ID}")
+    try:
+        return DomainParticipant(domain_id)
+    except Exception as err:  # the binding raises DDSException with the C library's code
+        raise InputError(
+            f"cannot join DDS domain {domain_id}: {err} (check CYCLONEDDS_URI)"
+        ) from None
+
+
+def _reliable(depth: int, *, keep: bool = False) -> Qos:
+    """Reliable, and with ``keep`` transient-local: a reader that asks for it gets the last
+    ``depth`` samples on joining (one that matched a moment after a sample was written
+    too); a volatile reader, ROS's default, gets the next ones. Either matches."""
+    return Qos(
+        Policy.Reliability.Reliable(duration(milliseconds=100)),
+        Policy.Durability.TransientLocal if keep else Policy.Durability.Volatile,
+        Policy.History.KeepLast(depth),
+        _XCDR1,
+    )
+
+
+class Ros2Source(Source):
+    """LaserScans from a ROS 2 topic as they arrive (see the module).
+
+    The run goes on until stopped: no scan for ``options.timeout_s`` is said once (with
+    how many publishers the topic has), and no scan for ``options.give_up_s`` ends it
+    when that is finite.
+    """
+
+    def __init__(
+        self, dp: DomainParticipant, topic: str, options: SourceOptions, *, url: str
+    ) -> None:
+        super().__init__(url, options)
+        self.topic = topic
+        self._dp = dp
+        self._reader = DataReader(
+            dp,
+            Topic(dp, dds_topic(topic), LaserScan),
+            qos=Qos(Policy.Reliability.BestEffort, Policy.History.KeepLast(8), _EITHER),
+        )
+
+    def scans(self, stop: threading.Event, warn: Callable[[str], None]) -> Iterator[Received]:
+        o = self.options
+        waitset = WaitSet(self._dp)
+        waitset.attach(ReadCondition(self._reader, SampleState.NotRead))
+        last = time.perf_counter()
+        gap: float | None = None
+        said_quiet = said_malformed = False
+        while not stop.is_set():
+            waitset.wait(duration(milliseconds=100))
+            for msg in self._take(warn):
+                if msg is None:
+                    self.stats.malformed += 1
+                    continue
+                try:
+                    scan = Scan.from_message(msg)
+                except InputError as err:
+                    self.stats.malformed += 1
+                    if not said_malformed:
+                        self.stats.first_malformed = err.problem
+                        warn(f"{self.topic}: malformed LaserScan skipped: {err.problem}")
+                        said_malformed = True
+                    continue
+                if o.range_min_m is not None or o.range_max_m is not None:
+                    scan = scan.with_range_limits(o.range_min_m, o.range_max_m)
+                now = time.perf_counter()
+                self.stats.scans += 1
+                yield Received(scan, time.time_ns(), now, gap)
+                last, gap, said_quiet = now, None, False
+            quiet = time.perf_counter() - last
+            if quiet > o.timeout_s and not said_quiet:
+                n = len(self._reader.get_matched_publications())
+                warn(
+                    f"no scan on {self.topic} for {quiet:.1f} s "
+                    f"({n} publisher{'s' if n != 1 else ''} of sensor_msgs/LaserScan matched)"
+                )
+                said_quiet = True
+                gap = quiet
+            if quiet > o.give_up_s:
+                return
+            if gap is not None:
+                gap = quiet
+
+    def _take(self, warn: Callable[[str], None]) -> list[LaserScan | None]:
+        try:
+            return list(self._reader.take(N=64))
+        except Exception as err:  # a sample the binding cannot decode
+            warn(f"{self.topic}: a sample could not be decoded: {err}")
+            return [None]
+
+
+class Ros2Publisher:
+    """Each record published: the pose and the transform of a fix, the JSON of every one
+    (a :class:`~mast.live.session.Sink` of the live loop)."""
+
+    def __init__(
+        self,
+        dp: DomainParticipant,
+        *,
+        frame: str,
+        pose_topic: str = "/mast/pose",
+        fix_topic: str = "/mast/fix",
+        tf: bool = True,
+    ) -> None:
+        if not frame.strip() or any(c.isspace() for c in frame):
+            raise InputError(f"--frame {frame!r}: give a frame id such as map")
+        self.frame = frame
+        self._pose = DataWriter(
+            dp,
+            Topic(dp, dds_topic(pose_topic), PoseWithCovarianceStamped),
+            qos=_reliable(10, keep=True),
+        )
+        self._fix = DataWriter(
+            dp, Topic(dp, dds_topic(fix_topic), String), qos=_reliable(10, keep=True)
+        )
+        self._tf = (
+            DataWriter(dp, Topic(dp, dds_topic("/tf"), TFMessage), qos=_reliable(10, keep=True))
+            if tf
+            else None
+        )
+        self.published = 0
+
+    def scan(self, scan: Scan) -> None:
+        """Scans are the robot's own: not published again."""
+
+    def fix(self, scan: Scan, fix: Fix, record: dict[str, Any]) -> None:
+        """``fix`` of ``scan`` (stamped as the scan) and its ``record``."""
+        self.publish(scan, fix, json.dumps(record))
+
+    def publish(self, scan: Scan, fix: Fix, text: str) -> None:
+        """``fix`` of ``scan`` (stamped as the scan) and its record ``text``."""
+        if fix.ok and fix.pose is not None and fix.adjustment is not None:
+            cov = (fix.adjustment.covariance + fix.adjustment.covariance.T) / 2
+            self._pose.write(pose_message(fix.pose, cov, stamp=scan.stamp_ns, frame=self.frame))
+            if self._tf is not None:
+                child = scan.frame_id or "laser"
+                self._tf.write(
+                    tf_message(fix.pose, stamp=scan.stamp_ns, frame=self.frame, child=child)
+                )
+            self.published += 1
+        self._fix.write(String(text))
+
+    def matched(self) -> int:
+        """Subscribers of the pose topic matched now."""
+        return len(self._pose.get_matched_subscriptions())
+
+
+class ScanPublisher:
+    """Scans published on a ROS 2 topic as a driver does (reliable or best effort)."""
+
+    def __init__(self, dp: DomainParticipant, topic: str = "/scan", *, reliable: bool = False):
+        qos = (
+            _reliable(10)
+            if reliable
+            else Qos(Policy.Reliability.BestEffort, Policy.History.KeepLast(10), _XCDR1)
+        )
+        self._writer = DataWriter(dp, Topic(dp, dds_topic(topic), LaserScan), qos=qos)
+
+    def matched(self) -> int:
+        """Subscribers matched now."""
+        return len(self._writer.get_matched_subscriptions())
+
+    def publish(self, scan: Scan) -> None:
+        self._writer.write(laserscan_message(scan))
+
+    def write(self, message: Any) -> None:
+        """Any sample of the topic's type (a test's malformed message)."""
+        self._writer.write(message)
