@@ -323,7 +323,7 @@ def test_ctrl_c_or_sigterm_end_the_node_cleanly(
 
 def test_a_malformed_scan_is_skipped_counted_and_named_once(drive: Drive, domain: int) -> None:
     dp = DomainParticipant(domain)
-    node = _start(drive, domain, "--max-scans", "2")
+    node = _start(drive, domain, "--max-scans", "2", "--crs", "local:Mine Grid A")
     try:
         publisher = ScanPublisher(dp, "/scan", reliable=True)
         fixes = Subscriber(dp, "/mast/fix", String)
@@ -343,6 +343,8 @@ def test_a_malformed_scan_is_skipped_counted_and_named_once(drive: Drive, domain
     assert text.count("malformed LaserScan skipped") == 1
     assert "3 malformed skipped" in text
     assert len(printed) == 2
+    assert [r["crs"]["name"] for r in printed] == ["Mine Grid A"] * 2
+    assert json.loads(fixes.samples[0].data)["crs"] == printed[0]["crs"]
 
 
 @pytest.mark.parametrize(

@@ -71,7 +71,7 @@ def test_every_record_carries_the_crs_and_validates(utm_run: Path) -> None:
         assert isinstance(crs, dict)
         assert crs["epsg"] == 32735
         assert crs["name"] == "WGS 84 / UTM zone 35S"
-        assert CRS.from_wkt(crs["wkt"]).equals(CRS.from_epsg(32735))
+        assert "wkt" not in crs  # the code names it whole: not 1.5 kB on every record
     report = (utm_run / "report.html").read_text(encoding="utf-8")
     assert "WGS 84 / UTM zone 35S (EPSG:32735)" in report
 

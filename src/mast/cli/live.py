@@ -18,6 +18,7 @@ from mast.cli.options import (
     AngleSigmaOption,
     AzimuthToleranceOption,
     BeaconsOption,
+    CrsOption,
     NearOption,
     RadiusOption,
     RangeMaxOption,
@@ -26,6 +27,7 @@ from mast.cli.options import (
     ScannerOption,
     SurveySigmaOption,
     check_range_limits,
+    grid_crs,
     parse_near,
     precisions,
     signals_as_flag,
@@ -97,6 +99,7 @@ def live(
         int | None,
         typer.Option("--max-scans", min=1, help="End after this many scans received."),
     ] = None,
+    crs: CrsOption = None,
 ) -> None:
     """Locate a scanner's stream as it arrives: one JSON record per located scan on standard
     output, flushed as it is written; the newest scan is located first when locating falls
@@ -118,6 +121,7 @@ def live(
         precision=(range_sigma, angle_sigma, scanner, survey_sigma),
         near=(near, radius, azimuth_tolerance),
         range_limits=(range_min, range_max),
+        crs=crs,
     )
     for name, value in (("--timeout", timeout), ("--give-up", give_up)):
         if not (math.isfinite(value) and value > 0):
@@ -183,6 +187,7 @@ def stream_setup(
     precision: tuple[float | None, float | None, str | None, float | None],
     near: tuple[str | None, float, float],
     range_limits: tuple[float | None, float | None],
+    crs: str | None = None,
 ) -> StreamSetup:
     """The locator's settings (the config file's, then the options'), the survey and the
     report's inputs of a stream command; bad options are InputErrors."""
@@ -199,6 +204,7 @@ def stream_setup(
     if near_text is not None:
         cfg = replace(cfg, prior=parse_near(near_text, radius, azimuth_tolerance))
     check_range_limits(*range_limits)
+    grid = grid_crs(crs)
     survey = read_survey(beacons)
     warn_loose_edges(survey, cfg.survey_sigma_m)
     inputs = ReportInputs(
@@ -209,6 +215,7 @@ def stream_setup(
         config_file=None if config is None else str(config),
         config_sha256=settings.sha256,
         survey_sigmas=survey_weighing(survey, cfg.survey_sigma_m),
+        crs=grid,
     )
     return StreamSetup(source, survey, cfg, tables["sequence"], inputs)
 

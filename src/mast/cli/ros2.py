@@ -15,6 +15,7 @@ from mast.cli.options import (
     AngleSigmaOption,
     AzimuthToleranceOption,
     BeaconsOption,
+    CrsOption,
     NearOption,
     RadiusOption,
     RangeMaxOption,
@@ -89,6 +90,7 @@ def ros2(
         int | None,
         typer.Option("--max-scans", min=1, help="End after this many scans received."),
     ] = None,
+    crs: CrsOption = None,
 ) -> None:
     """Locate a ROS 2 robot's laser scans as they arrive, over DDS (Eclipse Cyclone DDS;
     no ROS installation needed, wire-compatible with every ROS 2 middleware).
@@ -122,6 +124,7 @@ def ros2(
         precision=(range_sigma, angle_sigma, scanner, survey_sigma),
         near=(near, radius, azimuth_tolerance),
         range_limits=(range_min, range_max),
+        crs=crs,
     )
     limit = math.inf if give_up is None else give_up
     for name, value in (("--timeout", timeout), ("--give-up", limit)):

@@ -269,7 +269,7 @@ def fix_record(
             "radius_m": fix.config.prior.radius_m,
         }
     if inputs.crs is not None:
-        rec["crs"] = inputs.crs.record()
+        rec["crs"] = inputs.crs.brief()
     rec["inputs"] = _inputs_record(fix, scan, inputs)
     rec["software"] = f"mast {__version__}"
     rec["computed_utc"] = inputs.computed_utc.isoformat(timespec="seconds").replace("+00:00", "Z")
