@@ -200,6 +200,34 @@ def bench_live(
     run_live_bench(scans=scans, seed=seed, kinds=tuple(kind or ("sick", "hokuyo")), echo=typer.echo)
 
 
+@bench_app.command("ros2")
+def bench_ros2(
+    scans: Annotated[int, typer.Option("--scans", min=10, help="Scans per rate.")] = 2000,
+    rate: Annotated[
+        list[float] | None, typer.Option("--rate", help="Scan rate, Hz [default: 10 and 25].")
+    ] = None,
+    seed: Annotated[int, typer.Option("--seed", help="Seed of the drive.")] = 0,
+    domain_id: Annotated[
+        int, typer.Option("--domain-id", min=0, max=232, help="DDS domain the run uses.")
+    ] = 201,
+) -> None:
+    """ROS 2: a simulated drive published on /scan over DDS (loopback) and located by
+    `mast ros2` in its own process (latency to the pose, the node's overhead, scans
+    dropped or lost, poses against mast locate's on the same bag).
+
+    Example: mast bench ros2 --scans 500 --rate 25
+    """
+    from mast.bench.ros2 import run_ros2_bench
+
+    run_ros2_bench(
+        scans=scans,
+        rates_hz=tuple(rate or (10.0, 25.0)),
+        seed=seed,
+        domain=domain_id,
+        echo=typer.echo,
+    )
+
+
 @bench_app.command("longdrive")
 def bench_longdrive(
     scans: Annotated[int, typer.Option("--scans", min=100, help="Scans per drive.")] = 10_000,

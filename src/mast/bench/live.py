@@ -32,7 +32,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["LIVE_SCANNERS", "LiveFigures", "run_live_bench"]
+__all__ = ["LIVE_SCANNERS", "LiveFigures", "run_live_bench", "simulate_drive"]
 
 #: (kind, scan rate Hz) of each emulated scanner.
 LIVE_SCANNERS = (("sick", 50.0), ("hokuyo", 40.0))
@@ -93,7 +93,7 @@ def _rss_mb() -> float:
         return int(fh.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 2**20
 
 
-def _simulate(folder: Path, scans: int, rate_hz: float, seed: int) -> tuple[Path, Path, Any]:
+def simulate_drive(folder: Path, scans: int, rate_hz: float, seed: int) -> tuple[Path, Path, Any]:
     """The drive's survey and bag, and per scan in order: true position, owed."""
     from mast.io import write_survey
     from mast.io.bags import write_laserscans
@@ -125,7 +125,7 @@ def _one(
     from mast.sim import scanner_model
 
     t0 = time.perf_counter()
-    survey_csv, bag, truth = _simulate(folder, scans, rate_hz, seed)
+    survey_csv, bag, truth = simulate_drive(folder, scans, rate_hz, seed)
     echo(f"{kind}: {scans} scans at {rate_hz:g} Hz simulated in {time.perf_counter() - t0:.0f} s")
     emulator = subprocess.Popen(
         [sys.executable, "-m", "mast", "emulate", kind, "--from", str(bag), "--port", "0"],

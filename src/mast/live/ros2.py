@@ -30,6 +30,7 @@ from typing import Any
 
 from cyclonedds.core import Policy, Qos, ReadCondition, SampleState, WaitSet
 from cyclonedds.domain import DomainParticipant
+from cyclonedds.internal import InvalidSample
 from cyclonedds.pub import DataWriter
 from cyclonedds.sub import DataReader
 from cyclonedds.topic import Topic
@@ -50,10 +51,21 @@ from mast.live.ros2_msgs import (
 from mast.live.stream import Received, Source, SourceOptions
 from mast.pipeline.locator import Fix
 
-__all__ = ["Ros2Publisher", "Ros2Source", "ScanPublisher", "participant"]
+__all__ = ["LOOPBACK_CONFIG", "Ros2Publisher", "Ros2Source", "ScanPublisher", "participant"]
 
 #: ROS 2's domain ids: 0-232 (the port mapping of RTPS leaves no room above).
 MAX_DOMAIN_ID = 232
+
+#: A Cyclone DDS configuration (for ``CYCLONEDDS_URI``) that keeps a participant on
+#: loopback, discovering its peers by unicast: the tests and the benchmark see no other
+#: host's traffic and need no multicast route.
+LOOPBACK_CONFIG = (
+    '<CycloneDDS><Domain Id="any"><General><Interfaces><NetworkInterface address="127.0.0.1"/>'
+    "</Interfaces><AllowMulticast>false</AllowMulticast></General><Discovery>"
+    "<ParticipantIndex>auto</ParticipantIndex><MaxAutoParticipantIndex>30"
+    '</MaxAutoParticipantIndex><Peers><Peer address="127.0.0.1"/></Peers></Discovery>'
+    "</Domain></CycloneDDS>"
+)
 
 # Writers use plain CDR (XCDR1), as every ROS 2 middleware does; readers take either.
 _XCDR1 = Policy.DataRepresentation(use_cdrv0_representation=True)
@@ -148,11 +160,14 @@ class Ros2Source(Source):
                 gap = quiet
 
     def _take(self, warn: Callable[[str], None]) -> list[LaserScan | None]:
+        """The scans waiting; None for one that could not be decoded. A publisher that
+        leaves (a driver restarted) shows as a sample without data: not a scan."""
         try:
-            return list(self._reader.take(N=64))
+            samples = self._reader.take(N=64)
         except Exception as err:  # a sample the binding cannot decode
             warn(f"{self.topic}: a sample could not be decoded: {err}")
             return [None]
+        return [s for s in samples if not isinstance(s, InvalidSample)]
 
 
 class Ros2Publisher:
