@@ -245,6 +245,9 @@ class Fix:
     stages_s: dict[str, float] = field(default_factory=dict)
     """Seconds spent in each stage (:data:`STAGES`) up to this result; what they leave of
     ``elapsed_s`` is the locator's own bookkeeping (choosing between poses, the record)."""
+    refused: tuple[float, int] | None = None
+    """The reference variance and degrees of freedom of an adjustment its global test
+    refused (``rejected``): what a hint on the range sigma is worked out from."""
 
     @property
     def ok(self) -> bool:
@@ -883,6 +886,7 @@ def _locate(
             detail=f"reference variance {adj.reference_variance:.2f} on {adj.dof} degrees "
             "of freedom: the returns do not fit the surveyed beacons",
             residuals=summary(obs, adj, tests),
+            refused=(float(adj.reference_variance), int(adj.dof)),
         )
     if np.any(obs.survey_var > 0):
         adj = replace(adj, covariance=adj.covariance + survey_covariance(adj, obs))
