@@ -41,7 +41,7 @@ def test_simulate_writes_survey_scans_and_truth(tmp_path: Path) -> None:
 
 
 def test_simulate_bag(tmp_path: Path) -> None:
-    r = runner.invoke(app, ["simulate", "--format", "bag", "--out", str(tmp_path)])
+    r = runner.invoke(app, ["simulate", "--scan-format", "bag", "--out", str(tmp_path)])
     assert r.exit_code == 0, r.output
     assert (tmp_path / "paper-parallel" / "scans.bag").is_file()
 
@@ -184,7 +184,7 @@ def test_locate_bad_input_is_status_2(paper_files: Path, tmp_path: Path) -> None
     assert "--range-sigma must be a positive number of metres (10 mm is 0.01), got -1" in r.stderr
     for option, value, said in (
         ("--range-sigma", "0", "--range-sigma must be a positive number"),
-        ("--angle-sigma", "nan", "--angle-sigma must be a non-negative number of radians"),
+        ("--angle-sigma-deg", "nan", "--angle-sigma-deg must be a non-negative number of degrees"),
         ("--survey-sigma", "-0.003", "--survey-sigma must be a non-negative number of metres"),
     ):
         r = _mast("locate", str(folder / "scan_001.csv"), "-b", str(folder / "beacons.csv"),
@@ -303,7 +303,7 @@ def test_unit_mistakes_in_a_scan_are_bad_input_with_a_hint(
     [
         ("--range-sigma", "10", "it is in metres (10 mm is 0.01)"),
         ("--survey-sigma", "3", "it is in metres (3 mm is 0.003)"),
-        ("--angle-sigma", "0.5", "it is in radians"),
+        ("--angle-sigma-deg", "5", "it is in degrees"),
     ],
 )
 def test_a_sigma_no_scanner_has_warns_with_its_unit(

@@ -21,7 +21,7 @@ CONTRACT = (
 def test_plan_writes_the_four_outputs_and_suggests(tmp_path: Path) -> None:
     out = tmp_path / "plan"
     done = run_mast_text(
-        "plan", "--drift", str(EXAMPLE / "drift.csv"), "-b", str(EXAMPLE / "beacons.csv"),
+        "plan", "--walls", str(EXAMPLE / "drift.csv"), "-b", str(EXAMPLE / "beacons.csv"),
         "--scanner", "lms1xx-0.25", "--out", str(out), "--step", "6", "--across", "2",
         "--scans-per-cell", "1", "--suggest", "2", "--target-sigma", "0.02",
     )  # fmt: skip
@@ -46,7 +46,7 @@ def test_plan_writes_the_four_outputs_and_suggests(tmp_path: Path) -> None:
     assert summary["wrong_fixes"] == 0
     # the proposal is a survey: mast plan and mast locate take it
     again = run_mast_text(
-        "plan", "--drift", str(EXAMPLE / "drift.dxf"), "-b", str(out / "proposed_beacons.csv"),
+        "plan", "--walls", str(EXAMPLE / "drift.dxf"), "-b", str(out / "proposed_beacons.csv"),
         "--scanner", "lms1xx-0.25", "--out", str(tmp_path / "again"), "--step", "6",
         "--scans-per-cell", "1", "--target-sigma", "0.02", "--crs", "EPSG:32735",
     )  # fmt: skip
@@ -76,7 +76,7 @@ def test_plan_writes_the_four_outputs_and_suggests(tmp_path: Path) -> None:
 )
 def test_plan_bad_options_are_one_line_errors(tmp_path: Path, args: list[str], words: str) -> None:
     done = run_mast_text(
-        "plan", "--drift", str(EXAMPLE / "drift.csv"), "-b", str(EXAMPLE / "beacons.csv"),
+        "plan", "--walls", str(EXAMPLE / "drift.csv"), "-b", str(EXAMPLE / "beacons.csv"),
         "--out", str(tmp_path / "o"), *args,
     )  # fmt: skip
     assert done.returncode == 2
@@ -88,7 +88,7 @@ def test_plan_bad_drift_names_file_and_line(tmp_path: Path) -> None:
     bad = tmp_path / "drift.csv"
     bad.write_text("wall,vertex,easting,northing\nw,1,0,0\nw,2,oops,0\n")
     done = run_mast_text(
-        "plan", "--drift", str(bad), "-b", str(EXAMPLE / "beacons.csv"),
+        "plan", "--walls", str(bad), "-b", str(EXAMPLE / "beacons.csv"),
         "--scanner", "lms1xx-0.5", "--out", str(tmp_path / "o"),
     )  # fmt: skip
     assert done.returncode == 2

@@ -193,8 +193,10 @@ def test_an_interrupted_run_leaves_valid_files_for_the_scans_done(
     """Interrupted after 40 scans, by Python's KeyboardInterrupt (a library caller) or by
     the flag ``mast track``'s signal handler sets (checked between two scans)."""
     interrupt = threading.Event()
+    totals: list[int | None] = []
 
-    def stop_after_40(scans: int, fixes: int) -> None:
+    def stop_after_40(scans: int, fixes: int, total: int | None) -> None:
+        totals.append(total)
         if scans == 40:
             if how == "flag":
                 interrupt.set()
@@ -211,6 +213,7 @@ def test_an_interrupted_run_leaves_valid_files_for_the_scans_done(
     )
     assert result.interrupted
     assert result.summary.scans == 40
+    assert set(totals) == {250}  # the bag's LaserScan count, from its index: a bar's total
     lines = (tmp_path / "fixes.jsonl").read_text().splitlines()
     assert len(lines) == 40
     json.loads(lines[-1])

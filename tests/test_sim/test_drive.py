@@ -250,7 +250,7 @@ def test_memory_does_not_grow_with_the_number_of_scans(tmp_path: Path) -> None:
 def test_cli_writes_a_drive(tmp_path: Path) -> None:
     r = run_mast_text(
         "simulate", "--scenario", "drive", "--scans", "40", "--rate", "50", "--seed", "2",
-        "--format", "ros2", "--out", str(tmp_path),
+        "--scan-format", "ros2", "--out", str(tmp_path),
     )  # fmt: skip
     assert r.returncode == 0, r.stderr
     scans = list(read_laserscans(tmp_path / "drive-2" / "scans_ros2"))

@@ -11,8 +11,10 @@ import typer
 from mast.cli.options import (
     DesignSeedOption,
     LogBeaconsOption,
+    OldBeaconCountOption,
     RealDataOption,
     cell_progress,
+    renamed,
 )
 from mast.cli.root import (
     CONTEXT,
@@ -43,7 +45,11 @@ def reproduce_paper_cmd(
     seed: Annotated[int, typer.Option("--seed", help="Noise seed.")] = 0,
 ) -> None:
     """The MAST paper's experiments (Table 2 positions, wall yaws, beacon sizes), noise-free
-    and with 12 mm range noise, reported beside the paper's published values."""
+    and with 12 mm range noise, reported beside the paper's published values.
+
+    \b
+    Example: mast reproduce paper --out paper/ --draws 5
+    """
     from mast.bench.paper import reproduce_paper
 
     check_output_folder(out)
@@ -60,7 +66,11 @@ def bench_accuracy(
     seed: Annotated[int, typer.Option("--seed", help="First scene seed.")] = 0,
 ) -> None:
     """RMS error against the Cramer-Rao bound and coverage of the 95 % intervals,
-    for the four scanner configurations (270° at 0.5° and 0.25°, 190° at 1/6°, 360° at 0.2°)."""
+    for the four scanner configurations (270° at 0.5° and 0.25°, 190° at 1/6°, 360° at 0.2°).
+
+    \b
+    Example: mast bench accuracy --poses 5 --draws 5
+    """
     from mast.bench.accuracy import run_accuracy
 
     if out is not None:
@@ -71,7 +81,7 @@ def bench_accuracy(
 @bench_app.command("survey")
 def bench_survey(
     beacons: Annotated[
-        int, typer.Option("--beacons", min=1, help="Beacons in the mine's survey.")
+        int, typer.Option("--beacon-count", min=1, help="Beacons in the mine's survey.")
     ] = 10_000,
     range_max: Annotated[
         float,
@@ -79,11 +89,17 @@ def bench_survey(
             "--range-max", min=0.1, help="Scanner's longest range, metres (sets the index's reach)."
         ),
     ] = 80.0,
+    old_beacons: OldBeaconCountOption = None,
 ) -> None:
     """A whole mine's survey read, checked and indexed: seconds, with a few designs and with
-    every beacon its own."""
+    every beacon its own.
+
+    \b
+    Example: mast bench survey --beacon-count 1000
+    """
     from mast.bench.surveyload import run_survey_load
 
+    beacons = _count(beacons, old_beacons, 10_000)
     run_survey_load(beacons=beacons, range_max_m=range_max, echo=typer.echo)
 
 
@@ -99,12 +115,16 @@ def bench_fuzz(
 ) -> None:
     """Damaged and crafted files through every reader and output path, each run in a
     child with memory, file-size and time limits: tracebacks, undocumented exit
-    statuses, memory and time beyond bounds, fixes that differ, half-written outputs."""
+    statuses, memory and time beyond bounds, fixes that differ, half-written outputs.
+
+    \b
+    Example: mast bench fuzz --inputs 50 --keep fuzz-failures/
+    """
     from mast.bench.fuzz import run_fuzz
 
     if keep is not None:
         check_output_folder(keep, option="--keep")
-    with cell_progress("fuzzing") as progress:
+    with cell_progress("fuzzing", unit="inputs") as progress:
         run_fuzz(inputs=inputs, seed=seed, echo=typer.echo, progress=progress, keep_failures=keep)
 
 
@@ -112,16 +132,29 @@ def bench_fuzz(
 def bench_robustness(
     out: Annotated[Path | None, typer.Option("--out", help="Folder for the CSV files.")] = None,
     hard: Annotated[
-        int, typer.Option("--hard", min=0, help="Hostile scenes (5 scans each).")
+        int, typer.Option("--hard-scenes", min=0, help="Hostile scenes (5 scans each).")
     ] = 200,
     drift: Annotated[
-        int, typer.Option("--drift", min=0, help="Many-beacon drifts (10 scans each).")
+        int, typer.Option("--drift-scenes", min=0, help="Many-beacon drifts (10 scans each).")
     ] = 40,
     seed: Annotated[int, typer.Option("--seed", help="First scene seed.")] = 0,
+    old_hard: Annotated[
+        int | None, typer.Option("--hard", hidden=True, help="Old name of --hard-scenes.")
+    ] = None,
+    old_drift: Annotated[
+        int | None, typer.Option("--drift", hidden=True, help="Old name of --drift-scenes.")
+    ] = None,
 ) -> None:
     """Fix rate where two beacons each show two clean panels, wrong fixes and no-fix
-    reasons, over hostile scenes and a many-beacon drift."""
+    reasons, over hostile scenes and a many-beacon drift.
+
+    \b
+    Example: mast bench robustness --hard-scenes 10 --drift-scenes 2
+    """
     from mast.bench.robustness import run_robustness
+
+    hard = _count(hard, old_hard, 200, new="--hard-scenes", old="--hard")
+    drift = _count(drift, old_drift, 40, new="--drift-scenes", old="--drift")
 
     if out is not None:
         check_output_folder(out)
@@ -140,7 +173,11 @@ def bench_field(
     """Scenes drawn as widely as the field (beacons of any shape bolted askew onto rough
     rock, five scanners from 8 to 20 mm, clutter shaped like panels, mixed pixels),
     scored as the independent scenes are: owed scans fixed, wrong fixes, RMS/CRB and
-    95 % coverage."""
+    95 % coverage.
+
+    \b
+    Example: mast bench field --scenes 5 --poses 2
+    """
     from mast.bench.field import run_field
 
     if out is not None:
@@ -163,7 +200,11 @@ def bench_minewide(
     ] = False,
 ) -> None:
     """The same scans against their local survey and a mine-wide one (the local beacons
-    plus copies of their designs in other drifts): same fixes, and the time it costs."""
+    plus copies of their designs in other drifts): same fixes, and the time it costs.
+
+    \b
+    Example: mast bench minewide --poses 5 --copies 20
+    """
     from mast.bench.minewide import run_minewide
 
     run_minewide(poses=poses, copies=copies, seed=seed, distinct=distinct, echo=typer.echo)
@@ -178,7 +219,11 @@ def bench_tracking(
     seed: Annotated[int, typer.Option("--seed", help="First scene seed.")] = 0,
 ) -> None:
     """Tracking: the accuracy benchmark's owed scans with a prior within 0.5 m and 5 degrees
-    (a fix owed on every one), and with a prior 1.5 m off (no fix owed)."""
+    (a fix owed on every one), and with a prior 1.5 m off (no fix owed).
+
+    \b
+    Example: mast bench tracking --poses 5 --draws 1
+    """
     from mast.bench.tracking import run_tracking
 
     run_tracking(poses=poses, draws=draws, seed=seed, echo=typer.echo)
@@ -194,7 +239,11 @@ def bench_live(
 ) -> None:
     """Live: a simulated drive with beacon gaps served by the SICK (50 Hz) and Hokuyo (40 Hz)
     emulators and located as it arrives (latency, drops, memory, CPU, owed scans fixed,
-    recovery from a wrong prior)."""
+    recovery from a wrong prior).
+
+    \b
+    Example: mast bench live --scans 1000 --kind sick
+    """
     from mast.bench.live import run_live_bench
 
     run_live_bench(scans=scans, seed=seed, kinds=tuple(kind or ("sick", "hokuyo")), echo=typer.echo)
@@ -239,7 +288,11 @@ def bench_longdrive(
 ) -> None:
     """Long drives: SICK (50 Hz) and Hokuyo (40 Hz) drives sent through their protocols and
     located in sequence as `mast locate RUN` and `mast live` do (owed scans fixed, wrong
-    fixes listed, fixes outside their own 99 % ellipse, time a scan)."""
+    fixes listed, fixes outside their own 99 % ellipse, time a scan).
+
+    \b
+    Example: mast bench longdrive --scans 1000 --seeds 1 --workers 1
+    """
     from mast.bench.longdrive import run_longdrive
 
     if out is not None:
@@ -270,7 +323,11 @@ def bench_georef(
     out: Annotated[Path | None, typer.Option("--out", help="CSV of every cloud.")] = None,
 ) -> None:
     """Simulated SLAM clouds through mast georef: beacons found, check misclosures, honest
-    bounds, drift corrected, and a large LAZ's time and memory."""
+    bounds, drift corrected, and a large LAZ's time and memory.
+
+    \b
+    Example: mast bench georef --clouds 1 --drift-clouds 0 --large-points 0
+    """
     from mast.bench.georef import run_georef_bench
 
     run_georef_bench(
@@ -299,7 +356,11 @@ def bench_survey_in(
     out: Annotated[Path | None, typer.Option("--out", help="CSV of every beacon.")] = None,
 ) -> None:
     """Simulated terrestrial scans through mast survey-in: beacons found with their
-    designs, edge and elevation errors against sigma_m, a moved beacon named."""
+    designs, edge and elevation errors against sigma_m, a moved beacon named.
+
+    \b
+    Example: mast bench survey-in --scenes 2
+    """
     from mast.bench.survey_in import run_survey_in_bench
 
     if out is not None:
@@ -318,7 +379,11 @@ def bench_dense(
     ] = 0.0,
 ) -> None:
     """Dense scans: read and locate time and peak memory (each in a fresh process)
-    against the beams of a scan, from a normal scan to a million beams."""
+    against the beams of a scan, from a normal scan to a million beams.
+
+    \b
+    Example: mast bench dense 1081 10000
+    """
     from mast.bench.dense import DEFAULT_BEAMS, run_dense
 
     run_dense(tuple(beams) if beams else DEFAULT_BEAMS, range_sigma_m=range_sigma, echo=typer.echo)
@@ -333,7 +398,11 @@ def bench_run(
     seed: Annotated[int, typer.Option("--seed", help="Seed of the drive.")] = 0,
 ) -> None:
     """Survey runs: simulated drives read and tracked (throughput, peak memory), the placed
-    scans against the truth (fixed and carried by odometry) and their 95 % coverage."""
+    scans against the truth (fixed and carried by odometry) and their 95 % coverage.
+
+    \b
+    Example: mast bench run 1000
+    """
     from mast.bench.runs import DEFAULT_SCANS, run_runs
 
     run_runs(tuple(scans) if scans else DEFAULT_SCANS, seed=seed, echo=typer.echo)
@@ -368,7 +437,7 @@ def bench_speed(
         int, typer.Option("--minewide-poses", min=0, help="Mine-wide scans (0: skip).")
     ] = 40,
     beacons: Annotated[
-        int, typer.Option("--beacons", min=3, help="Beacons of the mine-wide survey.")
+        int, typer.Option("--beacon-count", min=3, help="Beacons of the mine-wide survey.")
     ] = 200,
     startup_runs: Annotated[
         int, typer.Option("--startup-runs", min=0, help="Fresh 'mast --help' runs (0: skip).")
@@ -381,12 +450,20 @@ def bench_speed(
     out: Annotated[
         Path | None, typer.Option("--out", help="Also write the figures to this text file.")
     ] = None,
+    old_beacons: OldBeaconCountOption = None,
 ) -> None:
     """Speed: locate per scan and per stage (1081 and 1800 beams), bags read, located and
     tracked (each in a fresh process: throughput, peak memory), a 200-beacon survey,
     start-up, a peer (small_gicp point-to-plane ICP) on the same scans, and tracked
-    scans (a drive located in sequence) per stage beside the peer from their priors."""
+    scans (a drive located in sequence) per stage beside the peer from their priors.
+
+    \b
+    Example: mast bench speed --scans 50 --scans-360 0 --bag 0 --track 0 \\
+      --minewide-poses 0 --startup-runs 1 --tracked-scans 0
+    """
     from mast.bench.speed import DEFAULT_BAG_SCANS, DEFAULT_TRACK_SCANS, run_speed
+
+    beacons = _count(beacons, old_beacons, 200)
 
     if out is not None:
         check_output_file(out, suffixes=(".txt", ".md", ".log"), option="--out")
@@ -417,11 +494,18 @@ def bench_clutter(
             help="Also locate every scan with a good prior (0.5 m, 5 deg) and a wrong one.",
         ),
     ] = True,
+    old_beacons: OldBeaconCountOption = None,
 ) -> None:
     """Real clutter: beacons mounted on the real walls of CARMEN logs with corrected
     poses, ray-cast into every scan; fixes where owed and wrong fixes per log, also
-    when tracking from a good or a wrong prior."""
+    when tracking from a good or a wrong prior.
+
+    \b
+    Example: mast bench clutter --data ../shared/data --no-priors
+    """
     from mast.bench.clutter import run_real_clutter
+
+    beacons = _count(beacons, old_beacons, 29)
 
     if not data.is_dir():
         raise InputError("folder of real scans not found", path=data)
@@ -436,10 +520,17 @@ def bench_reallog(
     max_gap: Annotated[
         float, typer.Option("--max-gap", min=0.0, help="As mast track's --max-gap, seconds.")
     ] = 3.0,
+    old_beacons: OldBeaconCountOption = None,
 ) -> None:
     """Runs on real logs: beacons mounted on the real walls of CARMEN logs, the logs
-    tracked as mast track does; error and 95 % coverage of the scans placed by odometry."""
+    tracked as mast track does; error and 95 % coverage of the scans placed by odometry.
+
+    \b
+    Example: mast bench reallog --data ../shared/data --max-gap 3
+    """
     from mast.bench.reallog import run_real_logs
+
+    beacons = _count(beacons, old_beacons, 29)
 
     if not data.is_dir():
         raise InputError("folder of real scans not found", path=data)
@@ -453,9 +544,28 @@ def bench_real(
         int, typer.Option("--every", min=1, help="Insert beacons into every Nth scan.")
     ] = 10,
 ) -> None:
-    """Real scans by others: no fix without beacons; fixes with beacons ray-cast into them."""
+    """Real scans by others: no fix without beacons; fixes with beacons ray-cast into them.
+
+    \b
+    Example: mast bench real --data ../shared/data --every 20
+    """
     from mast.bench.realscans import run_real_scans
 
     if not data.is_dir():
         raise InputError("folder of real scans not found", path=data)
     run_real_scans(data, every=every, echo=typer.echo)
+
+
+def _count(
+    value: int,
+    old_value: int | None,
+    default: int,
+    *,
+    new: str = "--beacon-count",
+    old: str = "--beacons",
+) -> int:
+    """A count given by its new option name or, for a release, its old one (which, in
+    ``mast locate`` and the other field commands, names the survey file):
+    :func:`mast.cli.options.renamed`."""
+    given = renamed(value, old_value, new=new, old=old, default=default)
+    return default if given is None else given

@@ -30,7 +30,11 @@ def demo(
         typer.Option("--out", help="Keep the simulated files here (default: a temporary folder)."),
     ] = None,
 ) -> None:
-    """Simulate the paper's layout, locate every scan, and compare with the truth (Table 2)."""
+    """Simulate the paper's layout, locate every scan, and compare with the truth (Table 2).
+
+    \b
+    Example: mast demo
+    """
     if out is not None:
         check_output_folder(out)
     with tempfile.TemporaryDirectory(prefix="mast-demo-") as tmp:

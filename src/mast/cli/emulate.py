@@ -49,6 +49,9 @@ def emulate(
 
     Prints the address served on, then serves until every scan is sent. Exit status 0
     when the run was served, 2 for bad input, 130 when interrupted.
+
+    \b
+    Example: mast emulate sick --from examples/run.bag --port 2111
     """
     from mast.live.emulate import Emulator, EmulatorFaults
     from mast.live.sources import read_run

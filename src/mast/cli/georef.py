@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from pathlib import Path
 from typing import Annotated
 
@@ -13,7 +14,9 @@ from mast.cli.options import (
     CrsOption,
     ForceOption,
     SurveySigmaOption,
+    WorkUpdate,
     grid_crs,
+    work_progress,
 )
 from mast.cli.root import (
     EXIT_NO_FIX,
@@ -107,6 +110,10 @@ def georef(
     Exit status 0 georeferenced, 3 refused (too few beacons, an ambiguous match, beacons
     that disagree: the reports and beacons_found.csv say why), 2 bad input, 4 an output
     cannot be written.
+
+    \b
+    Example: mast simulate --scenario cloud --out sim && \\
+      mast georef sim/cloud.laz -b sim/beacons.csv --out geo --check B04,B09
     """
     from mast.cloud.detect import DetectConfig
     from mast.cloud.georef import MODELS, GeorefConfig
@@ -134,15 +141,17 @@ def georef(
         )
     grid = grid_crs(crs)
     check_output_folder(out, force=force)
-    run = run_georef(
-        cloud,
-        beacons,
-        out,
-        config,
-        trajectory_path=trajectory,
-        time_field=time_field,
-        crs=grid,
-    )
+    with work_progress("georef", counts=False) as bar:
+        run = run_georef(
+            cloud,
+            beacons,
+            out,
+            config,
+            trajectory_path=trajectory,
+            time_field=time_field,
+            progress=None if bar is None else _staged(bar),
+            crs=grid,
+        )
     r = run.result
     roles = [b.role for b in r.beacons]
     typer.echo(
@@ -163,6 +172,15 @@ def georef(
     )
     for c in r.checks:
         typer.echo(f"check {c.beacon}: {1000 * c.horizontal_m:.1f} mm horizontal")
+
+
+def _staged(bar: WorkUpdate) -> Callable[[str, int, int], None]:
+    """The cloud's progress (a pass's name, points done, points in it) onto the bar."""
+
+    def update(stage: str, done: int, total: int) -> None:
+        bar(done, total, stage)
+
+    return update
 
 
 def parse_checks(text: str | None) -> tuple[str, ...]:

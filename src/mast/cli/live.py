@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING, Annotated
 import typer
 
 from mast.cli.options import (
+    AngleSigmaDegOption,
     AngleSigmaOption,
     AzimuthToleranceOption,
     BeaconsOption,
@@ -62,7 +63,7 @@ def live(
     ],
     beacons: BeaconsOption,
     range_sigma: RangeSigmaOption = None,
-    angle_sigma: AngleSigmaOption = None,
+    angle_sigma_deg: AngleSigmaDegOption = None,
     scanner: ScannerOption = None,
     survey_sigma: SurveySigmaOption = None,
     config: ConfigOption = None,
@@ -100,6 +101,7 @@ def live(
         typer.Option("--max-scans", min=1, help="End after this many scans received."),
     ] = None,
     crs: CrsOption = None,
+    angle_sigma: AngleSigmaOption = None,
 ) -> None:
     """Locate a scanner's stream as it arrives: one JSON record per located scan on standard
     output, flushed as it is written; the newest scan is located first when locating falls
@@ -109,6 +111,10 @@ def live(
     (status 0), on Ctrl-C or SIGTERM (status 130 or 143; a --record file is closed
     complete) or when the scanner cannot be reached (status 2). Exit status 3 when no
     scan was fixed, 4 when an output cannot be written.
+
+    \b
+    Example: mast live "replay://examples/run.bag?rate=2" -b examples/beacons.csv \\
+      --scanner lms1xx-0.25
     """
     from mast.live.sources import ReplaySource, open_source
     from mast.live.stream import SourceOptions
@@ -119,6 +125,7 @@ def live(
         beacons,
         config=config,
         precision=(range_sigma, angle_sigma, scanner, survey_sigma),
+        angle_sigma_deg=angle_sigma_deg,
         near=(near, radius, azimuth_tolerance),
         range_limits=(range_min, range_max),
         crs=crs,
@@ -188,16 +195,25 @@ def stream_setup(
     near: tuple[str | None, float, float],
     range_limits: tuple[float | None, float | None],
     crs: str | None = None,
+    angle_sigma_deg: float | None = None,
 ) -> StreamSetup:
     """The locator's settings (the config file's, then the options'), the survey and the
-    report's inputs of a stream command; bad options are InputErrors."""
+    report's inputs of a stream command; bad options are InputErrors. ``precision``'s
+    angle sigma is the old ``--angle-sigma`` (radians), ``angle_sigma_deg`` the
+    ``--angle-sigma-deg`` that replaces it (:func:`mast.cli.options.angle_sigma_rad`)."""
     from mast.io import read_survey
     from mast.report.record import ReportInputs, survey_weighing
 
     range_sigma, angle_sigma, scanner, survey_sigma = precision
     tables, given = read_config(config, command)
     cfg, defaults = precisions(
-        range_sigma, angle_sigma, scanner, survey_sigma, base=tables["locator"], given=given
+        range_sigma,
+        angle_sigma,
+        scanner,
+        survey_sigma,
+        angle_sigma_deg=angle_sigma_deg,
+        base=tables["locator"],
+        given=given,
     )
     settings = effective({"locator": cfg, "sequence": tables["sequence"]}, command)
     near_text, radius, azimuth_tolerance = near

@@ -9,6 +9,7 @@ from typing import Annotated
 import typer
 
 from mast.cli.options import (
+    AngleSigmaDegOption,
     AngleSigmaOption,
     AzimuthToleranceOption,
     BeaconsOption,
@@ -27,6 +28,7 @@ from mast.cli.options import (
     parse_near,
     precisions,
     warn_loose_edges,
+    work_progress,
 )
 from mast.cli.root import (
     EXIT_NO_FIX,
@@ -50,7 +52,7 @@ def locate(
     ],
     beacons: BeaconsOption,
     range_sigma: RangeSigmaOption = None,
-    angle_sigma: AngleSigmaOption = None,
+    angle_sigma_deg: AngleSigmaDegOption = None,
     scanner: ScannerOption = None,
     fmt: Annotated[
         OutputFormat,
@@ -73,6 +75,7 @@ def locate(
     survey_sigma: SurveySigmaOption = None,
     config: ConfigOption = None,
     crs: CrsOption = None,
+    angle_sigma: AngleSigmaOption = None,
 ) -> None:
     """Fix position and azimuth from one scan, several, or every scan of a bag.
 
@@ -80,6 +83,9 @@ def locate(
 
     Exit status 0 when a scan is fixed (with several scans or a bag: at least
     one), 3 when none is, 2 for bad input, 4 when an output cannot be written.
+
+    \b
+    Example: mast locate examples/scan.csv -b examples/beacons.csv --scanner lms1xx-0.25
     """
     import json
 
@@ -89,7 +95,13 @@ def locate(
 
     tables, given = read_config(config, "locate")
     cfg, defaults = precisions(
-        range_sigma, angle_sigma, scanner, survey_sigma, base=tables["locator"], given=given
+        range_sigma,
+        angle_sigma,
+        scanner,
+        survey_sigma,
+        angle_sigma_deg=angle_sigma_deg,
+        base=tables["locator"],
+        given=given,
     )
     settings = effective({"locator": cfg, "sequence": tables["sequence"]}, "locate")
     if near is not None:
@@ -105,7 +117,8 @@ def locate(
     fixed = located = 0
     # What is alive once a scan is located is frozen, out of the collector's full
     # passes over it (mast.core.heap): they were a run's slowest scans.
-    with QuietCollector() as heap:
+    with QuietCollector() as heap, work_progress("locating") as bar:
+        total = _scan_total(scan_paths, topic) if bar is not None else None
         for scan_path in scan_paths:
             scans, many, scan_topic = load_scans(
                 scan_path, topic=topic, range_min=range_min, range_max=range_max
@@ -146,5 +159,25 @@ def locate(
                     target = plot.with_name(f"{plot.stem}_{located:04d}{plot.suffix}")
                     plot_fix(scan, survey, fix, target if numbered else plot, title=label)
                 located += 1
+                if bar is not None and total != 1:
+                    bar(located, total, f"{fixed} fixed")
     if fixed == 0:
         raise typer.Exit(EXIT_NO_FIX)
+
+
+def _scan_total(paths: list[Path], topic: str | None) -> int | None:
+    """The scans the paths hold (a bag's from its index, a folder's files, one a CSV or
+    standard input), for the progress bar; None when one of them does not say (a path
+    that is no scan file is the reading's error to report, in its turn)."""
+    from mast.io.scans import scan_count
+
+    total = 0
+    for path in paths:
+        try:
+            n = 1 if path == Path("-") else scan_count(path, topic=topic)
+        except InputError:
+            n = None
+        if n is None:
+            return None
+        total += n
+    return total

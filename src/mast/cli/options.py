@@ -15,7 +15,7 @@ from contextlib import contextmanager
 from dataclasses import replace
 from enum import StrEnum
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated
+from typing import TYPE_CHECKING, Annotated, TypeVar
 
 import typer
 
@@ -26,6 +26,8 @@ from mast.cli.root import (
 from mast.core.noise import DEFAULT_ANGLE_SIGMA_RAD, DEFAULT_RANGE_SIGMA_M, DEFAULT_SURVEY_SIGMA_M
 from mast.core.scan import Scan
 from mast.errors import InputError
+
+T = TypeVar("T")
 
 if TYPE_CHECKING:
     from mast.core.beacon import Survey
@@ -131,7 +133,13 @@ TopicOption = Annotated[str | None, typer.Option("--topic", help="LaserScan topi
 RealDataOption = Annotated[
     Path, typer.Option("--data", help="Folder of real scans (../shared/data).")
 ]
-LogBeaconsOption = Annotated[int, typer.Option("--beacons", min=2, help="Beacons mounted per log.")]
+LogBeaconsOption = Annotated[
+    int, typer.Option("--beacon-count", min=2, help="Beacons mounted per log.")
+]
+#: The old ``--beacons`` of the benchmarks, a count: hidden, kept for a release (:func:`renamed`).
+OldBeaconCountOption = Annotated[
+    int | None, typer.Option("--beacons", hidden=True, help="Old name of --beacon-count.")
+]
 DesignSeedOption = Annotated[int, typer.Option("--seed", help="Seed of the designs and the noise.")]
 RangeSigmaOption = Annotated[
     float | None,
@@ -141,13 +149,18 @@ RangeSigmaOption = Annotated[
         f"[default: {default_text(DEFAULT_RANGE_SIGMA_M)}, or the --scanner's].",
     ),
 ]
-AngleSigmaOption = Annotated[
+AngleSigmaDegOption = Annotated[
     float | None,
     typer.Option(
-        "--angle-sigma",
-        help="Beam angle standard deviation, radians "
-        f"[default: {default_text(DEFAULT_ANGLE_SIGMA_RAD)}, or the --scanner's].",
+        "--angle-sigma-deg",
+        help="Beam angle standard deviation, degrees "
+        f"[default: {default_text(math.degrees(DEFAULT_ANGLE_SIGMA_RAD))}, or the --scanner's].",
     ),
+]
+#: The old ``--angle-sigma``, in radians: hidden, kept for a release (:func:`angle_sigma_rad`).
+AngleSigmaOption = Annotated[
+    float | None,
+    typer.Option("--angle-sigma", hidden=True, help="Old name: --angle-sigma-deg, in radians."),
 ]
 ScannerOption = Annotated[
     str | None,
@@ -197,31 +210,87 @@ RadiusOption = Annotated[
 ]
 AzimuthToleranceOption = Annotated[
     float,
-    typer.Option("--azimuth-tolerance", help="With an azimuth in --near: degrees allowed."),
+    typer.Option(
+        "--azimuth-tolerance",
+        help="With an azimuth in --near: how far the azimuth may be from it, degrees.",
+    ),
 ]
 
 
+#: A progress callback of a command: (done, total or None when unknown, a note shown after
+#: the count, such as "12 fixed"); what :func:`work_progress` yields on a terminal.
+WorkUpdate = Callable[[int, int | None, str], None]
+
+
 @contextmanager
-def run_progress(label: str) -> Iterator[Callable[[int, int], None] | None]:
-    """A progress line on a terminal (scans, fixes, scans per second); nothing otherwise."""
+def work_progress(
+    label: str, *, unit: str = "scans", counts: bool = True
+) -> Iterator[WorkUpdate | None]:
+    """A progress bar on standard error while a command works through a run, a bag or a
+    cloud: done of the total where it is known (a bag's message count, a folder's files,
+    a cloud's points), the time taken and the time left; None (nothing drawn) unless
+    standard error is a terminal, so that a pipe or a log file never receives it.
+
+    ``counts`` shows "done/total unit" (scans); without it a percentage (points). A new
+    total (a cloud's next pass) starts the bar and its estimate of the time left again.
+    """
     if not sys.stderr.isatty():
         yield None
         return
-    from rich.progress import Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
+    from rich.console import Console
+    from rich.progress import (
+        BarColumn,
+        MofNCompleteColumn,
+        Progress,
+        ProgressColumn,
+        SpinnerColumn,
+        TaskProgressColumn,
+        TextColumn,
+        TimeElapsedColumn,
+        TimeRemainingColumn,
+    )
 
+    amount: list[ProgressColumn] = (
+        [MofNCompleteColumn(), TextColumn(unit)] if counts else [TaskProgressColumn()]
+    )
     with Progress(
         SpinnerColumn(),
         TextColumn("{task.description}"),
-        TextColumn("{task.completed} scans, {task.fields[fixes]} fixed, {task.fields[rate]}"),
+        BarColumn(),
+        *amount,
+        TextColumn("{task.fields[note]}"),
         TimeElapsedColumn(),
+        TextColumn("left"),
+        TimeRemainingColumn(),
+        console=Console(stderr=True),
         transient=True,
     ) as bar:
-        task = bar.add_task(label, total=None, fixes=0, rate="")
+        task = bar.add_task(label, total=None, note="")
+        shown: list[int | None] = [None]
+
+        def update(done: int, total: int | None, note: str = "") -> None:
+            if total != shown[0]:
+                shown[0] = total
+                bar.reset(task, total=total, note=note)
+            bar.update(task, completed=done, note=note)
+
+        yield update
+
+
+@contextmanager
+def run_progress(label: str) -> Iterator[Callable[[int, int, int | None], None] | None]:
+    """:func:`work_progress` for a run tracked scan by scan: the callback takes (scans so
+    far, fixes so far, the run's scans or None), as :func:`mast.runs.run.track_run` calls
+    it, and shows the fixes and the scans a second beside the count."""
+    with work_progress(label) as bar:
+        if bar is None:
+            yield None
+            return
         start = time.perf_counter()
 
-        def update(scans: int, fixes: int) -> None:
+        def update(scans: int, fixes: int, total: int | None) -> None:
             rate = scans / max(time.perf_counter() - start, 1e-9)
-            bar.update(task, completed=scans, fixes=fixes, rate=f"{rate:.0f} scans/s")
+            bar(scans, total, f"{fixes} fixed, {rate:.0f} scans/s")
 
         yield update
 
@@ -249,24 +318,82 @@ def signals_as_flag() -> Iterator[tuple[threading.Event, list[int]]]:
             signal.signal(signum, handler)
 
 
+def renamed(
+    value: T | None, old_value: T | None, *, new: str, old: str, default: T | None = None
+) -> T | None:
+    """The value of an option given by its name ``new`` or, for one release more, by its
+    old name ``old`` (a hidden option of the command, forwarded here): the old name
+    works with a one-line warning on standard error; both given is bad input.
+
+    ``default`` is the new option's default, for an option that has one: the new name
+    counts as given only when its value differs from it.
+    """
+    if old_value is None:
+        return value
+    if value is not None and value != default:
+        raise InputError(f"{old} is the old name of {new} here: give {new} only")
+    typer.echo(
+        f"mast: warning: {old} is now {new} here; the old name goes in the next release",
+        err=True,
+    )
+    return old_value
+
+
+def angle_sigma_rad(degrees: float | None, radians: float | None) -> float | None:
+    """The beam angle sigma, radians, from ``--angle-sigma-deg`` (degrees) or the old
+    ``--angle-sigma`` (radians, warned of: see :func:`renamed`); None when neither is
+    given. Both is bad input; a degree value no scanner has is warned of with its unit."""
+    if degrees is not None and radians is not None:
+        raise InputError(
+            "--angle-sigma is the old name of --angle-sigma-deg (in radians): "
+            "give --angle-sigma-deg only"
+        )
+    if radians is not None:
+        typer.echo(
+            "mast: warning: --angle-sigma (radians) is now --angle-sigma-deg (degrees): "
+            f"--angle-sigma {radians:g} is --angle-sigma-deg {math.degrees(radians):.6g}; "
+            "the old name goes in the next release",
+            err=True,
+        )
+        return radians
+    if degrees is None:
+        return None
+    if not (math.isfinite(degrees) and degrees >= 0):
+        raise InputError(
+            f"--angle-sigma-deg must be a non-negative number of degrees, got {degrees}"
+        )
+    if degrees > math.degrees(MAX_PLAUSIBLE_ANGLE_SIGMA_RAD):
+        typer.echo(
+            f"mast: warning: --angle-sigma-deg {degrees:g} degrees is more than any laser "
+            "scanner has; it is in degrees (36 arc-seconds is 0.01)",
+            err=True,
+        )
+    return math.radians(degrees)
+
+
 def precisions(
     range_sigma: float | None,
     angle_sigma: float | None,
     scanner: str | None,
     survey_sigma: float | None,
     *,
+    angle_sigma_deg: float | None = None,
     base: LocatorConfig | None = None,
     given: Collection[str] = (),
 ) -> tuple[LocatorConfig, set[str]]:
     """The locator's configuration: ``base`` (a settings file's ``[locator]``, whose keys
     ``given`` names as ``locator.<key>``; defaults without one), then the precisions the
-    options give; and which precisions were left at their defaults.
+    options give; and which precisions were left at their defaults. ``angle_sigma`` is
+    the old ``--angle-sigma`` (radians), ``angle_sigma_deg`` the ``--angle-sigma-deg``
+    that replaces it (:func:`angle_sigma_rad`).
 
     A sigma no scanner or survey has gets a warning naming its unit.
     """
     from mast.pipeline.locator import LocatorConfig
     from mast.sim import scanner_model
 
+    old_angle = angle_sigma
+    angle_sigma = angle_sigma_rad(angle_sigma_deg, angle_sigma)
     cfg = LocatorConfig() if base is None else base
     defaults = {"range_sigma_m", "angle_sigma_rad", "survey_sigma_m"}
     defaults -= {key.removeprefix("locator.") for key in given}
@@ -290,7 +417,7 @@ def precisions(
     for name, value, limit, unit, example in (
         ("--range-sigma", range_sigma, MAX_PLAUSIBLE_SIGMA_M, "metres", "10 mm is 0.01"),
         ("--survey-sigma", survey_sigma, MAX_PLAUSIBLE_SIGMA_M, "metres", "3 mm is 0.003"),
-        ("--angle-sigma", angle_sigma, MAX_PLAUSIBLE_ANGLE_SIGMA_RAD, "radians", "0.1° is 0.0017"),
+        ("--angle-sigma", old_angle, MAX_PLAUSIBLE_ANGLE_SIGMA_RAD, "radians", "0.1° is 0.0017"),
     ):
         if value is not None and value > limit:
             typer.echo(
@@ -316,17 +443,15 @@ def warn_loose_edges(survey: Survey, default_m: float) -> None:
 
 
 @contextmanager
-def cell_progress(label: str) -> Iterator[Callable[[int, int], None] | None]:
-    """A progress bar over cells on a terminal; nothing otherwise."""
-    if not sys.stderr.isatty():
-        yield None
-        return
-    from rich.progress import Progress
-
-    with Progress(transient=True) as bar:
-        task = bar.add_task(label, total=None)
+def cell_progress(label: str, unit: str = "cells") -> Iterator[Callable[[int, int], None] | None]:
+    """A progress bar over cells (``mast plan``) or inputs (``mast bench fuzz``) on a
+    terminal, with the time left (:func:`work_progress`); nothing otherwise."""
+    with work_progress(label, unit=unit) as bar:
+        if bar is None:
+            yield None
+            return
 
         def update(done: int, total: int) -> None:
-            bar.update(task, completed=done, total=total)
+            bar(done, total, "")
 
         yield update

@@ -9,14 +9,17 @@ from typing import Annotated
 import typer
 
 from mast.cli.options import (
+    AngleSigmaDegOption,
     AngleSigmaOption,
     BeaconsOption,
     CrsOption,
     ForceOption,
     RangeSigmaOption,
     SurveySigmaOption,
+    angle_sigma_rad,
     cell_progress,
     grid_crs,
+    renamed,
 )
 from mast.cli.root import (
     app,
@@ -27,17 +30,18 @@ from mast.io.outputs import check_output_folder
 
 @app.command()
 def plan(
-    drift: Annotated[
-        Path,
-        typer.Option(
-            "--drift",
-            help="The drift's walls: a CSV wall,vertex,easting,northing or a DXF of polylines.",
-        ),
-    ],
     beacons: BeaconsOption,
     out: Annotated[
         Path, typer.Option("--out", help="Folder for the outputs (created if missing).")
     ],
+    walls: Annotated[
+        Path | None,
+        typer.Option(
+            "--walls",
+            help="The drift's walls: a CSV wall,vertex,easting,northing or a DXF of polylines "
+            "[required].",
+        ),
+    ] = None,
     scanner: Annotated[
         str | None,
         typer.Option("--scanner", help="Named scanner model (see mast scanners)."),
@@ -51,7 +55,7 @@ def plan(
         typer.Option("--resolution", help="Beam spacing, degrees [default: the --scanner's]."),
     ] = None,
     range_sigma: RangeSigmaOption = None,
-    angle_sigma: AngleSigmaOption = None,
+    angle_sigma_deg: AngleSigmaDegOption = None,
     range_max: Annotated[
         float | None,
         typer.Option(
@@ -113,16 +117,23 @@ def plan(
     seed: Annotated[
         int, typer.Option("--seed", help="Seed of the noise and the rock texture.")
     ] = 0,
-    check: Annotated[
+    dry_run: Annotated[
         bool,
         typer.Option(
-            "--check",
-            help="Only read and check the drift and the survey, and say how large "
+            "--dry-run",
+            help="Only read and check the walls and the survey, and say how large "
             "the job is; write nothing.",
         ),
     ] = False,
     crs: CrsOption = None,
     force: ForceOption = False,
+    old_drift: Annotated[
+        Path | None, typer.Option("--drift", hidden=True, help="Old name of --walls.")
+    ] = None,
+    old_check: Annotated[
+        bool, typer.Option("--check", hidden=True, help="Old name of --dry-run.")
+    ] = False,
+    angle_sigma: AngleSigmaOption = None,
 ) -> None:
     """Predict where along a drift a scanner gets a fix, how precise, and where beacons help.
 
@@ -131,12 +142,20 @@ def plan(
     survey with the new beacons, for mast plan and mast locate); --crs names the grid
     in summary.json.
     Exit status 0, 2 for bad input, 4 when an output cannot be written.
+
+    \b
+    Example: mast plan --walls examples/plan/drift.csv -b examples/plan/beacons.csv \\
+      --scanner lms1xx-0.25 --out plan/
     """
     from mast.io import read_survey
     from mast.plan.predict import PlanSettings
     from mast.plan.run import run_plan
     from mast.sim.scanner import scanner_for
 
+    drift = renamed(walls, old_drift, new="--walls", old="--drift")
+    if drift is None:
+        raise InputError("give the drift's walls with --walls (a CSV or a DXF)")
+    check = bool(renamed(dry_run or None, old_check or None, new="--dry-run", old="--check"))
     for name, value in (
         ("--step", step),
         ("--across", across),
@@ -156,7 +175,7 @@ def plan(
         resolution_deg=resolution,
         range_sigma_m=range_sigma,
         range_max_m=range_max,
-        angle_sigma_rad=angle_sigma,
+        angle_sigma_rad=angle_sigma_rad(angle_sigma_deg, angle_sigma),
     )
     settings = PlanSettings(
         step_m=step,
@@ -174,11 +193,11 @@ def plan(
     if check:
         from mast.io.drift import read_drift
 
-        walls = read_drift(drift, layers=tuple(layer or ()))
-        along = walls.length_m / 2  # two walls to a drift
+        outline = read_drift(drift, layers=tuple(layer or ()))
+        along = outline.length_m / 2  # two walls to a drift
         stations = math.ceil(along / settings.step_m) + 1
         typer.echo(
-            f"{drift}: {len(walls.walls)} walls, {walls.length_m:.0f} m of wall (about "
+            f"{drift}: {len(outline.walls)} walls, {outline.length_m:.0f} m of wall (about "
             f"{along:.0f} m of drift, {stations} stations); {beacons}: {len(survey)} beacons"
         )
         return

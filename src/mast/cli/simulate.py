@@ -10,6 +10,7 @@ import typer
 
 from mast.cli.options import (
     SimulatedFormat,
+    renamed,
 )
 from mast.cli.root import (
     app,
@@ -28,7 +29,8 @@ def simulate(
             help=(
                 "Scenario name: paper, random, drive (a vehicle driving a drift at the "
                 "scanner's rate, beacons in stretches with 30-60 m gaps between; streamed), "
-                "or cloud (a 3D SLAM point cloud of a drift with beacons, for mast georef)."
+                "cloud (a 3D SLAM point cloud of a drift with beacons, for mast georef) or "
+                "tls (tripod laser scans of a drift already in the grid, for mast survey-in)."
             ),
         ),
     ] = "paper",
@@ -36,18 +38,19 @@ def simulate(
     fmt: Annotated[
         SimulatedFormat,
         typer.Option(
-            "--format",
+            "--scan-format",
             help=(
-                "csv: one file per scan; bag: ROS 1 bag; "
+                "How the scans are written: csv: one file per scan; bag: ROS 1 bag; "
                 "ros2: ROS 2 sqlite3 bag; mcap: ROS 2 MCAP bag."
             ),
         ),
     ] = SimulatedFormat.csv,
-    noise: Annotated[
+    noisy: Annotated[
         bool | None,
         typer.Option(
-            "--noise/--no-noise",
-            help="Add realistic range noise (default: none for paper and random, 12 mm for drive).",
+            "--noisy/--noise-free",
+            help="Add realistic noise: 12 mm range noise to scans, 10 mm to a cloud's points "
+            "(default: noise-free for paper and random, noisy for drive and cloud).",
             show_default=False,
         ),
     ] = None,
@@ -77,7 +80,7 @@ def simulate(
             "--drift",
             min=0.0,
             max=0.2,
-            help="cloud: SLAM drift, fraction of distance (0.01 = 1 %).",
+            help="cloud: the SLAM's drift, a fraction of the distance travelled (0.01 = 1 %).",
         ),
     ] = None,
     density: Annotated[
@@ -88,11 +91,31 @@ def simulate(
             help="cloud: points per square metre (default 2000; georef needs about 1200).",
         ),
     ] = None,
+    old_format: Annotated[
+        SimulatedFormat | None,
+        typer.Option("--format", hidden=True, help="Old name of --scan-format."),
+    ] = None,
+    old_noise: Annotated[
+        bool | None,
+        typer.Option("--noise/--no-noise", hidden=True, help="Old name of --noisy/--noise-free."),
+    ] = None,
 ) -> None:
     """Simulate a scenario: per scene, beacons.csv, the scans and truth.csv; or, with
     --scenario cloud, a 3D SLAM cloud of a drift (cloud.laz, beacons.csv with elevations,
-    trajectory.tum, truth.json)."""
+    trajectory.tum, truth.json); or, with --scenario tls, tripod scans of a drift in the
+    grid (scans.e57, designs.csv, beacons.csv, truth.json). The folder layout:
+    docs/simulate.md.
+
+    \b
+    Example: mast simulate --scenario random --seed 7 --scan-format bag --out sim-random/
+    """
     from mast.sim import build_scenario, write_scenario
+
+    written_as = renamed(
+        fmt, old_format, new="--scan-format", old="--format", default=SimulatedFormat.csv
+    )
+    assert written_as is not None
+    noise = renamed(noisy, old_noise, new="--noisy/--noise-free", old="--noise/--no-noise")
 
     options = {k: v for k, v in (("scans", scans), ("rate_hz", rate)) if v is not None}
     cloud_options = {
@@ -112,6 +135,17 @@ def simulate(
             "--length, --beacon-count, --drift and --density apply to --scenario cloud"
         )
     check_output_folder(out)
+    if scenario == "tls":
+        from mast.sim.tls import TlsOptions, simulate_tls
+
+        # a phase-based scanner's 1.5 mm unless --noise-free
+        tls = simulate_tls(out, seed, TlsOptions(range_noise_m=0.0 if noise is False else 0.0015))
+        typer.echo(
+            f"{tls.e57}: {tls.points} points from {len(tls.stations)} stations, "
+            f"{len(tls.beacons)} beacons; designs {tls.designs.name}, survey "
+            f"{tls.survey.name}, truth {tls.truth.name}"
+        )
+        return
     if scenario == "cloud":
         from mast.sim.cloud import CloudOptions, simulate_cloud
 
@@ -126,7 +160,7 @@ def simulate(
         )
         return
     scenes = build_scenario(scenario, seed, noise=noise, **options)
-    written = write_scenario(scenes, out, fmt=fmt.value, scenario=scenario, seed=seed)
+    written = write_scenario(scenes, out, fmt=written_as.value, scenario=scenario, seed=seed)
     for w in written:
         typer.echo(f"{w.folder}: {w.count} scan(s), survey {w.survey.name}, truth {w.truth.name}")
     typer.echo(f"wrote {sum(w.count for w in written)} scan(s) in {len(written)} scene(s) to {out}")

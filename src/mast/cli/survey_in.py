@@ -7,7 +7,7 @@ from typing import Annotated
 
 import typer
 
-from mast.cli.options import CrsOption, ForceOption, grid_crs
+from mast.cli.options import CrsOption, ForceOption, grid_crs, work_progress
 from mast.cli.root import EXIT_NO_FIX, app
 from mast.errors import InputError
 from mast.io.outputs import check_output_folder
@@ -63,6 +63,10 @@ def survey_in(
 
     Exit status 0 with beacons surveyed, 3 when no beacon is found, 2 for bad input, 4
     when an output cannot be written.
+
+    \b
+    Example: mast simulate --scenario tls --out tls && \\
+      mast survey-in tls/scans.e57 --designs tls/designs.csv --out tls-survey
     """
     from mast.cloud.survey_in import SurveyInConfig
     from mast.cloud.survey_in import survey_in as run
@@ -78,7 +82,14 @@ def survey_in(
     the_designs = read_survey(designs, apart=False)
     before = read_survey(previous) if previous is not None else None
     check_output_folder(out, force=force)
-    result = run(clouds, the_designs, config, previous=before)
+    with work_progress("survey-in", counts=False) as bar:
+        result = run(
+            clouds,
+            the_designs,
+            config,
+            previous=before,
+            progress=None if bar is None else lambda stage, done, total: bar(done, total, stage),
+        )
     files = write_survey_in(result, out, clouds=clouds, designs_file=designs, crs=grid)
     edge_on = len(result.edge_on)
     typer.echo(

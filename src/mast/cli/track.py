@@ -11,6 +11,7 @@ from typing import Annotated
 import typer
 
 from mast.cli.options import (
+    AngleSigmaDegOption,
     AngleSigmaOption,
     BeaconsOption,
     CrsOption,
@@ -54,7 +55,7 @@ def track(
     ],
     topic: TopicOption = None,
     range_sigma: RangeSigmaOption = None,
-    angle_sigma: AngleSigmaOption = None,
+    angle_sigma_deg: AngleSigmaDegOption = None,
     scanner: ScannerOption = None,
     survey_sigma: SurveySigmaOption = None,
     config: ConfigOption = None,
@@ -84,6 +85,7 @@ def track(
     ] = None,
     crs: CrsOption = None,
     force: ForceOption = False,
+    angle_sigma: AngleSigmaOption = None,
 ) -> None:
     """Place every scan of a run in the mine grid: fixes from beacons, odometry between
     them, smoothed in a pose graph; writes fixes.jsonl, trajectory.csv and .tum, map.las,
@@ -96,6 +98,9 @@ def track(
     Exit status 0 when scans were placed (in every run), 3 when none could be, 2 for bad
     input, 4 when an output cannot be written, 130 when interrupted (the files then hold
     the scans read until then).
+
+    \b
+    Example: mast track examples/run.bag -b examples/beacons.csv --scanner lms1xx-0.25 --out run/
     """
     from mast.io import read_survey
     from mast.report.record import ReportInputs, survey_weighing
@@ -104,7 +109,13 @@ def track(
 
     tables, keys_given = read_config(config, "track")
     cfg, defaults = precisions(
-        range_sigma, angle_sigma, scanner, survey_sigma, base=tables["locator"], given=keys_given
+        range_sigma,
+        angle_sigma,
+        scanner,
+        survey_sigma,
+        angle_sigma_deg=angle_sigma_deg,
+        base=tables["locator"],
+        given=keys_given,
     )
     run_config = replace(
         tables["track"],

@@ -51,6 +51,7 @@ from mast.cloud.detect import (
     DetectConfig,
     Panel,
     PlanPieces,
+    Progress,
     beacon_top,
     find_candidates,
     panel_from_points,
@@ -237,14 +238,17 @@ def survey_in(
     config: SurveyInConfig = SurveyInConfig(),
     *,
     previous: Survey | None = None,
+    progress: Progress | None = None,
 ) -> SurveyIn:
-    """Survey in the beacons the clouds at ``paths`` show (see the module)."""
+    """Survey in the beacons the clouds at ``paths`` show (see the module); ``progress``
+    is told of each pass over the points (:data:`mast.cloud.detect.Progress`: the pass,
+    points done, points in all its passes)."""
     if not paths:
         raise InputError("no cloud given")
     clouds = [open_cloud(p) for p in paths]
     cloud: Cloud = clouds[0] if len(clouds) == 1 else ChainedCloud(clouds)
     detect = replace(config.detect, noise_m=config.noise_m)
-    cand = find_candidates(cloud, detect)
+    cand = find_candidates(cloud, detect, progress)
     pieces = plan_pieces(cand, detect)
     index = SurveyIndex.from_survey(designs, reach_m=5.0)
     for group in index.designs:

@@ -26,6 +26,7 @@ __all__ = [
     "ScanReading",
     "ScanRun",
     "open_scans",
+    "scan_count",
     "scan_format",
 ]
 
@@ -46,20 +47,27 @@ class ScanReading:
     on_skip: Callable[[str], None] | None = None
 
 
+def _no_topic(_path: Path, _topic: str | None) -> None:
+    return None
+
+
+def _one(_path: Path, _topic: str | None) -> int:
+    return 1
+
+
 @dataclass(frozen=True, slots=True)
 class ScanFormat:
     """A kind of scan file: its name, whether it claims a path, whether it holds a run
-    (many scans) or one scan, the topic a path's scans come from, and its reader."""
+    (many scans) or one scan, the topic a path's scans come from, its reader, and how
+    many scans a path holds without reading them (None when that is not known: a
+    progress bar's total, never a limit)."""
 
     name: str
     claims: Callable[[Path], bool]
     sequence: bool
     topic_of: Callable[[Path, str | None], str | None]
     read: Callable[[Path, ScanReading], Generator[Scan, None, None]]
-
-
-def _no_topic(_path: Path, _topic: str | None) -> None:
-    return None
+    count: Callable[[Path, str | None], int | None] = _one
 
 
 def _is_scan_csv(path: Path) -> bool:
@@ -122,6 +130,10 @@ def _folder_read(path: Path, how: ScanReading) -> Generator[Scan, None, None]:
         yield scan.with_range_limits(how.range_min_m, how.range_max_m)
 
 
+def _folder_count(path: Path, _topic: str | None) -> int:
+    return len(_scan_csvs(path))
+
+
 def _bag_claims(path: Path) -> bool:
     from mast.io.bags import bag_kind
 
@@ -135,6 +147,19 @@ def _bag_topic(path: Path, topic: str | None) -> str | None:
     return laserscan_topic(path, topic)
 
 
+def _bag_count(path: Path, topic: str | None) -> int | None:
+    """The LaserScan messages of the topic read, from the bag's index or metadata (no
+    message is read); None for a bag whose index does not say (a damaged one)."""
+    from mast.io.bags import laserscan_topic, list_topics
+
+    try:
+        name = laserscan_topic(path, topic)
+        n = sum(t.count for t in list_topics(path) if t.topic == name)
+    except InputError:
+        return None
+    return n or None
+
+
 def _bag_read(path: Path, how: ScanReading) -> Generator[Scan, None, None]:
     from mast.io.bags import read_laserscans
 
@@ -146,8 +171,15 @@ def _bag_read(path: Path, how: ScanReading) -> Generator[Scan, None, None]:
 #: is left and says why a path is none of them).
 FORMATS: tuple[ScanFormat, ...] = (
     ScanFormat("scan CSV", _csv_claims, False, _no_topic, _csv_read),
-    ScanFormat("folder of scan CSVs", _folder_claims, True, _no_topic, _folder_read),
-    ScanFormat("ROS bag (ROS 1, ROS 2 folder or MCAP)", _bag_claims, True, _bag_topic, _bag_read),
+    ScanFormat("folder of scan CSVs", _folder_claims, True, _no_topic, _folder_read, _folder_count),
+    ScanFormat(
+        "ROS bag (ROS 1, ROS 2 folder or MCAP)",
+        _bag_claims,
+        True,
+        _bag_topic,
+        _bag_read,
+        _bag_count,
+    ),
 )
 
 
@@ -178,6 +210,12 @@ class ScanRun:
         bag)."""
         return self.format.topic_of(self.path, self.asked_topic)
 
+    @property
+    def count(self) -> int | None:
+        """How many scans there are, from the bag's index or the folder's files (read
+        when asked), or None when unknown (:func:`scan_count`)."""
+        return self.format.count(self.path, self.asked_topic)
+
 
 def open_scans(
     path: Path,
@@ -195,3 +233,12 @@ def open_scans(
     fmt = scan_format(path, what=what)
     how = ScanReading(topic, csv_hz, range_min_m, range_max_m, on_skip)
     return ScanRun(path, fmt, fmt.read(path, how), topic)
+
+
+def scan_count(path: Path, *, topic: str | None = None) -> int | None:
+    """How many scans ``path`` holds, without reading them: 1 for a scan CSV, the scan
+    CSVs of a folder, a bag's LaserScan messages on ``topic`` from its index or
+    metadata; None when that is not known. For a progress bar's total, never a limit:
+    a damaged bag may give fewer."""
+    fmt = scan_format(path)
+    return fmt.count(path, topic)

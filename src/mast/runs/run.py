@@ -99,7 +99,7 @@ def track_run(
     inputs: ReportInputs | None = None,
     range_limits: tuple[float | None, float | None] = (None, None),
     warn: Callable[[str], object] = print,
-    progress: Callable[[int, int], object] | None = None,
+    progress: Callable[[int, int, int | None], object] | None = None,
     interrupt: threading.Event | None = None,
 ) -> RunResult:
     """Track every LaserScan of ``bag`` and write the run's files into ``out``.
@@ -123,7 +123,9 @@ def track_run(
     warn : callable
         Told about every message skipped and where a damaged bag stopped.
     progress : callable, optional
-        Called with (scans so far, fixes so far) after each scan.
+        Called with (scans so far, fixes so far, the run's scans) after each scan; the
+        run's scans come from the bag's index or the folder's files, None when unknown
+        (:func:`mast.io.scans.scan_count`).
     interrupt : threading.Event, optional
         Set (by a signal handler) to end the reading between two scans: a signal then
         never lands inside a compiled kernel or a half-written record.
@@ -158,6 +160,7 @@ def track_run(
     # The caller may have resolved the topic already (opening a bag is not free).
     name = inputs.topic if inputs.topic is not None else fmt.topic_of(bag, topic)
     inputs = replace(inputs, scan_file=inputs.scan_file or str(bag), topic=name)
+    total = fmt.count(bag, topic) if progress is not None else None
     summary = RunSummary(run=str(bag), topic=name)
     result = RunResult(summary, Trajectory(), out)
 
@@ -221,7 +224,7 @@ def track_run(
                         walls[i] = _walls(segmentation_of(step.fix, scan).segments)
                         last_wall = pose.position
                     if progress is not None:
-                        progress(summary.scans, summary.fixes)
+                        progress(summary.scans, summary.fixes, total)
             except KeyboardInterrupt:  # a caller that left Ctrl-C to Python
                 result.interrupted = True
     except OSError as err:

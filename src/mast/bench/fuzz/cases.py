@@ -91,8 +91,8 @@ def fuzz_cases(seeds: Seeds, work: Path, n: int, seed: int) -> Iterator[FuzzCase
             target = d / src.name
             target.write_bytes(data)
             argv = (
-                "plan", "--drift", str(target), "--beacons", survey, "--out", str(d / "plan"),
-                "--scanner", "lms1xx-0.5", "--check",
+                "plan", "--walls", str(target), "--beacons", survey, "--out", str(d / "plan"),
+                "--scanner", "lms1xx-0.5", "--dry-run",
             )  # fmt: skip
             yield FuzzCase(fam, what, argv, None, frozenset({0, 2}))
         elif fam == "output":
@@ -193,7 +193,7 @@ def _disk_full_case(seeds: Seeds, d: Path, rng: np.random.Generator) -> FuzzCase
     elif kind == 1:
         argv, outputs = ("simulate", "--out", str(d / "sim")), ()
     elif kind == 2:
-        argv, outputs = ("simulate", "--out", str(d / "sim"), "--format", "mcap"), ()
+        argv, outputs = ("simulate", "--out", str(d / "sim"), "--scan-format", "mcap"), ()
     else:
         argv = ("track", str(seeds.bag1), "-b", survey, "--out", str(d / "track"))
         outputs = ()
