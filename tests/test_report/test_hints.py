@@ -35,9 +35,10 @@ def test_a_range_sigma_below_the_scatter_earns_the_sigma_that_fixes(noisy: Scene
     hints = _run(noisy, noisy.survey, LocatorConfig(range_sigma_m=0.010))
     assert hints.rejected >= 1
     (line,) = hints.lines()
-    m = re.search(r"with --range-sigma (\S+) (\d+) of the (\d+) refused fix", line)
+    m = re.search(r"with --range-sigma (\S+) (all (\d+)|(\d+) of the (\d+)) fix:", line)
     assert m is not None, line
-    sigma, fixed, tried = float(m[1]), int(m[2]), int(m[3])
+    sigma = float(m[1])
+    fixed, tried = (int(m[3]), int(m[3])) if m[3] else (int(m[4]), int(m[5]))
     assert sigma == pytest.approx(0.012, abs=0.0011)
     assert 2 * fixed >= tried == hints.rejected
     assert f"{hints.rejected} of {hints.scans} scans were refused" in line

@@ -83,6 +83,9 @@ def locate(
 
     Exit status 0 when a scan is fixed (with several scans or a bag: at least
     one), 3 when none is, 2 for bad input, 4 when an output cannot be written.
+    Scans refused in a way a setting explains end with a one-line hint on stderr
+    (a range sigma below the returns' scatter; a survey with easting and northing
+    exchanged).
 
     \b
     Example: mast locate examples/scan.csv -b examples/beacons.csv --scanner lms1xx-0.25
@@ -91,6 +94,7 @@ def locate(
 
     from mast.io import read_survey
     from mast.pipeline.locator import SequenceLocator
+    from mast.report.hints import Hints
     from mast.report.record import ReportInputs, fix_record, fix_text, survey_weighing
 
     tables, given = read_config(config, "locate")
@@ -115,6 +119,7 @@ def locate(
     warn_loose_edges(survey, cfg.survey_sigma_m)
     numbered = len(scan_paths) > 1
     fixed = located = 0
+    hints = Hints(survey, cfg)
     # What is alive once a scan is located is frozen, out of the collector's full
     # passes over it (mast.core.heap): they were a run's slowest scans.
     with QuietCollector() as heap, work_progress("locating") as bar:
@@ -141,6 +146,7 @@ def locate(
                 step = tracker.step(scan)
                 fix = step.fix
                 fixed += fix.ok
+                hints.add(scan, fix)
                 label = f"{source}#{i}" if many else source
                 if fmt is OutputFormat.json:
                     record = fix_record(
@@ -161,6 +167,8 @@ def locate(
                 located += 1
                 if bar is not None and total != 1:
                     bar(located, total, f"{fixed} fixed")
+    for line in hints.lines():
+        typer.echo(f"mast: {line}", err=True)
     if fixed == 0:
         raise typer.Exit(EXIT_NO_FIX)
 

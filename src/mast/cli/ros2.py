@@ -12,6 +12,7 @@ import typer
 
 from mast.cli.live import run_stream, stream_setup
 from mast.cli.options import (
+    AngleSigmaDegOption,
     AngleSigmaOption,
     AzimuthToleranceOption,
     BeaconsOption,
@@ -67,7 +68,7 @@ def ros2(
         ),
     ] = True,
     range_sigma: RangeSigmaOption = None,
-    angle_sigma: AngleSigmaOption = None,
+    angle_sigma_deg: AngleSigmaDegOption = None,
     scanner: ScannerOption = None,
     survey_sigma: SurveySigmaOption = None,
     config: ConfigOption = None,
@@ -91,6 +92,7 @@ def ros2(
         typer.Option("--max-scans", min=1, help="End after this many scans received."),
     ] = None,
     crs: CrsOption = None,
+    angle_sigma: AngleSigmaOption = None,
 ) -> None:
     """Locate a ROS 2 robot's laser scans as they arrive, over DDS (Eclipse Cyclone DDS;
     no ROS installation needed, wire-compatible with every ROS 2 middleware).
@@ -109,7 +111,7 @@ def ros2(
     scan or --max-scans (status 0; 3 when no scan was fixed), or standard output
     closed (status 0). Status 2 on bad input (a domain that cannot be joined).
 
-    Example: mast ros2 -b beacons.csv --scanner tim571 --scan-topic /scan --frame map
+    Example: mast ros2 -b examples/beacons.csv --scanner lms1xx-0.25 --frame map
     """
     from mast.live.ros2 import Ros2Publisher, Ros2Source, participant
     from mast.live.stream import SourceOptions
@@ -122,6 +124,7 @@ def ros2(
         beacons,
         config=config,
         precision=(range_sigma, angle_sigma, scanner, survey_sigma),
+        angle_sigma_deg=angle_sigma_deg,
         near=(near, radius, azimuth_tolerance),
         range_limits=(range_min, range_max),
         crs=crs,

@@ -197,6 +197,8 @@ def track(
         + f" in {s.elapsed_s:.1f} s ({s.scans / max(s.elapsed_s, 1e-9):.0f} scans/s); "
         f"files in {out}"
     )
+    for line in result.hints:
+        typer.echo(f"mast: {line}", err=True)
     if s.gaps > s.scans // 2:
         typer.echo(
             f"mast: hint: {s.gaps} of {s.scans} scans came more than "

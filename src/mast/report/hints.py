@@ -94,12 +94,15 @@ class Hints:
         if 2 * fixed < len(self._rejected):
             return None  # the scatter does not explain the refusals
         tried = len(self._rejected)
+        if tried < self.rejected:
+            again_text = f"{fixed} of {tried} of them tried fix"
+        else:
+            again_text = f"all {tried} fix" if fixed == tried else f"{fixed} of the {tried} fix"
         return (
             f"hint: {self.rejected} of {self.scans} scans were refused by the global test; "
             f"their returns scatter about {1e3 * sigma * scale:.1f} mm where --range-sigma is "
-            f"{1e3 * sigma:g} mm, and with --range-sigma {fitted:g} {fixed} of "
-            f"{'the' if tried == self.rejected else f'{tried} of the'} {tried} refused fix: "
-            "give the scanner's noise (--range-sigma, or --scanner; `mast scanners` lists them)"
+            f"{1e3 * sigma:g} mm, and with --range-sigma {fitted:g} {again_text}: give the "
+            "scanner's noise (--range-sigma, or --scanner; `mast scanners` lists them)"
         )
 
     def _swapped(self) -> str | None:

@@ -28,6 +28,7 @@ from mast.core.trajectory import Trajectory
 from mast.errors import OutputError
 from mast.io.atomic import atomic_open
 from mast.pipeline.locator import segmentation_of
+from mast.report.hints import Hints
 from mast.report.record import ReportInputs, fix_record
 from mast.runs.model import RunSummary
 from mast.runs.track import Node, RunTracker, Smoother, TrackConfig
@@ -79,6 +80,8 @@ class RunResult:
     out: Path
     interrupted: bool = False
     warnings: list[str] = field(default_factory=list)
+    hints: list[str] = field(default_factory=list)
+    """What the run's refusals point to (:class:`mast.report.hints.Hints`), one line each."""
 
 
 def _walls(fix_segments: Any) -> NDArray[np.float64]:
@@ -167,6 +170,7 @@ def track_run(
     from mast.runs.outputs import MAX_TABLE_ROWS
 
     tracker = RunTracker(survey, cfg)
+    hints = Hints(survey, cfg.locator)
     # Each scan is placed for good once enough fixes after it are known: memory
     # holds the longest stretch between fixes, not the run.
     smoother = Smoother(cfg)
@@ -188,6 +192,7 @@ def track_run(
                         result.interrupted = True
                         break
                     step = tracker.step(i, scan)
+                    hints.add(scan, step.fix)
                     rec = fix_record(step.fix, source=str(bag), index=i, scan=scan, inputs=inputs)
                     fh.write(json.dumps(rec) + "\n")
                     exports.add(rec)
@@ -234,6 +239,7 @@ def track_run(
     for p in smoother.finish():
         placed.append(p)
     summary.placed = len(placed)
+    result.hints = hints.lines()
     try:
         write_trajectory_csv(out / "trajectory.csv", placed)
         write_trajectory_tum(out / "trajectory.tum", placed)
