@@ -358,6 +358,33 @@ def test_a_malformed_scan_is_skipped_counted_and_named_once(drive: Drive, domain
     assert json.loads(fixes.samples[0].data)["crs"] == printed[0]["crs"]
 
 
+def test_a_bag_published_by_mast_emulate_ros2_is_located(drive: Drive, domain: int) -> None:
+    node = _start(drive, domain, "--max-scans", "20")
+    try:
+        assert node.proc.stderr is not None
+        assert node.proc.stderr.readline().startswith(b"mast: listening on /scan")
+        played = subprocess.run(
+            [
+                *(sys.executable, "-m", "mast", "emulate", "ros2", "--from", str(drive.bag)),
+                *("--domain-id", str(domain), "--hz", "25"),
+            ],
+            capture_output=True,
+            text=True,
+            timeout=HANG_S,
+            check=False,
+        )
+        printed, text = node.finish()
+    finally:
+        node.stop()
+    assert played.returncode == 0, played.stderr
+    assert played.stderr.strip().splitlines()[-1] == f"mast: published {drive.scans} scans"
+    assert node.proc.returncode == 0, text
+    assert len(printed) == 20 - int(text.split(" dropped")[0].rsplit(" ", 1)[-1])
+    stamps = {s.stamp_ns for s in read_run(drive.bag)}
+    assert {r["stamp_ns"] for r in printed} <= stamps  # stamps as recorded
+    assert any(r["status"] == "fix" for r in printed)
+
+
 def test_a_driver_that_restarts_is_taken_up_again(drive: Drive, domain: int) -> None:
     dp = DomainParticipant(domain)
     node = _start(drive, domain)

@@ -17,7 +17,11 @@ from mast.errors import InputError
 @app.command()
 def emulate(
     kind: Annotated[
-        str, typer.Argument(metavar="KIND", help="sick (CoLa-A) or hokuyo (SCIP 2.0).")
+        str,
+        typer.Argument(
+            metavar="KIND",
+            help="sick (CoLa-A), hokuyo (SCIP 2.0) or ros2 (a LaserScan topic over DDS).",
+        ),
     ],
     run: Annotated[
         Path,
@@ -43,9 +47,22 @@ def emulate(
         int | None,
         typer.Option("--corrupt-every", min=1, help="Fault: every N-th telegram malformed."),
     ] = None,
+    scan_topic: Annotated[
+        str, typer.Option("--scan-topic", help="ros2: the LaserScan topic to publish on.")
+    ] = "/scan",
+    domain_id: Annotated[
+        int | None,
+        typer.Option(
+            "--domain-id",
+            help="ros2: the DDS domain [default: $ROS_DOMAIN_ID, else 0].",
+            show_default=False,
+        ),
+    ] = None,
 ) -> None:
     """Serve a recorded or simulated run as a SICK LMS1xx (CoLa-A) or Hokuyo UST (SCIP 2.0)
-    scanner on TCP, at the run's rate, for `mast live` (tests, demos, benchmarks).
+    scanner on TCP, at the run's rate, for `mast live` (tests, demos, benchmarks); or,
+    as ros2, publish it on a ROS 2 LaserScan topic over DDS as a robot's driver does
+    (best effort, stamps as recorded), for `mast ros2`.
 
     Prints the address served on, then serves until every scan is sent. Exit status 0
     when the run was served, 2 for bad input, 130 when interrupted.
@@ -58,6 +75,11 @@ def emulate(
 
     if hz is not None and not (math.isfinite(hz) and hz > 0):
         raise InputError(f"--hz must be a positive number, got {hz}")
+    if kind == "ros2":
+        if drop_after or stall_after or corrupt_every:
+            raise InputError("ros2: the faults (--drop-after, ...) are TCP scanners' own")
+        _publish(run, scan_topic, domain_id, hz)
+        return
     faults = EmulatorFaults(
         drop_after=drop_after, stall_after=stall_after, corrupt_every=corrupt_every
     )
@@ -69,3 +91,20 @@ def emulate(
     if emulator.error is not None:
         raise emulator.error
     typer.echo(f"mast: served {emulator.sent} scans", err=True)
+
+
+def _publish(run: Path, topic: str, domain_id: int | None, hz: float | None) -> None:
+    """``mast emulate ros2``: the run's scans published on ``topic`` at its rate."""
+    from mast.cli.options import signals_as_flag
+    from mast.live.ros2 import ScanPublisher, participant, play, ros2_domain
+    from mast.live.sources import read_run
+
+    domain = ros2_domain() if domain_id is None else domain_id
+    scans = read_run(run)
+    publisher = ScanPublisher(participant(domain), topic)
+    typer.echo(f"mast: publishing {run} on {topic} in DDS domain {domain}", err=True)
+    with signals_as_flag() as (interrupt, caught):
+        sent = play(scans, publisher, stop=interrupt, hz=hz)
+    typer.echo(f"mast: published {sent} scans", err=True)
+    if interrupt.is_set():
+        raise typer.Exit(128 + caught[0])

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import contextlib
 import math
-import os
 from typing import TYPE_CHECKING, Annotated
 
 import typer
@@ -31,11 +30,6 @@ from mast.errors import InputError
 
 if TYPE_CHECKING:
     from mast.live.session import Sink
-
-
-def _domain_default() -> int:
-    text = os.environ.get("ROS_DOMAIN_ID", "").strip()
-    return int(text) if text.isdigit() else 0
 
 
 @app.command()
@@ -113,10 +107,10 @@ def ros2(
 
     Example: mast ros2 -b examples/beacons.csv --scanner lms1xx-0.25 --frame map
     """
-    from mast.live.ros2 import Ros2Publisher, Ros2Source, participant
+    from mast.live.ros2 import Ros2Publisher, Ros2Source, participant, ros2_domain
     from mast.live.stream import SourceOptions
 
-    domain = _domain_default() if domain_id is None else domain_id
+    domain = ros2_domain() if domain_id is None else domain_id
     url = f"ros2://{scan_topic}?domain={domain}"
     setup = stream_setup(
         "ros2",

@@ -23,9 +23,10 @@ network configuration from ``CYCLONEDDS_URI`` as usual.
 from __future__ import annotations
 
 import json
+import os
 import threading
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from typing import Any
 
 from cyclonedds.core import Policy, Qos, ReadCondition, SampleState, WaitSet
@@ -51,7 +52,15 @@ from mast.live.ros2_msgs import (
 from mast.live.stream import Received, Source, SourceOptions
 from mast.pipeline.locator import Fix
 
-__all__ = ["LOOPBACK_CONFIG", "Ros2Publisher", "Ros2Source", "ScanPublisher", "participant"]
+__all__ = [
+    "LOOPBACK_CONFIG",
+    "Ros2Publisher",
+    "Ros2Source",
+    "ScanPublisher",
+    "participant",
+    "play",
+    "ros2_domain",
+]
 
 #: ROS 2's domain ids: 0-232 (the port mapping of RTPS leaves no room above).
 MAX_DOMAIN_ID = 232
@@ -70,6 +79,12 @@ LOOPBACK_CONFIG = (
 # Writers use plain CDR (XCDR1), as every ROS 2 middleware does; readers take either.
 _XCDR1 = Policy.DataRepresentation(use_cdrv0_representation=True)
 _EITHER = Policy.DataRepresentation(use_cdrv0_representation=True, use_xcdrv2_representation=True)
+
+
+def ros2_domain() -> int:
+    """The ROS 2 domain of this shell: ``$ROS_DOMAIN_ID``, else 0."""
+    text = os.environ.get("ROS_DOMAIN_ID", "").strip()
+    return int(text) if text.isdigit() else 0
 
 
 def participant(domain_id: int) -> DomainParticipant:
@@ -224,6 +239,28 @@ class Ros2Publisher:
     def matched(self) -> int:
         """Subscribers of the pose topic matched now."""
         return len(self._pose.get_matched_subscriptions())
+
+
+def play(
+    scans: Iterable[Scan],
+    publisher: ScanPublisher,
+    *,
+    stop: threading.Event,
+    hz: float | None = None,
+) -> int:
+    """Publish ``scans`` as a driver would: at their recorded spacing, or ``hz`` a
+    second, stamps as recorded, until they end or ``stop`` is set; how many were sent."""
+    t0: float | None = None
+    s0 = sent = 0
+    for scan in scans:
+        if t0 is None:
+            t0, s0 = time.perf_counter(), scan.stamp_ns
+        due = t0 + (sent / hz if hz is not None else (scan.stamp_ns - s0) / 1e9)
+        if stop.wait(max(0.0, due - time.perf_counter())):
+            break
+        publisher.publish(scan)
+        sent += 1
+    return sent
 
 
 class ScanPublisher:
