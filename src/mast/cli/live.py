@@ -30,7 +30,6 @@ from mast.cli.options import (
     check_range_limits,
     grid_crs,
     parse_near,
-    precisions,
     signals_as_flag,
     warn_loose_edges,
 )
@@ -39,7 +38,7 @@ from mast.cli.root import (
     app,
     silence_stdout,
 )
-from mast.cli.settings import ConfigOption, effective, read_config
+from mast.cli.settings import ConfigOption, effective, locator_settings, report_inputs
 from mast.errors import InputError
 from mast.io.outputs import check_output_file
 
@@ -202,18 +201,9 @@ def stream_setup(
     angle sigma is the old ``--angle-sigma`` (radians), ``angle_sigma_deg`` the
     ``--angle-sigma-deg`` that replaces it (:func:`mast.cli.options.angle_sigma_rad`)."""
     from mast.io import read_survey
-    from mast.report.record import ReportInputs, survey_weighing
 
-    range_sigma, angle_sigma, scanner, survey_sigma = precision
-    tables, given = read_config(config, command)
-    cfg, defaults = precisions(
-        range_sigma,
-        angle_sigma,
-        scanner,
-        survey_sigma,
-        angle_sigma_deg=angle_sigma_deg,
-        base=tables["locator"],
-        given=given,
+    tables, cfg, defaults = locator_settings(
+        command, config, precision, angle_sigma_deg=angle_sigma_deg
     )
     settings = effective({"locator": cfg, "sequence": tables["sequence"]}, command)
     near_text, radius, azimuth_tolerance = near
@@ -223,15 +213,16 @@ def stream_setup(
     grid = grid_crs(crs)
     survey = read_survey(beacons)
     warn_loose_edges(survey, cfg.survey_sigma_m)
-    inputs = ReportInputs(
-        scan_file=source,
-        survey_file=str(beacons),
-        scanner=scanner,
-        defaults=frozenset(defaults),
-        config_file=None if config is None else str(config),
-        config_sha256=settings.sha256,
-        survey_sigmas=survey_weighing(survey, cfg.survey_sigma_m),
+    inputs = report_inputs(
+        beacons=beacons,
+        survey=survey,
+        locator=cfg,
+        scanner=precision[2],
+        defaults=defaults,
+        config=config,
+        settings=settings,
         crs=grid,
+        scan_file=source,
     )
     return StreamSetup(source, survey, cfg, tables["sequence"], inputs)
 

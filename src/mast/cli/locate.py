@@ -26,7 +26,6 @@ from mast.cli.options import (
     grid_crs,
     load_scans,
     parse_near,
-    precisions,
     warn_loose_edges,
     work_progress,
 )
@@ -34,7 +33,7 @@ from mast.cli.root import (
     EXIT_NO_FIX,
     app,
 )
-from mast.cli.settings import ConfigOption, effective, read_config
+from mast.cli.settings import ConfigOption, effective, locator_settings, report_inputs
 from mast.core.heap import QuietCollector
 from mast.errors import InputError
 from mast.io.outputs import PLOT_SUFFIXES, check_output_file
@@ -95,17 +94,13 @@ def locate(
     from mast.io import read_survey
     from mast.pipeline.locator import SequenceLocator
     from mast.report.hints import Hints
-    from mast.report.record import ReportInputs, fix_record, fix_text, survey_weighing
+    from mast.report.record import fix_record, fix_text
 
-    tables, given = read_config(config, "locate")
-    cfg, defaults = precisions(
-        range_sigma,
-        angle_sigma,
-        scanner,
-        survey_sigma,
+    tables, cfg, defaults = locator_settings(
+        "locate",
+        config,
+        (range_sigma, angle_sigma, scanner, survey_sigma),
         angle_sigma_deg=angle_sigma_deg,
-        base=tables["locator"],
-        given=given,
     )
     settings = effective({"locator": cfg, "sequence": tables["sequence"]}, "locate")
     if near is not None:
@@ -129,16 +124,17 @@ def locate(
                 scan_path, topic=topic, range_min=range_min, range_max=range_max
             )
             numbered = numbered or many
-            inputs = ReportInputs(
-                scan_file="<stdin>" if scan_path == Path("-") else str(scan_path),
-                survey_file=str(beacons),
+            inputs = report_inputs(
+                beacons=beacons,
+                survey=survey,
+                locator=cfg,
                 scanner=scanner,
-                topic=scan_topic,
-                defaults=frozenset(defaults),
-                config_file=None if config is None else str(config),
-                config_sha256=settings.sha256,
-                survey_sigmas=survey_weighing(survey, cfg.survey_sigma_m),
+                defaults=defaults,
+                config=config,
+                settings=settings,
                 crs=grid,
+                scan_file="<stdin>" if scan_path == Path("-") else str(scan_path),
+                topic=scan_topic,
             )
             source = inputs.scan_file or str(scan_path)
             tracker = SequenceLocator(survey, config=cfg, sequence=tables["sequence"])

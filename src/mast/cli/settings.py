@@ -8,7 +8,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Annotated, Any
+from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 
@@ -16,7 +16,21 @@ from mast import __version__
 from mast.errors import InputError
 from mast.io.settings import fingerprint, from_table, read_settings, settings_text
 
-__all__ = ["COMMAND_TABLES", "ConfigOption", "Effective", "effective", "read_config"]
+if TYPE_CHECKING:
+    from mast.core.beacon import Survey
+    from mast.io.crs import GridCrs
+    from mast.pipeline.locator import LocatorConfig
+    from mast.report.record import ReportInputs
+
+__all__ = [
+    "COMMAND_TABLES",
+    "ConfigOption",
+    "Effective",
+    "effective",
+    "locator_settings",
+    "read_config",
+    "report_inputs",
+]
 
 ConfigOption = Annotated[
     Path | None,
@@ -99,3 +113,59 @@ def effective(tables: Mapping[str, Any], command: str) -> Effective:
         f"# SHA-256 of the settings below: {fingerprint(body)}\n"
     )
     return Effective(header + body, fingerprint(body))
+
+
+def locator_settings(
+    command: str,
+    config: Path | None,
+    precision: tuple[float | None, float | None, str | None, float | None],
+    *,
+    angle_sigma_deg: float | None = None,
+) -> tuple[dict[str, Any], LocatorConfig, set[str]]:
+    """A locating command's ``--config`` tables, its locator's settings (the file's, then
+    the precisions given: range sigma, the old ``--angle-sigma`` in radians, scanner,
+    survey sigma, and ``--angle-sigma-deg``) and the precisions left at their defaults
+    (:func:`mast.cli.options.precisions`)."""
+    from mast.cli.options import precisions
+
+    range_sigma, angle_sigma, scanner, survey_sigma = precision
+    tables, given = read_config(config, command)
+    cfg, defaults = precisions(
+        range_sigma,
+        angle_sigma,
+        scanner,
+        survey_sigma,
+        angle_sigma_deg=angle_sigma_deg,
+        base=tables["locator"],
+        given=given,
+    )
+    return tables, cfg, defaults
+
+
+def report_inputs(
+    *,
+    beacons: Path,
+    survey: Survey,
+    locator: LocatorConfig,
+    scanner: str | None,
+    defaults: set[str],
+    config: Path | None,
+    settings: Effective,
+    crs: GridCrs | None,
+    scan_file: str | None = None,
+    topic: str | None = None,
+) -> ReportInputs:
+    """What each record and report of a locating command states about its inputs."""
+    from mast.report.record import ReportInputs, survey_weighing
+
+    return ReportInputs(
+        scan_file=scan_file,
+        survey_file=str(beacons),
+        scanner=scanner,
+        topic=topic,
+        defaults=frozenset(defaults),
+        config_file=None if config is None else str(config),
+        config_sha256=settings.sha256,
+        survey_sigmas=survey_weighing(survey, locator.survey_sigma_m),
+        crs=crs,
+    )

@@ -24,7 +24,6 @@ from mast.cli.options import (
     TopicOption,
     check_range_limits,
     grid_crs,
-    precisions,
     run_progress,
     signals_as_flag,
     warn_loose_edges,
@@ -34,7 +33,7 @@ from mast.cli.root import (
     EXIT_NO_FIX,
     app,
 )
-from mast.cli.settings import ConfigOption, effective, read_config
+from mast.cli.settings import ConfigOption, effective, locator_settings, report_inputs
 from mast.errors import InputError, shorten
 from mast.io.outputs import check_output_folder
 
@@ -103,19 +102,14 @@ def track(
     Example: mast track examples/run.bag -b examples/beacons.csv --scanner lms1xx-0.25 --out run/
     """
     from mast.io import read_survey
-    from mast.report.record import ReportInputs, survey_weighing
     from mast.runs.batch import expand_runs, track_runs
     from mast.runs.run import track_run
 
-    tables, keys_given = read_config(config, "track")
-    cfg, defaults = precisions(
-        range_sigma,
-        angle_sigma,
-        scanner,
-        survey_sigma,
+    tables, cfg, defaults = locator_settings(
+        "track",
+        config,
+        (range_sigma, angle_sigma, scanner, survey_sigma),
         angle_sigma_deg=angle_sigma_deg,
-        base=tables["locator"],
-        given=keys_given,
     )
     run_config = replace(
         tables["track"],
@@ -133,6 +127,16 @@ def track(
     survey = read_survey(beacons)
     warn_loose_edges(survey, cfg.survey_sigma_m)
     settings.write(out / "config.toml")  # once the inputs are read: a refused run leaves nothing
+    inputs = report_inputs(
+        beacons=beacons,
+        survey=survey,
+        locator=cfg,
+        scanner=scanner,
+        defaults=defaults,
+        config=config,
+        settings=settings,
+        crs=grid,
+    )
     if len(found) > 1 or scheduler is not None:
         outcomes = track_runs(
             found,
@@ -141,15 +145,7 @@ def track(
             options={
                 "config": run_config,
                 "topic": topic,
-                "inputs": ReportInputs(
-                    survey_file=str(beacons),
-                    scanner=scanner,
-                    defaults=frozenset(defaults),
-                    config_file=None if config is None else str(config),
-                    config_sha256=settings.sha256,
-                    survey_sigmas=survey_weighing(survey, cfg.survey_sigma_m),
-                    crs=grid,
-                ),
+                "inputs": inputs,
             },
             scheduler=scheduler,
             workers=workers,
@@ -162,16 +158,7 @@ def track(
             raise typer.Exit(EXIT_NO_FIX)
         return
     (run,) = found
-    inputs = ReportInputs(
-        scan_file=str(run),
-        survey_file=str(beacons),
-        scanner=scanner,
-        defaults=frozenset(defaults),
-        config_file=None if config is None else str(config),
-        config_sha256=settings.sha256,
-        survey_sigmas=survey_weighing(survey, cfg.survey_sigma_m),
-        crs=grid,
-    )
+    inputs = replace(inputs, scan_file=str(run))
 
     def warn(text: str) -> None:
         typer.echo(f"mast: warning: {shorten(text, 80)}", err=True)
