@@ -5,7 +5,8 @@ exit status (0, or 3 for no fix).
 
 Left out: the benchmarks and ``mast reproduce`` (minutes each, their own tests), ``mast
 live`` from a scanner on the network (``sick://``, ``hokuyo://``; the replay line runs),
-and the 10 000-scan drive (its shorter self is tested in tests/test_sim)."""
+and the 10 000-scan drive (its shorter self is tested in tests/test_sim). The ROS 2 pair
+(`mast ros2` runs until stopped, `mast emulate ros2` feeds it) runs in a test of its own."""
 
 from __future__ import annotations
 
@@ -20,7 +21,9 @@ import pytest
 from tests._cli import HANG_S
 
 REPO = Path(__file__).resolve().parents[1]
-SKIP = re.compile(r"^mast (bench|reproduce)\b|sick://|hokuyo://|--scans 10000")
+SKIP = re.compile(
+    r"^mast (bench|reproduce)\b|sick://|hokuyo://|--scans 10000|^mast (emulate )?ros2"
+)
 
 
 def readme_commands() -> list[str]:
@@ -71,6 +74,43 @@ def test_every_readme_command_runs_on_the_examples(tmp_path: Path) -> None:
     assert (tmp_path / "geo" / "transform.json").is_file()
     assert (tmp_path / "tls-survey" / "beacons.csv").is_file()
     assert not list((REPO / "examples").glob("**/fixes.jsonl"))
+
+
+def test_the_readme_ros2_pair_runs_as_written(tmp_path: Path) -> None:
+    """The node as written (ended by --max-scans), then the bag played as written, in a
+    DDS domain of the test's own on loopback."""
+    from mast.live.ros2 import LOOPBACK_CONFIG
+
+    commands = readme_commands()
+    node_line = next(c for c in commands if c.startswith("mast ros2 "))
+    play_line = next(c for c in commands if c.startswith("mast emulate ros2 "))
+    (tmp_path / "examples").symlink_to(REPO / "examples", target_is_directory=True)
+    env = dict(os.environ, PATH=f"{Path(sys.executable).parent}{os.pathsep}{os.environ['PATH']}")
+    env.update(ROS_DOMAIN_ID=str(230 - os.getpid() % 20), CYCLONEDDS_URI=LOOPBACK_CONFIG)
+    node = subprocess.Popen(
+        f"{node_line} --max-scans 10",
+        shell=True,
+        cwd=tmp_path,
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        assert node.stderr is not None
+        assert node.stderr.readline().startswith("mast: listening on /scan")
+        played = subprocess.run(
+            play_line, shell=True, cwd=tmp_path, env=env, capture_output=True, text=True,
+            timeout=HANG_S, check=False,
+        )  # fmt: skip
+        out, err = node.communicate(timeout=HANG_S)
+    finally:
+        if node.poll() is None:
+            node.kill()
+    assert played.returncode == 0, played.stderr
+    assert node.returncode == 0, err
+    assert len(out.splitlines()) >= 1
+    assert '"status": "fix"' in out
 
 
 @pytest.mark.parametrize("folder", ["examples"])

@@ -206,7 +206,7 @@ def test_the_text_report_lists_inputs_residuals_and_conventions(files: Path) -> 
         "Survey file",
         "Beams         1081 read,",
         "Range σ       12.0 mm\n",
-        "Angle σ       0 rad (default)",
+        "Angle σ       0° (0 rad) (default)",
         "Survey σ      3.0 mm per edge coordinate (default)",
         "clockwise from grid north",
         "chi-square test at 5 %",

@@ -353,7 +353,8 @@ def _input_lines(fix: Fix, scan: Scan | None, inputs: ReportInputs) -> list[str]
     )
     lines += [
         f"  Range σ       {_mm(noise.range_sigma_m)} mm{tag('range_sigma_m')}",
-        f"  Angle σ       {noise.angle_sigma_rad:g} rad{tag('angle_sigma_rad')}",
+        f"  Angle σ       {math.degrees(noise.angle_sigma_rad):.6g}° "
+        f"({noise.angle_sigma_rad:g} rad){tag('angle_sigma_rad')}",
         f"  Survey σ      {surveyed}",
     ]
     prior = fix.config.prior
