@@ -7,6 +7,7 @@ import csv
 import io
 import json
 import math
+import re
 from pathlib import Path
 from typing import Any
 
@@ -222,6 +223,29 @@ def test_a_las_header_given_a_crs_carries_it_as_wkt_in_las_1_4(
     assert sum(v.record_id == 2112 for v in back.header.vlrs) == 1
 
 
+@pytest.mark.parametrize("code", [2193, 31467])
+def test_a_northing_first_crs_is_written_easting_first_as_gis_reads_it(
+    tmp_path: Path, code: int
+) -> None:
+    """NZTM 2000 and Gauss-Kruger zone 3 list northing first. MAST's coordinates are
+    easting first, as LAS, GeoJSON and every GIS take x and y: the LAS carries the CRS
+    in that order (GDAL's WKT1), which reads back as the same EPSG entry."""
+    crs = parse_crs(f"EPSG:{code}")
+    assert crs.epsg == code
+    header = new_las_header(
+        offsets=[0.0, 0.0, 0.0], software="test", version="1.4", point_format=6, crs=crs
+    )
+    path = tmp_path / "c.las"
+    with LasWriter(path, header) as las:
+        las.write(las.zeros(1))
+    parsed = laspy.read(path).header.parse_crs()
+    assert parsed is not None
+    assert parsed.name == crs.name  # (pyproj may name the entry of its easting-first twin)
+    assert [a.direction for a in parsed.axis_info[:2]] == ["east", "north"]
+    assert parsed.geodetic_crs.equals(crs.pyproj().geodetic_crs, ignore_axis_order=True)
+    assert parsed.coordinate_operation == crs.pyproj().coordinate_operation
+
+
 def test_a_las_header_without_a_crs_records_none(tmp_path: Path) -> None:
     header = new_las_header(offsets=[0.0, 0.0, 0.0], software="test", version="1.2", point_format=3)
     path = tmp_path / "c.las"
@@ -287,6 +311,7 @@ def test_the_point_list_writes_dms_and_arc_seconds() -> None:
         "northing": "2.0000",
         "elevation": "",
         "azimuth": "123°04'05.6\"",
+        "azimuth_ddd_mmss": "123.04056",
         "sigma_easting_m": "0.0010",
         "sigma_northing_m": "0.0020",
         "sigma_azimuth_arcsec": "1.0",
@@ -304,7 +329,10 @@ def test_the_point_list_writes_dms_and_arc_seconds() -> None:
     ],
 )
 def test_rounding_carries_into_minutes_and_degrees_never_60(azimuth_deg: float, dms: str) -> None:
-    assert _point_row(azimuth_deg)["azimuth"] == dms
+    row = _point_row(azimuth_deg)
+    assert row["azimuth"] == dms
+    d, m, sec = re.match(r"(\d+)°(\d\d)'(\d\d\.\d)\"", dms).groups()  # type: ignore[union-attr]
+    assert row["azimuth_ddd_mmss"] == f"{d}.{m}{sec.replace('.', '')}"
 
 
 @given(st.floats(min_value=-720.0, max_value=720.0, allow_nan=False))

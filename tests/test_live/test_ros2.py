@@ -9,6 +9,7 @@ gets the next poses, and Ctrl-C or SIGTERM end the node cleanly.
 
 from __future__ import annotations
 
+import itertools
 import json
 import math
 import os
@@ -27,7 +28,7 @@ import pytest
 
 from mast.core.frames import UNOBSERVED_VARIANCE
 from mast.core.pose import Pose2D
-from mast.core.scan import Scan
+from mast.core.scan import Scan, stamp_of
 from mast.live.ros2_msgs import (
     Header,
     LaserScan,
@@ -59,9 +60,20 @@ HANG_S = float(os.environ.get("MAST_TEST_HANG_S", "120"))
 #: How many of the drive's scans the equality test publishes.
 SCANS = 40
 
-_worker = os.environ.get("PYTEST_XDIST_WORKER", "gw5").removeprefix("gw")
-#: 30 domains for each parallel test process, none shared (ROS 2's domains are 0-232).
-_domains = iter(range(2 + 30 * (int(_worker) % 7), 2 + 30 * (int(_worker) % 7 + 1)))
+
+def _worker_domains() -> Iterator[int]:
+    """DDS domains no other test process uses at the same time: the domains 1-200 shared
+    out among the parallel test processes, each cycling through its own (its tests run
+    one after the other, each ending its node)."""
+    workers = int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1"))
+    worker = int(os.environ.get("PYTEST_XDIST_WORKER", "gw0").removeprefix("gw"))
+    block = 200 // max(workers, 1)
+    if block < 1:
+        raise RuntimeError(f"{workers} test processes: more than the 200 DDS domains")
+    return itertools.cycle(range(1 + worker * block, 1 + (worker + 1) * block))
+
+
+_domains = _worker_domains()
 
 
 @pytest.fixture
@@ -140,6 +152,8 @@ class Node:
 
     proc: subprocess.Popen[bytes]
     records: IO[bytes]
+    listening: str = ""
+    """Its first line on standard error: it has joined the domain, ready."""
 
     def finish(self) -> tuple[list[dict[str, Any]], str]:
         """Its records and standard error once it has ended."""
@@ -173,7 +187,10 @@ def _start(drive: Drive, domain: int, *args: str) -> Node:
         stdout=records,
         stderr=subprocess.PIPE,
     )
-    return Node(proc, records)
+    assert proc.stderr is not None
+    # ready (compiled, joined) before the test publishes: a node still compiling would
+    # locate the test's first scans late, and drop some
+    return Node(proc, records, proc.stderr.readline().decode())
 
 
 def _scans(drive: Drive, n: int) -> list[Scan]:
@@ -188,7 +205,7 @@ def _azimuth_deg(msg: PoseWithCovarianceStamped) -> float:
 
 
 def _stamp(header: Header) -> int:
-    return int(header.stamp.sec) * 1_000_000_000 + int(header.stamp.nanosec)
+    return stamp_of(header.stamp.sec, header.stamp.nanosec)
 
 
 @pytest.fixture
@@ -196,6 +213,7 @@ def node(drive: Drive, domain: int) -> Iterator[tuple[DomainParticipant, Node]]:
     dp = DomainParticipant(domain)
     running = _start(drive, domain)
     try:
+        assert running.listening.startswith("mast: listening on /scan"), running.listening
         yield dp, running
     finally:
         running.stop()
@@ -317,9 +335,7 @@ def test_ctrl_c_or_sigterm_end_the_node_cleanly(
 ) -> None:
     node = _start(drive, domain)
     try:
-        assert node.proc.stderr is not None
-        line = node.proc.stderr.readline().decode()
-        assert line.startswith(f"mast: listening on /scan in DDS domain {domain}")
+        assert node.listening.startswith(f"mast: listening on /scan in DDS domain {domain}")
         node.proc.send_signal(signum)
         printed, err = node.finish()
     finally:
@@ -361,8 +377,7 @@ def test_a_malformed_scan_is_skipped_counted_and_named_once(drive: Drive, domain
 def test_a_bag_published_by_mast_emulate_ros2_is_located(drive: Drive, domain: int) -> None:
     node = _start(drive, domain, "--max-scans", "20")
     try:
-        assert node.proc.stderr is not None
-        assert node.proc.stderr.readline().startswith(b"mast: listening on /scan")
+        assert node.listening.startswith("mast: listening on /scan")
         played = subprocess.run(
             [
                 *(sys.executable, "-m", "mast", "emulate", "ros2", "--from", str(drive.bag)),
@@ -379,7 +394,7 @@ def test_a_bag_published_by_mast_emulate_ros2_is_located(drive: Drive, domain: i
     assert played.returncode == 0, played.stderr
     assert played.stderr.strip().splitlines()[-1] == f"mast: published {drive.scans} scans"
     assert node.proc.returncode == 0, text
-    assert len(printed) == 20 - int(text.split(" dropped")[0].rsplit(" ", 1)[-1])
+    assert len(printed) + sum(r["dropped"] for r in printed) == 20
     stamps = {s.stamp_ns for s in read_run(drive.bag)}
     assert {r["stamp_ns"] for r in printed} <= stamps  # stamps as recorded
     assert any(r["status"] == "fix" for r in printed)
@@ -424,6 +439,23 @@ def test_bad_options_are_one_line_errors(
     assert message in done.stderr
     assert len(done.stderr.strip().splitlines()) == 1
     assert "Traceback" not in done.stderr
+
+
+@pytest.mark.parametrize("value", ["abc", "300"])
+def test_a_ros_domain_id_that_is_no_domain_is_named_not_taken_for_0(
+    drive: Drive, value: str
+) -> None:
+    done = subprocess.run(
+        [sys.executable, "-m", "mast", "ros2", "-b", str(drive.beacons)],
+        capture_output=True,
+        text=True,
+        timeout=HANG_S,
+        check=False,
+        env=dict(os.environ, ROS_DOMAIN_ID=value),
+    )
+    assert done.returncode == 2
+    (line,) = done.stderr.strip().splitlines()
+    assert line.startswith(f"mast: error: $ROS_DOMAIN_ID '{value}': ROS 2 domains are 0-232")
 
 
 @pytest.mark.parametrize("azimuth_deg", [0.0, 30.0, 90.0, 200.0, 359.5])

@@ -118,6 +118,7 @@ def _one(
     from cyclonedds.util import duration
 
     from mast.bench.live import simulate_drive
+    from mast.core.scan import stamp_of
     from mast.live.ros2 import ScanPublisher
     from mast.live.ros2_msgs import PoseWithCovarianceStamped, String, dds_topic
     from mast.live.sources import read_run
@@ -137,7 +138,7 @@ def _one(
             for msg in reader.take(N=64):
                 if isinstance(msg, InvalidSample):  # the node has left
                     continue
-                arrived[msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec] = now
+                arrived[stamp_of(msg.header.stamp.sec, msg.header.stamp.nanosec)] = now
 
     def on_fix(reader: DataReader[Any]) -> None:
         with lock:

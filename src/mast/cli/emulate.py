@@ -93,18 +93,34 @@ def emulate(
     typer.echo(f"mast: served {emulator.sent} scans", err=True)
 
 
+#: After a subscriber matched, how long its side takes to learn of the writer (discovery
+#: is not symmetric in time): a scan sent before would be lost to it, seconds.
+SETTLE_S = 0.3
+
+
 def _publish(run: Path, topic: str, domain_id: int | None, hz: float | None) -> None:
     """``mast emulate ros2``: the run's scans published on ``topic`` at its rate."""
     from mast.cli.options import signals_as_flag
-    from mast.live.ros2 import ScanPublisher, participant, play, ros2_domain
+    from mast.live.ros2 import ScanPublisher, leave, participant, play, ros2_domain
     from mast.live.sources import read_run
 
     domain = ros2_domain() if domain_id is None else domain_id
     scans = read_run(run)
-    publisher = ScanPublisher(participant(domain), topic)
-    typer.echo(f"mast: publishing {run} on {topic} in DDS domain {domain}", err=True)
-    with signals_as_flag() as (interrupt, caught):
-        sent = play(scans, publisher, stop=interrupt, hz=hz)
+    dp = participant(domain)
+    publisher = ScanPublisher(dp, topic)
+    try:
+        with signals_as_flag() as (interrupt, caught):
+            # best effort: a scan sent before anyone listens is lost, so wait for one
+            typer.echo(
+                f"mast: waiting for a subscriber of {topic} in DDS domain {domain}", err=True
+            )
+            while not publisher.matched() and not interrupt.wait(0.05):
+                pass
+            interrupt.wait(SETTLE_S)  # its reader learns of this writer a moment later
+            typer.echo(f"mast: publishing {run} on {topic}", err=True)
+            sent = play(scans, publisher, stop=interrupt, hz=hz)
+    finally:
+        leave(dp)
     typer.echo(f"mast: published {sent} scans", err=True)
     if interrupt.is_set():
         raise typer.Exit(128 + caught[0])

@@ -4,7 +4,6 @@ scan first."""
 from __future__ import annotations
 
 import contextlib
-import math
 import signal
 import sys
 from collections.abc import Callable
@@ -28,6 +27,7 @@ from mast.cli.options import (
     ScannerOption,
     SurveySigmaOption,
     check_range_limits,
+    check_seconds,
     grid_crs,
     parse_near,
     signals_as_flag,
@@ -129,9 +129,8 @@ def live(
         range_limits=(range_min, range_max),
         crs=crs,
     )
-    for name, value in (("--timeout", timeout), ("--give-up", give_up)):
-        if not (math.isfinite(value) and value > 0):
-            raise InputError(f"{name} must be a positive number of seconds, got {value}")
+    check_seconds("--timeout", timeout)
+    check_seconds("--give-up", give_up)
     options = SourceOptions(
         range_min_m=range_min, range_max_m=range_max, timeout_s=timeout, give_up_s=give_up
     )

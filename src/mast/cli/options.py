@@ -115,6 +115,12 @@ def check_range_limits(range_min: float | None, range_max: float | None) -> None
             raise InputError(f"{name} must be a non-negative number, got {value}")
 
 
+def check_seconds(option: str, value: float) -> None:
+    """A duration option must be a positive, finite number of seconds."""
+    if not (math.isfinite(value) and value > 0):
+        raise InputError(f"{option} must be a positive number of seconds, got {value}")
+
+
 def grid_crs(text: str | None) -> GridCrs | None:
     """The ``--crs`` given, checked (:func:`mast.io.crs.parse_crs`); None without one."""
     if text is None:

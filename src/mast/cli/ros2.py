@@ -23,10 +23,10 @@ from mast.cli.options import (
     RangeSigmaOption,
     ScannerOption,
     SurveySigmaOption,
+    check_seconds,
 )
 from mast.cli.root import app
 from mast.cli.settings import ConfigOption
-from mast.errors import InputError
 
 if TYPE_CHECKING:
     from mast.live.session import Sink
@@ -107,7 +107,8 @@ def ros2(
 
     Example: mast ros2 -b examples/beacons.csv --scanner lms1xx-0.25 --frame map
     """
-    from mast.live.ros2 import Ros2Publisher, Ros2Source, participant, ros2_domain
+    from mast.cli.warmup import compile_all
+    from mast.live.ros2 import Ros2Publisher, Ros2Source, leave, participant, ros2_domain
     from mast.live.stream import SourceOptions
 
     domain = ros2_domain() if domain_id is None else domain_id
@@ -123,18 +124,24 @@ def ros2(
         range_limits=(range_min, range_max),
         crs=crs,
     )
-    limit = math.inf if give_up is None else give_up
-    for name, value in (("--timeout", timeout), ("--give-up", limit)):
-        if not (value > 0 and not math.isnan(value)):
-            raise InputError(f"{name} must be a positive number of seconds, got {value}")
+    check_seconds("--timeout", timeout)
+    if give_up is not None:
+        check_seconds("--give-up", give_up)
     options = SourceOptions(
-        range_min_m=range_min, range_max_m=range_max, timeout_s=timeout, give_up_s=limit
+        range_min_m=range_min,
+        range_max_m=range_max,
+        timeout_s=timeout,
+        give_up_s=math.inf if give_up is None else give_up,
     )
+    # Ready before joining: a peer that matches a node still compiling would send it
+    # scans it locates seconds late (the first run after installing compiles for long).
+    compile_all()
     dp = participant(domain)
     stream = Ros2Source(dp, scan_topic, options, url=url)
     publisher = Ros2Publisher(dp, frame=frame, tf=tf)
 
-    def open_sinks(_stack: contextlib.ExitStack[bool | None]) -> list[Sink]:
+    def open_sinks(stack: contextlib.ExitStack[bool | None]) -> list[Sink]:
+        stack.callback(leave, dp)  # after the run: the last poses acknowledged
         return [publisher]
 
     def ready() -> None:

@@ -25,6 +25,7 @@ from mast.errors import InputError
 
 __all__ = [
     "Pose2D",
+    "format_ddd_mmss",
     "format_dms",
     "normalize_azimuth",
     "parse_azimuth",
@@ -116,14 +117,9 @@ class Pose2D:
         return f"E {self.easting:.4f} m, N {self.northing:.4f} m, Az {format_dms(self.azimuth_deg)}"
 
 
-def format_dms(angle_deg: float, *, decimals: int = 1, signed: bool = False) -> str:
-    """Format degrees as ``D°MM'SS.S"``, carrying rounding into minutes and degrees.
-
-    Azimuths (``signed=False``) are wrapped to [0, 360); ``signed=True`` keeps
-    the sign, for differences and standard deviations.
-    """
-    if not math.isfinite(angle_deg):
-        return str(angle_deg)
+def _dms_parts(angle_deg: float, decimals: int, signed: bool) -> tuple[str, int, int, int]:
+    """Sign, degrees, minutes and seconds times ``10**decimals`` of an angle, rounded
+    once, the rounding carried into minutes and degrees (never 60")."""
     sign = ""
     if signed:
         if angle_deg < 0:
@@ -137,9 +133,30 @@ def format_dms(angle_deg: float, *, decimals: int = 1, signed: bool = False) -> 
         tenths %= 360 * 3600 * scale
     deg, rem = divmod(tenths, 3600 * scale)
     minutes, sec_scaled = divmod(rem, 60 * scale)
-    sec = sec_scaled / scale
+    return sign, deg, minutes, sec_scaled
+
+
+def format_dms(angle_deg: float, *, decimals: int = 1, signed: bool = False) -> str:
+    """Format degrees as ``D°MM'SS.S"``, carrying rounding into minutes and degrees.
+
+    Azimuths (``signed=False``) are wrapped to [0, 360); ``signed=True`` keeps
+    the sign, for differences and standard deviations.
+    """
+    if not math.isfinite(angle_deg):
+        return str(angle_deg)
+    sign, deg, minutes, sec_scaled = _dms_parts(angle_deg, decimals, signed)
+    sec = sec_scaled / 10**decimals
     width = 3 + decimals if decimals else 2
     return f"{sign}{deg}°{minutes:02d}'{sec:0{width}.{decimals}f}\""
+
+
+def format_ddd_mmss(angle_deg: float, *, decimals: int = 1) -> str:
+    """An azimuth in the packed ``DDD.MMSSs`` form total stations and survey packages
+    read (``309.53227`` is 309°53'22.7"), rounded as :func:`format_dms` rounds."""
+    if not math.isfinite(angle_deg):
+        return str(angle_deg)
+    _, deg, minutes, sec_scaled = _dms_parts(angle_deg, decimals, False)
+    return f"{deg}.{minutes:02d}{sec_scaled:0{2 + decimals}d}"
 
 
 _DMS = re.compile(

@@ -12,7 +12,21 @@ from numpy.typing import ArrayLike, NDArray
 from mast import limits
 from mast.errors import InputError
 
-__all__ = ["Scan"]
+__all__ = ["Scan", "split_stamp", "stamp_of"]
+
+#: Nanoseconds in a second: a stamp's (sec, nanosec) as ROS messages carry it.
+NS_PER_S = 1_000_000_000
+
+
+def split_stamp(stamp_ns: int) -> tuple[int, int]:
+    """A stamp in integer nanoseconds as ROS's ``(sec, nanosec)``."""
+    sec, nanosec = divmod(int(stamp_ns), NS_PER_S)
+    return sec, nanosec
+
+
+def stamp_of(sec: int, nanosec: int) -> int:
+    """ROS's ``(sec, nanosec)`` as one stamp in integer nanoseconds."""
+    return int(sec) * NS_PER_S + int(nanosec)
 
 
 def _frozen(a: ArrayLike) -> NDArray[np.float64]:
@@ -175,7 +189,7 @@ class Scan:
             range_min=float(msg.range_min) if math.isfinite(msg.range_min) else 0.0,
             range_max=float(msg.range_max) if msg.range_max > msg.range_min else math.inf,
             intensities=np.asarray(msg.intensities, dtype=float),
-            stamp_ns=int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec),
+            stamp_ns=stamp_of(stamp.sec, stamp.nanosec),
             frame_id=str(msg.header.frame_id),
         )
 
@@ -186,7 +200,7 @@ class Scan:
             raise InputError("beams are not evenly spaced; a LaserScan needs that")
         inten = self.intensities
         return {
-            "stamp": divmod(int(self.stamp_ns), 1_000_000_000),
+            "stamp": split_stamp(self.stamp_ns),
             "frame_id": self.frame_id,
             "angle_min": float(self.angles_rad[0]),
             "angle_max": float(self.angles_rad[-1]),

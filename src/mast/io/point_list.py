@@ -5,7 +5,9 @@ The columns (:data:`POINT_LIST_COLUMNS`, with a header row, comma separated, UTF
 ``name``, ``easting``, ``northing`` and ``elevation`` in metres (elevation empty: a
 2D fix has none), ``azimuth`` as ``123°04'05.6"`` (clockwise from grid north,
 :func:`mast.core.pose.format_dms`; the field is quoted, its ``"`` doubled, as CSV
-does), ``sigma_easting_m`` and ``sigma_northing_m`` in metres and
+does), ``azimuth_ddd_mmss`` the same azimuth in the packed ``DDD.MMSSs`` form total
+stations and survey packages read (``309.53227``; no quoting needed),
+``sigma_easting_m`` and ``sigma_northing_m`` in metres and
 ``sigma_azimuth_arcsec`` in arc-seconds. A point-import template of a survey package
 maps these columns (name, E, N, Z, and the rest as attributes).
 """
@@ -16,7 +18,7 @@ import csv
 import math
 from typing import IO, Final
 
-from mast.core.pose import format_dms
+from mast.core.pose import format_ddd_mmss, format_dms
 
 __all__ = ["POINT_LIST_COLUMNS", "PointListWriter"]
 
@@ -27,6 +29,7 @@ POINT_LIST_COLUMNS: Final = (
     "northing",
     "elevation",
     "azimuth",
+    "azimuth_ddd_mmss",
     "sigma_easting_m",
     "sigma_northing_m",
     "sigma_azimuth_arcsec",
@@ -67,6 +70,7 @@ class PointListWriter:
                 _num(northing, 4),
                 _num(elevation, 4),
                 format_dms(azimuth_deg, decimals=1),
+                format_ddd_mmss(azimuth_deg, decimals=1),
                 _num(sigma_easting_m, 4),
                 _num(sigma_northing_m, 4),
                 _num(sigma_az, 1),

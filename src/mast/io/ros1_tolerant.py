@@ -21,6 +21,7 @@ from pathlib import Path
 from typing import BinaryIO
 
 from mast import limits
+from mast.core.scan import stamp_of
 
 __all__ = [
     "BagFormatError",
@@ -90,7 +91,7 @@ def _conn_header(data: bytes) -> dict[str, str]:
 
 def _time_ns(value: bytes) -> int:
     sec, nsec = struct.unpack("<II", value[:8])
-    return int(sec) * 1_000_000_000 + int(nsec)
+    return stamp_of(sec, nsec)
 
 
 def _read(fh: BinaryIO, n: int, pos: int, what: str) -> bytes:

@@ -24,7 +24,7 @@ from pathlib import Path
 from typing import Any
 
 from mast.core.frames import ros_pose_covariance, yaw_of_azimuth, yaw_quaternion
-from mast.core.scan import Scan
+from mast.core.scan import Scan, split_stamp
 from mast.io.atomic import commit, discard, part_path
 from mast.io.bags import LASERSCAN, laserscan_bytes
 from mast.pipeline.locator import Fix
@@ -89,7 +89,7 @@ class McapRecorder:
         assert fix.pose is not None
         assert fix.adjustment is not None
         t = self._store.types
-        sec, nsec = divmod(int(scan.stamp_ns), 1_000_000_000)
+        sec, nsec = split_stamp(scan.stamp_ns)
         yaw = yaw_of_azimuth(fix.pose.azimuth)
         cov = ros_pose_covariance(fix.adjustment.covariance)
         return t[_POSE](

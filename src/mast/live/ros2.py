@@ -57,6 +57,7 @@ __all__ = [
     "Ros2Publisher",
     "Ros2Source",
     "ScanPublisher",
+    "leave",
     "participant",
     "play",
     "ros2_domain",
@@ -76,15 +77,32 @@ LOOPBACK_CONFIG = (
     "</Domain></CycloneDDS>"
 )
 
+#: Samples taken in one wake-up at most, so that a flood cannot starve the stop check.
+_TAKE_AT_MOST = 256
+
 # Writers use plain CDR (XCDR1), as every ROS 2 middleware does; readers take either.
 _XCDR1 = Policy.DataRepresentation(use_cdrv0_representation=True)
 _EITHER = Policy.DataRepresentation(use_cdrv0_representation=True, use_xcdrv2_representation=True)
 
 
 def ros2_domain() -> int:
-    """The ROS 2 domain of this shell: ``$ROS_DOMAIN_ID``, else 0."""
+    """The ROS 2 domain of this shell: ``$ROS_DOMAIN_ID``, else 0; one that is not a
+    domain is an InputError naming the variable (not someone else's domain 0)."""
     text = os.environ.get("ROS_DOMAIN_ID", "").strip()
-    return int(text) if text.isdigit() else 0
+    if not text:
+        return 0
+    if not text.isdigit() or int(text) > MAX_DOMAIN_ID:
+        raise InputError(
+            f"$ROS_DOMAIN_ID {text!r}: ROS 2 domains are 0-{MAX_DOMAIN_ID} (or give --domain-id)"
+        )
+    return int(text)
+
+
+def leave(dp: DomainParticipant) -> None:
+    """Leave the DDS domain now, not whenever the collector gets to it: the participant
+    and everything it made are deleted (Cyclone DDS first lets a reliable writer's last
+    samples be acknowledged) and the others see it go at once, not at its lease's end."""
+    dp.__del__()  # the binding's delete; it also forgets the entity, so it runs once
 
 
 def participant(domain_id: int) -> DomainParticipant:
@@ -138,21 +156,24 @@ class Ros2Source(Source):
         waitset.attach(ReadCondition(self._reader, SampleState.NotRead))
         last = time.perf_counter()
         gap: float | None = None
-        said_quiet = said_malformed = False
+        said_quiet = False
+
+        def malformed(problem: str) -> None:
+            self.stats.malformed += 1
+            if not self.stats.first_malformed:  # named once, counted always
+                self.stats.first_malformed = problem
+                warn(f"{self.topic}: malformed LaserScan skipped: {problem}")
+
         while not stop.is_set():
             waitset.wait(duration(milliseconds=100))
-            for msg in self._take(warn):
-                if msg is None:
-                    self.stats.malformed += 1
+            for msg in self._take():
+                if isinstance(msg, str):
+                    malformed(msg)
                     continue
                 try:
                     scan = Scan.from_message(msg)
                 except InputError as err:
-                    self.stats.malformed += 1
-                    if not said_malformed:
-                        self.stats.first_malformed = err.problem
-                        warn(f"{self.topic}: malformed LaserScan skipped: {err.problem}")
-                        said_malformed = True
+                    malformed(err.problem)
                     continue
                 if o.range_min_m is not None or o.range_max_m is not None:
                     scan = scan.with_range_limits(o.range_min_m, o.range_max_m)
@@ -174,15 +195,21 @@ class Ros2Source(Source):
             if gap is not None:
                 gap = quiet
 
-    def _take(self, warn: Callable[[str], None]) -> list[LaserScan | None]:
-        """The scans waiting; None for one that could not be decoded. A publisher that
-        leaves (a driver restarted) shows as a sample without data: not a scan."""
-        try:
-            samples = self._reader.take(N=64)
-        except Exception as err:  # a sample the binding cannot decode
-            warn(f"{self.topic}: a sample could not be decoded: {err}")
-            return [None]
-        return [s for s in samples if not isinstance(s, InvalidSample)]
+    def _take(self) -> Iterator[LaserScan | str]:
+        """The scans waiting, one at a time (one the binding cannot decode costs only
+        itself): a LaserScan, or what was wrong with one. A publisher that leaves (a
+        driver restarted) shows as a sample without data: not a scan."""
+        for _ in range(_TAKE_AT_MOST):
+            try:
+                samples = self._reader.take(N=1)
+            except Exception as err:  # a sample the binding cannot decode
+                yield f"the sample could not be decoded ({type(err).__name__}: {err})"
+                continue
+            if not samples:
+                return
+            (sample,) = samples
+            if not isinstance(sample, InvalidSample):
+                yield sample
 
 
 class Ros2Publisher:
@@ -226,10 +253,10 @@ class Ros2Publisher:
     def publish(self, scan: Scan, fix: Fix, text: str) -> None:
         """``fix`` of ``scan`` (stamped as the scan) and its record ``text``."""
         if fix.ok and fix.pose is not None and fix.adjustment is not None:
-            cov = (fix.adjustment.covariance + fix.adjustment.covariance.T) / 2
+            cov = fix.adjustment.covariance
             self._pose.write(pose_message(fix.pose, cov, stamp=scan.stamp_ns, frame=self.frame))
-            if self._tf is not None:
-                child = scan.frame_id or "laser"
+            child = scan.frame_id or "laser"
+            if self._tf is not None and child != self.frame:  # no frame is its own child
                 self._tf.write(
                     tf_message(fix.pose, stamp=scan.stamp_ns, frame=self.frame, child=child)
                 )

@@ -23,7 +23,7 @@ from numpy.typing import NDArray
 
 from mast.core.frames import ros_pose_covariance, yaw_of_azimuth, yaw_quaternion
 from mast.core.pose import Pose2D
-from mast.core.scan import Scan
+from mast.core.scan import Scan, split_stamp
 from mast.errors import InputError
 
 __all__ = [
@@ -153,8 +153,7 @@ def dds_topic(name: str) -> str:
 
 
 def _time(ns: int) -> Time:
-    sec, nanosec = divmod(int(ns), 1_000_000_000)
-    return Time(sec, nanosec)
+    return Time(*split_stamp(ns))
 
 
 def laserscan_message(scan: Scan) -> LaserScan:

@@ -27,7 +27,7 @@ import numpy as np
 from mast.core.beacon import Survey
 from mast.core.frames import yaw_of_azimuth, yaw_quaternion
 from mast.core.pose import Pose2D
-from mast.core.scan import Scan
+from mast.core.scan import Scan, split_stamp
 from mast.pipeline.locator import Fix
 
 __all__ = ["DEFAULT_VIEW_PORT", "ELLIPSE_EXAGGERATION", "LiveView"]
@@ -48,8 +48,7 @@ def _yaw_quaternion(yaw: float) -> Any:
 def _timestamp(ns: int) -> Any:
     import foxglove.messages as fm
 
-    sec, nsec = divmod(int(ns), 1_000_000_000)
-    return fm.Timestamp(sec, nsec)
+    return fm.Timestamp(*split_stamp(ns))
 
 
 class LiveView:
