@@ -3,6 +3,10 @@
 ROS 1 bags are single ``.bag`` files (recognised by their ``#ROSBAG V2.0``
 magic whatever their name); ROS 2 bags are folders with a ``metadata.yaml``
 and sqlite3 (``.db3``) or MCAP storage. No ROS installation is needed.
+
+Opening a bag, choosing a topic, and reading its messages one at a time with damaged
+ones skipped and named are written once here for every message type
+(:func:`_read_messages`); :mod:`mast.io.pointclouds` reads ``PointCloud2`` through them.
 """
 
 from __future__ import annotations
@@ -13,7 +17,7 @@ import tempfile
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path, PurePosixPath
-from typing import Any, Literal
+from typing import Any, Literal, TypeVar
 
 from mast import limits
 from mast.core.scan import Scan
@@ -31,6 +35,10 @@ __all__ = [
 ]
 
 LASERSCAN = "sensor_msgs/msg/LaserScan"
+_T = TypeVar("_T")
+#: Turns one deserialised message (its index in the topic, from 1) into a record, or
+#: raises :class:`InputError` saying what is wrong with it.
+_Convert = Callable[[Any, Path, int], _T]
 BagKind = Literal["rosbag1", "sqlite3", "mcap"]
 _ROS1_MAGIC = b"#ROSBAG V2.0"
 _MCAP_MAGIC = b"\x89MCAP0\r\n"
@@ -233,18 +241,34 @@ def read_laserscans(
     storage fails part-way) gives every scan before the damage, and
     ``on_skip`` is told where the reading stopped.
     """
-    p = Path(path)
+    yield from _read_messages(
+        Path(path), LASERSCAN, _to_scan, topic=topic, on_skip=on_skip, what="scans"
+    )
+
+
+def _read_messages(
+    p: Path,
+    msgtype: str,
+    convert: _Convert[_T],
+    *,
+    topic: str | None,
+    on_skip: Callable[[str], None] | None,
+    what: str,
+) -> Iterator[_T]:
+    """The messages of type ``msgtype`` on ``topic`` (or the bag's one such topic), each
+    made a record by ``convert``, as :func:`read_laserscans` describes; ``what`` names
+    the records in a message to ``on_skip`` ("scans", "frames")."""
     try:
         reader, store, ros1 = _open(p)
     except InputError as err:
         if bag_kind(p) != "rosbag1":
             raise
         # A damaged or missing index (strict readers refuse it) need not mean lost messages.
-        yield from _read_tolerant(p, topic, err, on_skip)
+        yield from _read_tolerant(p, topic, err, on_skip, msgtype, convert)
         return
     try:
         conns = list(reader.connections)
-        name = _choose_topic([(c.topic, c.msgtype) for c in conns], topic, p)
+        name = _choose_topic([(c.topic, c.msgtype) for c in conns], topic, p, msgtype)
         chosen = [c for c in conns if c.topic == name]
         index = 0
         messages = reader.messages(connections=chosen)
@@ -257,12 +281,12 @@ def read_laserscans(
                 problem = f"unreadable bag after message {index} of {name}: {_describe(err)}"
                 if on_skip is None:
                     raise InputError(problem, path=p) from None
-                on_skip(f"{p}: {problem}; the scans before it are kept")
+                on_skip(f"{p}: {problem}; the {what} before it are kept")
                 break
             index += 1
-            scan = _decode(store, ros1, conn.msgtype, raw, p, name, index, on_skip)
-            if scan is not None:
-                yield scan
+            record = _decode(store, ros1, conn.msgtype, raw, p, name, index, on_skip, convert)
+            if record is not None:
+                yield record
     finally:
         reader.close()
 
@@ -276,11 +300,13 @@ def _decode(
     topic: str,
     index: int,
     on_skip: Callable[[str], None] | None,
-) -> Scan | None:
-    """One message as a Scan; None (after telling ``on_skip``) when it cannot be decoded."""
+    convert: _Convert[_T],
+) -> _T | None:
+    """One message as ``convert`` makes it; None (after telling ``on_skip``) when it
+    cannot be decoded."""
     try:
         msg = store.deserialize_ros1(raw, msgtype) if ros1 else store.deserialize_cdr(raw, msgtype)
-        return _to_scan(msg, path, index)
+        return convert(msg, path, index)
     except Exception as err:
         problem = err.problem if isinstance(err, InputError) else _describe(err)
         if isinstance(err, InputError) and problem.startswith(f"message {index}: "):
@@ -302,16 +328,20 @@ def laserscan_topic(path: str | Path, topic: str | None = None) -> str | None:
     return _choose_topic([(t.topic, t.msgtype) for t in topics], topic, Path(path))
 
 
-def _choose_topic(topics: list[tuple[str, str]], topic: str | None, path: Path) -> str:
-    """The LaserScan topic to read among ``(topic, msgtype)`` pairs, or an error listing them.
+def _choose_topic(
+    topics: list[tuple[str, str]], topic: str | None, path: Path, msgtype: str = LASERSCAN
+) -> str:
+    """The ``msgtype`` topic to read among ``(topic, msgtype)`` pairs, or an error listing
+    them.
 
-    With ``topic=None`` the bag must hold exactly one LaserScan topic.
+    With ``topic=None`` the bag must hold exactly one topic of ``msgtype``.
     """
     listing = ", ".join(f"{t} ({ty})" for t, ty in sorted(set(topics))) or "none"
+    short = msgtype.rsplit("/", 1)[-1]
     if topic is None:
-        names = sorted({t for t, ty in topics if ty == LASERSCAN})
+        names = sorted({t for t, ty in topics if ty == msgtype})
         if len(names) != 1:
-            what = "no LaserScan topic" if not names else "several LaserScan topics"
+            what = f"no {short} topic" if not names else f"several {short} topics"
             raise InputError(
                 f"bag has {what}; choose one with --topic. Topics: {listing}", path=path
             )
@@ -319,9 +349,9 @@ def _choose_topic(topics: list[tuple[str, str]], topic: str | None, path: Path) 
     types = {ty for t, ty in topics if t == topic}
     if not types:
         raise InputError(f"bag has no topic {topic!r}. Topics: {listing}", path=path)
-    if types != {LASERSCAN}:
-        other = sorted(types - {LASERSCAN})[0]
-        raise InputError(f"topic {topic!r} carries {other}, not {LASERSCAN}", path=path)
+    if types != {msgtype}:
+        other = sorted(types - {msgtype})[0]
+        raise InputError(f"topic {topic!r} carries {other}, not {msgtype}", path=path)
     return topic
 
 
@@ -330,9 +360,12 @@ def _read_tolerant(
     topic: str | None,
     strict_error: InputError,
     on_skip: Callable[[str], None] | None,
-) -> Iterator[Scan]:
+    msgtype: str,
+    convert: _Convert[_T],
+) -> Iterator[_T]:
     """ROS 1 messages by walking the records (see :mod:`mast.io.ros1_tolerant`): a first
-    walk finds the topics, a second yields the chosen one's scans, one chunk at a time."""
+    walk finds the topics, a second yields the chosen one's records, one chunk at a
+    time."""
     from rosbags.typesys import Stores, get_typestore
 
     from mast.io.ros1_tolerant import BagFormatError, iter_ros1_bag
@@ -348,14 +381,14 @@ def _read_tolerant(
             ) from None
 
     # ROS 1 names types "pkg/Type"; rosbags and this module say "pkg/msg/Type".
-    def msgtype(m: Any) -> str:
+    def type_of(m: Any) -> str:
         t = str(m.msgtype)
         return t if "/msg/" in t else t.replace("/", "/msg/", 1)
 
-    topics = sorted({(m.topic, msgtype(m)) for m in walk()})
+    topics = sorted({(m.topic, type_of(m)) for m in walk()})
     if not topics and damage:
         raise InputError(f"no intact message before the damage: {damage[0]}", path=path)
-    topic = _choose_topic(topics, topic, path)
+    topic = _choose_topic(topics, topic, path, msgtype)
     damage.clear()
     store = get_typestore(Stores.ROS1_NOETIC)
     index = 0
@@ -363,9 +396,9 @@ def _read_tolerant(
         if m.topic != topic:
             continue
         index += 1
-        scan = _decode(store, True, LASERSCAN, m.data, path, topic, index, on_skip)
-        if scan is not None:
-            yield scan
+        record = _decode(store, True, msgtype, m.data, path, topic, index, on_skip, convert)
+        if record is not None:
+            yield record
     if damage and on_skip is not None:
         on_skip(f"{path}: {damage[0]}; the {index} message(s) of {topic} before it are kept")
 
@@ -392,49 +425,84 @@ def write_laserscans(
     bag's chunks. Beams must be evenly spaced, as a LaserScan has one
     ``angle_increment``. Each scan's ``stamp_ns`` is its bag time.
     """
+    return _write_messages(
+        Path(path),
+        ((int(s.stamp_ns), s) for s in scans),
+        LASERSCAN,
+        laserscan_bytes,
+        kind=kind,
+        topic=topic,
+        compression=compression,
+    )
+
+
+def _write_messages(
+    p: Path,
+    records: Iterable[tuple[int, _T]],
+    msgtype: str,
+    serialise: Callable[..., bytes],
+    *,
+    kind: BagKind,
+    topic: str,
+    compression: str = "none",
+) -> int:
+    """Write ``(bag time ns, record)`` pairs on ``topic`` as ``msgtype`` messages, each
+    made by ``serialise(store, record, seq, ros1=...)``, whole or not at all; returns the
+    number written."""
     from rosbags.typesys import Stores, get_typestore
 
-    p = Path(path)
     if p.exists():
         raise InputError("exists already; not overwriting a bag", path=p)
     ros1 = kind == "rosbag1"
     store = get_typestore(Stores.ROS1_NOETIC if ros1 else Stores.ROS2_HUMBLE)
+
+    def write(target: Path) -> int:
+        return _write_into(
+            target,
+            records,
+            msgtype,
+            serialise,
+            kind=kind,
+            topic=topic,
+            store=store,
+            compression=compression,
+        )
+
     # Whole or not at all: written under a temporary name, renamed when complete. A ROS 2
     # bag names its storage file after its folder, so it is staged in a temporary folder
     # under its own name.
     if ros1:
         with atomic_path(p) as tmp:
-            n = _write_scans(
-                tmp, scans, ros1=ros1, kind=kind, topic=topic, store=store, compression=compression
-            )
+            n = write(tmp)
         return n
     try:
         staging = tempfile.TemporaryDirectory(dir=p.parent, prefix=f".{p.name}.")
         with staging as stage:
             staged = Path(stage) / p.name
-            n = _write_scans(staged, scans, ros1=ros1, kind=kind, topic=topic, store=store)
+            n = write(staged)
             os.replace(staged, p)
     except OSError as err:
         raise OutputError(f"cannot write: {err.strerror or err}", path=p) from None
     return n
 
 
-def _write_scans(
+def _write_into(
     path: Path,
-    scans: Iterable[Scan],
+    records: Iterable[tuple[int, _T]],
+    msgtype: str,
+    serialise: Callable[..., bytes],
     *,
-    ros1: bool,
     kind: BagKind,
     topic: str,
     store: Any,
     compression: str = "none",
 ) -> int:
-    """:func:`write_laserscans` into ``path`` (a temporary name its caller renames)."""
-    if ros1:
+    """:func:`_write_messages` into ``path`` (a temporary name its caller renames)."""
+    if kind == "rosbag1":
         from rosbags.rosbag1 import Writer as Writer1
 
         writer: Any = Writer1(path)
-        # rosbag record's chunk size: a bag cut short loses at most one chunk of scans.
+        # rosbag record's chunk size: a bag cut short loses at most one chunk of messages.
         writer.chunk_threshold = ROS1_CHUNK_BYTES
         if compression != "none":  # as rosbag record --bz2 / --lz4 writes
             writer.set_compression(Writer1.CompressionFormat[compression.upper()])
@@ -446,9 +514,9 @@ def _write_scans(
         writer = Writer2(path, version=Writer2.VERSION_LATEST, storage_plugin=plugin)
     n = 0
     with writer:
-        conn = writer.add_connection(topic, LASERSCAN, typestore=store)
-        for seq, scan in enumerate(scans):
-            writer.write(conn, int(scan.stamp_ns), laserscan_bytes(store, scan, seq, ros1=ros1))
+        conn = writer.add_connection(topic, msgtype, typestore=store)
+        for seq, (stamp_ns, record) in enumerate(records):
+            writer.write(conn, stamp_ns, serialise(store, record, seq, ros1=kind == "rosbag1"))
             n += 1
     return n
 
