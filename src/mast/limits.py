@@ -27,6 +27,7 @@ __all__ = [
     "MAX_BAG_CHUNK_BYTES",
     "MAX_BEACONS",
     "MAX_BEAMS",
+    "MAX_CLOUD_POINTS",
     "MAX_COORDINATE_M",
     "MAX_CRS_BYTES",
     "MAX_ELEVATION_M",
@@ -57,6 +58,9 @@ MAX_METADATA_BYTES = 1024 * 1024
 MAX_CRS_BYTES = 1024 * 1024
 #: Beams in one scan (a 360-degree scan at 0.01 degrees is 36 000): 1 000 000.
 MAX_BEAMS = 1_000_000
+#: Points in one 3D lidar frame, NaNs for no return counted (a 128-ring lidar at 2048
+#: columns gives 262 144): 4 000 000.
+MAX_CLOUD_POINTS = 4_000_000
 #: Beacons in one survey (a whole mine holds thousands): 100 000.
 MAX_BEACONS = 100_000
 #: Largest easting or northing, metres: any projected grid (UTM northings reach 1e7 m).
