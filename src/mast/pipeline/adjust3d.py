@@ -111,15 +111,19 @@ class PanelPlanes:
         gate_m: float,
         *,
         top_margin_m: float = math.inf,
+        clear_m: float | None = None,
+        bottoms: NDArray[np.float64] | None = None,
     ) -> NDArray[np.intp]:
         """The panel each grid point (n, 3), seen from the sensor at ``origin``, lies
         on, or -1: within ``gate_m`` of its plane along its ray, the ray crossing it inside
-        the panel's plan extent (kept clear of the wall at a free end by twice the gate
-        over :attr:`wall_sine`, and by twice the gate at a joint), within the gate of no
+        the panel's plan extent (kept clear of the wall at a free end by ``clear_m``,
+        twice the gate unless given, over :attr:`wall_sine`, and by it at a joint),
+        within the gate of no
         other panel, and, where the top is known,
         not above it by more than ``top_margin_m``. Where the ray crosses, not where
         the return lies: a return's range noise moves it along its ray, and choosing
         by its own place would keep, near an end, those whose noise pointed one way."""
+        clear = 2.0 * gate_m if clear_m is None else clear_m
         o = np.asarray(origin, dtype=float).reshape(3)
         rel = grid - o
         reach = np.linalg.norm(rel, axis=1)
@@ -135,11 +139,13 @@ class PanelPlanes:
             off = np.abs(1.0 - s) * reach
             cross = o + s[:, None] * rel
             t = (cross[:, :2] - self.start[k]) @ self.along[k]
-            lo = 2.0 * gate_m / max(float(self.wall_sine[k, 0]), 0.2)
-            hi = self.length[k] - 2.0 * gate_m / max(float(self.wall_sine[k, 1]), 0.2)
+            lo = clear / max(float(self.wall_sine[k, 0]), 0.2)
+            hi = self.length[k] - clear / max(float(self.wall_sine[k, 1]), 0.2)
             on = (off < gate_m) & (t > lo) & (t < hi) & (s > 0)
             if math.isfinite(self.top[k]) and math.isfinite(top_margin_m):
                 on &= cross[:, 2] <= self.top[k] + top_margin_m
+            if bottoms is not None and math.isfinite(bottoms[k]):
+                on &= cross[:, 2] >= bottoms[k]
             claims += on
             closer = on & (off < best)
             which[closer], best[closer] = k, off[closer]
@@ -148,6 +154,29 @@ class PanelPlanes:
 
     def __len__(self) -> int:
         return len(self.beacon)
+
+    def bottoms(
+        self,
+        grid: NDArray[np.float64],
+        origin: NDArray[np.float64],
+        which: NDArray[np.intp],
+        margin_m: float,
+    ) -> NDArray[np.float64]:
+        """Each panel's bottom as its returns show it: the lowest crossing of the middle
+        half of the panel (where no wall is near its plane) less ``margin_m``; NaN for a
+        panel without returns there. Near a free end the wall below a panel is within
+        the gate of its plane; below this it is not taken for the panel."""
+        o = np.asarray(origin, dtype=float).reshape(3)
+        out = np.full(len(self), np.nan)
+        for k in np.unique(which[which >= 0]):
+            mine = grid[which == k]
+            t = (mine[:, :2] - self.start[k]) @ self.along[k]
+            mid = np.abs(t - self.length[k] / 2) < self.length[k] / 4
+            if mid.any():
+                rel = mine[mid] - o
+                s = (self.offset[k] - o[:2] @ self.normal[k]) / (rel[:, :2] @ self.normal[k])
+                out[k] = float((o[2] + s * rel[:, 2]).min()) - margin_m
+        return out
 
 
 @dataclass(frozen=True, slots=True)

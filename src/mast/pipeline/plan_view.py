@@ -24,6 +24,7 @@ where the 3D adjustment starts (docs/3d.md).
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import numpy as np
@@ -33,7 +34,7 @@ from mast.core.pose3d import Frame3D
 from mast.core.scan import Scan
 from mast.errors import InputError
 
-__all__ = ["level_rotation", "plan_scan"]
+__all__ = ["estimate_up", "level_rotation", "plan_scan"]
 
 
 def level_rotation(up: ArrayLike) -> NDArray[np.float64]:
@@ -97,3 +98,97 @@ def plan_scan(
         stamp_ns=frame.stamp_ns,
         frame_id=frame.frame_id,
     )
+
+
+def estimate_up(
+    frame: Frame3D,
+    *,
+    sample: int = 6000,
+    neighbours: int = 10,
+    flatness: float = 0.02,
+) -> NDArray[np.float64]:
+    """The grid's vertical in the sensor frame, from the frame's own surfaces.
+
+    Walls and panels are vertical, so their normals are horizontal: the vertical is
+    the direction the wall normals are least along (the smallest eigenvector of the
+    sum of their outer products). In a straight drift the walls face one way and leave
+    the direction along the drift free as well; there the floor and the roof, whose
+    normals are the vertical tilted by the grade along the drift, choose within the two
+    the walls leave. A pitch left off by the grade turns a wall's plan view along the
+    wall, and is the 3D adjustment's to find (docs/3d.md).
+
+    Normals come from the rings where the frame says which ring each return is: at a
+    return, the cross product of the step to the next return of its ring and the step
+    to the nearest return, by bearing, of the ring above (a ring alone is a line, and
+    the nearest returns of a return are mostly on its own ring). Without rings, from
+    the ``neighbours`` nearest returns of ``sample`` returns, kept where that patch is
+    flat and not a line (its smallest eigenvalue below ``flatness`` of the sum, its
+    middle one above a tenth)."""
+    normals = _ring_normals(frame, sample) if frame.ring is not None else None
+    if normals is None:
+        normals = _patch_normals(frame.points, sample, neighbours, flatness)
+    z = np.abs(normals[:, 2])
+    walls = normals[z < math.sin(math.radians(45.0))]
+    level = normals[z > math.cos(math.radians(30.0))]
+    if len(walls) < 20:
+        return np.array([0.0, 0.0, 1.0])
+    _, axes = np.linalg.eigh(walls.T @ walls)
+    span = axes[:, :2]  # the two directions the walls leave free
+    guide = np.array([0.0, 0.0, 1.0])
+    if len(level) >= 20:
+        level = level * np.sign(level[:, 2])[:, None]
+        guide = level.mean(axis=0)
+    up = span @ (span.T @ guide)
+    norm = float(np.linalg.norm(up))
+    if norm < 0.5:  # the walls leave a vertical far from the floor's: trust neither
+        return np.array([0.0, 0.0, 1.0])
+    return np.asarray(up / norm, dtype=np.float64)
+
+
+def _patch_normals(
+    p: NDArray[np.float64], sample: int, neighbours: int, flatness: float
+) -> NDArray[np.float64]:
+    from scipy.spatial import cKDTree
+
+    if len(p) < 3 * neighbours:
+        return np.zeros((0, 3))
+    centres = p[:: max(1, len(p) // sample)]
+    _, idx = cKDTree(p).query(centres, k=neighbours)
+    patch = p[idx] - p[idx].mean(axis=1, keepdims=True)
+    values, vectors = np.linalg.eigh(np.einsum("nki,nkj->nij", patch, patch))
+    total = values.sum(axis=1)
+    flat = (values[:, 0] < flatness * total) & (values[:, 1] > 0.1 * total)
+    return np.asarray(vectors[flat, :, 0], dtype=np.float64)
+
+
+def _ring_normals(frame: Frame3D, sample: int) -> NDArray[np.float64] | None:
+    """Normals from each ring and the one above it (see :func:`estimate_up`); None when
+    the frame has fewer than two rings."""
+    assert frame.ring is not None
+    p = frame.points
+    rings = np.unique(frame.ring)
+    if rings.size < 2:
+        return None
+    bearing = np.arctan2(p[:, 1], p[:, 0])
+    elevation = np.arctan2(p[:, 2], np.hypot(p[:, 0], p[:, 1]))
+    by_ring = []
+    for r in rings:
+        idx = np.flatnonzero(frame.ring == r)
+        idx = idx[np.argsort(bearing[idx])]
+        by_ring.append((float(np.median(elevation[idx])), idx))
+    by_ring.sort(key=lambda item: item[0])  # bottom to top, whatever the driver's numbering
+    stride = max(1, len(p) // sample)
+    out = []
+    for (_, low), (_, high) in itertools.pairwise(by_ring):
+        if low.size < 3 or high.size < 2:
+            continue
+        here = low[:-1:stride]
+        along = p[low[1::stride][: here.size]] - p[here]
+        at = np.clip(np.searchsorted(bearing[high], bearing[here]), 0, high.size - 1)
+        up = p[high[at]] - p[here]
+        n = np.cross(along, up)
+        size = np.linalg.norm(n, axis=1)
+        ok = (np.linalg.norm(along, axis=1) < 0.3) & (np.linalg.norm(up, axis=1) < 0.6)
+        ok &= size > 1e-6
+        out.append(n[ok] / size[ok, None])
+    return np.vstack(out) if out else np.zeros((0, 3))
