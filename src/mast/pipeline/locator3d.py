@@ -6,8 +6,9 @@ view, then the six-parameter adjustment on the panels it names (docs/3d.md).
 2. **The plan view** (:func:`~mast.pipeline.plan_view.plan_scan`): the frame levelled
    by it, the band about the sensor's height projected, as one 2D scan.
 3. **The 2D fix** (:func:`mast.pipeline.locator.locate`): easting, northing and azimuth,
-   the beacons told from clutter, with every test of 2D. No 2D fix, no 3D fix: its
-   reason is the frame's.
+   the beacons told from clutter, with every test of 2D; where the plan view finds
+   none, the vertical pitched by a grade's worth (:data:`PITCH_TRIES_DEG`). No 2D fix,
+   no 3D fix: its reason is the frame's.
 4. **The start**: the 2D pose with the levelling's pitch and roll; the elevation from
    the highest return on each panel, which is below that panel's top.
 5. **The adjustment** (:func:`mast.pipeline.adjust3d.adjust_pose`), twice: once on the
@@ -38,6 +39,9 @@ from mast.pipeline.plan_view import estimate_up, level_rotation, plan_scan
 
 __all__ = ["Fix3D", "Locator3DConfig", "locate3d"]
 
+#: The pitches about the estimated vertical the plan view is tried at, in turn, degrees.
+PITCH_TRIES_DEG = (0.0, 4.0, -4.0, 8.0, -8.0)
+
 
 @dataclass(frozen=True, slots=True)
 class Locator3DConfig:
@@ -65,7 +69,7 @@ class Locator3DConfig:
     survey_sigma_m: float = 0.003
     band_m: tuple[float, float] = (-0.5, 1.0)
     plan_resolution_deg: float = 0.25
-    min_panel_returns: int = 12
+    min_panel_returns: int = 6
     first_gate_m: float = 0.1
     reject_alpha: float = 1e-3
 
@@ -145,12 +149,17 @@ def locate3d(
 
     up = estimate_up(frame)
     t = lap("vertical", t0)
-    scan = plan_scan(frame, up=up, band=cfg.band_m, resolution_deg=cfg.plan_resolution_deg)
-    plan = locate(
-        scan,
-        survey,
-        config=LocatorConfig(range_sigma_m=cfg.range_sigma_m, survey_sigma_m=cfg.survey_sigma_m),
-    )
+    plan_cfg = LocatorConfig(range_sigma_m=cfg.range_sigma_m, survey_sigma_m=cfg.survey_sigma_m)
+    level = level_rotation(up)
+    for tilt in PITCH_TRIES_DEG:
+        # the walls leave the pitch along the drift to the floor, which a grade tilts:
+        # where the plan view finds no fix, the same vertical pitched by a grade's worth
+        a = math.radians(tilt)
+        up = level.T @ np.array([math.sin(a), 0.0, math.cos(a)])
+        scan = plan_scan(frame, up=up, band=cfg.band_m, resolution_deg=cfg.plan_resolution_deg)
+        plan = locate(scan, survey, config=plan_cfg)
+        if plan.ok:
+            break
     t = lap("plan", t)
 
     def refused(reason: str | None, detail: str, adj: Adjustment3D | None = None) -> Fix3D:
