@@ -121,7 +121,7 @@ def _one(
     from mast.core.scan import stamp_of
     from mast.live.ros2 import ScanPublisher
     from mast.live.ros2_msgs import PoseWithCovarianceStamped, String, dds_topic
-    from mast.live.sources import read_run
+    from mast.live.sources import paced, read_run
 
     t0 = time.perf_counter()
     survey, bag, truth = simulate_drive(folder, scans, rate_hz, seed)
@@ -193,12 +193,7 @@ def _one(
         node.stderr.readline()  # "listening ...": the node is up
         while publisher.matched() == 0:
             time.sleep(0.01)
-        period = 1.0 / rate_hz
-        start = time.perf_counter()
-        for i, scan in enumerate(read_run(bag)):
-            due = start + i * period
-            while (left := due - time.perf_counter()) > 0:
-                time.sleep(min(left, 0.002))
+        for scan in paced(read_run(bag), threading.Event(), hz=rate_hz):
             sent[scan.stamp_ns] = time.perf_counter()
             publisher.publish(scan)
         _, err = node.communicate(timeout=120)
@@ -210,10 +205,10 @@ def _one(
     del readers
     summary = err.strip().splitlines()[-1] if err.strip() else ""
     echo(f"  the node: {summary}")
-    dropped = int(summary.split(" dropped")[0].rsplit(" ", 1)[-1]) if " dropped" in summary else -1
     with lock:
         recs = {r["stamp_ns"]: r for r in records}
         poses = dict(arrived)
+    dropped = sum(r["dropped"] for r in recs.values())  # each record counts those before it
     latency, locator, overhead = [], [], []
     for stamp, t_pose in poses.items():
         e2e = 1e3 * (t_pose - sent[stamp])
@@ -247,7 +242,7 @@ def _one(
         published=len(sent),
         located=len(recs),
         dropped=dropped,
-        lost=len(sent) - len(recs) - max(dropped, 0),
+        lost=len(sent) - len(recs) - dropped,
         fixed=sum(r["status"] == "fix" for r in recs.values()),
         latency_ms=_spread(latency),
         locator_ms=_spread(locator),

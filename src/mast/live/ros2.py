@@ -49,6 +49,7 @@ from mast.live.ros2_msgs import (
     pose_message,
     tf_message,
 )
+from mast.live.sources import paced
 from mast.live.stream import Received, Source, SourceOptions
 from mast.pipeline.locator import Fix
 
@@ -216,42 +217,23 @@ class Ros2Publisher:
     """Each record published: the pose and the transform of a fix, the JSON of every one
     (a :class:`~mast.live.session.Sink` of the live loop)."""
 
-    def __init__(
-        self,
-        dp: DomainParticipant,
-        *,
-        frame: str,
-        pose_topic: str = "/mast/pose",
-        fix_topic: str = "/mast/fix",
-        tf: bool = True,
-    ) -> None:
+    def __init__(self, dp: DomainParticipant, *, frame: str, tf: bool = True) -> None:
         if not frame.strip() or any(c.isspace() for c in frame):
             raise InputError(f"--frame {frame!r}: give a frame id such as map")
         self.frame = frame
-        self._pose = DataWriter(
-            dp,
-            Topic(dp, dds_topic(pose_topic), PoseWithCovarianceStamped),
-            qos=_reliable(10, keep=True),
-        )
-        self._fix = DataWriter(
-            dp, Topic(dp, dds_topic(fix_topic), String), qos=_reliable(10, keep=True)
-        )
-        self._tf = (
-            DataWriter(dp, Topic(dp, dds_topic("/tf"), TFMessage), qos=_reliable(10, keep=True))
-            if tf
-            else None
-        )
-        self.published = 0
+
+        def writer(topic: str, kind: type) -> DataWriter[Any]:
+            return DataWriter(dp, Topic(dp, dds_topic(topic), kind), qos=_reliable(10, keep=True))
+
+        self._pose = writer("/mast/pose", PoseWithCovarianceStamped)
+        self._fix = writer("/mast/fix", String)
+        self._tf = writer("/tf", TFMessage) if tf else None
 
     def scan(self, scan: Scan) -> None:
         """Scans are the robot's own: not published again."""
 
     def fix(self, scan: Scan, fix: Fix, record: dict[str, Any]) -> None:
         """``fix`` of ``scan`` (stamped as the scan) and its ``record``."""
-        self.publish(scan, fix, json.dumps(record))
-
-    def publish(self, scan: Scan, fix: Fix, text: str) -> None:
-        """``fix`` of ``scan`` (stamped as the scan) and its record ``text``."""
         if fix.ok and fix.pose is not None and fix.adjustment is not None:
             cov = fix.adjustment.covariance
             self._pose.write(pose_message(fix.pose, cov, stamp=scan.stamp_ns, frame=self.frame))
@@ -260,12 +242,7 @@ class Ros2Publisher:
                 self._tf.write(
                     tf_message(fix.pose, stamp=scan.stamp_ns, frame=self.frame, child=child)
                 )
-            self.published += 1
-        self._fix.write(String(text))
-
-    def matched(self) -> int:
-        """Subscribers of the pose topic matched now."""
-        return len(self._pose.get_matched_subscriptions())
+        self._fix.write(String(json.dumps(record)))
 
 
 def play(
@@ -276,15 +253,10 @@ def play(
     hz: float | None = None,
 ) -> int:
     """Publish ``scans`` as a driver would: at their recorded spacing, or ``hz`` a
-    second, stamps as recorded, until they end or ``stop`` is set; how many were sent."""
-    t0: float | None = None
-    s0 = sent = 0
-    for scan in scans:
-        if t0 is None:
-            t0, s0 = time.perf_counter(), scan.stamp_ns
-        due = t0 + (sent / hz if hz is not None else (scan.stamp_ns - s0) / 1e9)
-        if stop.wait(max(0.0, due - time.perf_counter())):
-            break
+    second (:func:`mast.live.sources.paced`), stamps as recorded, until they end or
+    ``stop`` is set; how many were sent."""
+    sent = 0
+    for scan in paced(scans, stop, hz=hz):
         publisher.publish(scan)
         sent += 1
     return sent

@@ -21,7 +21,7 @@ import math
 import threading
 import time
 import urllib.parse
-from collections.abc import Callable, Generator, Iterator
+from collections.abc import Callable, Generator, Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -31,7 +31,7 @@ from mast.io.scans import DEFAULT_CSV_HZ
 from mast.live.protocols import PROTOCOLS
 from mast.live.stream import Received, Source, SourceOptions
 
-__all__ = ["ReplaySource", "open_source", "read_run"]
+__all__ = ["ReplaySource", "open_source", "paced", "read_run"]
 
 
 # --------------------------------------------------------------------------- replay
@@ -80,23 +80,32 @@ class ReplaySource(Source):
 
     def _paced(self, scans: Iterator[Scan], stop: threading.Event) -> Iterator[Received]:
         o = self.options
-        t0: float | None = None
-        s0 = 0
-        for scan in scans:
+        for scan in paced(scans, stop, rate=self.rate):
             if o.range_min_m is not None or o.range_max_m is not None:
                 scan = scan.with_range_limits(o.range_min_m, o.range_max_m)
-            if t0 is None:
-                t0, s0 = time.perf_counter(), scan.stamp_ns
-            due = t0 + (scan.stamp_ns - s0) / 1e9 / self.rate
-            while not stop.is_set():
-                left = due - time.perf_counter()
-                if left <= 0:
-                    break
-                stop.wait(min(left, 0.1)) if left > 0.002 else time.sleep(0)
-            if stop.is_set():
-                return
             self.stats.scans += 1
             yield Received(scan, time.time_ns(), time.perf_counter())
+
+
+def paced(
+    scans: Iterable[Scan], stop: threading.Event, *, rate: float = 1.0, hz: float | None = None
+) -> Iterator[Scan]:
+    """Each scan when it is due: at its recorded spacing divided by ``rate``, or ``hz`` a
+    second; until the scans end or ``stop`` is set."""
+    t0: float | None = None
+    s0 = 0
+    for n, scan in enumerate(scans):
+        if t0 is None:
+            t0, s0 = time.perf_counter(), scan.stamp_ns
+        due = t0 + (n / hz if hz is not None else (scan.stamp_ns - s0) / 1e9 / rate)
+        while not stop.is_set():
+            left = due - time.perf_counter()
+            if left <= 0:
+                break
+            stop.wait(min(left, 0.1)) if left > 0.002 else time.sleep(0)
+        if stop.is_set():
+            return
+        yield scan
 
 
 # --------------------------------------------------------------------------- URLs

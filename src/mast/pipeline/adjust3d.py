@@ -104,6 +104,18 @@ class PanelPlanes:
             wall_sine=np.array(sines, dtype=float).reshape(-1, 2),
         )
 
+    def crossing(
+        self, k: int, origin: NDArray[np.float64], rel: NDArray[np.float64]
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+        """Where the rays from ``origin`` to ``origin + rel`` (n, 3) cross panel ``k``'s
+        plane: how far along each ray (1 at its return), how far along the panel from
+        its first edge, and at what elevation."""
+        n = self.normal[k]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            s = (self.offset[k] - origin[:2] @ n) / (rel[:, :2] @ n)
+        cross = origin + s[:, None] * rel
+        return s, (cross[:, :2] - self.start[k]) @ self.along[k], cross[:, 2]
+
     def assign(
         self,
         grid: NDArray[np.float64],
@@ -115,14 +127,15 @@ class PanelPlanes:
         bottoms: NDArray[np.float64] | None = None,
     ) -> NDArray[np.intp]:
         """The panel each grid point (n, 3), seen from the sensor at ``origin``, lies
-        on, or -1: within ``gate_m`` of its plane along its ray, the ray crossing it inside
-        the panel's plan extent (kept clear of the wall at a free end by ``clear_m``,
-        twice the gate unless given, over :attr:`wall_sine`, and by it at a joint),
-        within the gate of no
-        other panel, and, where the top is known,
-        not above it by more than ``top_margin_m``. Where the ray crosses, not where
-        the return lies: a return's range noise moves it along its ray, and choosing
-        by its own place would keep, near an end, those whose noise pointed one way."""
+        on, or -1: within ``gate_m`` of its plane along its ray; the ray crossing it
+        inside the panel's plan extent (kept clear of the wall at a free end by
+        ``clear_m``, twice the gate unless given, over :attr:`wall_sine`, and by it at
+        a joint), not above its top by more than ``top_margin_m`` where the top is
+        known, and not below ``bottoms`` (per panel, where given: the survey has no
+        bottom edge, the data do); within the gate of no other panel. Where the ray
+        crosses, not where the return lies: a return's range noise moves it along its
+        ray, and choosing by its own place would keep, near an end, those whose noise
+        pointed one way."""
         clear = 2.0 * gate_m if clear_m is None else clear_m
         o = np.asarray(origin, dtype=float).reshape(3)
         rel = grid - o
@@ -131,21 +144,17 @@ class PanelPlanes:
         best = np.full(len(grid), gate_m)
         claims = np.zeros(len(grid), dtype=np.intp)
         for k in range(len(self)):
-            n, d = self.normal[k], self.offset[k]
-            with np.errstate(divide="ignore", invalid="ignore"):
-                s = (d - o[:2] @ n) / (rel[:, :2] @ n)
+            s, t, z = self.crossing(k, o, rel)
             # how far along its ray the return lies from the plane: its range error,
             # were it on the panel (a gate on it keeps both signs of the noise alike)
             off = np.abs(1.0 - s) * reach
-            cross = o + s[:, None] * rel
-            t = (cross[:, :2] - self.start[k]) @ self.along[k]
             lo = clear / max(float(self.wall_sine[k, 0]), 0.2)
             hi = self.length[k] - clear / max(float(self.wall_sine[k, 1]), 0.2)
             on = (off < gate_m) & (t > lo) & (t < hi) & (s > 0)
             if math.isfinite(self.top[k]) and math.isfinite(top_margin_m):
-                on &= cross[:, 2] <= self.top[k] + top_margin_m
+                on &= z <= self.top[k] + top_margin_m
             if bottoms is not None and math.isfinite(bottoms[k]):
-                on &= cross[:, 2] >= bottoms[k]
+                on &= z >= bottoms[k]
             claims += on
             closer = on & (off < best)
             which[closer], best[closer] = k, off[closer]
@@ -173,9 +182,8 @@ class PanelPlanes:
             t = (mine[:, :2] - self.start[k]) @ self.along[k]
             mid = np.abs(t - self.length[k] / 2) < self.length[k] / 4
             if mid.any():
-                rel = mine[mid] - o
-                s = (self.offset[k] - o[:2] @ self.normal[k]) / (rel[:, :2] @ self.normal[k])
-                out[k] = float((o[2] + s * rel[:, 2]).min()) - margin_m
+                _, _, z = self.crossing(k, o, mine[mid] - o)
+                out[k] = float(z.min()) - margin_m
         return out
 
 
@@ -235,10 +243,7 @@ def _top_edges(
         n, d = planes.normal[k], planes.offset[k]
         across = grid[:, :2] @ n - d
         side = float(origin[:2] @ n - d)
-        denom = rel[:, :2] @ n
-        with np.errstate(divide="ignore", invalid="ignore"):
-            s = (d - origin[:2] @ n) / denom  # where each ray crosses the plane, 0..1
-        t = (origin[:2] + s[:, None] * rel[:, :2] - planes.start[k]) @ planes.along[k]
+        s, t, _ = planes.crossing(k, origin, rel)  # s: where each ray crosses, 0..1
         over = (s > 0) & (s < 1) & (t > inset_m) & (t < planes.length[k] - inset_m)
         over &= (across * side < 0) & (np.abs(across) >= gate_m) & (rel[:, 2] > 0)
         if not over.any():
