@@ -223,6 +223,22 @@ def list_topics(path: str | Path) -> list[TopicInfo]:
         reader.close()
 
 
+def indexed_count(
+    path: str | Path,
+    topic: str | None,
+    choose: Callable[[str | Path, str | None], str | None],
+) -> int | None:
+    """How many messages the topic ``choose(path, topic)`` picks holds, from the bag's
+    index or metadata (no message is read); None when that is not known (a damaged bag,
+    no such topic). For a progress bar's total, never a limit."""
+    try:
+        name = choose(path, topic)
+        n = sum(t.count for t in list_topics(path) if t.topic == name)
+    except InputError:
+        return None
+    return n or None
+
+
 def read_laserscans(
     path: str | Path,
     *,

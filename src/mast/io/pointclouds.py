@@ -42,6 +42,7 @@ from mast.io.bags import (
     _choose_topic,
     _read_messages,
     _write_messages,
+    indexed_count,
     list_topics,
 )
 
@@ -295,12 +296,7 @@ def pointcloud_count(path: str | Path, topic: str | None = None) -> int | None:
     """How many PointCloud2 messages the topic read holds, from the bag's index or
     metadata (no message is read); None when that is not known (a damaged bag, no such
     topic). For a progress bar's total, never a limit."""
-    try:
-        name = pointcloud_topic(path, topic)
-        n = sum(t.count for t in list_topics(path) if t.topic == name)
-    except InputError:
-        return None
-    return n or None
+    return indexed_count(path, topic, pointcloud_topic)
 
 
 def write_pointclouds(

@@ -150,14 +150,9 @@ def _bag_topic(path: Path, topic: str | None) -> str | None:
 def _bag_count(path: Path, topic: str | None) -> int | None:
     """The LaserScan messages of the topic read, from the bag's index or metadata (no
     message is read); None for a bag whose index does not say (a damaged one)."""
-    from mast.io.bags import laserscan_topic, list_topics
+    from mast.io.bags import indexed_count, laserscan_topic
 
-    try:
-        name = laserscan_topic(path, topic)
-        n = sum(t.count for t in list_topics(path) if t.topic == name)
-    except InputError:
-        return None
-    return n or None
+    return indexed_count(path, topic, laserscan_topic)
 
 
 def _bag_read(path: Path, how: ScanReading) -> Generator[Scan, None, None]:
