@@ -29,6 +29,7 @@ __all__ = [
     "bound_of",
     "cramer_rao_bound",
     "information",
+    "inverse_bound",
     "truth_bound",
     "truth_information",
 ]
@@ -93,17 +94,25 @@ def bound_of(info: NDArray[np.float64]) -> NDArray[np.float64]:
 MAX_CONDITION = 1e14
 
 
-def _bound_reference(info: NDArray[np.float64]) -> NDArray[np.float64]:
-    """:func:`bound_of` in numpy, the compiled kernel's reference."""
+def inverse_bound(info: NDArray[np.float64]) -> NDArray[np.float64]:
+    """:func:`bound_of` in numpy, for an information of any size: ``info^-1``, or ``inf``
+    on the diagonal (0 off it) when ``info`` is not finite, singular, its inverse not
+    finite, or its condition number above :data:`MAX_CONDITION`. The compiled 3×3
+    kernel's reference, and the six-parameter bound's (:mod:`mast.pipeline.bounds3d`)."""
+    fail = np.diag([math.inf] * len(info))
     if not np.all(np.isfinite(info)):
-        return np.diag([math.inf] * 3)
+        return fail
     try:
         out: NDArray[np.float64] = np.asarray(np.linalg.inv(info), dtype=np.float64)
     except np.linalg.LinAlgError:
-        return np.diag([math.inf] * 3)
+        return fail
     if not np.all(np.isfinite(out)) or np.linalg.cond(info) > MAX_CONDITION:
-        return np.diag([math.inf] * 3)
+        return fail
     return out
+
+
+#: :func:`bound_of`'s reference (the name its kernel tests use).
+_bound_reference = inverse_bound
 
 
 def cramer_rao_bound(
