@@ -78,6 +78,49 @@ def bench_accuracy(
     run_accuracy(poses=poses, draws=draws, seed=seed, out_dir=out, echo=typer.echo)
 
 
+@bench_app.command("accuracy3d")
+def bench_accuracy3d(
+    out: Annotated[Path | None, typer.Option("--out", help="Folder for the CSV files.")] = None,
+    frames: Annotated[
+        int, typer.Option("--frames", min=1, help="Owed frames per configuration.")
+    ] = 60,
+    seed: Annotated[int, typer.Option("--seed", help="Seed of the simulated drifts.")] = 0,
+    lidar: Annotated[
+        list[str] | None,
+        typer.Option("--lidar", help="Only this lidar (vlp16, os1-64); may be repeated."),
+    ] = None,
+    range_sigma: Annotated[
+        list[float] | None,
+        typer.Option(
+            "--range-sigma", help="Only this range sigma, metres (0.01, 0.02, 0.03); repeatable."
+        ),
+    ] = None,
+) -> None:
+    """The 3D locator against the six-parameter Cramer-Rao bound: fix rate where owed,
+    wrong fixes, RMS/CRB and 95 % coverage per parameter, errors and time per frame, for
+    VLP-16 and OS1-64 frames at 1, 2 and 3 cm, with and without look-alikes.
+
+    \b
+    Example: mast bench accuracy3d --frames 5 --lidar vlp16 --range-sigma 0.02
+    """
+    from mast.bench.accuracy3d import ACCURACY3D_CONFIGS, run_accuracy3d
+
+    if out is not None:
+        check_output_folder(out)
+    configs = [
+        c
+        for c in ACCURACY3D_CONFIGS
+        if (not lidar or c.lidar in lidar)
+        and (not range_sigma or any(abs(c.range_sigma_m - s) < 1e-9 for s in range_sigma))
+    ]
+    if not configs:
+        raise InputError(
+            "no 3D configuration matches --lidar and --range-sigma; known: lidars vlp16 and "
+            "os1-64, range sigmas 0.01, 0.02 and 0.03"
+        )
+    run_accuracy3d(configs=configs, frames=frames, seed=seed, out_dir=out, echo=typer.echo)
+
+
 @bench_app.command("survey")
 def bench_survey(
     beacons: Annotated[
