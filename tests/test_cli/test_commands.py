@@ -53,6 +53,7 @@ def test_demo_prints_the_table2_comparison() -> None:
     assert "12 mm range noise" in r.output
     for pos in ("P1", "P2", "P3", "P4", "P5", "P6", "P7"):
         assert pos in r.output
+    assert "3D: one simulated VLP-16 frame" in r.output  # tests/test_cli/test_demo3d.py
 
 
 @pytest.mark.parametrize(

@@ -83,7 +83,7 @@ def bench_accuracy3d(
     out: Annotated[Path | None, typer.Option("--out", help="Folder for the CSV files.")] = None,
     frames: Annotated[
         int, typer.Option("--frames", min=1, help="Owed frames per configuration.")
-    ] = 60,
+    ] = 40,
     seed: Annotated[int, typer.Option("--seed", help="Seed of the simulated drifts.")] = 0,
     lidar: Annotated[
         list[str] | None,
