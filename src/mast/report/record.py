@@ -13,16 +13,33 @@ from datetime import UTC, datetime
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from mast import __version__
 from mast.core.beacon import Survey
 from mast.core.pose import format_dms
+from mast.core.pose3d import Frame3D
+from mast.core.quantiles import chi2_ppf, f_ppf, norm_ppf, t_ppf
 from mast.core.scan import Scan
+from mast.core.stats import variance_bounds
 from mast.io.crs import GridCrs
+from mast.pipeline.adjust3d import PARAMETERS, UNBRACKETED, Adjustment3D
+from mast.pipeline.adjustment import ErrorEllipse, position_ellipse
 from mast.pipeline.integrity import Residuals
 from mast.pipeline.locator import NO_FIX_REASONS, Fix
+from mast.pipeline.locator3d import Fix3D
 
-__all__ = ["COVARIANCE_ORDER", "OPTION_WORDS", "ReportInputs", "fix_record", "fix_text"]
+__all__ = [
+    "COVARIANCE_ORDER",
+    "COVARIANCE_ORDER_3D",
+    "OPTION_WORDS",
+    "ReportInputs",
+    "Stats3D",
+    "fix3d_record",
+    "fix3d_text",
+    "fix_record",
+    "fix_text",
+]
 
 #: Row and column order of ``covariance`` in a record, with units.
 COVARIANCE_ORDER = ("easting_m", "northing_m", "azimuth_rad")
@@ -445,3 +462,294 @@ def fix_text(
             f"{fix.similarity.scale:.6f}; 1 when they agree in size), {refined}"
         )
     return "\n".join(lines)
+
+
+# --------------------------------------------------------------------------- 3D frames
+
+#: Row and column order of ``covariance`` in a 3D record (:data:`adjust3d.PARAMETERS`).
+COVARIANCE_ORDER_3D = PARAMETERS
+
+
+@dataclass(frozen=True, slots=True)
+class Stats3D:
+    """The statistics of a 3D adjustment as a record states them, on the 2D rules: the
+    global test at 5 % two-sided (:func:`mast.core.stats.variance_bounds`), the
+    covariance scaled by the reference variance when it is too large, and 95 %
+    intervals from the normal (Student t when scaled). An elevation no top edge
+    bracketed (variance :data:`~mast.pipeline.adjust3d.UNBRACKETED`) is not observed:
+    ``elevation_observed`` False, its sigma and interval None."""
+
+    covariance: NDArray[np.float64]
+    sigma: NDArray[np.float64]
+    ci95: NDArray[np.float64]
+    test_code: str
+    chi2_lower: float
+    chi2_upper: float
+    scaled: bool
+    elevation_observed: bool
+
+    @classmethod
+    def of(cls, adj: Adjustment3D) -> Stats3D:
+        lo, hi = variance_bounds(adj.dof)
+        s0 = adj.reference_variance
+        code = "too_small" if s0 < lo else "too_large" if s0 > hi else "pass"
+        scaled = code == "too_large"
+        cov = (adj.covariance + adj.covariance.T) / 2
+        observed = bool(adj.top_edges > 0 and cov[2, 2] < UNBRACKETED / 2)
+        if scaled:
+            cov = cov * s0
+        sigma = np.sqrt(np.maximum(np.diag(cov), 0.0))
+        q = t_ppf(0.975, max(adj.dof, 1)) if scaled else norm_ppf(0.975)
+        return cls(cov, sigma, q * sigma, code, lo, hi, scaled, observed)
+
+    def ellipse(self, dof: int) -> ErrorEllipse:
+        """The 95 % position ellipse of (easting, northing), as 2D's."""
+        if self.scaled:
+            k = math.sqrt(2 * f_ppf(0.95, 2, max(dof, 1)))
+        else:
+            k = math.sqrt(chi2_ppf(0.95, 2))
+        return position_ellipse(self.covariance, k, 0.95)
+
+
+#: The keys a 3D record adds to 2D's, null without a fix.
+KEYS_3D = (
+    "elevation_m",
+    "roll_deg",
+    "pitch_deg",
+    "sigma_elevation_m",
+    "sigma_roll_deg",
+    "sigma_pitch_deg",
+)
+
+
+def fix3d_record(
+    fix: Fix3D,
+    *,
+    source: str | None = None,
+    index: int | None = None,
+    frame: Frame3D | None = None,
+    inputs: ReportInputs | None = None,
+    range_sigma_m: float,
+    survey_sigma_m: float,
+) -> dict[str, Any]:
+    """The record of one 3D lidar frame (``docs/fix.schema.json``, ``"dimensions": 3``):
+    ``locate``'s keys, with the pose's elevation, roll and pitch and their sigmas, and
+    the 6×6 covariance in :data:`COVARIANCE_ORDER_3D` order.
+
+    ``azimuth_deg`` is the heading of the sensor's x axis projected on the horizontal.
+    The corners identified, the segments and the excluded beacons are the plan view's
+    (the 2D fix the 3D one starts from, :attr:`Fix3D.plan`), given also as
+    ``plan_view``. An elevation no panel's top edge bracketed is reported with
+    ``elevation_observed`` false and null ``sigma_elevation_m``: its value is then the
+    start's, from the highest returns on the panels. Without a fix the pose keys are
+    null, as in 2D, with the reason and detail.
+    """
+    inputs = inputs or ReportInputs()
+    plan = fix.plan
+    rec: dict[str, Any] = {}
+    if source is not None:
+        rec["source"] = source
+    if index is not None:
+        rec["scan"] = index
+        if frame is not None:
+            rec["stamp_ns"] = frame.stamp_ns
+            rec["frame_id"] = frame.frame_id
+        if inputs.topic is not None:
+            rec["topic"] = inputs.topic
+    rec["status"] = fix.status
+    rec["dimensions"] = 3
+    adj = fix.adjustment
+    if fix.ok and adj is not None and fix.pose is not None:
+        p = fix.pose
+        st = Stats3D.of(adj)
+        sig, ci = st.sigma, st.ci95
+        ell = st.ellipse(adj.dof)
+        az = math.degrees(p.azimuth) % 360.0
+        z_sigma = _r(sig[2], 7) if st.elevation_observed else None
+        z_ci = _r(ci[2], 7) if st.elevation_observed else None
+        rec.update(
+            easting=_r(p.easting),
+            northing=_r(p.northing),
+            elevation_m=_r(p.elevation),
+            azimuth_deg=_r(az, 8),
+            azimuth_dms=format_dms(az),
+            roll_deg=_r(math.degrees(p.roll), 8),
+            pitch_deg=_r(math.degrees(p.pitch), 8),
+            sigma_easting_m=_r(sig[0], 7),
+            sigma_northing_m=_r(sig[1], 7),
+            sigma_elevation_m=z_sigma,
+            sigma_roll_deg=_r(math.degrees(sig[3]), 8),
+            sigma_pitch_deg=_r(math.degrees(sig[4]), 8),
+            sigma_azimuth_deg=_r(math.degrees(sig[5]), 8),
+            elevation_observed=st.elevation_observed,
+            ci95_easting_m=_r(ci[0], 7),
+            ci95_northing_m=_r(ci[1], 7),
+            ci95_elevation_m=z_ci,
+            ci95_roll_deg=_r(math.degrees(ci[3]), 8),
+            ci95_pitch_deg=_r(math.degrees(ci[4]), 8),
+            ci95_azimuth_deg=_r(math.degrees(ci[5]), 8),
+            ellipse95_semi_major_m=_r(ell.semi_major_m, 7),
+            ellipse95_semi_minor_m=_r(ell.semi_minor_m, 7),
+            ellipse95_azimuth_deg=_r(math.degrees(ell.azimuth_rad), 4),
+            covariance=[[float(v) for v in row] for row in st.covariance],
+            covariance_order=list(COVARIANCE_ORDER_3D),
+            reference_variance=_r(adj.reference_variance, 6),
+            degrees_of_freedom=adj.dof,
+            chi2_test=st.test_code,
+            chi2_bounds=[_r(st.chi2_lower, 6), _r(st.chi2_upper, 6)],
+            covariance_scaled=st.scaled,
+            global_test_p=_r(adj.test_p, 9),
+            top_edges=adj.top_edges,
+        )
+    else:
+        rec.update(
+            easting=None,
+            northing=None,
+            elevation_m=None,
+            azimuth_deg=None,
+            roll_deg=None,
+            pitch_deg=None,
+            sigma_easting_m=None,
+            sigma_northing_m=None,
+            sigma_elevation_m=None,
+            sigma_roll_deg=None,
+            sigma_pitch_deg=None,
+            sigma_azimuth_deg=None,
+            reference_variance=None,
+            reason=fix.reason,
+            reason_text=NO_FIX_REASONS.get(fix.reason or "", ""),
+            detail=fix.detail,
+        )
+    rec["beacons"] = list(fix.beacons)
+    rec["excluded_beacons"] = list(plan.excluded_beacons)
+    rec["panels"] = {b: sorted(ps) for b, ps in plan.panels.items() if b in fix.beacons}
+    rec["points_used"] = adj.returns if fix.ok and adj is not None else 0
+    seg, ident = plan.segmentation, plan.identification
+    rec["segments"] = None if seg is None else len(seg.segments)
+    rec["identified"] = (
+        None
+        if ident is None
+        else [
+            {"beacon": n.beacon, "edge": n.edge, "option": n.option, "segments": list(n.segments)}
+            for n in ident.nodes
+        ]
+    )
+    rec["plan_view"] = _plan_record(plan)
+    rec["range_sigma_m"] = range_sigma_m
+    rec["angle_sigma_rad"] = plan.config.noise.angle_sigma_rad
+    rec["survey_sigma_m"] = survey_sigma_m
+    if inputs.crs is not None:
+        rec["crs"] = inputs.crs.brief()
+    rec["inputs"] = _frame_inputs(frame, inputs)
+    rec["software"] = f"mast {__version__}"
+    rec["computed_utc"] = inputs.computed_utc.isoformat(timespec="seconds").replace("+00:00", "Z")
+    rec["elapsed_ms"] = round(fix.elapsed_s * 1e3, 3)
+    return rec
+
+
+def _plan_record(plan: Fix) -> dict[str, Any]:
+    """The plan view's 2D fix, in brief: what the 3D fix started from."""
+    if plan.ok and plan.pose is not None and plan.adjustment is not None:
+        return {
+            "status": plan.status,
+            "easting": _r(plan.pose.easting),
+            "northing": _r(plan.pose.northing),
+            "azimuth_deg": _r(plan.pose.azimuth_deg, 8),
+            "reference_variance": _r(plan.adjustment.reference_variance, 6),
+            "points_used": plan.points_used,
+        }
+    return {"status": plan.status, "reason": plan.reason}
+
+
+def _frame_inputs(frame: Frame3D | None, inputs: ReportInputs) -> dict[str, Any]:
+    rec: dict[str, Any] = {
+        "scan_file": inputs.scan_file,
+        "survey_file": inputs.survey_file,
+        "scanner": inputs.scanner,
+        "defaults": sorted(inputs.defaults - {"angle_sigma_rad"}),
+    }
+    if inputs.topic is not None:
+        rec["topic"] = inputs.topic
+    if inputs.survey_sigmas is not None:
+        rec["survey_sigmas"] = inputs.survey_sigmas
+    if inputs.config_sha256 is not None:
+        rec.update(config_file=inputs.config_file, config_sha256=inputs.config_sha256)
+    if frame is not None:
+        rec["points"] = len(frame)
+        if frame.ring is not None and len(frame):
+            rec["rings"] = int(np.unique(frame.ring).size)
+    return rec
+
+
+def fix3d_text(
+    fix: Fix3D,
+    *,
+    source: str | None = None,
+    frame: Frame3D | None = None,
+    inputs: ReportInputs | None = None,
+    range_sigma_m: float,
+    survey_sigma_m: float,
+) -> str:
+    """A survey-style report of one 3D frame's fix (or of why there is none)."""
+    inputs = inputs or ReportInputs(scan_file=source)
+    when = inputs.computed_utc.strftime("%Y-%m-%d %H:%M:%S UTC")
+    lines = [f"MAST 3D fix report                       mast {__version__}, {when}", "Inputs"]
+    if inputs.scan_file is not None:
+        lines.append(f"  Scan file     {inputs.scan_file}")
+    if source is not None and source != inputs.scan_file:
+        lines.append(f"  Frame         {source}")
+    if frame is not None:
+        rings = "" if frame.ring is None else f", {np.unique(frame.ring).size} rings"
+        lines.append(f"  Points        {len(frame)}{rings}")
+    if inputs.survey_file is not None:
+        lines.append(f"  Survey file   {inputs.survey_file}")
+    if inputs.crs is not None:
+        lines.append(f"  Grid CRS      {inputs.crs.line()}")
+    if inputs.scanner is not None:
+        lines.append(f"  Scanner       {inputs.scanner}")
+    surveyed = inputs.survey_sigmas or f"{_mm(survey_sigma_m)} mm per edge coordinate"
+    lines += [f"  Range σ       {_mm(range_sigma_m)} mm", f"  Survey σ      {surveyed}"]
+    adj = fix.adjustment
+    if not fix.ok or fix.pose is None or adj is None:
+        lines += [
+            f"Result        NO FIX ({fix.reason}): {NO_FIX_REASONS.get(fix.reason or '', '')}",
+            f"  {fix.detail}",
+        ]
+        return "\n".join(lines)
+    p = fix.pose
+    st = Stats3D.of(adj)
+    sig, ci = st.sigma, st.ci95
+    az = math.degrees(p.azimuth) % 360.0
+
+    def angle(name: str, value_deg: str, k: int) -> str:
+        s = format_dms(math.degrees(sig[k]), signed=True)
+        c = format_dms(math.degrees(ci[k]), signed=True)
+        return f"  {name:<9} {value_deg:>15}     σ {s:>10}   95% ± {c}"
+
+    z_line = (
+        f"  Elevation {p.elevation:15.4f} m   σ {_mm2(sig[2])} mm   95% ± {_mm2(ci[2])} mm"
+        if st.elevation_observed
+        else f"  Elevation {p.elevation:15.4f} m   NOT OBSERVED (no panel's top edge bracketed "
+        "it): from the highest returns on the panels"
+    )
+    lines += [
+        "Result        FIX (six degrees of freedom)",
+        f"  Easting   {p.easting:15.4f} m   σ {_mm2(sig[0])} mm   95% ± {_mm2(ci[0])} mm",
+        f"  Northing  {p.northing:15.4f} m   σ {_mm2(sig[1])} mm   95% ± {_mm2(ci[1])} mm",
+        z_line,
+        angle("Azimuth", format_dms(az), 5),
+        angle("Roll", f"{math.degrees(p.roll):+.4f}°", 3),
+        angle("Pitch", f"{math.degrees(p.pitch):+.4f}°", 4),
+        "Statistics",
+        f"  Reference variance {adj.reference_variance:.3f} on {adj.dof} degrees of freedom; "
+        f"chi-square test at 5 % (accept {st.chi2_lower:.3f} to {st.chi2_upper:.3f}): "
+        f"{_TEST_WORDS[st.test_code]}",
+        f"  Beacons used  {', '.join(fix.beacons)}; {adj.returns} returns on their panels, "
+        f"{adj.top_edges} top edge(s) bracketing the elevation",
+        f"How it was found: the plan view's 2D fix (E {fix.plan.pose.easting:.3f}, "
+        f"N {fix.plan.pose.northing:.3f}) refined in six parameters, "
+        f"{1e3 * fix.elapsed_s:.1f} ms in all"
+        if fix.plan.pose is not None
+        else "",
+    ]
+    return "\n".join(line for line in lines if line)
