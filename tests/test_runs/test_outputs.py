@@ -314,8 +314,8 @@ def test_las_errors_name_the_problem(tmp_path: Path) -> None:
     with pytest.raises(OutputError, match=r"map\.las: cannot write"):
         LasMapWriter(tmp_path / "nowhere" / "map.las", origin_e=E0, origin_n=N0)
     las = LasMapWriter(tmp_path / "map.las", origin_e=E0, origin_n=N0)
-    with pytest.raises(InputError, match=r"points_mine must have shape \(n, 2\)"):
-        las.add(0, T0_NS, np.zeros((3, 3)))
+    with pytest.raises(InputError, match=r"points_mine must have shape \(n, 2\) or \(n, 3\)"):
+        las.add(0, T0_NS, np.zeros((3, 4)))
     with pytest.raises(InputError, match=r"intensity must have shape \(2,\)"):
         las.add(0, T0_NS, np.zeros((2, 2)) + [E0, N0], np.zeros(3))
     with pytest.raises(InputError, match=r"scan 4: .* more than 215 km from the map origin"):

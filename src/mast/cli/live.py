@@ -9,7 +9,7 @@ import sys
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated
+from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 
@@ -44,9 +44,12 @@ from mast.io.outputs import check_output_file
 
 if TYPE_CHECKING:
     from mast.core.beacon import Survey
+    from mast.core.pose3d import Frame3D
     from mast.live.session import Sink
+    from mast.live.sources import FrameReplaySource
     from mast.live.stream import Source
     from mast.pipeline.locator import LocatorConfig, SequenceConfig
+    from mast.pipeline.locator3d import Fix3D
     from mast.report.record import ReportInputs
 
 
@@ -106,6 +109,10 @@ def live(
     output, flushed as it is written; the newest scan is located first when locating falls
     behind (the others counted as dropped).
 
+    A replay of a bag's PointCloud2 topic (replay://RUN?topic=/points) locates a 3D
+    lidar's frames in six degrees of freedom, each on its own, with the 3D record
+    (docs/3d.md); the survey must give the edges' elevations.
+
     Ends when the source ends (a replay), after --max-scans, when standard output is closed
     (status 0), on Ctrl-C or SIGTERM (status 130 or 143; a --record file is closed
     complete) or when the scanner cannot be reached (status 2). Exit status 3 when no
@@ -115,7 +122,7 @@ def live(
     Example: mast live "replay://examples/run.bag?rate=2" -b examples/beacons.csv \\
       --scanner lms1xx-0.25
     """
-    from mast.live.sources import ReplaySource, open_source
+    from mast.live.sources import ReplaySource, open_frame_source, open_source
     from mast.live.stream import SourceOptions
 
     setup = stream_setup(
@@ -134,6 +141,13 @@ def live(
     options = SourceOptions(
         range_min_m=range_min, range_max_m=range_max, timeout_s=timeout, give_up_s=give_up
     )
+    frames = open_frame_source(source)
+    if frames is not None:  # a replayed PointCloud2 topic: a 3D lidar's frames
+        for option, given in (("--record", record is not None), ("--view", view)):
+            if given:
+                raise InputError(f"{option} takes 2D scans; {source} replays 3D lidar frames")
+        run_frames(setup, frames, beacons, max_scans=max_scans, near=near)
+        return
     stream = open_source(source, options)
     if record is not None:
         if record.suffix != ".mcap":
@@ -228,6 +242,68 @@ def stream_setup(
 
 def _warn(text: str) -> None:
     typer.echo(f"mast: warning: {text}", err=True)
+
+
+def run_frames(
+    setup: StreamSetup,
+    frames: FrameReplaySource,
+    beacons: Path,
+    *,
+    max_scans: int | None,
+    near: str | None,
+) -> None:
+    """Locate a replayed 3D lidar's frames as they come (:func:`mast.live.session.
+    run_live3d`): records on standard output, the summary on standard error, the exit
+    status of ``mast live --help``."""
+    import json
+
+    from mast.cli.options import lidar_range_sigma
+    from mast.live.session import run_live3d
+    from mast.runs.frames3d import FrameLocator, check_elevations
+
+    check_elevations(setup.survey, beacons)
+    if near is not None:
+        _warn(f"--near applies to 2D scans; {setup.source} replays 3D lidar frames")
+    locator = FrameLocator(
+        setup.survey,
+        range_sigma_m=lidar_range_sigma(setup.config, setup.inputs.defaults),
+        survey_sigma_m=setup.config.survey_sigma_m,
+    )
+    inputs = replace(setup.inputs, topic=frames.topic)
+
+    def emit(record_: dict[str, object]) -> None:
+        sys.stdout.write(json.dumps(record_) + "\n")
+        sys.stdout.flush()
+
+    def record(fix: Fix3D, index: int, frame: Frame3D, now: ReportInputs) -> dict[str, Any]:
+        return locator.record(fix, source=setup.source, index=index, frame=frame, inputs=now)
+
+    with signals_as_flag() as (interrupt, caught):
+        summary = run_live3d(
+            frames,
+            locate=locator.locate,
+            record=record,
+            emit=emit,
+            inputs=inputs,
+            max_scans=max_scans,
+            warn=_warn,
+            interrupt=interrupt,
+        )
+    typer.echo(
+        f"mast: {setup.source}: {summary.received} frames received, {summary.located} "
+        f"located in 3D, {summary.fixed} fixed, {summary.dropped} dropped"
+        + (f", {summary.malformed} malformed skipped" if summary.malformed else "")
+        + f" in {summary.elapsed_s:.1f} s (each frame fixed on its own)",
+        err=True,
+    )
+    if summary.pipe_closed:
+        silence_stdout()
+        return
+    if summary.interrupted:
+        typer.echo("mast: interrupted", err=True)
+        raise typer.Exit(128 + (caught[0] if caught else signal.SIGINT))
+    if summary.fixed == 0:
+        raise typer.Exit(EXIT_NO_FIX)
 
 
 def run_stream(

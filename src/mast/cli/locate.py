@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from dataclasses import replace
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 
@@ -23,7 +23,9 @@ from mast.cli.options import (
     ScannerOption,
     SurveySigmaOption,
     TopicOption,
+    WorkUpdate,
     grid_crs,
+    lidar_range_sigma,
     load_scans,
     parse_near,
     warn_loose_edges,
@@ -38,6 +40,11 @@ from mast.core.heap import QuietCollector
 from mast.errors import InputError
 from mast.io.outputs import PLOT_SUFFIXES, check_output_file
 
+if TYPE_CHECKING:
+    from mast.core.beacon import Survey
+    from mast.pipeline.locator import LocatorConfig
+    from mast.report.record import ReportInputs
+
 
 @app.command()
 def locate(
@@ -45,8 +52,8 @@ def locate(
         list[Path],
         typer.Argument(
             metavar="SCAN...",
-            help="Scan CSVs, ROS 1 bags or ROS 2 bag folders; '-' reads a scan CSV from "
-            "standard input.",
+            help="Scan CSVs, ROS 1 bags, ROS 2 bag folders or MCAP files (LaserScan, or a 3D "
+            "lidar's PointCloud2); '-' reads a scan CSV from standard input.",
         ),
     ],
     beacons: BeaconsOption,
@@ -80,6 +87,11 @@ def locate(
 
     --crs names the grid in each JSON record (its crs object) and in the report.
 
+    A bag topic of sensor_msgs/PointCloud2 (a 3D lidar: --topic, or a bag's only
+    topic) is located in six degrees of freedom, frame by frame: each record adds the
+    elevation, roll, pitch and their sigmas (docs/3d.md); the survey must give the
+    edges' elevations. --near and --plot apply to 2D scans only.
+
     Exit status 0 when a scan is fixed (with several scans or a bag: at least
     one), 3 when none is, 2 for bad input, 4 when an output cannot be written.
     Scans refused in a way a setting explains end with a one-line hint on stderr
@@ -92,6 +104,7 @@ def locate(
     import json
 
     from mast.io import read_survey
+    from mast.live.sources import cloud_topic
     from mast.pipeline.locator import SequenceLocator
     from mast.report.hints import Hints
     from mast.report.record import fix_record, fix_text
@@ -120,6 +133,35 @@ def locate(
     with QuietCollector() as heap, work_progress("locating") as bar:
         total = _scan_total(scan_paths, topic) if bar is not None else None
         for scan_path in scan_paths:
+            clouds = None if scan_path == Path("-") else cloud_topic(scan_path, topic)
+            if clouds is not None:
+                located, fixed = _locate_frames(
+                    scan_path,
+                    clouds,
+                    fmt=fmt,
+                    located=located,
+                    fixed=fixed,
+                    survey=survey,
+                    beacons=beacons,
+                    cfg=cfg,
+                    defaults=defaults,
+                    inputs=report_inputs(
+                        beacons=beacons,
+                        survey=survey,
+                        locator=cfg,
+                        scanner=scanner,
+                        defaults=defaults,
+                        config=config,
+                        settings=settings,
+                        crs=grid,
+                        scan_file=str(scan_path),
+                        topic=clouds,
+                    ),
+                    ignored=[o for o, v in (("--near", near), ("--plot", plot)) if v is not None],
+                    bar=bar,
+                )
+                numbered = True
+                continue
             scans, many, scan_topic = load_scans(
                 scan_path, topic=topic, range_min=range_min, range_max=range_max
             )
@@ -167,6 +209,64 @@ def locate(
         typer.echo(f"mast: {line}", err=True)
     if fixed == 0:
         raise typer.Exit(EXIT_NO_FIX)
+
+
+def _locate_frames(
+    path: Path,
+    topic: str,
+    *,
+    fmt: OutputFormat,
+    located: int,
+    fixed: int,
+    survey: Survey,
+    beacons: Path,
+    cfg: LocatorConfig,
+    defaults: set[str],
+    inputs: ReportInputs,
+    ignored: list[str],
+    bar: WorkUpdate | None,
+) -> tuple[int, int]:
+    """Every PointCloud2 frame of ``topic`` located in 3D (:mod:`mast.runs.frames3d`),
+    one record or report each; the counts of frames located and fixed, carried on."""
+    import json
+
+    from mast.io.pointclouds import pointcloud_count, read_pointclouds
+    from mast.report.record import fix3d_text
+    from mast.runs.frames3d import FrameLocator, check_elevations
+
+    check_elevations(survey, beacons)
+    for option in ignored:
+        typer.echo(f"mast: warning: {option} applies to 2D scans; {path} is 3D frames", err=True)
+    locator = FrameLocator(
+        survey,
+        range_sigma_m=lidar_range_sigma(cfg, defaults),
+        survey_sigma_m=cfg.survey_sigma_m,
+    )
+    total = pointcloud_count(path, topic) if bar is not None else None
+    source = str(path)
+    for i, frame in enumerate(read_pointclouds(path, topic)):
+        fix = locator.locate(frame)
+        fixed += fix.ok
+        if fmt is OutputFormat.json:
+            record = locator.record(fix, source=source, index=i, frame=frame, inputs=inputs)
+            typer.echo(json.dumps(record))
+        else:
+            if located:
+                typer.echo("")
+            typer.echo(
+                fix3d_text(
+                    fix,
+                    source=f"{source}#{i}",
+                    frame=frame,
+                    inputs=inputs,
+                    range_sigma_m=locator.config.range_sigma_m,
+                    survey_sigma_m=locator.config.survey_sigma_m,
+                )
+            )
+        located += 1
+        if bar is not None:
+            bar(i + 1, total, f"{fixed} fixed")
+    return located, fixed
 
 
 def _scan_total(paths: list[Path], topic: str | None) -> int | None:

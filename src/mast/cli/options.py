@@ -377,6 +377,26 @@ def angle_sigma_rad(degrees: float | None, radians: float | None) -> float | Non
     return math.radians(degrees)
 
 
+#: The 3D lidars ``--scanner`` names (their rings and limits are
+#: :data:`mast.sim.lidar3d.LIDARS`') and the range sigma (1σ, metres) each is weighted
+#: with. Velodyne VLP-16: "±3 cm typical" range accuracy on its data sheet, a bound
+#: rather than a sigma, taken as 1.5σ: 2 cm. Ouster OS1-64: range repeatability 1σ
+#: ±1.5 cm at SNR above 250 and ±3 cm at SNR 100 on its data sheet; a drift wall a few
+#: metres off lies between them: 2 cm. Both are the simulator's default (docs/3d.md).
+LIDAR_RANGE_SIGMA_M: dict[str, float] = {"vlp16": 0.02, "os1-64": 0.02}
+
+#: The 3D locator's range sigma when neither ``--range-sigma`` nor ``--scanner`` gives
+#: one (:class:`mast.pipeline.locator3d.Locator3DConfig`'s default).
+DEFAULT_LIDAR_RANGE_SIGMA_M = 0.02
+
+
+def lidar_range_sigma(cfg: LocatorConfig, defaults: Collection[str]) -> float:
+    """The range sigma a 3D lidar's frames are weighted with: the one given (option,
+    settings file or a 3D ``--scanner``), else :data:`DEFAULT_LIDAR_RANGE_SIGMA_M`
+    (a 2D scanner's default is not a 3D lidar's)."""
+    return DEFAULT_LIDAR_RANGE_SIGMA_M if "range_sigma_m" in defaults else cfg.range_sigma_m
+
+
 def precisions(
     range_sigma: float | None,
     angle_sigma: float | None,
@@ -403,8 +423,16 @@ def precisions(
     cfg = LocatorConfig() if base is None else base
     defaults = {"range_sigma_m", "angle_sigma_rad", "survey_sigma_m"}
     defaults -= {key.removeprefix("locator.") for key in given}
-    if scanner is not None:
-        noise = scanner_model(scanner).noise()
+    if scanner is not None and scanner in LIDAR_RANGE_SIGMA_M:  # a 3D lidar
+        cfg = replace(cfg, range_sigma_m=LIDAR_RANGE_SIGMA_M[scanner])
+        defaults -= {"range_sigma_m"}
+    elif scanner is not None:
+        try:
+            noise = scanner_model(scanner).noise()
+        except InputError as err:
+            raise InputError(
+                f"{err.problem}; 3D lidars: {', '.join(LIDAR_RANGE_SIGMA_M)}"
+            ) from None
         cfg = replace(cfg, range_sigma_m=noise.range_sigma_m, angle_sigma_rad=noise.angle_sigma_rad)
         defaults -= {"range_sigma_m", "angle_sigma_rad"}
     given_here = {

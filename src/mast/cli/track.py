@@ -6,7 +6,7 @@ from __future__ import annotations
 import signal
 from dataclasses import replace
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 
@@ -36,6 +36,11 @@ from mast.cli.root import (
 from mast.cli.settings import ConfigOption, effective, locator_settings, report_inputs
 from mast.errors import InputError, shorten
 from mast.io.outputs import check_output_folder
+
+if TYPE_CHECKING:
+    from mast.core.beacon import Survey
+    from mast.pipeline.locator import LocatorConfig
+    from mast.report.record import ReportInputs
 
 
 @app.command()
@@ -94,6 +99,12 @@ def track(
     Several runs (or a folder of them) are tracked in parallel on Dask, one run per
     task, each into --out/<run name>/, with --out/index.csv listing them.
 
+    A run's PointCloud2 topic (a 3D lidar) is tracked in six degrees of freedom, each
+    frame fixed on its own (no odometry or smoothing in 3D: only the frames fixed are
+    placed): fixes.jsonl with the 3D records, trajectory.csv with the elevation, roll
+    and pitch, trajectory.tum with the elevation as z and the full quaternion, map.las
+    with real z, fixes.geojson and fixes_points.csv (docs/3d.md).
+
     Exit status 0 when scans were placed (in every run), 3 when none could be, 2 for bad
     input, 4 when an output cannot be written, 130 when interrupted (the files then hold
     the scans read until then).
@@ -102,7 +113,9 @@ def track(
     Example: mast track examples/run.bag -b examples/beacons.csv --scanner lms1xx-0.25 --out run/
     """
     from mast.io import read_survey
+    from mast.live.sources import cloud_topic
     from mast.runs.batch import expand_runs, track_runs
+    from mast.runs.frames3d import check_elevations
     from mast.runs.run import track_run
 
     tables, cfg, defaults = locator_settings(
@@ -126,6 +139,9 @@ def track(
     check_output_folder(out, force=force)
     survey = read_survey(beacons)
     warn_loose_edges(survey, cfg.survey_sigma_m)
+    clouds = cloud_topic(found[0], topic) if len(found) == 1 and scheduler is None else None
+    if clouds is not None:
+        check_elevations(survey, beacons)
     settings.write(out / "config.toml")  # once the inputs are read: a refused run leaves nothing
     inputs = report_inputs(
         beacons=beacons,
@@ -138,6 +154,12 @@ def track(
         crs=grid,
     )
     if len(found) > 1 or scheduler is not None:
+        three_d = [r for r in found if cloud_topic(r, topic) is not None]
+        if three_d:
+            raise InputError(
+                "3D lidar runs (PointCloud2) are tracked one at a time, without --scheduler",
+                path=three_d[0],
+            )
         outcomes = track_runs(
             found,
             beacons,
@@ -159,6 +181,9 @@ def track(
         return
     (run,) = found
     inputs = replace(inputs, scan_file=str(run))
+    if clouds is not None:  # a 3D lidar's PointCloud2 topic
+        _track_frames(run, survey, out, clouds, inputs, cfg, defaults)
+        return
 
     def warn(text: str) -> None:
         typer.echo(f"mast: warning: {shorten(text, 80)}", err=True)
@@ -196,6 +221,55 @@ def track(
         )
     if result.interrupted:
         typer.echo("mast: interrupted; the files hold the scans read until then", err=True)
+        raise typer.Exit(128 + (caught[0] if caught else signal.SIGINT))
+    if s.placed == 0:
+        raise typer.Exit(EXIT_NO_FIX)
+
+
+def _track_frames(
+    run: Path,
+    survey: Survey,
+    out: Path,
+    topic: str,
+    inputs: ReportInputs,
+    cfg: LocatorConfig,
+    defaults: set[str],
+) -> None:
+    """A 3D lidar's run (:func:`mast.runs.frames3d.track_run3d`), its summary and exit
+    status as a 2D run's."""
+    from mast.cli.options import lidar_range_sigma
+    from mast.runs.frames3d import PER_FRAME_NOTE, FrameLocator, track_run3d
+
+    locator = FrameLocator(
+        survey,
+        range_sigma_m=lidar_range_sigma(cfg, defaults),
+        survey_sigma_m=cfg.survey_sigma_m,
+    )
+
+    def warn(text: str) -> None:
+        typer.echo(f"mast: warning: {shorten(text, 80)}", err=True)
+
+    with signals_as_flag() as (interrupt, caught), run_progress(f"tracking {run.name}") as progress:
+        result = track_run3d(
+            run,
+            survey,
+            out,
+            locator=locator,
+            topic=topic,
+            inputs=replace(inputs, topic=topic),
+            warn=warn,
+            progress=progress,
+            interrupt=interrupt,
+        )
+    s = result.summary
+    typer.echo(
+        f"{run}: {s.scans} 3D frames, {s.fixes} fixed, {s.placed} placed"
+        + (f", {s.skipped} messages skipped" if s.skipped else "")
+        + f" in {s.elapsed_s:.1f} s ({s.scans / max(s.elapsed_s, 1e-9):.1f} frames/s); "
+        f"{PER_FRAME_NOTE}; files in {out}"
+    )
+    if result.interrupted:
+        typer.echo("mast: interrupted; the files hold the frames read until then", err=True)
         raise typer.Exit(128 + (caught[0] if caught else signal.SIGINT))
     if s.placed == 0:
         raise typer.Exit(EXIT_NO_FIX)

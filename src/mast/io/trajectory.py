@@ -13,21 +13,28 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable, Iterator
 from pathlib import Path
-from typing import Final
+from typing import Final, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
 
 from mast.core.frames import yaw_of_azimuth, yaw_quaternion
+from mast.core.pose3d import Pose3D
 from mast.core.trajectory import PlacedScan, ScannerPath
 from mast.errors import InputError
 from mast.io.atomic import write_lines
 
 __all__ = [
+    "TRAJECTORY3D_HEADER",
     "TRAJECTORY_HEADER",
+    "TUM3D_HEADER",
     "TUM_HEADER",
+    "Placed3D",
     "read_trajectory",
+    "rotation_quaternion",
     "tum_quaternion",
+    "write_trajectory3d_csv",
+    "write_trajectory3d_tum",
     "write_trajectory_csv",
     "write_trajectory_tum",
 ]
@@ -42,6 +49,35 @@ TRAJECTORY_HEADER: Final = (
 TUM_HEADER: Final = (
     "# timestamp_s x_easting_m y_northing_m z_m qx qy qz qw (yaw = 90 deg - azimuth)"
 )
+
+#: Header of a 3D run's ``trajectory.csv``: 2D's columns, then the elevation, roll and
+#: pitch and their sigmas (``sigma_elevation_m`` empty where it was not observed).
+TRAJECTORY3D_HEADER: Final = (
+    TRAJECTORY_HEADER
+    + ",elevation_m,roll_deg,pitch_deg,sigma_elevation_m,sigma_roll_deg,sigma_pitch_deg"
+)
+
+#: Header comment of a 3D run's ``trajectory.tum``.
+TUM3D_HEADER: Final = (
+    "# timestamp_s x_easting_m y_northing_m z_elevation_m qx qy qz qw "
+    "(sensor to grid, R = Rz(yaw) Ry(pitch) Rx(roll), yaw = 90 deg - azimuth)"
+)
+
+
+class Placed3D(Protocol):
+    """A frame placed in 3D (:class:`mast.runs.frames3d.PlacedFrame`)."""
+
+    @property
+    def stamp_ns(self) -> int: ...
+
+    @property
+    def pose(self) -> Pose3D: ...
+
+    @property
+    def sigma(self) -> NDArray[np.float64]:
+        """Sigmas of (easting, northing, elevation, roll, pitch, azimuth), metres and
+        radians; the elevation's NaN where it was not observed."""
+        ...
 
 
 def _seconds(stamp_ns: int) -> str:
@@ -225,11 +261,101 @@ def _read_track_csv(p: Path, lines: list[str]) -> ScannerPath:
         try:
             t = int(row["stamp_ns"]) * 1e-9
             e, n, az = float(row["easting"]), float(row["northing"]), float(row["azimuth_deg"])
+            z = float(row.get("elevation_m") or 0.0)  # a 3D run's trajectory has it
         except (KeyError, TypeError, ValueError):
             raise InputError(
                 "a track trajectory row needs stamp_ns, easting, northing, azimuth_deg",
                 path=p,
                 line=no,
             ) from None
-        rows.append([t, e, n, 0.0, *yaw_quaternion(yaw_of_azimuth(math.radians(az)))])
+        rows.append([t, e, n, z, *yaw_quaternion(yaw_of_azimuth(math.radians(az)))])
     return _trajectory(p, np.array(rows).reshape(-1, 8))
+
+
+def rotation_quaternion(R: NDArray[np.float64]) -> tuple[float, float, float, float]:
+    """``(qx, qy, qz, qw)`` of a rotation matrix, unit and with ``qw >= 0`` (Shepperd's
+    method: the largest of the four squares taken first, so no component is found from
+    a small difference)."""
+    m = np.asarray(R, dtype=float)
+    tr = float(m[0, 0] + m[1, 1] + m[2, 2])
+    squares = (tr, float(m[0, 0]), float(m[1, 1]), float(m[2, 2]))
+    k = int(np.argmax(squares))
+    if k == 0:
+        s = math.sqrt(1.0 + tr) * 2
+        q = ((m[2, 1] - m[1, 2]) / s, (m[0, 2] - m[2, 0]) / s, (m[1, 0] - m[0, 1]) / s, s / 4)
+    elif k == 1:
+        s = math.sqrt(1.0 + m[0, 0] - m[1, 1] - m[2, 2]) * 2
+        q = (s / 4, (m[0, 1] + m[1, 0]) / s, (m[0, 2] + m[2, 0]) / s, (m[2, 1] - m[1, 2]) / s)
+    elif k == 2:
+        s = math.sqrt(1.0 + m[1, 1] - m[0, 0] - m[2, 2]) * 2
+        q = ((m[0, 1] + m[1, 0]) / s, s / 4, (m[1, 2] + m[2, 1]) / s, (m[0, 2] - m[2, 0]) / s)
+    else:
+        s = math.sqrt(1.0 + m[2, 2] - m[0, 0] - m[1, 1]) * 2
+        q = ((m[0, 2] + m[2, 0]) / s, (m[1, 2] + m[2, 1]) / s, s / 4, (m[1, 0] - m[0, 1]) / s)
+    v = np.array(q, dtype=float)
+    v /= np.linalg.norm(v)
+    if v[3] < 0:
+        v = -v
+    return float(v[0]), float(v[1]), float(v[2]), float(v[3])
+
+
+def write_trajectory3d_csv(path: str | Path, placed: Iterable[Placed3D]) -> int:
+    """Write a 3D run's ``trajectory.csv`` (:data:`TRAJECTORY3D_HEADER`): the 2D columns
+    (``source`` ``fix``: a 3D run places only its fixes), then the elevation, roll and
+    pitch in degrees and their sigmas, numbers as :func:`write_trajectory_csv` writes
+    them; an elevation not observed has an empty ``sigma_elevation_m``. Returns the
+    rows written."""
+
+    def rows() -> Iterator[str]:
+        yield TRAJECTORY3D_HEADER
+        for p in placed:
+            s = p.sigma
+            pose = p.pose
+            yield ",".join(
+                (
+                    str(int(p.stamp_ns)),
+                    _num(pose.easting),
+                    _num(pose.northing),
+                    _num(math.degrees(pose.azimuth) % 360.0),
+                    _num(s[0]),
+                    _num(s[1]),
+                    _num(math.degrees(s[5])),
+                    "fix",
+                    _num(pose.elevation),
+                    _num(math.degrees(pose.roll)),
+                    _num(math.degrees(pose.pitch)),
+                    _num(s[2]) if math.isfinite(s[2]) else "",
+                    _num(math.degrees(s[3])),
+                    _num(math.degrees(s[4])),
+                )
+            )
+
+    return write_lines(path, rows())
+
+
+def write_trajectory3d_tum(path: str | Path, placed: Iterable[Placed3D]) -> int:
+    """Write a 3D run's ``trajectory.tum``: ``t x y z qx qy qz qw`` as
+    :func:`write_trajectory_tum` writes them, with ``z`` the elevation and the full
+    sensor-to-grid rotation ``R = Rz(yaw) Ry(pitch) Rx(roll)``, ``yaw = 90° − azimuth``
+    (:mod:`mast.core.pose3d`), as a unit quaternion with ``qw >= 0``
+    (:func:`rotation_quaternion`). Returns the poses written."""
+
+    def rows() -> Iterator[str]:
+        yield TUM3D_HEADER
+        for p in placed:
+            pose = p.pose
+            qx, qy, qz, qw = rotation_quaternion(pose.rotation)
+            yield " ".join(
+                (
+                    _seconds(p.stamp_ns),
+                    _num(pose.easting),
+                    _num(pose.northing),
+                    _num(pose.elevation),
+                    _num(qx),
+                    _num(qy),
+                    _num(qz),
+                    _num(qw),
+                )
+            )
+
+    return write_lines(path, rows())

@@ -25,16 +25,21 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 from datetime import UTC, datetime
-from typing import Any, Protocol
+from typing import TYPE_CHECKING, Any, Generic, Protocol, TypeVar
 
 from mast.core.beacon import Survey
 from mast.core.heap import QuietCollector
 from mast.core.scan import Scan
+from mast.live.sources import FrameReplaySource, ReceivedFrame
 from mast.live.stream import Received, Source
 from mast.pipeline.locator import Fix, LocatorConfig, SequenceConfig, SequenceLocator
 from mast.report.record import ReportInputs, fix_record
 
-__all__ = ["LatestSlot", "LiveSummary", "Sink", "run_live"]
+if TYPE_CHECKING:
+    from mast.core.pose3d import Frame3D
+    from mast.pipeline.locator3d import Fix3D
+
+__all__ = ["LatestSlot", "LiveSummary", "Sink", "run_live", "run_live3d"]
 
 
 class Sink(Protocol):
@@ -45,18 +50,22 @@ class Sink(Protocol):
     def fix(self, scan: Scan, fix: Fix, record: dict[str, Any]) -> None: ...
 
 
-class LatestSlot:
-    """A one-item hand-over between threads where the newest item wins."""
+_Item = TypeVar("_Item", Received, ReceivedFrame)
+
+
+class LatestSlot(Generic[_Item]):
+    """A one-item hand-over between threads where the newest item wins (a scan, or a 3D
+    lidar's frame)."""
 
     def __init__(self) -> None:
         self._cond = threading.Condition()
-        self._item: tuple[int, Received] | None = None
+        self._item: tuple[int, _Item] | None = None
         self._closed = False
         self._dropped_since_take = 0
         self.error: BaseException | None = None
         self.dropped = 0
 
-    def put(self, index: int, item: Received) -> None:
+    def put(self, index: int, item: _Item) -> None:
         """Hand over ``item``, replacing one not taken yet: that one is counted as dropped,
         and a gap it reported goes on with the item that replaced it (the first record
         after an outage says so even when a busy locator never saw its first scan)."""
@@ -76,7 +85,7 @@ class LatestSlot:
             self.error = error
             self._cond.notify()
 
-    def take(self, stop: threading.Event | None = None) -> tuple[int, Received, int] | None:
+    def take(self, stop: threading.Event | None = None) -> tuple[int, _Item, int] | None:
         """The newest item and how many were replaced since the last take, waiting for
         one; None once closed and empty, or when ``stop`` is set."""
         with self._cond:
@@ -135,7 +144,7 @@ def run_live(
     """
     summary = LiveSummary()
     tracker = SequenceLocator(survey, config=config, sequence=sequence or SequenceConfig())
-    slot = LatestSlot()
+    slot: LatestSlot[Received] = LatestSlot()
     stop = threading.Event()
     inputs = inputs or ReportInputs()
 
@@ -204,6 +213,83 @@ def run_live(
         summary.malformed = stats.malformed
         summary.reconnects = stats.reconnects
         summary.gap_s = stats.gap_s
+        summary.elapsed_s = time.perf_counter() - t0
+    if slot.error is not None and not (summary.pipe_closed or summary.interrupted):
+        raise slot.error
+    return summary
+
+
+def run_live3d(
+    source: FrameReplaySource,
+    *,
+    locate: Callable[[Frame3D], Fix3D],
+    record: Callable[[Fix3D, int, Frame3D, ReportInputs], dict[str, Any]],
+    emit: Callable[[dict[str, Any]], None],
+    inputs: ReportInputs | None = None,
+    max_scans: int | None = None,
+    warn: Callable[[str], None] = lambda _text: None,
+    interrupt: threading.Event | None = None,
+) -> LiveSummary:
+    """:func:`run_live` for a 3D lidar's frames: each frame located on its own by
+    ``locate`` (:func:`mast.pipeline.locator3d.locate3d` with its settings: the 2D
+    prior does not apply to a tilted sensor, so ``tracking`` and ``track_lost`` are
+    always false), its record made by ``record`` (the 3D record) with the live keys
+    added as in 2D, the newest frame first when locating falls behind."""
+    summary = LiveSummary()
+    slot: LatestSlot[ReceivedFrame] = LatestSlot()
+    stop = threading.Event()
+    inputs = inputs or ReportInputs()
+
+    def read() -> None:
+        error: BaseException | None = None
+        try:
+            for index, received in enumerate(source.frames(stop, warn)):
+                slot.put(index, received)
+                if max_scans is not None and index + 1 >= max_scans:
+                    break
+        except BaseException as err:  # handed to the locating thread
+            error = err
+        finally:
+            stop.set()
+            slot.close(error)
+
+    reader = threading.Thread(target=read, name="mast-live-reader", daemon=True)
+    t0 = time.perf_counter()
+    reader.start()
+    try:
+        with QuietCollector() as heap:
+            while (item := slot.take(interrupt)) is not None:
+                if interrupt is not None and interrupt.is_set():
+                    break
+                index, received, dropped = item
+                fix = locate(received.frame)
+                now = replace(inputs, computed_utc=datetime.now(UTC))
+                rec = record(fix, index, received.frame, now)
+                rec.update(
+                    received_ns=received.received_ns,
+                    tracking=False,
+                    track_lost=False,
+                    dropped=dropped,
+                )
+                rec["latency_ms"] = round((time.perf_counter() - received.received_s) * 1e3, 3)
+                summary.located += 1
+                summary.fixed += fix.ok
+                try:
+                    emit(rec)
+                except BrokenPipeError:
+                    summary.pipe_closed = True
+                    break
+                heap.step()
+    except KeyboardInterrupt:
+        summary.interrupted = True
+    finally:
+        if interrupt is not None and interrupt.is_set():
+            summary.interrupted = True
+        stop.set()
+        reader.join(5.0)
+        summary.received = source.stats.scans
+        summary.dropped = slot.dropped
+        summary.malformed = source.stats.malformed
         summary.elapsed_s = time.perf_counter() - t0
     if slot.error is not None and not (summary.pipe_closed or summary.interrupted):
         raise slot.error

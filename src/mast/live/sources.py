@@ -7,7 +7,8 @@ A source is named by a URL (:func:`open_source`):
 * ``replay://RUN[?rate=F&hz=H&topic=T]``: any run ``mast locate`` reads (ROS 1 bag,
   ROS 2 bag folder or ``.mcap`` file, or a folder of scan CSVs), sent at its
   recorded rate times ``F``; a CSV folder has no stamps and plays at ``H`` scans a
-  second (default 25); ``T`` chooses a bag's LaserScan topic.
+  second (default 25); ``T`` chooses a bag's LaserScan topic, or a PointCloud2 topic
+  of a 3D lidar (:class:`FrameReplaySource`, whose frames are located in 3D).
 
 The scanners' schemes are the protocols of :mod:`mast.live.protocols` (each with
 its client, reconnection and device clock in :mod:`mast.live.tcp`); what every
@@ -24,14 +25,25 @@ import urllib.parse
 from collections.abc import Callable, Generator, Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TypeVar
 
+from mast.core.pose3d import Frame3D
 from mast.core.scan import Scan
 from mast.errors import InputError
 from mast.io.scans import DEFAULT_CSV_HZ
 from mast.live.protocols import PROTOCOLS
 from mast.live.stream import Received, Source, SourceOptions
 
-__all__ = ["ReplaySource", "open_source", "paced", "read_run"]
+__all__ = [
+    "FrameReplaySource",
+    "ReceivedFrame",
+    "ReplaySource",
+    "cloud_topic",
+    "open_frame_source",
+    "open_source",
+    "paced",
+    "read_run",
+]
 
 
 # --------------------------------------------------------------------------- replay
@@ -87,9 +99,86 @@ class ReplaySource(Source):
             yield Received(scan, time.time_ns(), time.perf_counter())
 
 
+def cloud_topic(path: Path, topic: str | None) -> str | None:
+    """The PointCloud2 topic a recorded run is read from, or None when it is read as
+    LaserScans (a scan CSV or a folder of them; a bag whose ``topic`` carries LaserScan;
+    without ``topic``, a bag with a LaserScan topic). A bag with no LaserScan topic and
+    one PointCloud2 topic is a 3D run; the message type decides, not the options. A path
+    that is no bag, or a bag too damaged to list its topics, is left to the 2D reader to
+    say what is wrong (None)."""
+    from mast.io.bags import LASERSCAN, list_topics
+    from mast.io.pointclouds import POINTCLOUD2
+    from mast.io.scans import FORMATS, scan_format
+
+    try:
+        if scan_format(path, what="run") is not FORMATS[-1]:
+            return None
+        topics = list_topics(path)
+    except InputError:
+        return None
+    if topic is not None:
+        return topic if any(t.topic == topic and t.msgtype == POINTCLOUD2 for t in topics) else None
+    if any(t.msgtype == LASERSCAN for t in topics):
+        return None
+    clouds = sorted({t.topic for t in topics if t.msgtype == POINTCLOUD2})
+    return clouds[0] if len(clouds) == 1 else None
+
+
+@dataclass(frozen=True, slots=True)
+class ReceivedFrame:
+    """One 3D lidar frame as it arrived (:class:`~mast.live.stream.Received`'s fields,
+    a :class:`~mast.core.pose3d.Frame3D` for the scan)."""
+
+    frame: Frame3D
+    received_ns: int
+    received_s: float
+    gap_s: float | None = None
+
+
+class FrameReplaySource:
+    """A recorded run's PointCloud2 frames (a 3D lidar's), sent at the recorded rate
+    times ``rate``, stamps as recorded; the frame count in ``stats`` as a scan source's.
+    A damaged message is skipped and counted as malformed (as from the field)."""
+
+    def __init__(self, url: str, path: Path, rate: float, topic: str) -> None:
+        from mast.io.pointclouds import read_pointclouds
+        from mast.live.stream import SourceStats
+
+        self.url, self.path, self.rate, self.topic = url, path, rate, topic
+        self.stats = SourceStats()
+        self._skipped: list[str] = []
+        self._frames = read_pointclouds(path, topic, on_skip=self._skipped.append)
+        # Read the first frame now: a run that cannot be read is an error before the run.
+        self._first = next(self._frames, None)
+        if self._first is None:
+            raise InputError(f"run holds no PointCloud2 frame on {topic}", path=path)
+
+    def frames(self, stop: threading.Event, warn: Callable[[str], None]) -> Iterator[ReceivedFrame]:
+        """Every frame when it is due, until the run ends or ``stop`` is set."""
+        first = self._first
+        assert first is not None
+        try:
+            for frame in paced(itertools.chain([first], self._frames), stop, rate=self.rate):
+                while self._skipped:
+                    self.stats.malformed += 1
+                    warn(self._skipped.pop(0))
+                self.stats.scans += 1
+                yield ReceivedFrame(frame, time.time_ns(), time.perf_counter())
+        finally:
+            if isinstance(self._frames, Generator):
+                self._frames.close()  # the bag reader, also when the run ends early
+
+
+_Stamped = TypeVar("_Stamped", Scan, Frame3D)
+
+
 def paced(
-    scans: Iterable[Scan], stop: threading.Event, *, rate: float = 1.0, hz: float | None = None
-) -> Iterator[Scan]:
+    scans: Iterable[_Stamped],
+    stop: threading.Event,
+    *,
+    rate: float = 1.0,
+    hz: float | None = None,
+) -> Iterator[_Stamped]:
     """Each scan when it is due: at its recorded spacing divided by ``rate``, or ``hz`` a
     second; until the scans end or ``stop`` is set."""
     t0: float | None = None
@@ -155,6 +244,20 @@ def _positive(text: str, what: str, source: str) -> float:
     if not (math.isfinite(value) and value > 0):
         raise InputError(f"source {source!r}: {what} must be a positive number, got {text!r}")
     return value
+
+
+def open_frame_source(text: str) -> FrameReplaySource | None:
+    """The 3D lidar frames a ``replay://`` URL names: a :class:`FrameReplaySource` when
+    its run is read as PointCloud2 (:func:`cloud_topic`), None for a scan source (opened
+    by :func:`open_source`). A bad URL is an InputError naming it."""
+    u = _parse(text)
+    if u.scheme != "replay":
+        return None
+    path = Path(urllib.parse.unquote(u.path))
+    clouds = cloud_topic(path, u.query.get("topic"))
+    if clouds is None:
+        return None
+    return FrameReplaySource(text, path, _positive(u.query.get("rate", "1"), "rate", text), clouds)
 
 
 def open_source(text: str, options: SourceOptions | None = None) -> Source:

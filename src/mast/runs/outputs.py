@@ -204,7 +204,8 @@ class LasMapWriter:
     path : str or Path
         ``map.las`` (replaced if it exists).
     origin_e, origin_n : float
-        A point near the survey, metres. The header offsets are these rounded
+        A point near the survey, metres (``origin_z`` its elevation, for a 3D run's
+        map; 0 by default). The header offsets are these rounded
         to :data:`LAS_OFFSET_STEP_M`, and the scales :data:`LAS_SCALE_M`
         (0.1 mm), so UTM-sized coordinates keep 0.1 mm: LAS stores each
         coordinate as an int32 multiple of the scale from the offset, which
@@ -214,7 +215,8 @@ class LasMapWriter:
 
     Notes
     -----
-    Point data record format 6 (LAS 1.4): x = easting, y = northing, z = 0,
+    Point data record format 6 (LAS 1.4): x = easting, y = northing, z = the
+    elevation for 3D frames' points and 0 for a 2D scan's,
     ``intensity`` (uint16), ``return_number`` = ``number_of_returns`` = 1,
     ``gps_time`` and the extra dimension ``scan_index`` (uint32, the
     LaserScan message index of the point's scan).
@@ -238,17 +240,23 @@ class LasMapWriter:
     """
 
     def __init__(
-        self, path: str | Path, *, origin_e: float, origin_n: float, crs: GridCrs | None = None
+        self,
+        path: str | Path,
+        *,
+        origin_e: float,
+        origin_n: float,
+        crs: GridCrs | None = None,
+        origin_z: float = 0.0,
     ) -> None:
         import laspy
 
-        if not (math.isfinite(origin_e) and math.isfinite(origin_n)):
-            raise InputError(f"map origin ({origin_e}, {origin_n}) is not finite")
+        if not (math.isfinite(origin_e) and math.isfinite(origin_n) and math.isfinite(origin_z)):
+            raise InputError(f"map origin ({origin_e}, {origin_n}, {origin_z}) is not finite")
         self.path = Path(path)
         scan_index = laspy.ExtraBytesParams(
             name="scan_index", type=np.uint32, description="LaserScan message index"
         )
-        offsets = las_offsets([origin_e, origin_n, 0.0], LAS_OFFSET_STEP_M)
+        offsets = las_offsets([origin_e, origin_n, origin_z], LAS_OFFSET_STEP_M)
         header = new_las_header(
             offsets=offsets,
             software="mast",
@@ -297,9 +305,10 @@ class LasMapWriter:
             The scan's LaserScan message index (from 0).
         stamp_ns : int
             Its stamp, nanoseconds since the Unix epoch.
-        points_mine : array_like, shape (n, 2)
-            Its returns in the mine frame (E, N), metres. Rows with a
-            coordinate that is not finite (beams without a return) are left out.
+        points_mine : array_like, shape (n, 2) or (n, 3)
+            Its returns in the mine frame (E, N), metres, or (E, N, elevation) for a
+            3D frame's (z 0 otherwise). Rows with a coordinate that is not finite
+            (beams without a return) are left out.
         intensity : array_like, shape (n,), optional
             The returns' intensities, rounded and clipped to LAS's uint16
             (0..65535); not finite gives 0. Without it, 0.
@@ -320,8 +329,8 @@ class LasMapWriter:
         if self._las.closed:
             raise OutputError("already closed", path=self.path)
         pts = np.asarray(points_mine, dtype=float)
-        if pts.ndim != 2 or pts.shape[1] != 2:
-            raise InputError(f"points_mine must have shape (n, 2), got {pts.shape}")
+        if pts.ndim != 2 or pts.shape[1] not in (2, 3):
+            raise InputError(f"points_mine must have shape (n, 2) or (n, 3), got {pts.shape}")
         keep = np.all(np.isfinite(pts), axis=1)
         inten = np.zeros(len(pts))
         if intensity is not None:
@@ -334,9 +343,10 @@ class LasMapWriter:
         n = len(pts)
         if n == 0:
             return 0
-        counts, far = las_integers(pts, self._offset[:2])
+        dims = pts.shape[1]
+        counts, far = las_integers(pts, self._offset[:dims])
         if far >= 0:
-            e, north = pts[far]
+            e, north = pts[far][:2]
             raise InputError(
                 f"scan {scan_index}: point ({e:.3f}, {north:.3f}) is more than "
                 f"{INT32_MAX * LAS_SCALE_M / 1000:.0f} km from the map origin "
@@ -346,7 +356,7 @@ class LasMapWriter:
         record = self._las.zeros(n)
         record.X = counts[:, 0]
         record.Y = counts[:, 1]
-        record.Z = np.zeros(n, dtype=np.int32)
+        record.Z = counts[:, 2] if dims == 3 else np.zeros(n, dtype=np.int32)
         record.intensity = np.clip(np.round(np.nan_to_num(inten, nan=0.0)), 0, 65535).astype(
             np.uint16
         )
