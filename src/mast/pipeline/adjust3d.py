@@ -15,18 +15,24 @@ elevation is its top end). Two kinds of evidence, each from the frame alone:
   sigma, shared by every return of a panel, is propagated into the covariance after
   (as in 2D, :func:`mast.pipeline.adjustment.survey_covariance`).
 * **Top edges** (elevation). Every ray that crosses a panel's plane inside its plan
-  extent either hit the panel (it crossed below the top) or went over it (it
-  crossed above: its return lies beyond the plane). With the tilt known, each
-  crossing's height relative to the sensor is known, so the sensor's elevation ``Z``
-  is bracketed: ``h_k - Z`` is at least the highest hit and below the lowest
-  crossing over, on every panel. The estimate is the middle of the tightest bracket
-  and its sigma that of a uniform over it (width / sqrt 12), widened by the height
-  noise of the returns that set its ends.
+  extent either hit the panel (it crossed below the top) or went over it (it crossed
+  above: its return lies beyond the plane). With the tilt known, each crossing's
+  height relative to the sensor is known (from the ray's direction: no range noise),
+  so the sensor's elevation ``Z`` is bracketed: ``h_k - Z`` is at least the highest
+  hit and below the lowest crossing over. A beacon's panels are crossed by the same
+  rings, so per beacon the brackets of its panels are intersected into one
+  observation of ``Z``: the middle, with the variance of a uniform over the width,
+  and the beams' angular error at the two ends (:data:`BEAM_ANGLE_SIGMA`); its
+  derivatives by all six parameters are those of the two rays that set its ends. The
+  rays are chosen at the start of each adjustment and kept through its iterations
+  (chosen again, and the adjustment run again, until the choice holds); a beacon's
+  bracket that fails its w-test against the others is left out.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -45,6 +51,13 @@ __all__ = ["Adjustment3D", "PanelPlanes", "adjust_pose"]
 PARAMETERS = ("easting_m", "northing_m", "elevation_m", "roll_rad", "pitch_rad", "azimuth_rad")
 #: Variance of the elevation when no top edge brackets it: not observed (m²).
 UNBRACKETED = 1e6
+#: The share of the gate a panel return must be within to bracket its top (the gate is
+#: four range sigmas: this is 2.5, which a hit's noise across the panel passes 99 % of
+#: the time).
+HIT_SHARE = 0.625
+#: A lidar beam's angular error (one sigma, radians): the height of a top edge's bracket
+#: ends is a ray's direction's, known to this times its range.
+BEAM_ANGLE_SIGMA = 5e-4
 
 
 @dataclass(frozen=True, slots=True)
@@ -67,21 +80,30 @@ class PanelPlanes:
     wall_sine: NDArray[np.float64]
     """(k, 2): at each end of a panel, the sine of its angle to the beacon's chord e1-e4
     (the wall's direction) where that end is the beacon's free end (e1 of P1, e4 of
-    P3); 1 elsewhere. Near a wall end the wall above and below a panel is within a
-    gate of its plane for gate / sine: those returns are not the panel's."""
+    P3); infinite at a joint. Near a wall end the wall above and below a panel is
+    within a gate of its plane for gate / sine: those returns are not the panel's.
+    At a joint the returns within the gate of both panels' planes are neither's."""
+    wall: NDArray[np.float64]
+    """(k, 3): the wall each panel's beacon is mounted on, the vertical plane through its
+    free ends e1 and e4, as (nx, ny, d) with ``n · X = d``. A return within the gate of
+    it is the wall's as much as the panel's: a shallow beacon's middle panel, or any
+    panel near a free end, is within the gate of the wall above and below it."""
 
     @classmethod
     def of(cls, survey: Survey) -> PanelPlanes:
         starts, alongs, lengths, tops, ids, panels, sines = [], [], [], [], [], [], []
+        walls = []
         for b in survey:
             chord = b.edges[3] - b.edges[0]
             chord = chord / np.hypot(*chord)
+            wall = np.array([chord[1], -chord[0]])
+            walls += [(wall[0], wall[1], float(wall @ b.edges[0]))] * 3
             for k in range(3):
                 a, c = b.edges[k], b.edges[k + 1]
                 u = c - a
                 length = float(np.hypot(*u))
                 sine = abs(float(u[0] * chord[1] - u[1] * chord[0])) / length
-                sines.append((sine if k == 0 else 1.0, sine if k == 2 else 1.0))
+                sines.append((sine if k == 0 else math.inf, sine if k == 2 else math.inf))
                 starts.append(a)
                 alongs.append(u / length)
                 lengths.append(length)
@@ -102,6 +124,7 @@ class PanelPlanes:
             beacon=tuple(ids),
             panel=tuple(panels),
             wall_sine=np.array(sines, dtype=float).reshape(-1, 2),
+            wall=np.array(walls, dtype=float).reshape(-1, 3),
         )
 
     def crossing(
@@ -125,17 +148,24 @@ class PanelPlanes:
         top_margin_m: float = math.inf,
         clear_m: float | None = None,
         bottoms: NDArray[np.float64] | None = None,
+        reach_m: float = math.inf,
+        ceilings: NDArray[np.float64] | None = None,
     ) -> NDArray[np.intp]:
         """The panel each grid point (n, 3), seen from the sensor at ``origin``, lies
-        on, or -1: within ``gate_m`` of its plane along its ray; the ray crossing it
-        inside the panel's plan extent (kept clear of the wall at a free end by
-        ``clear_m``, twice the gate unless given, over :attr:`wall_sine`, and by it at
-        a joint), not above its top by more than ``top_margin_m`` where the top is
-        known, and not below ``bottoms`` (per panel, where given: the survey has no
-        bottom edge, the data do); within the gate of no other panel. Where the ray
-        crosses, not where the return lies: a return's range noise moves it along its
-        ray, and choosing by its own place would keep, near an end, those whose noise
-        pointed one way."""
+        on, or -1:
+
+        * within ``gate_m`` of its plane along its ray (where the ray crosses, not where
+          the return lies: a return's range noise moves it along its ray, and choosing
+          by its own place would keep, near an end, those whose noise pointed one way);
+        * the ray crossing it inside the panel's plan extent, kept clear of the wall at
+          a free end by ``clear_m`` (twice the gate unless given) over
+          :attr:`wall_sine`;
+        * not above its top by more than ``top_margin_m`` where the top is known, not
+          below ``bottoms`` nor above ``ceilings`` (per panel, where given and finite:
+          the survey has no bottom edge, the data do), and within ``reach_m`` of the
+          sensor's height (a tilt's error moves a return by its height times it);
+        * within the gate of no other panel's plane, nor of its beacon's wall
+          (:attr:`wall`)."""
         clear = 2.0 * gate_m if clear_m is None else clear_m
         o = np.asarray(origin, dtype=float).reshape(3)
         rel = grid - o
@@ -151,18 +181,81 @@ class PanelPlanes:
             lo = clear / max(float(self.wall_sine[k, 0]), 0.2)
             hi = self.length[k] - clear / max(float(self.wall_sine[k, 1]), 0.2)
             on = (off < gate_m) & (t > lo) & (t < hi) & (s > 0)
+            if math.isfinite(reach_m):
+                on &= np.abs(z - o[2]) <= reach_m
             if math.isfinite(self.top[k]) and math.isfinite(top_margin_m):
                 on &= z <= self.top[k] + top_margin_m
             if bottoms is not None and math.isfinite(bottoms[k]):
                 on &= z >= bottoms[k]
+            if ceilings is not None and math.isfinite(ceilings[k]):
+                on &= z <= ceilings[k]
             claims += on
             closer = on & (off < best)
             which[closer], best[closer] = k, off[closer]
         which[claims > 1] = -1  # near a joint, within the gate of two panels: neither's
+        mine = np.flatnonzero(which >= 0)  # within the gate of its beacon's wall: not its
+        wall = self.wall[which[mine]]
+        flush = np.abs(np.einsum("ij,ij->i", grid[mine, :2], wall[:, :2]) - wall[:, 2]) < gate_m
+        which[mine[flush]] = -1
         return which
 
     def __len__(self) -> int:
         return len(self.beacon)
+
+    def near(self, grid: NDArray[np.float64], margin_m: float) -> NDArray[np.bool_]:
+        """Which grid points (n, 2 or 3) lie within ``margin_m`` of a panel in plan: all
+        that the assignment, the bottoms and the top edges could use (the wall just
+        behind a panel included), so that they need not look at the rest of a frame."""
+        xy = np.asarray(grid, dtype=float)[:, :2]
+        out = np.zeros(len(xy), dtype=bool)
+        for k in range(len(self)):
+            rel = xy - self.start[k]
+            t = np.clip(rel @ self.along[k], 0.0, self.length[k])
+            gap = rel - t[:, None] * self.along[k]
+            out |= np.einsum("ij,ij->i", gap, gap) <= margin_m**2
+        return out
+
+    def floors(self, grid: NDArray[np.float64], radius_m: float) -> NDArray[np.float64]:
+        """Each panel's floor: the lowest of the grid points (n, 3) within ``radius_m``
+        of it in plan (their 2nd percentile, against stray low returns: the floor, or
+        the wall's foot); NaN for a panel with fewer than 50, or where those lowest
+        returns do not spread out from the panel's plane by 30 cm (the lowest ring on a
+        wall is a line along it, and no floor). A beacon stands on no floor: near its
+        plane's foot the floor is within the gate of the plane, and is no panel's."""
+        xy = grid[:, :2]
+        out = np.full(len(self), np.nan)
+        for k in range(len(self)):
+            rel = xy - self.start[k]
+            t = np.clip(rel @ self.along[k], 0.0, self.length[k])
+            gap = rel - t[:, None] * self.along[k]
+            close = np.einsum("ij,ij->i", gap, gap) <= radius_m**2
+            if np.count_nonzero(close) < 50:
+                continue
+            low = float(np.percentile(grid[close, 2], 2.0))
+            # a floor spreads out from the wall; the lowest ring on a wall is a line
+            layer = close & (np.abs(grid[:, 2] - low) < 0.05)
+            across = xy[layer] @ self.normal[k]
+            if across.size >= 20 and np.ptp(np.percentile(across, [10, 90])) > 0.3:
+                out[k] = low
+        return out
+
+    def ceilings(
+        self,
+        grid: NDArray[np.float64],
+        origin: NDArray[np.float64],
+        which: NDArray[np.intp],
+        margin_m: float,
+    ) -> NDArray[np.float64]:
+        """Each panel's highest crossing among the returns ``which`` gives it, plus
+        ``margin_m``; NaN for a panel without returns. With a tight gate, the wall just
+        above a panel (behind it by the beacon's depth) is no hit, and no ray crosses
+        the panel between its highest hit and its top."""
+        o = np.asarray(origin, dtype=float).reshape(3)
+        out = np.full(len(self), np.nan)
+        for k in np.unique(which[which >= 0]):
+            _, _, z = self.crossing(k, o, grid[which == k] - o)
+            out[k] = float(z.max()) + margin_m
+        return out
 
     def bottoms(
         self,
@@ -227,11 +320,12 @@ def _top_edges(
     origin: NDArray[np.float64],
     planes: PanelPlanes,
     gate_m: float,
-    inset_m: float = 0.02,
-) -> list[tuple[int, int, int, float]]:
+    inset_m: float = 0.05,
+) -> list[tuple[int, int, int]]:
     """For each panel with a top, both hit and passed over inside its plan extent: the
-    panel, its highest hit, its lowest crossing over and where along that ray (0..1)
-    the crossing is. ``grid`` the returns in the grid, ``rel`` the same relative to the
+    panel, its highest hit and its lowest crossing over (above that hit: a ray
+    crossing under the panel is no evidence of its top), heights where the rays cross
+    the panel's plane. ``grid`` the returns in the grid, ``rel`` the same relative to the
     sensor origin ``origin``."""
     found = []
     for k in range(len(planes)):
@@ -244,15 +338,85 @@ def _top_edges(
         across = grid[:, :2] @ n - d
         side = float(origin[:2] @ n - d)
         s, t, _ = planes.crossing(k, origin, rel)  # s: where each ray crosses, 0..1
-        over = (s > 0) & (s < 1) & (t > inset_m) & (t < planes.length[k] - inset_m)
-        over &= (across * side < 0) & (np.abs(across) >= gate_m) & (rel[:, 2] > 0)
+        # a hit well within the gate: the wall just above a panel, behind it by the
+        # beacon's depth, may be within the gate, and is no hit
+        close = on[np.abs(across[on]) <= HIT_SHARE * gate_m]
+        if close.size == 0:
+            continue
+        a = int(close[np.argmax(s[close] * rel[close, 2])])
+        # well inside: a ray just past a panel's side passes beside it, not over it
+        inset = max(inset_m, 0.1 * planes.length[k])
+        over = (s > 0) & (s < 1) & (t > inset) & (t < planes.length[k] - inset)
+        over &= (across * side < 0) & (np.abs(across) >= gate_m)
+        over &= s * rel[:, 2] > s[a] * rel[a, 2]
         if not over.any():
             continue
         above = np.flatnonzero(over)
         b = int(above[np.argmin(s[above] * rel[above, 2])])
-        a = int(on[np.argmax(rel[on, 2])])
-        found.append((k, a, b, float(s[b])))
+        found.append((k, a, b))
     return found
+
+
+def _height_gradient(
+    point: NDArray[np.float64],
+    rel: NDArray[np.float64],
+    s: float,
+    normal: NDArray[np.float64],
+    dR: tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]],
+) -> NDArray[np.float64]:
+    """How the height ``h = s rel_z`` at which a ray (its return ``point`` in the sensor
+    frame, ``rel`` in the grid's axes from the sensor) crosses a vertical plane of
+    horizontal ``normal`` changes with (E, N, A, pitch, roll, Z): ``s`` is the plane's
+    distance over the ray's, so moving the sensor or turning the ray moves it too."""
+    across = float(rel[:2] @ normal)
+    g = np.zeros(6)
+    g[:2] = -rel[2] * normal / across
+    for j, dRj in zip((2, 3, 4), dR, strict=True):
+        turn = dRj @ point
+        g[j] = s * turn[2] - s * rel[2] * float(turn[:2] @ normal) / across
+    g[2] = -g[2]  # d yaw / d A = -1
+    return g
+
+
+def _brackets(
+    tops: list[tuple[int, int, int]],
+    p: NDArray[np.float64],
+    rel: NDArray[np.float64],
+    origin: NDArray[np.float64],
+    planes: PanelPlanes,
+    dR: tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]],
+) -> list[tuple[float, float, NDArray[np.float64]]]:
+    """The sensor's elevation bracketed by each beacon's top edges: each panel ``k``
+    says ``top_k - crossing over < Z <= top_k - highest hit``; a beacon's panels are
+    crossed by the same rings, so their brackets are one piece of evidence, and the
+    elevation is in their intersection (where it is uniform, were the hits and
+    crossings exact). Per beacon: the middle, its variance (the uniform's, a width
+    closed where the pose's error crossed its ends, and the beams' angular error at
+    its ends) and the derivatives of its residual ``Z - middle`` by (E, N, A, pitch,
+    roll, Z) (through the two rays that set its ends; ``dR`` R's derivatives by yaw,
+    pitch and roll). Heights are where the rays cross the panel's plane, the hit's
+    too: a ray's direction carries no range noise. Different beacons are crossed by
+    different rings at different ranges: their brackets are independent observations
+    (intersecting them too would let a tilt's error cross their ends)."""
+    out = []
+    for beacon in sorted({planes.beacon[k] for k, *_ in tops}):
+        mine = [(k, a, b, *planes.crossing(k, origin, rel[[a, b]])[0]) for k, a, b in tops
+                if planes.beacon[k] == beacon]  # fmt: skip
+        lows = [planes.top[k] - sb * rel[b, 2] for k, _, b, _, sb in mine]
+        highs = [planes.top[k] - sa * rel[a, 2] for k, a, _, sa, _ in mine]
+        lo, hi = int(np.argmax(lows)), int(np.argmin(highs))
+        _, a, _, sa, _ = mine[hi]
+        _, _, b, _, sb = mine[lo]
+        middle = 0.5 * (lows[lo] + highs[hi])
+        k_a, k_b = mine[hi][0], mine[lo][0]
+        d = 0.5 * (_height_gradient(p[a], rel[a], sa, planes.normal[k_a], dR))
+        d += 0.5 * (_height_gradient(p[b], rel[b], sb, planes.normal[k_b], dR))
+        d[5] = 1.0
+        # the beams' angular error moves each end by it times the range to the crossing
+        reach = BEAM_ANGLE_SIGMA * np.linalg.norm([sa * rel[a], sb * rel[b]], axis=1)
+        spread = max(highs[hi] - lows[lo], 0.0) ** 2 / 12.0 + 0.25 * float(reach @ reach)
+        out.append((float(middle), spread, d))
+    return out
 
 
 @dataclass(slots=True)
@@ -263,7 +427,7 @@ class _Solved:
     v: NDArray[np.float64]
     N: NDArray[np.float64]
     n_points: int
-    tops: int
+    tops: list[tuple[int, int, int]]
     iterations: int
 
 
@@ -276,8 +440,13 @@ def _solve(
     survey_sigma_m: float,
     gate_m: float,
     iterations: int,
+    tops: list[tuple[int, int, int]] | None = None,
+    tilt_prior: tuple[float, float, float] | None = None,
+    skip: frozenset[str] = frozenset(),
 ) -> _Solved:
-    """Gauss-Newton over (E, N, A, pitch, roll, Z) (see :func:`adjust_pose`)."""
+    """Gauss-Newton over (E, N, A, pitch, roll, Z) (see :func:`adjust_pose`), the top
+    edges' rays those given or, without, those chosen at ``x0``: kept through the
+    iterations, so that a ray's choice cannot flip back and forth with the pose."""
     mine = which >= 0
     pts, k_of = p[mine], which[mine]
     n_k, d_k = planes.normal[k_of], planes.offset[k_of]
@@ -299,26 +468,78 @@ def _solve(
         W = 1.0 / np.maximum(range_sigma_m * cos_inc, 1e-3 * range_sigma_m) ** 2
         rel = p @ R.T
         origin = np.array([x[0], x[1], x[5]])
-        tops = _top_edges(rel + origin, rel, which, origin, planes, gate_m)
-        rows, vt, wt = [], [], []
-        for k, a, b, sb in tops:
-            za, zb = rel[a, 2], sb * rel[b, 2]
-            width = abs(zb - za)
-            dz = [(p[a] @ dR[2] + sb * (p[b] @ dR[2])) / 2 for dR in (dR_pitch, dR_roll)]
-            rows.append([0.0, 0.0, 0.0, dz[0], dz[1], 1.0])
-            vt.append(x[5] + (za + zb) / 2 - planes.top[k])
-            wt.append(1.0 / (width**2 / 12.0 + range_sigma_m**2 + survey_sigma_m**2))
-        if rows:
-            J = np.vstack([J, rows])
-            v = np.concatenate([v, vt])
-            W = np.concatenate([W, wt])
+        if tops is None:
+            tops = _top_edges(rel + origin, rel, which, origin, planes, gate_m)
+            tops = [top for top in tops if planes.beacon[top[0]] not in skip]
+        if tops:
+            seen = _brackets(tops, p, rel, origin, planes, (dR_yaw, dR_pitch, dR_roll))
+            J = np.vstack([J, [dz for _, _, dz in seen]])
+            v = np.concatenate([v, [x[5] - middle for middle, _, _ in seen]])
+            W = np.concatenate([W, [1.0 / (sp + survey_sigma_m**2) for _, sp, _ in seen]])
+        if tilt_prior is not None:  # the walls' vertical, as two observations
+            pitch0, roll0, sd = tilt_prior
+            J = np.vstack([J, [[0.0, 0.0, 0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 0.0, 0.0, 1.0, 0.0]]])
+            v = np.concatenate([v, [x[3] - pitch0, x[4] - roll0]])
+            W = np.concatenate([W, [sd**-2, sd**-2]])
         N = J.T @ (W[:, None] * J)
-        if not rows:
+        if not tops:
             N[5, 5] += 1.0 / UNBRACKETED  # the elevation unobserved: kept, with no weight
         step = np.linalg.solve(N, -(J.T @ (W * v)))
         x += step
         if done >= iterations or np.all(np.abs(step) < [1e-7, 1e-7, 1e-9, 1e-9, 1e-9, 1e-7]):
-            return _Solved(x, J, W, v, N, len(pts), len(tops), done)
+            return _Solved(x, J, W, v, N, len(pts), tops, done)
+
+
+def _failed_bracket(solved: _Solved, planes: PanelPlanes) -> str | None:
+    """The beacon whose top edges' bracket fails Baarda's w-test worst, beyond the
+    critical value of the largest of as many as there are, or None. A far panel's
+    sparse rings may take the wall well above it for a hit (a shallow beacon's wall is
+    within the gate of its plane); the other beacons' brackets and the tilt the panel
+    returns hold tell. One bracket alone has no redundancy and is not tested."""
+    beacons = sorted({planes.beacon[k] for k, _, _ in solved.tops})
+    n = solved.n_points
+    rows = np.arange(n, n + len(beacons))
+    if len(beacons) < 2:
+        return None
+    Q = np.linalg.inv(solved.N)
+    J, W = solved.J[rows], solved.W[rows]
+    qvv = 1.0 / W - np.einsum("ij,jk,ik->i", J, Q, J)
+    ok = qvv > 1e-6 / W
+    w = np.where(ok, np.abs(solved.v[rows]) / np.sqrt(np.where(ok, qvv, 1.0)), 0.0)
+    worst = int(np.argmax(w))
+    return beacons[worst] if w[worst] > w_critical(len(beacons)) else None
+
+
+def _snoop_pieces(
+    p: NDArray[np.float64],
+    which: NDArray[np.intp],
+    planes: PanelPlanes,
+    solved: _Solved,
+    lines: NDArray[np.intp],
+    solve: Callable[[NDArray[np.float64]], _Solved],
+    rounds: int = 12,
+) -> _Solved:
+    """Leave out, one at a time, the piece of panel returns (a quarter of a panel along
+    one line) whose mean standardised residual fails (see :func:`adjust_pose`);
+    ``which`` is changed in place."""
+    for _ in range(rounds):
+        on = np.flatnonzero(which >= 0)
+        k = which[on]
+        R = rotation_rpy(solved.x[4], solved.x[3], yaw_of_azimuth(solved.x[2]))
+        xy = p[on] @ R[:2].T + solved.x[:2]
+        t = np.einsum("ij,ij->i", xy - planes.start[k], planes.along[k]) / planes.length[k]
+        quarter = np.clip(np.floor(4.0 * t), 0, 3).astype(np.intp)
+        _, piece = np.unique(np.stack([k, lines[on], quarter]), axis=1, return_inverse=True)
+        piece = piece.reshape(-1)
+        r = solved.v[: solved.n_points] * np.sqrt(solved.W[: solved.n_points])
+        count = np.bincount(piece)
+        mean = np.bincount(piece, weights=r) / np.sqrt(count)
+        worst = int(np.argmax(np.abs(mean)))
+        if abs(mean[worst]) <= w_critical(len(count)):
+            break
+        which[on[piece == worst]] = -1
+        solved = solve(solved.x)
+    return solved
 
 
 def adjust_pose(
@@ -332,6 +553,9 @@ def adjust_pose(
     gate_m: float,
     iterations: int = 12,
     snooping_rounds: int = 6,
+    lines: NDArray[np.intp] | None = None,
+    elevation: bool = True,
+    tilt_prior: tuple[float, float, float] | None = None,
 ) -> Adjustment3D:
     """All six parameters from a frame's returns ``points`` (sensor frame, (n, 3)), those
     on panels named by ``which`` (indices into ``planes``, -1 for none), from ``start``
@@ -342,13 +566,39 @@ def adjust_pose(
     Returns that are not the panel's (the wall just above, below or beside one, within
     the gate of its plane) are found by data snooping: Baarda's w-test on each
     panel return's standardised residual, those beyond the critical value of the
-    largest of n left out, and the adjustment run again."""
+    largest of n left out, and the adjustment run again.
+
+    Before that, whole pieces: the wall beside a panel's free end, or one ring's run on
+    the wall just above its top, is within the gate of the plane as a group, each
+    return too near to fail alone. So the panel returns are grouped into pieces (a
+    panel's quarter along its length on one of ``lines``: the ring of each return,
+    or any label of returns that lie on one line across a panel), and the piece whose
+    mean standardised residual is furthest out, beyond the critical value of the
+    largest of that many, is left out and the adjustment run again, until none is.
+
+    Without ``elevation`` no top edge enters: the elevation stays the start's (its
+    variance :data:`UNBRACKETED`). ``tilt_prior`` (pitch, roll, sigma; radians) adds
+    the two as observations (the vertical of the walls, say): a few panels' returns
+    alone may leave the tilt loose."""
     p = np.asarray(points, dtype=float)
     which = np.asarray(which, dtype=np.intp).copy()
     x = np.array(
         [start.easting, start.northing, start.azimuth, start.pitch, start.roll, start.elevation]
     )
-    solved = _solve(p, which, planes, x, range_sigma_m, survey_sigma_m, gate_m, iterations)
+
+    def solve(
+        x0: NDArray[np.float64], tops: list[tuple[int, int, int]] | None = None
+    ) -> _Solved:  # ``which`` as it is now: the snooping leaves returns out of it
+        if not elevation:
+            tops = []
+        return _solve(p, which, planes, x0, range_sigma_m, survey_sigma_m, gate_m, iterations,
+                      tops=tops, tilt_prior=tilt_prior, skip=frozenset(distrust))  # fmt: skip
+
+    distrust: set[str] = set()  # beacons whose top edges failed their w-test
+
+    solved = solve(x)
+    if lines is not None:
+        solved = _snoop_pieces(p, which, planes, solved, lines, solve)
     for _ in range(snooping_rounds):
         n = solved.n_points
         Q = np.linalg.inv(solved.N)
@@ -359,9 +609,17 @@ def adjust_pose(
         if not bad.any():
             break
         which[np.flatnonzero(which >= 0)[bad]] = -1
-        solved = _solve(
-            p, which, planes, solved.x, range_sigma_m, survey_sigma_m, gate_m, iterations
-        )
+        solved = solve(solved.x)
+    for _ in range(6 if elevation else 0):
+        again = solve(solved.x)  # the top edges' rays chosen again where the pose moved
+        same = again.tops == solved.tops
+        solved = again
+        if same:
+            worst = _failed_bracket(solved, planes)
+            if worst is None:
+                break
+            distrust.add(worst)
+            solved = solve(solved.x)
     x, J, W, v, n_points = solved.x, solved.J, solved.W, solved.v, solved.n_points
     k_of = which[which >= 0]
     Q = np.linalg.inv(solved.N)
@@ -384,5 +642,5 @@ def adjust_pose(
         test_p=float(chi2_sf(s0 * dof, dof)) if dof > 0 else 1.0,
         returns=n_points,
         iterations=solved.iterations,
-        top_edges=solved.tops,
+        top_edges=len({planes.beacon[k] for k, _, _ in solved.tops}),
     )

@@ -9,15 +9,26 @@ view, then the six-parameter adjustment on the panels it names (docs/3d.md).
    the beacons told from clutter, with every test of 2D; where the plan view finds
    none, the vertical pitched by a grade's worth (:data:`PITCH_TRIES_DEG`). No 2D fix,
    no 3D fix: its reason is the frame's.
-4. **The start**: the 2D pose with the levelling's pitch and roll; the elevation from
-   the highest return on each panel, which is below that panel's top.
-5. **The adjustment** (:func:`mast.pipeline.adjust3d.adjust_pose`), twice: once on the
-   returns within a wide gate of the panels, once on those within four range sigmas of
-   the adjusted panels and below their tops.
-6. **The tests**: two beacons each showing two panels with enough returns, the global
+4. **The start**: the 2D pose with the levelling's pitch and roll, and the elevation
+   where the most panels' top brackets agree (:func:`_start_elevation`: hits in a
+   tight gate, each panel's run of them up from its middle, and the rays crossing over
+   it). Only returns within :data:`NEAR_M` of a panel in plan are looked at after.
+5. **The tilt, grown out** (:func:`mast.pipeline.adjust3d.adjust_pose`, elevation
+   held): on the returns within four range sigmas of the panels, first those within
+   half a metre of the sensor's height, where the plan view's tilt error moves a return
+   least, then a metre, two, all (:data:`REACH_M`). Each panel is cut at its top (the
+   start's elevation), above its floor (:data:`FLOOR_CLEAR_M`) and, once adjusted, at
+   the bottom its returns show; a return within the gate of two panels, or of a panel
+   and its beacon's wall, is neither's. The walls' vertical enters as an observation of
+   the tilt (:data:`TILT_PRIOR_DEG`), which only a frame whose panels hold the tilt
+   loosely feels.
+6. **The elevation**: the adjustment with the top edges' brackets, and the panels cut
+   again at their adjusted tops, until the assignment holds.
+7. **The tests**: two beacons each showing two panels with enough returns, the global
    test of the adjustment, and the 3D position within the 2D fix's 99.9 % ellipse
-   widened by the tilt's share. A frame whose panels no ring crosses at the top keeps
-   its fix with the elevation unobserved (its variance says so).
+   widened by the plan view's smear (:data:`PLAN_SLACK_M`). A frame whose panels no
+   ring crosses at the top keeps its fix with the elevation unobserved (its variance
+   says so).
 """
 
 from __future__ import annotations
@@ -33,7 +44,7 @@ from mast.core.beacon import Survey
 from mast.core.frames import yaw_of_azimuth
 from mast.core.pose3d import Frame3D, Pose3D, rotation_rpy
 from mast.errors import InputError
-from mast.pipeline.adjust3d import Adjustment3D, PanelPlanes, adjust_pose
+from mast.pipeline.adjust3d import Adjustment3D, PanelPlanes, _top_edges, adjust_pose
 from mast.pipeline.locator import Fix, LocatorConfig, locate
 from mast.pipeline.plan_view import estimate_up, level_rotation, plan_scan
 
@@ -41,6 +52,29 @@ __all__ = ["Fix3D", "Locator3DConfig", "locate3d"]
 
 #: The pitches about the estimated vertical the plan view is tried at, in turn, degrees.
 PITCH_TRIES_DEG = (0.0, 4.0, -4.0, 8.0, -8.0)
+#: The heights about the sensor the adjustment is grown through, metres.
+REACH_M = (0.5, 1.0, 2.0, math.inf)
+#: Before the first adjustment, the gate is widened by this times a return's height
+#: (the plan view's vertical may be off by a couple of degrees).
+TILT_SLACK = 0.04
+#: The sigma of the walls' vertical as an observation of the pitch and roll, degrees
+#: (the estimate is within 2 deg across the drift and is pitched by the plan view's
+#: tries along it).
+TILT_PRIOR_DEG = 5.0
+#: The plan view's own error, beyond its covariance, in the test that the 3D position
+#: is where it put it: a vertical off by a degree smears each panel's plan view by its
+#: height times that (1.7 cm a metre up), metres.
+PLAN_SLACK_M = 0.02
+#: How far above the floor by a panel its returns must cross (no beacon stands on the
+#: floor, and near its foot the floor is within the gate of its plane), metres.
+FLOOR_CLEAR_M = 0.15
+#: How far about a panel, in plan, the lowest returns are its floor, metres.
+FLOOR_RADIUS_M = 2.0
+#: The plan view's tilt error in a return's place, for the first look, metres.
+START_SLACK_M = 0.03
+#: How far from a panel, in plan, a return may lie and be looked at by the adjustment:
+#: the wall behind the panel and a 10 deg tilt's worth at 2 m above or below the sensor.
+NEAR_M = 0.5
 
 
 @dataclass(frozen=True, slots=True)
@@ -59,8 +93,6 @@ class Locator3DConfig:
         Bearing bins of the plan view.
     min_panel_returns : int
         Returns a panel needs to count as shown.
-    first_gate_m : float
-        The first adjustment's gate about the panels (the start is the 2D fix's).
     reject_alpha : float
         The global test's level.
     """
@@ -70,7 +102,6 @@ class Locator3DConfig:
     band_m: tuple[float, float] = (-0.5, 1.0)
     plan_resolution_deg: float = 0.25
     min_panel_returns: int = 6
-    first_gate_m: float = 0.1
     reject_alpha: float = 1e-3
 
 
@@ -98,16 +129,75 @@ class Fix3D:
 
 
 def _start_elevation(
-    grid: NDArray[np.float64], which: NDArray[np.intp], planes: PanelPlanes
-) -> float | None:
-    """The sensor's elevation from the highest return on each panel (heights relative to
-    a sensor at elevation 0): the median of top - highest, None without tops."""
-    guesses = [
-        float(planes.top[k] - grid[which == k, 2].max())
-        for k in np.unique(which[which >= 0])
-        if math.isfinite(planes.top[k])
-    ]
-    return float(np.median(guesses)) if guesses else None
+    grid: NDArray[np.float64],
+    origin: NDArray[np.float64],
+    which: NDArray[np.intp],
+    planes: PanelPlanes,
+    gate_m: float,
+    spacing_rad: float,
+) -> tuple[float, float] | None:
+    """The sensor's elevation where the most panels' top brackets agree (``grid`` seen
+    from ``origin`` at elevation 0, ``which`` tight hits): each panel with a hit says
+    ``top - lowest crossing over < Z <= top - highest hit``; a return on the roof or the
+    wall within the gate of a panel's plane far above it makes one panel's bracket
+    wrong, not the most. The middle and half the width of the interval the most
+    brackets share; None without a hit on a panel with a top. ``spacing_rad``: the
+    lidar's rings' spacing."""
+    o = np.asarray(origin, dtype=float)
+    rel = grid - o
+    ends: list[tuple[float, int]] = []
+    which = which.copy()
+    for k in np.unique(which[which >= 0]):
+        if not math.isfinite(planes.top[k]):
+            continue
+        mine = np.flatnonzero(which == k)
+        s, _, _ = planes.crossing(k, o, rel[mine])
+        h = s * rel[mine, 2]
+        # the highest hit of the run up from the middle: no ring leaves a gap wider
+        # than its spacing at that range (the roof or the wall far above within the
+        # gate of a panel's plane is no hit of it)
+        gap = 1.5 * spacing_rad * float(np.median(np.linalg.norm(rel[mine], axis=1))) + 0.05
+        order = np.argsort(h)
+        run = order[int(np.searchsorted(h[order], np.median(h))) :]
+        cut = np.flatnonzero(np.diff(h[run]) > gap)
+        if cut.size:
+            which[mine[run[cut[0] + 1 :]]] = -1
+            run = run[: cut[0] + 1]
+        ends.append((float(planes.top[k] - h[run].max()), -1))
+        ends.append((-math.inf, +1))
+    for k, _, b in _top_edges(grid, rel, which, o, planes, gate_m):
+        s, _, _ = planes.crossing(k, o, rel[[b]])
+        lows = [e for e in ends if e[1] == +1 and math.isinf(e[0])]
+        ends.remove(lows[0])
+        ends.append((float(planes.top[k] - s[0] * rel[b, 2]), +1))
+    if not ends:
+        return None
+    ends.sort(key=lambda e: (e[0], -e[1]))  # at a tie, a bracket opens before one closes
+    best, count, start, middle, half = 0, 0, -math.inf, 0.0, 0.0
+    for i, (z, step) in enumerate(ends):
+        count += step
+        if step > 0:
+            start = z
+        elif count + 1 > best:  # the deepest overlap ends here
+            best = count + 1
+            low = start if math.isfinite(start) else z - 0.5
+            middle, half = 0.5 * (low + z), 0.5 * (z - low)
+        del i
+    return middle, half
+
+
+def ring_spacing(frame: Frame3D) -> float:
+    """The angle between a frame's neighbouring rings (radians): the median step between
+    the rings' median elevation angles; 2 deg (a VLP-16's) without rings."""
+    if frame.ring is None:
+        return math.radians(2.0)
+    p = frame.points
+    elevation = np.arctan2(p[:, 2], np.hypot(p[:, 0], p[:, 1]))
+    rings = np.unique(frame.ring)
+    if rings.size < 2:
+        return math.radians(2.0)
+    angles = np.sort([np.median(elevation[frame.ring == r]) for r in rings])
+    return float(np.median(np.diff(angles)))
 
 
 def _shown(which: NDArray[np.intp], planes: PanelPlanes, least: int) -> tuple[str, ...]:
@@ -173,44 +263,87 @@ def locate3d(
     # the 2D pose, with the levelling's tilt: R = Rz(yaw) @ L, L = Ry(pitch) Rx(roll)
     R0 = rotation_rpy(0.0, 0.0, yaw_of_azimuth(plan.pose.azimuth)) @ level_rotation(up)
     flat = Pose3D.from_rotation(R0, (plan.pose.easting, plan.pose.northing, 0.0))
-    pts = frame.points
-    grid = flat.sensor_to_grid(pts)
-    clear = 3.0 * cfg.range_sigma_m  # the wall at a free end: within 3 sigmas, ambiguous
-    which = planes.assign(grid, flat.position, cfg.first_gate_m, clear_m=clear)
-    z0 = _start_elevation(grid, which, planes)
-    if z0 is None:
-        return refused("one_beacon", "no return on a surveyed panel in 3D")
-    start = Pose3D(flat.easting, flat.northing, z0, flat.azimuth, flat.pitch, flat.roll)
-    beacons = _shown(which, planes, cfg.min_panel_returns)
-    if len(beacons) < 2:
-        return refused("one_beacon", _too_few(beacons, cfg))
+
+    def all_grid(pose: Pose3D) -> NDArray[np.float64]:  # every return, for the floors
+        return pose.sensor_to_grid(frame.points[about])
+
+    # only the returns near a panel in plan can be a panel's or pass over its top
+    grid = flat.sensor_to_grid(frame.points)
+    near = planes.near(grid, NEAR_M)
+    about = planes.near(grid, FLOOR_RADIUS_M)
+    pts, grid = frame.points[near], grid[near]
+    # the lines each ring draws across a panel, or without rings, 10 cm heights
+    lines = (
+        frame.ring[near].astype(np.intp)
+        if frame.ring is not None
+        else np.floor(pts[:, 2] / 0.1).astype(np.intp)
+    )
     sig_r, sig_s = cfg.range_sigma_m, cfg.survey_sigma_m
+    gate = 4.0 * sig_r
+    # The wall at a free end is within a gate of the plane for gate / sine of it: there
+    # a return is ambiguous (PanelPlanes.assign), so each assignment clears by its gate.
+    # The elevation first, from hits in a gate tight but for the plan view's tilt error.
+    loose = 2.5 * sig_r + START_SLACK_M
+    tight = planes.assign(grid, flat.position, loose, clear_m=loose)
+    start = _start_elevation(grid, flat.position, tight, planes, 2.0 * loose, ring_spacing(frame))
+    if start is None:
+        return refused("one_beacon", "no return on a surveyed panel in 3D")
+    z0, spread = start
+    pose = Pose3D(flat.easting, flat.northing, z0, flat.azimuth, flat.pitch, flat.roll)
+    adj: Adjustment3D | None = None
+    which = tight
+    prior = (flat.pitch, flat.roll, math.radians(TILT_PRIOR_DEG))
     try:
-        adj = adjust_pose(
-            pts, which, planes, start, range_sigma_m=sig_r, survey_sigma_m=sig_s,
-            gate_m=cfg.first_gate_m,
-        )  # fmt: skip
-        gate = 4.0 * sig_r
-        for _ in range(3):  # the tight gate about the adjusted panels, until it holds
-            grid = adj.pose.sensor_to_grid(pts)
-            margin = max(2.0 * math.sqrt(adj.covariance[2, 2]), 2.0 * sig_r)
-            if adj.top_edges == 0:
-                margin = math.inf  # the elevation unknown: no top to cut at
-            floor = planes.bottoms(grid, adj.pose.position, which, 2.0 * sig_r)
-            again = planes.assign(
-                grid, adj.pose.position, gate, clear_m=clear, top_margin_m=margin,
-                bottoms=floor,
+        # Grown from the sensor's height out: near it a tilt's error moves a return
+        # little, so the tight gate holds from the start; each stage's tilt lets the
+        # next reach further, and its elevation cuts each panel at its top.
+        for reach in REACH_M:
+            grid = pose.sensor_to_grid(pts)
+            margin = spread + 2.0 * sig_r + START_SLACK_M  # the start's elevation
+            slack = 0.0 if adj is not None else min(reach, 2.0) * TILT_SLACK
+            roof = None
+            floor = planes.floors(all_grid(pose), FLOOR_RADIUS_M) + FLOOR_CLEAR_M
+            if adj is None:  # each panel cut at its highest tight hit, too
+                roof = planes.ceilings(grid, pose.position, tight, 2.0 * sig_r)
+            else:
+                floor = np.fmax(floor, planes.bottoms(grid, pose.position, which, gate))
+            which = planes.assign(
+                grid, pose.position, gate + slack, clear_m=gate + slack, top_margin_m=margin,
+                bottoms=floor, reach_m=reach, ceilings=roof,
             )  # fmt: skip
-            if np.array_equal(again, which):
+            if len(_shown(which, planes, cfg.min_panel_returns)) < 2:
+                continue
+            adj = adjust_pose(
+                pts, which, planes, pose, range_sigma_m=sig_r, survey_sigma_m=sig_s,
+                gate_m=gate, lines=lines, elevation=False, tilt_prior=prior,
+            )  # fmt: skip
+            pose = adj.pose
+        if adj is None:
+            return refused(
+                "one_beacon", _too_few(_shown(which, planes, cfg.min_panel_returns), cfg)
+            )
+        # the elevation last, from the top edges of panels the tilt now holds
+        for _ in range(3):
+            adj = adjust_pose(
+                pts, which, planes, pose, range_sigma_m=sig_r, survey_sigma_m=sig_s,
+                gate_m=gate, lines=lines, tilt_prior=prior,
+            )  # fmt: skip
+            pose = adj.pose
+            if not adj.top_edges:
+                break
+            grid = pose.sensor_to_grid(pts)
+            margin = max(2.0 * math.sqrt(adj.covariance[2, 2]), 2.0 * sig_r)
+            floor = planes.floors(all_grid(pose), FLOOR_RADIUS_M) + FLOOR_CLEAR_M
+            floor = np.fmax(floor, planes.bottoms(grid, pose.position, which, gate))
+            again = planes.assign(
+                grid, pose.position, gate, clear_m=gate, top_margin_m=margin, bottoms=floor
+            )
+            if (
+                np.array_equal(again, which)
+                or len(_shown(again, planes, cfg.min_panel_returns)) < 2
+            ):
                 break
             which = again
-            beacons = _shown(which, planes, cfg.min_panel_returns)
-            if len(beacons) < 2:
-                return refused("one_beacon", _too_few(beacons, cfg), adj)
-            adj = adjust_pose(
-                pts, which, planes, adj.pose, range_sigma_m=sig_r, survey_sigma_m=sig_s,
-                gate_m=gate,
-            )  # fmt: skip
     except np.linalg.LinAlgError:  # the panels seen leave a direction unobserved
         return refused("one_beacon", "the panels seen do not hold the pose in 3D")
     lap("adjustment", t)
@@ -224,10 +357,11 @@ def locate3d(
             "freedom: the returns do not fit the surveyed panels",
             adj,
         )
-    # the 3D position must be where the plan view put it (within both sigmas)
+    # the 3D position must be where the plan view put it (within both sigmas and the
+    # plan view's smear)
     assert plan.adjustment is not None
     d = np.array([adj.pose.easting - plan.pose.easting, adj.pose.northing - plan.pose.northing])
-    c = plan.adjustment.covariance[:2, :2] + adj.covariance[:2, :2]
+    c = plan.adjustment.covariance[:2, :2] + adj.covariance[:2, :2] + PLAN_SLACK_M**2 * np.eye(2)
     if float(d @ np.linalg.solve(c, d)) > 13.8:  # chi-square, 2 dof, 0.1 %
         return refused(
             "inconsistent",
