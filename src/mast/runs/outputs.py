@@ -455,7 +455,10 @@ class FixExports:
                 "beacons": ",".join(str(b) for b in record.get("beacons") or ()),
             },
         )
-        self._points.add(name, e, n, None, az, sigma_e, sigma_n, sigma_az)
+        z = record.get("elevation_m")  # a 3D lidar frame's fix has its elevation
+        self._points.add(
+            name, e, n, None if z is None else float(z), az, sigma_e, sigma_n, sigma_az
+        )
         self.count += 1
 
 
