@@ -370,9 +370,8 @@ def table_3d(summaries: Sequence[Accuracy3DSummary]) -> str:
         "config", "owed", "fixed", "fix %", "not owed fixed", "WRONG", "E,N mm", "Z mm",
         "roll °", "pitch °", "A °", "ms / frame", "ms / 1000 pts", "misses (owed)",
     ):  # fmt: skip
-        first.add_column(
-            col_name, justify="left" if col_name.startswith(("config", "m")) else "right"
-        )
+        left = col_name.startswith(("config", "m"))
+        first.add_column(col_name, justify="left" if left else "right", no_wrap=True)
     for s in summaries:
         first.add_row(
             s.config,
@@ -407,8 +406,8 @@ def table_3d(summaries: Sequence[Accuracy3DSummary]) -> str:
                 for r, c, e in zip(s.ratio, s.coverage, s.sigma_over_crb, strict=True)
             ),
         )
-    console = Console(width=220)
+    console = Console(width=320)
     with console.capture() as cap:
         console.print(first)
         console.print(second)
-    return cap.get().rstrip()
+    return "\n".join(line.rstrip() for line in cap.get().rstrip().splitlines())
