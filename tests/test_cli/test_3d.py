@@ -174,6 +174,8 @@ def test_track_writes_a_6dof_trajectory(
     )  # fmt: skip
     assert done.returncode == 0, done.stderr
     assert "fixed one by one" in done.stdout  # the summary says what a 3D run is
+    # the settings the frames were located with: --config gives the same results again
+    assert "range_sigma_m = 0.02" in (out / "config.toml").read_text(encoding="utf-8")
     recs = _records((out / "fixes.jsonl").read_text(encoding="utf-8"))
     assert len(recs) == len(FRAMES)
     for rec in recs:

@@ -257,19 +257,19 @@ def run_frames(
     status of ``mast live --help``."""
     import json
 
-    from mast.cli.options import lidar_range_sigma
+    from mast.cli.options import lidar_config
     from mast.live.session import run_live3d
     from mast.runs.frames3d import FrameLocator, check_elevations
 
     check_elevations(setup.survey, beacons)
     if near is not None:
         _warn(f"--near applies to 2D scans; {setup.source} replays 3D lidar frames")
+    cfg = lidar_config(setup.config, setup.inputs.defaults)
     locator = FrameLocator(
-        setup.survey,
-        range_sigma_m=lidar_range_sigma(setup.config, setup.inputs.defaults),
-        survey_sigma_m=setup.config.survey_sigma_m,
+        setup.survey, range_sigma_m=cfg.range_sigma_m, survey_sigma_m=cfg.survey_sigma_m
     )
-    inputs = replace(setup.inputs, topic=frames.topic)
+    settings = effective({"locator": cfg, "sequence": setup.sequence}, "live")
+    inputs = replace(setup.inputs, topic=frames.topic, config_sha256=settings.sha256)
 
     def emit(record_: dict[str, object]) -> None:
         sys.stdout.write(json.dumps(record_) + "\n")

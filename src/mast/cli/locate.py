@@ -25,7 +25,7 @@ from mast.cli.options import (
     TopicOption,
     WorkUpdate,
     grid_crs,
-    lidar_range_sigma,
+    lidar_config,
     load_scans,
     parse_near,
     warn_loose_edges,
@@ -148,11 +148,17 @@ def locate(
                     inputs=report_inputs(
                         beacons=beacons,
                         survey=survey,
-                        locator=cfg,
+                        locator=lidar_config(cfg, defaults),
                         scanner=scanner,
                         defaults=defaults,
                         config=config,
-                        settings=settings,
+                        settings=effective(
+                            {
+                                "locator": lidar_config(cfg, defaults),
+                                "sequence": tables["sequence"],
+                            },
+                            "locate",
+                        ),
                         crs=grid,
                         scan_file=str(scan_path),
                         topic=clouds,
@@ -239,7 +245,7 @@ def _locate_frames(
         typer.echo(f"mast: warning: {option} applies to 2D scans; {path} is 3D frames", err=True)
     locator = FrameLocator(
         survey,
-        range_sigma_m=lidar_range_sigma(cfg, defaults),
+        range_sigma_m=lidar_config(cfg, defaults).range_sigma_m,
         survey_sigma_m=cfg.survey_sigma_m,
     )
     total = pointcloud_count(path, topic) if bar is not None else None

@@ -390,11 +390,15 @@ LIDAR_RANGE_SIGMA_M: dict[str, float] = {"vlp16": 0.02, "os1-64": 0.02}
 DEFAULT_LIDAR_RANGE_SIGMA_M = 0.02
 
 
-def lidar_range_sigma(cfg: LocatorConfig, defaults: Collection[str]) -> float:
-    """The range sigma a 3D lidar's frames are weighted with: the one given (option,
-    settings file or a 3D ``--scanner``), else :data:`DEFAULT_LIDAR_RANGE_SIGMA_M`
-    (a 2D scanner's default is not a 3D lidar's)."""
-    return DEFAULT_LIDAR_RANGE_SIGMA_M if "range_sigma_m" in defaults else cfg.range_sigma_m
+def lidar_config(cfg: LocatorConfig, defaults: Collection[str]) -> LocatorConfig:
+    """The settings a 3D lidar's frames are located with: ``cfg``, its range sigma the one
+    given (option, settings file or a 3D ``--scanner``), else
+    :data:`DEFAULT_LIDAR_RANGE_SIGMA_M` (a 2D scanner's default is not a 3D lidar's).
+    The effective configuration (``config.toml``, each record's ``config_sha256``) is
+    made of it, so that ``--config`` gives the same results again."""
+    if "range_sigma_m" in defaults:
+        return replace(cfg, range_sigma_m=DEFAULT_LIDAR_RANGE_SIGMA_M)
+    return cfg
 
 
 def precisions(

@@ -112,6 +112,7 @@ def track(
     \b
     Example: mast track examples/run.bag -b examples/beacons.csv --scanner lms1xx-0.25 --out run/
     """
+    from mast.cli.options import lidar_config
     from mast.io import read_survey
     from mast.live.sources import cloud_topic
     from mast.runs.batch import expand_runs, track_runs
@@ -140,8 +141,11 @@ def track(
     survey = read_survey(beacons)
     warn_loose_edges(survey, cfg.survey_sigma_m)
     clouds = cloud_topic(found[0], topic) if len(found) == 1 and scheduler is None else None
-    if clouds is not None:
+    if clouds is not None:  # a 3D lidar's frames: its settings are what config.toml holds
         check_elevations(survey, beacons)
+        cfg = lidar_config(cfg, defaults)
+        run_config = replace(run_config, locator=cfg)
+        settings = effective({"locator": cfg, "track": run_config}, "track")
     settings.write(out / "config.toml")  # once the inputs are read: a refused run leaves nothing
     inputs = report_inputs(
         beacons=beacons,
@@ -182,7 +186,7 @@ def track(
     (run,) = found
     inputs = replace(inputs, scan_file=str(run))
     if clouds is not None:  # a 3D lidar's PointCloud2 topic
-        _track_frames(run, survey, out, clouds, inputs, cfg, defaults)
+        _track_frames(run, survey, out, clouds, inputs, cfg)
         return
 
     def warn(text: str) -> None:
@@ -233,16 +237,14 @@ def _track_frames(
     topic: str,
     inputs: ReportInputs,
     cfg: LocatorConfig,
-    defaults: set[str],
 ) -> None:
     """A 3D lidar's run (:func:`mast.runs.frames3d.track_run3d`), its summary and exit
     status as a 2D run's."""
-    from mast.cli.options import lidar_range_sigma
     from mast.runs.frames3d import PER_FRAME_NOTE, FrameLocator, track_run3d
 
     locator = FrameLocator(
         survey,
-        range_sigma_m=lidar_range_sigma(cfg, defaults),
+        range_sigma_m=cfg.range_sigma_m,
         survey_sigma_m=cfg.survey_sigma_m,
     )
 
