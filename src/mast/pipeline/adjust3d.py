@@ -85,9 +85,9 @@ class PanelPlanes:
     At a joint the returns within the gate of both panels' planes are neither's."""
     wall: NDArray[np.float64]
     """(k, 3): the wall each panel's beacon is mounted on, the vertical plane through its
-    free ends e1 and e4, as (nx, ny, d) with ``n · X = d``. A return within the gate of
-    it is the wall's as much as the panel's: a shallow beacon's middle panel, or any
-    panel near a free end, is within the gate of the wall above and below it."""
+    free ends e1 and e4, as (nx, ny, d) with ``n · X = d``. A shallow beacon's middle
+    panel, or any panel near a free end, is within the gate of the wall above and below
+    it: a return nearer the wall is the wall's."""
 
     @classmethod
     def of(cls, survey: Survey) -> PanelPlanes:
@@ -164,8 +164,8 @@ class PanelPlanes:
           below ``bottoms`` nor above ``ceilings`` (per panel, where given and finite:
           the survey has no bottom edge, the data do), and within ``reach_m`` of the
           sensor's height (a tilt's error moves a return by its height times it);
-        * within the gate of no other panel's plane, nor of its beacon's wall
-          (:attr:`wall`)."""
+        * within the gate of no other panel's plane, and nearer the panel's plane than
+          its beacon's wall (:attr:`wall`)."""
         clear = 2.0 * gate_m if clear_m is None else clear_m
         o = np.asarray(origin, dtype=float).reshape(3)
         rel = grid - o
@@ -193,10 +193,12 @@ class PanelPlanes:
             closer = on & (off < best)
             which[closer], best[closer] = k, off[closer]
         which[claims > 1] = -1  # near a joint, within the gate of two panels: neither's
-        mine = np.flatnonzero(which >= 0)  # within the gate of its beacon's wall: not its
-        wall = self.wall[which[mine]]
-        flush = np.abs(np.einsum("ij,ij->i", grid[mine, :2], wall[:, :2]) - wall[:, 2]) < gate_m
-        which[mine[flush]] = -1
+        mine = np.flatnonzero(which >= 0)  # nearer its beacon's wall than it: the wall's
+        ks, xy = which[mine], grid[mine, :2]
+        wall = self.wall[ks]
+        to_wall = np.abs(np.einsum("ij,ij->i", xy, wall[:, :2]) - wall[:, 2])
+        to_panel = np.abs(np.einsum("ij,ij->i", xy, self.normal[ks]) - self.offset[ks])
+        which[mine[to_wall < to_panel]] = -1
         return which
 
     def __len__(self) -> int:
@@ -255,6 +257,39 @@ class PanelPlanes:
         for k in np.unique(which[which >= 0]):
             _, _, z = self.crossing(k, o, grid[which == k] - o)
             out[k] = float(z.max()) + margin_m
+        return out
+
+    def misfits(
+        self,
+        grid: NDArray[np.float64],
+        origin: NDArray[np.float64],
+        which: NDArray[np.intp],
+        gate_m: float,
+    ) -> NDArray[np.intp]:
+        """Per panel, the rays that cross it and do not fit it: crossing its plane well
+        inside its plan extent (:meth:`assign`'s clearance of the gate) between its
+        lowest and highest hits, and returning from beyond the plane by more than the
+        gate, or from in front of it by more than the gate but within three (nearer
+        still, something stands in front of it). A panel where the pose puts it is hit
+        by every such ray (a range noise beyond four sigmas aside); a panel put where it
+        is not is seen through, and one put tilted is missed at its top or bottom (the
+        beam verification of 2D, in 3D)."""
+        o = np.asarray(origin, dtype=float).reshape(3)
+        rel = grid - o
+        reach = np.linalg.norm(rel, axis=1)
+        out = np.zeros(len(self), dtype=np.intp)
+        for k in np.unique(which[which >= 0]):
+            s, t, z = self.crossing(k, o, rel)
+            mine = z[which == k]
+            lo = max(0.05, gate_m / max(float(self.wall_sine[k, 0]), 0.2))
+            hi = self.length[k] - max(0.05, gate_m / max(float(self.wall_sine[k, 1]), 0.2))
+            off = (1.0 - s) * reach  # along the ray: > 0 beyond the plane
+            across = (t > lo) & (t < hi) & (z > mine.min()) & (z < mine.max()) & (s > 0)
+            out[k] = int(
+                np.count_nonzero(
+                    across & ((off > gate_m) | (off < -gate_m) & (off > -3.0 * gate_m))
+                )
+            )
         return out
 
     def bottoms(
@@ -338,14 +373,17 @@ def _top_edges(
         across = grid[:, :2] @ n - d
         side = float(origin[:2] @ n - d)
         s, t, _ = planes.crossing(k, origin, rel)  # s: where each ray crosses, 0..1
+        # well inside: a ray just past a panel's side passes beside it, not over it; and
+        # near a free end the wall just above the panel is within the gate of its plane
+        inset = max(inset_m, 0.1 * planes.length[k])
+        lo = max(inset, gate_m / max(float(planes.wall_sine[k, 0]), 0.2))
+        hi = planes.length[k] - max(inset, gate_m / max(float(planes.wall_sine[k, 1]), 0.2))
         # a hit well within the gate: the wall just above a panel, behind it by the
         # beacon's depth, may be within the gate, and is no hit
-        close = on[np.abs(across[on]) <= HIT_SHARE * gate_m]
+        close = on[(np.abs(across[on]) <= HIT_SHARE * gate_m) & (t[on] > lo) & (t[on] < hi)]
         if close.size == 0:
             continue
         a = int(close[np.argmax(s[close] * rel[close, 2])])
-        # well inside: a ray just past a panel's side passes beside it, not over it
-        inset = max(inset_m, 0.1 * planes.length[k])
         over = (s > 0) & (s < 1) & (t > inset) & (t < planes.length[k] - inset)
         over &= (across * side < 0) & (np.abs(across) >= gate_m)
         over &= s * rel[:, 2] > s[a] * rel[a, 2]

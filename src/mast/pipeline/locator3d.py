@@ -4,11 +4,14 @@ view, then the six-parameter adjustment on the panels it names (docs/3d.md).
 1. **The vertical** (:func:`mast.pipeline.plan_view.estimate_up`): from the normals of
    the walls, the floor and the roof.
 2. **The plan view** (:func:`~mast.pipeline.plan_view.plan_scan`): the frame levelled
-   by it, the band about the sensor's height projected, as one 2D scan.
+   by it, a band of heights about the sensor's projected, as one 2D scan.
 3. **The 2D fix** (:func:`mast.pipeline.locator.locate`): easting, northing and azimuth,
-   the beacons told from clutter, with every test of 2D; where the plan view finds
-   none, the vertical pitched by a grade's worth (:data:`PITCH_TRIES_DEG`). No 2D fix,
-   no 3D fix: its reason is the frame's.
+   the beacons told from clutter, with every test of 2D. The walls leave the pitch
+   along the drift to the floor, which a grade tilts, and a beacon may stand wholly
+   below or above the sensor: where the plan view finds no fix, or its fix no 3D fix,
+   the next of the bands (:attr:`Locator3DConfig.bands_m`) and pitches
+   (:data:`PITCH_TRIES_DEG`) is tried (:func:`_tries`). No fix in any, no 3D fix: the
+   reason is the first 3D refusal's, or the first plan view's.
 4. **The start**: the 2D pose with the levelling's pitch and roll, and the elevation
    where the most panels' top brackets agree (:func:`_start_elevation`: hits in a
    tight gate, each panel's run of them up from its middle, and the rays crossing over
@@ -35,7 +38,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -51,7 +54,7 @@ from mast.pipeline.plan_view import estimate_up, level_rotation, plan_scan
 __all__ = ["Fix3D", "Locator3DConfig", "locate3d"]
 
 #: The pitches about the estimated vertical the plan view is tried at, in turn, degrees.
-PITCH_TRIES_DEG = (0.0, 4.0, -4.0, 8.0, -8.0)
+PITCH_TRIES_DEG = (0.0, 4.0, -4.0, 8.0, -8.0, 12.0, -12.0)
 #: The heights about the sensor the adjustment is grown through, metres.
 REACH_M = (0.5, 1.0, 2.0, math.inf)
 #: Before the first adjustment, the gate is widened by this times a return's height
@@ -68,6 +71,11 @@ PLAN_SLACK_M = 0.02
 #: How far above the floor by a panel its returns must cross (no beacon stands on the
 #: floor, and near its foot the floor is within the gate of its plane), metres.
 FLOOR_CLEAR_M = 0.15
+#: Beams crossing a panel where the pose puts it that may miss it: this many, or this
+#: share of those that hit it, whichever is more (a return's noise beyond the gate, a
+#: ray grazing an edge).
+MISFIT_LEAST = 3
+MISFIT_SHARE = 0.05
 #: How far about a panel, in plan, the lowest returns are its floor, metres.
 FLOOR_RADIUS_M = 2.0
 #: The plan view's tilt error in a return's place, for the first look, metres.
@@ -87,21 +95,23 @@ class Locator3DConfig:
         The lidar's range noise (one sigma), metres.
     survey_sigma_m : float
         Each surveyed edge's horizontal and elevation sigma, metres.
-    band_m : (float, float)
-        Heights about the sensor, levelled, that make the plan view.
+    bands_m : tuple of (float, float)
+        Heights about the sensor, levelled, that make the plan view, tried in turn (a
+        beacon may be wholly below or above the sensor).
     plan_resolution_deg : float
         Bearing bins of the plan view.
-    min_panel_returns : int
-        Returns a panel needs to count as shown.
+    min_line_returns : int
+        Returns a ring (a line) needs on a panel to count; a panel is shown by two such
+        lines.
     reject_alpha : float
         The global test's level.
     """
 
     range_sigma_m: float = 0.02
     survey_sigma_m: float = 0.003
-    band_m: tuple[float, float] = (-0.5, 1.0)
+    bands_m: tuple[tuple[float, float], ...] = ((-1.0, 0.5), (-0.5, 1.0), (-1.5, 1.5))
     plan_resolution_deg: float = 0.25
-    min_panel_returns: int = 6
+    min_line_returns: int = 3
     reject_alpha: float = 1e-3
 
 
@@ -146,24 +156,13 @@ def _start_elevation(
     o = np.asarray(origin, dtype=float)
     rel = grid - o
     ends: list[tuple[float, int]] = []
-    which = which.copy()
+    which = _contiguous(which, grid, o, planes, spacing_rad)
     for k in np.unique(which[which >= 0]):
         if not math.isfinite(planes.top[k]):
             continue
         mine = np.flatnonzero(which == k)
         s, _, _ = planes.crossing(k, o, rel[mine])
-        h = s * rel[mine, 2]
-        # the highest hit of the run up from the middle: no ring leaves a gap wider
-        # than its spacing at that range (the roof or the wall far above within the
-        # gate of a panel's plane is no hit of it)
-        gap = 1.5 * spacing_rad * float(np.median(np.linalg.norm(rel[mine], axis=1))) + 0.05
-        order = np.argsort(h)
-        run = order[int(np.searchsorted(h[order], np.median(h))) :]
-        cut = np.flatnonzero(np.diff(h[run]) > gap)
-        if cut.size:
-            which[mine[run[cut[0] + 1 :]]] = -1
-            run = run[: cut[0] + 1]
-        ends.append((float(planes.top[k] - h[run].max()), -1))
+        ends.append((float(planes.top[k] - (s * rel[mine, 2]).max()), -1))
         ends.append((-math.inf, +1))
     for k, _, b in _top_edges(grid, rel, which, o, planes, gate_m):
         s, _, _ = planes.crossing(k, o, rel[[b]])
@@ -186,6 +185,35 @@ def _start_elevation(
     return middle, half
 
 
+def _contiguous(
+    which: NDArray[np.intp],
+    grid: NDArray[np.float64],
+    origin: NDArray[np.float64],
+    planes: PanelPlanes,
+    spacing_rad: float,
+) -> NDArray[np.intp]:
+    """``which`` with each panel's returns kept to the run of heights (where their rays
+    cross its plane) about their median that no gap wider than 1.5 ring spacings at
+    their range, plus 5 cm, breaks: a panel is one piece, and the roof, the floor or
+    the wall far above or below within the gate of its plane is not of it."""
+    out = which.copy()
+    rel = grid - origin
+    for k in np.unique(which[which >= 0]):
+        mine = np.flatnonzero(which == k)
+        s, _, _ = planes.crossing(k, origin, rel[mine])
+        h = s * rel[mine, 2]
+        gap = 1.5 * spacing_rad * float(np.median(np.linalg.norm(rel[mine], axis=1))) + 0.05
+        order = np.argsort(h)
+        middle = int(np.searchsorted(h[order], np.median(h)))
+        breaks = np.flatnonzero(np.diff(h[order]) > gap)  # between order[i] and order[i+1]
+        below, above = breaks[breaks < middle], breaks[breaks >= middle]
+        lo = int(below.max()) + 1 if below.size else 0
+        hi = int(above.min()) + 1 if above.size else len(order)
+        out[mine[order[:lo]]] = -1
+        out[mine[order[hi:]]] = -1
+    return out
+
+
 def ring_spacing(frame: Frame3D) -> float:
     """The angle between a frame's neighbouring rings (radians): the median step between
     the rings' median elevation angles; 2 deg (a VLP-16's) without rings."""
@@ -200,19 +228,29 @@ def ring_spacing(frame: Frame3D) -> float:
     return float(np.median(np.diff(angles)))
 
 
-def _shown(which: NDArray[np.intp], planes: PanelPlanes, least: int) -> tuple[str, ...]:
-    """The beacons showing at least two panels with ``least`` returns each."""
-    counts = np.bincount(which[which >= 0], minlength=len(planes))
+def _shown(
+    which: NDArray[np.intp], lines: NDArray[np.intp], planes: PanelPlanes, cfg: Locator3DConfig
+) -> tuple[str, ...]:
+    """The beacons showing at least two panels, each with at least
+    ``cfg.min_line_returns`` returns on each of at least two lines (rings): two lines at
+    different heights span a panel's plane, as the rule a frame is owed a fix by
+    (:class:`mast.sim.lidar3d.OwedRule3D`) counts them."""
+    on = which >= 0
+    if not on.any():
+        return ()
+    pairs, counts = np.unique(np.stack([which[on], lines[on]]), axis=1, return_counts=True)
+    full = pairs[0][counts >= cfg.min_line_returns]
+    rings = np.bincount(full, minlength=len(planes))
     shown: dict[str, int] = {}
-    for k, c in enumerate(counts):
-        if c >= least:
-            shown[planes.beacon[k]] = shown.get(planes.beacon[k], 0) + 1
+    for k in np.flatnonzero(rings >= 2):
+        shown[planes.beacon[k]] = shown.get(planes.beacon[k], 0) + 1
     return tuple(sorted(b for b, n in shown.items() if n >= 2))
 
 
 def _too_few(beacons: tuple[str, ...], cfg: Locator3DConfig) -> str:
     return (
-        f"in 3D, {len(beacons)} beacon(s) show two panels with {cfg.min_panel_returns} returns each"
+        f"in 3D, {len(beacons)} beacon(s) show two panels each crossed by two rings of "
+        f"{cfg.min_line_returns} returns"
     )
 
 
@@ -230,36 +268,58 @@ def locate3d(
     if any(b.elevations is None for b in survey):
         raise InputError("a 3D frame needs the survey's elevations (the panels' top edges)")
     t0 = time.perf_counter()
-    spent: dict[str, float] = {}
-
-    def lap(name: str, since: float) -> float:
-        now = time.perf_counter()
-        spent[name] = now - since
-        return now
-
+    planes = planes or PanelPlanes.of(survey)
+    spent = {"vertical": 0.0, "plan": 0.0, "adjustment": 0.0}
     up = estimate_up(frame)
-    t = lap("vertical", t0)
-    plan_cfg = LocatorConfig(range_sigma_m=cfg.range_sigma_m, survey_sigma_m=cfg.survey_sigma_m)
+    spent["vertical"] = time.perf_counter() - t0
     level = level_rotation(up)
-    for tilt in PITCH_TRIES_DEG:
+    plan_cfg = LocatorConfig(range_sigma_m=cfg.range_sigma_m, survey_sigma_m=cfg.survey_sigma_m)
+    first: Fix3D | None = None  # the first refusal: the frame's reason, where none fixes
+    for tilt, band in _tries(cfg):
         # the walls leave the pitch along the drift to the floor, which a grade tilts:
-        # where the plan view finds no fix, the same vertical pitched by a grade's worth
+        # the same vertical pitched by a grade's worth, and the beacons at other heights
+        t = time.perf_counter()
         a = math.radians(tilt)
-        up = level.T @ np.array([math.sin(a), 0.0, math.cos(a)])
-        scan = plan_scan(frame, up=up, band=cfg.band_m, resolution_deg=cfg.plan_resolution_deg)
+        tried = level.T @ np.array([math.sin(a), 0.0, math.cos(a)])
+        scan = plan_scan(frame, up=tried, band=band, resolution_deg=cfg.plan_resolution_deg)
         plan = locate(scan, survey, config=plan_cfg)
-        if plan.ok:
-            break
-    t = lap("plan", t)
+        spent["plan"] += time.perf_counter() - t
+        if not plan.ok or plan.pose is None:
+            if first is None:
+                first = Fix3D(
+                    "no_fix", None, None, plan.reason, f"plan view: {plan.detail}", plan, tried
+                )
+            continue
+        t = time.perf_counter()
+        fix = _fix3d(frame, planes, plan, tried, cfg)
+        spent["adjustment"] += time.perf_counter() - t
+        if fix.ok:
+            return replace(fix, elapsed_s=time.perf_counter() - t0, stages_s=spent)
+        if first is None or first.adjustment is None:  # a 3D refusal says more
+            first = fix
+    assert first is not None
+    return replace(first, elapsed_s=time.perf_counter() - t0, stages_s=spent)
+
+
+def _tries(cfg: Locator3DConfig) -> list[tuple[float, tuple[float, float]]]:
+    """The (pitch about the walls' vertical, band) the plan view is tried at, in turn:
+    every band level, then the first two pitched by a grade's worth either way."""
+    out = [(0.0, band) for band in cfg.bands_m]
+    for tilt in PITCH_TRIES_DEG[1:]:
+        out += [(tilt, band) for band in cfg.bands_m[:2]]
+    return out
+
+
+def _fix3d(
+    frame: Frame3D, planes: PanelPlanes, plan: Fix, up: NDArray[np.float64], cfg: Locator3DConfig
+) -> Fix3D:
+    """The six parameters from the plan view's 2D fix ``plan``, seen with the vertical
+    ``up`` (steps 4 to 7 of the module)."""
 
     def refused(reason: str | None, detail: str, adj: Adjustment3D | None = None) -> Fix3D:
-        return Fix3D(
-            "no_fix", None, adj, reason, detail, plan, up, (), time.perf_counter() - t0, spent
-        )
+        return Fix3D("no_fix", None, adj, reason, detail, plan, up)
 
-    if not plan.ok or plan.pose is None:
-        return refused(plan.reason, f"plan view: {plan.detail}")
-    planes = planes or PanelPlanes.of(survey)
+    assert plan.pose is not None
     # the 2D pose, with the levelling's tilt: R = Rz(yaw) @ L, L = Ry(pitch) Rx(roll)
     R0 = rotation_rpy(0.0, 0.0, yaw_of_azimuth(plan.pose.azimuth)) @ level_rotation(up)
     flat = Pose3D.from_rotation(R0, (plan.pose.easting, plan.pose.northing, 0.0))
@@ -280,12 +340,15 @@ def locate3d(
     )
     sig_r, sig_s = cfg.range_sigma_m, cfg.survey_sigma_m
     gate = 4.0 * sig_r
-    # The wall at a free end is within a gate of the plane for gate / sine of it: there
-    # a return is ambiguous (PanelPlanes.assign), so each assignment clears by its gate.
+    # The wall at a free end is within a gate of the panel's plane for gate / sine:
+    # there a return is ambiguous (PanelPlanes.assign), whichever plane it is nearer
+    # (the rock is rough, and a beacon is mounted on it, not on the chord e1-e4).
+    clear = gate
     # The elevation first, from hits in a gate tight but for the plan view's tilt error.
     loose = 2.5 * sig_r + START_SLACK_M
-    tight = planes.assign(grid, flat.position, loose, clear_m=loose)
-    start = _start_elevation(grid, flat.position, tight, planes, 2.0 * loose, ring_spacing(frame))
+    tight = planes.assign(grid, flat.position, loose, clear_m=clear)
+    spacing = ring_spacing(frame)
+    start = _start_elevation(grid, flat.position, tight, planes, 2.0 * loose, spacing)
     if start is None:
         return refused("one_beacon", "no return on a surveyed panel in 3D")
     z0, spread = start
@@ -308,10 +371,11 @@ def locate3d(
             else:
                 floor = np.fmax(floor, planes.bottoms(grid, pose.position, which, gate))
             which = planes.assign(
-                grid, pose.position, gate + slack, clear_m=gate + slack, top_margin_m=margin,
+                grid, pose.position, gate + slack, clear_m=clear, top_margin_m=margin,
                 bottoms=floor, reach_m=reach, ceilings=roof,
             )  # fmt: skip
-            if len(_shown(which, planes, cfg.min_panel_returns)) < 2:
+            which = _contiguous(which, grid, pose.position, planes, spacing)
+            if len(_shown(which, lines, planes, cfg)) < 2:
                 continue
             adj = adjust_pose(
                 pts, which, planes, pose, range_sigma_m=sig_r, survey_sigma_m=sig_s,
@@ -319,9 +383,7 @@ def locate3d(
             )  # fmt: skip
             pose = adj.pose
         if adj is None:
-            return refused(
-                "one_beacon", _too_few(_shown(which, planes, cfg.min_panel_returns), cfg)
-            )
+            return refused("one_beacon", _too_few(_shown(which, lines, planes, cfg), cfg))
         # the elevation last, from the top edges of panels the tilt now holds
         for _ in range(3):
             adj = adjust_pose(
@@ -336,18 +398,15 @@ def locate3d(
             floor = planes.floors(all_grid(pose), FLOOR_RADIUS_M) + FLOOR_CLEAR_M
             floor = np.fmax(floor, planes.bottoms(grid, pose.position, which, gate))
             again = planes.assign(
-                grid, pose.position, gate, clear_m=gate, top_margin_m=margin, bottoms=floor
+                grid, pose.position, gate, clear_m=clear, top_margin_m=margin, bottoms=floor
             )
-            if (
-                np.array_equal(again, which)
-                or len(_shown(again, planes, cfg.min_panel_returns)) < 2
-            ):
+            again = _contiguous(again, grid, pose.position, planes, spacing)
+            if np.array_equal(again, which) or len(_shown(again, lines, planes, cfg)) < 2:
                 break
             which = again
     except np.linalg.LinAlgError:  # the panels seen leave a direction unobserved
         return refused("one_beacon", "the panels seen do not hold the pose in 3D")
-    lap("adjustment", t)
-    beacons = _shown(which, planes, cfg.min_panel_returns)
+    beacons = _shown(which, lines, planes, cfg)
     if len(beacons) < 2:
         return refused("one_beacon", _too_few(beacons, cfg), adj)
     if adj.test_p < cfg.reject_alpha:
@@ -355,6 +414,19 @@ def locate3d(
             "rejected",
             f"reference variance {adj.reference_variance:.2f} on {adj.dof} degrees of "
             "freedom: the returns do not fit the surveyed panels",
+            adj,
+        )
+    # every beam crossing a panel where the pose puts it hits it
+    grid = adj.pose.sensor_to_grid(pts)
+    hits = np.bincount(which[which >= 0], minlength=len(planes))
+    misfit = planes.misfits(grid, adj.pose.position, which, gate)
+    seen = np.flatnonzero(misfit > np.maximum(MISFIT_LEAST, MISFIT_SHARE * hits))
+    if seen.size:
+        k = int(seen[np.argmax(misfit[seen])])
+        return refused(
+            "inconsistent",
+            f"{misfit[k]} beams crossing panel {planes.beacon[k]}/P{planes.panel[k]} where the "
+            f"pose puts it do not fit it ({hits[k]} do)",
             adj,
         )
     # the 3D position must be where the plan view put it (within both sigmas and the
@@ -368,15 +440,4 @@ def locate3d(
             f"the 3D position is {1e3 * float(np.hypot(*d)):.1f} mm from the plan view's fix",
             adj,
         )
-    return Fix3D(
-        "fix",
-        adj.pose,
-        adj,
-        None,
-        "",
-        plan,
-        up,
-        beacons,
-        time.perf_counter() - t0,
-        spent,
-    )
+    return Fix3D("fix", adj.pose, adj, None, "", plan, up, beacons)

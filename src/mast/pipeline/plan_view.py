@@ -135,7 +135,11 @@ def estimate_up(
     _, axes = np.linalg.eigh(walls.T @ walls)
     span = axes[:, :2]  # the two directions the walls leave free
     guide = np.array([0.0, 0.0, 1.0])
-    if len(level) >= 20:
+    first = span @ (span.T @ guide)
+    floor = _floor_normal(frame.points, first / max(float(np.linalg.norm(first)), 1e-9))
+    if floor is not None:
+        guide = floor
+    elif len(level) >= 20:
         level = level * np.sign(level[:, 2])[:, None]
         guide = level.mean(axis=0)
     up = span @ (span.T @ guide)
@@ -143,6 +147,39 @@ def estimate_up(
     if norm < 0.5:  # the walls leave a vertical far from the floor's: trust neither
         return np.array([0.0, 0.0, 1.0])
     return np.asarray(up / norm, dtype=np.float64)
+
+
+def _floor_normal(
+    p: NDArray[np.float64], up: NDArray[np.float64], cell_m: float = 0.5, reach_m: float = 12.0
+) -> NDArray[np.float64] | None:
+    """The floor's normal in the sensor frame, or None where too little floor is seen:
+    the frame levelled by ``up`` (roughly), the lowest return of each ``cell_m`` column
+    within ``reach_m`` and at least 0.3 m below the sensor (a column's lowest return is
+    the floor, or a wall's foot on it), and a plane fitted to them, trimmed twice to
+    those within 10 cm (the rock's roughness; a kerb or a heap of muck is left out).
+    Rings reach the floor metres apart, too far for the ring normals to see it."""
+    L = level_rotation(up)
+    q = p @ L.T
+    keep = (np.hypot(q[:, 0], q[:, 1]) < reach_m) & (q[:, 2] < -0.3)
+    q = q[keep]
+    if len(q) < 50:
+        return None
+    cells = np.floor(q[:, :2] / cell_m).astype(np.int64)
+    key = cells[:, 0] * 100_003 + cells[:, 1]
+    order = np.lexsort((q[:, 2], key))
+    first = order[np.r_[True, key[order][1:] != key[order][:-1]]]
+    low = q[first]
+    if len(low) < 30:
+        return None
+    A = np.c_[low[:, 0], low[:, 1], np.ones(len(low))]
+    use = np.ones(len(low), dtype=bool)
+    for _ in range(3):
+        coef, *_ = np.linalg.lstsq(A[use], low[use, 2], rcond=None)
+        use = np.abs(A @ coef - low[:, 2]) < 0.1
+        if use.sum() < 30:
+            return None
+    n = np.array([-coef[0], -coef[1], 1.0])
+    return np.asarray(L.T @ (n / np.linalg.norm(n)), dtype=np.float64)
 
 
 def _patch_normals(
