@@ -6,7 +6,7 @@ goes through, from the library and from `mast bench accuracy3d`."""
 from __future__ import annotations
 
 import math
-from dataclasses import replace
+from dataclasses import asdict, replace
 from pathlib import Path
 
 import numpy as np
@@ -146,6 +146,17 @@ def test_a_short_run_of_the_locator_fills_its_tables_and_rows(tmp_path: Path) ->
     assert {"owed", "fixed", "wrong", "reason", "elapsed_ms", "points"} <= set(rows[0].split(","))
     summary = (tmp_path / "accuracy3d_summary.csv").read_text().splitlines()
     assert {"ratio_E", "coverage_A", "sigma_over_crb_Z", "wrong"} <= set(summary[0].split(","))
+
+
+def test_a_run_is_the_same_for_the_same_seed() -> None:
+    def run() -> dict[str, object]:
+        (summary,) = run_accuracy3d(configs=[CONFIG], frames=1, echo=lambda _: None)
+        times = ("time_median_ms", "time_p95_ms", "ms_per_kpoint_median", "seconds")
+        return {k: v for k, v in asdict(summary).items() if k not in times}
+
+    first, second = run(), run()
+    assert repr(first) == repr(second)  # (NaN where nothing was fixed: not equal to itself)
+    assert first["owed"] == 1
 
 
 def test_the_configurations_are_the_issues() -> None:
