@@ -150,9 +150,10 @@ class PanelPlanes:
         bottoms: NDArray[np.float64] | None = None,
         reach_m: float = math.inf,
         ceilings: NDArray[np.float64] | None = None,
+        local: list[NDArray[np.intp]] | None = None,
     ) -> NDArray[np.intp]:
         """The panel each grid point (n, 3), seen from the sensor at ``origin``, lies
-        on, or -1:
+        on, or -1 (looking at each panel's :meth:`local` points only, where given):
 
         * within ``gate_m`` of its plane along its ray (where the ray crosses, not where
           the return lies: a return's range noise moves it along its ray, and choosing
@@ -168,16 +169,17 @@ class PanelPlanes:
           its beacon's wall (:attr:`wall`)."""
         clear = 2.0 * gate_m if clear_m is None else clear_m
         o = np.asarray(origin, dtype=float).reshape(3)
-        rel = grid - o
-        reach = np.linalg.norm(rel, axis=1)
         which = np.full(len(grid), -1, dtype=np.intp)
         best = np.full(len(grid), gate_m)
         claims = np.zeros(len(grid), dtype=np.intp)
-        for k in range(len(self)):
+        for k, idx in enumerate(local or self._everywhere(len(grid))):
+            if idx.size == 0:
+                continue
+            rel = grid[idx] - o
             s, t, z = self.crossing(k, o, rel)
             # how far along its ray the return lies from the plane: its range error,
             # were it on the panel (a gate on it keeps both signs of the noise alike)
-            off = np.abs(1.0 - s) * reach
+            off = np.abs(1.0 - s) * np.linalg.norm(rel, axis=1)
             lo = clear / max(float(self.wall_sine[k, 0]), 0.2)
             hi = self.length[k] - clear / max(float(self.wall_sine[k, 1]), 0.2)
             on = (off < gate_m) & (t > lo) & (t < hi) & (s > 0)
@@ -189,9 +191,9 @@ class PanelPlanes:
                 on &= z >= bottoms[k]
             if ceilings is not None and math.isfinite(ceilings[k]):
                 on &= z <= ceilings[k]
-            claims += on
-            closer = on & (off < best)
-            which[closer], best[closer] = k, off[closer]
+            claims[idx] += on
+            closer = on & (off < best[idx])
+            which[idx[closer]], best[idx[closer]] = k, off[closer]
         which[claims > 1] = -1  # near a joint, within the gate of two panels: neither's
         mine = np.flatnonzero(which >= 0)  # nearer its beacon's wall than it: the wall's
         ks, xy = which[mine], grid[mine, :2]
@@ -204,40 +206,58 @@ class PanelPlanes:
     def __len__(self) -> int:
         return len(self.beacon)
 
-    def near(self, grid: NDArray[np.float64], margin_m: float) -> NDArray[np.bool_]:
-        """Which grid points (n, 2 or 3) lie within ``margin_m`` of a panel in plan: all
-        that the assignment, the bottoms and the top edges could use (the wall just
-        behind a panel included), so that they need not look at the rest of a frame."""
+    def local(self, grid: NDArray[np.float64], margin_m: float) -> list[NDArray[np.intp]]:
+        """Per panel, the grid points (n, 2 or 3) within ``margin_m`` of it in plan: all
+        its assignment, bottom, top edges and checks could use (the wall just behind
+        it included), so that they need not look at the rest of a frame. A beacon's
+        box, grown by the margin, is looked in first."""
         xy = np.asarray(grid, dtype=float)[:, :2]
-        out = np.zeros(len(xy), dtype=bool)
+        out: list[NDArray[np.intp]] = []
+        boxes: dict[str, NDArray[np.intp]] = {}
         for k in range(len(self)):
-            rel = xy - self.start[k]
+            b = self.beacon[k]
+            if b not in boxes:
+                mine = [j for j in range(len(self)) if self.beacon[j] == b]
+                ends = np.vstack(
+                    [
+                        self.start[mine],
+                        self.start[mine] + self.along[mine] * self.length[mine, None],
+                    ]
+                )
+                lo, hi = ends.min(axis=0) - margin_m, ends.max(axis=0) + margin_m
+                x, y = xy[:, 0], xy[:, 1]
+                boxes[b] = np.flatnonzero((x >= lo[0]) & (x <= hi[0]) & (y >= lo[1]) & (y <= hi[1]))
+            idx = boxes[b]
+            rel = xy[idx] - self.start[k]
             t = np.clip(rel @ self.along[k], 0.0, self.length[k])
             gap = rel - t[:, None] * self.along[k]
-            out |= np.einsum("ij,ij->i", gap, gap) <= margin_m**2
+            out.append(idx[np.einsum("ij,ij->i", gap, gap) <= margin_m**2])
         return out
 
-    def floors(self, grid: NDArray[np.float64], radius_m: float) -> NDArray[np.float64]:
-        """Each panel's floor: the lowest of the grid points (n, 3) within ``radius_m``
-        of it in plan (their 2nd percentile, against stray low returns: the floor, or
-        the wall's foot); NaN for a panel with fewer than 50, or where those lowest
+    def _everywhere(self, n: int) -> list[NDArray[np.intp]]:
+        every = np.arange(n)
+        return [every] * len(self)
+
+    def floors(
+        self, grid: NDArray[np.float64], about: list[NDArray[np.intp]]
+    ) -> NDArray[np.float64]:
+        """Each panel's floor: the lowest of the grid points (n, 3) ``about`` it (its
+        :meth:`local` points, a metre or two about; their 2nd percentile, against stray
+        low returns: the floor, or the wall's foot); NaN for a panel with fewer than 50,
+        or where those lowest
         returns do not spread out from the panel's plane by 30 cm (the lowest ring on a
         wall is a line along it, and no floor). A beacon stands on no floor: near its
         plane's foot the floor is within the gate of the plane, and is no panel's."""
-        xy = grid[:, :2]
         out = np.full(len(self), np.nan)
-        for k in range(len(self)):
-            rel = xy - self.start[k]
-            t = np.clip(rel @ self.along[k], 0.0, self.length[k])
-            gap = rel - t[:, None] * self.along[k]
-            close = np.einsum("ij,ij->i", gap, gap) <= radius_m**2
-            if np.count_nonzero(close) < 50:
+        for k, close in enumerate(about):
+            if close.size < 50:
                 continue
-            low = float(np.percentile(grid[close, 2], 2.0))
+            z = grid[close, 2]
+            low = float(np.partition(z, len(z) // 50)[len(z) // 50])  # its 2nd percentile
             # a floor spreads out from the wall; the lowest ring on a wall is a line
-            layer = close & (np.abs(grid[:, 2] - low) < 0.05)
-            across = xy[layer] @ self.normal[k]
-            if across.size >= 20 and np.ptp(np.percentile(across, [10, 90])) > 0.3:
+            across = np.sort(grid[close[np.abs(z - low) < 0.05], :2] @ self.normal[k])
+            n = across.size
+            if n >= 20 and across[(9 * n) // 10 - 1] - across[n // 10] > 0.3:
                 out[k] = low
         return out
 
@@ -265,8 +285,10 @@ class PanelPlanes:
         origin: NDArray[np.float64],
         which: NDArray[np.intp],
         gate_m: float,
+        local: list[NDArray[np.intp]] | None = None,
     ) -> NDArray[np.intp]:
-        """Per panel, the rays that cross it and do not fit it: crossing its plane well
+        """Per panel, the rays (its :meth:`local` ones, where given) that cross it and
+        do not fit it: crossing its plane well
         inside its plan extent (:meth:`assign`'s clearance of the gate) between its
         lowest and highest hits, and returning from beyond the plane by more than the
         gate, or from in front of it by more than the gate but within three (nearer
@@ -275,12 +297,13 @@ class PanelPlanes:
         is not is seen through, and one put tilted is missed at its top or bottom (the
         beam verification of 2D, in 3D)."""
         o = np.asarray(origin, dtype=float).reshape(3)
-        rel = grid - o
-        reach = np.linalg.norm(rel, axis=1)
         out = np.zeros(len(self), dtype=np.intp)
+        near = local or self._everywhere(len(grid))
         for k in np.unique(which[which >= 0]):
+            _, _, mine = self.crossing(k, o, grid[which == k] - o)
+            rel = grid[near[k]] - o
+            reach = np.linalg.norm(rel, axis=1)
             s, t, z = self.crossing(k, o, rel)
-            mine = z[which == k]
             lo = max(0.05, gate_m / max(float(self.wall_sine[k, 0]), 0.2))
             hi = self.length[k] - max(0.05, gate_m / max(float(self.wall_sine[k, 1]), 0.2))
             off = (1.0 - s) * reach  # along the ray: > 0 beyond the plane
@@ -355,14 +378,17 @@ def _top_edges(
     origin: NDArray[np.float64],
     planes: PanelPlanes,
     gate_m: float,
+    local: list[NDArray[np.intp]] | None = None,
     inset_m: float = 0.05,
 ) -> list[tuple[int, int, int]]:
     """For each panel with a top, both hit and passed over inside its plan extent: the
     panel, its highest hit and its lowest crossing over (above that hit: a ray
     crossing under the panel is no evidence of its top), heights where the rays cross
     the panel's plane. ``grid`` the returns in the grid, ``rel`` the same relative to the
-    sensor origin ``origin``."""
+    sensor origin ``origin``; the rays over a panel are looked for among its ``local``
+    ones (:meth:`PanelPlanes.local`), where given."""
     found = []
+    near = local or planes._everywhere(len(grid))
     for k in range(len(planes)):
         if not math.isfinite(planes.top[k]):
             continue
@@ -370,9 +396,6 @@ def _top_edges(
         if on.size == 0:
             continue
         n, d = planes.normal[k], planes.offset[k]
-        across = grid[:, :2] @ n - d
-        side = float(origin[:2] @ n - d)
-        s, t, _ = planes.crossing(k, origin, rel)  # s: where each ray crosses, 0..1
         # well inside: a ray just past a panel's side passes beside it, not over it; and
         # near a free end the wall just above the panel is within the gate of its plane
         inset = max(inset_m, 0.1 * planes.length[k])
@@ -380,17 +403,25 @@ def _top_edges(
         hi = planes.length[k] - max(inset, gate_m / max(float(planes.wall_sine[k, 1]), 0.2))
         # a hit well within the gate: the wall just above a panel, behind it by the
         # beacon's depth, may be within the gate, and is no hit
-        close = on[(np.abs(across[on]) <= HIT_SHARE * gate_m) & (t[on] > lo) & (t[on] < hi)]
-        if close.size == 0:
+        s, t, _ = planes.crossing(k, origin, rel[on])
+        across = grid[on, :2] @ n - d
+        close = (np.abs(across) <= HIT_SHARE * gate_m) & (t > lo) & (t < hi)
+        if not close.any():
             continue
-        a = int(close[np.argmax(s[close] * rel[close, 2])])
+        height = np.where(close, s * rel[on, 2], -np.inf)
+        a = int(on[np.argmax(height)])
+        top = float(height.max())
+        idx = near[k]
+        s, t, _ = planes.crossing(k, origin, rel[idx])  # s: where each ray crosses, 0..1
+        across = grid[idx, :2] @ n - d
+        side = float(origin[:2] @ n - d)
         over = (s > 0) & (s < 1) & (t > inset) & (t < planes.length[k] - inset)
         over &= (across * side < 0) & (np.abs(across) >= gate_m)
-        over &= s * rel[:, 2] > s[a] * rel[a, 2]
+        over &= s * rel[idx, 2] > top
         if not over.any():
             continue
         above = np.flatnonzero(over)
-        b = int(above[np.argmin(s[above] * rel[above, 2])])
+        b = int(idx[above[np.argmin(s[above] * rel[idx[above], 2])]])
         found.append((k, a, b))
     return found
 
@@ -481,6 +512,7 @@ def _solve(
     tops: list[tuple[int, int, int]] | None = None,
     tilt_prior: tuple[float, float, float] | None = None,
     skip: frozenset[str] = frozenset(),
+    local: list[NDArray[np.intp]] | None = None,
 ) -> _Solved:
     """Gauss-Newton over (E, N, A, pitch, roll, Z) (see :func:`adjust_pose`), the top
     edges' rays those given or, without, those chosen at ``x0``: kept through the
@@ -507,7 +539,7 @@ def _solve(
         rel = p @ R.T
         origin = np.array([x[0], x[1], x[5]])
         if tops is None:
-            tops = _top_edges(rel + origin, rel, which, origin, planes, gate_m)
+            tops = _top_edges(rel + origin, rel, which, origin, planes, gate_m, local)
             tops = [top for top in tops if planes.beacon[top[0]] not in skip]
         if tops:
             seen = _brackets(tops, p, rel, origin, planes, (dR_yaw, dR_pitch, dR_roll))
@@ -594,6 +626,7 @@ def adjust_pose(
     lines: NDArray[np.intp] | None = None,
     elevation: bool = True,
     tilt_prior: tuple[float, float, float] | None = None,
+    local: list[NDArray[np.intp]] | None = None,
 ) -> Adjustment3D:
     """All six parameters from a frame's returns ``points`` (sensor frame, (n, 3)), those
     on panels named by ``which`` (indices into ``planes``, -1 for none), from ``start``
@@ -617,7 +650,8 @@ def adjust_pose(
     Without ``elevation`` no top edge enters: the elevation stays the start's (its
     variance :data:`UNBRACKETED`). ``tilt_prior`` (pitch, roll, sigma; radians) adds
     the two as observations (the vertical of the walls, say): a few panels' returns
-    alone may leave the tilt loose."""
+    alone may leave the tilt loose. ``local``: each panel's :meth:`PanelPlanes.local`
+    returns, where the rays over its top are looked for."""
     p = np.asarray(points, dtype=float)
     which = np.asarray(which, dtype=np.intp).copy()
     x = np.array(
@@ -630,7 +664,8 @@ def adjust_pose(
         if not elevation:
             tops = []
         return _solve(p, which, planes, x0, range_sigma_m, survey_sigma_m, gate_m, iterations,
-                      tops=tops, tilt_prior=tilt_prior, skip=frozenset(distrust))  # fmt: skip
+                      tops=tops, tilt_prior=tilt_prior, skip=frozenset(distrust),
+                      local=local)  # fmt: skip
 
     distrust: set[str] = set()  # beacons whose top edges failed their w-test
 

@@ -145,6 +145,7 @@ def _start_elevation(
     planes: PanelPlanes,
     gate_m: float,
     spacing_rad: float,
+    local: list[NDArray[np.intp]],
 ) -> tuple[float, float] | None:
     """The sensor's elevation where the most panels' top brackets agree (``grid`` seen
     from ``origin`` at elevation 0, ``which`` tight hits): each panel with a hit says
@@ -152,7 +153,7 @@ def _start_elevation(
     wall within the gate of a panel's plane far above it makes one panel's bracket
     wrong, not the most. The middle and half the width of the interval the most
     brackets share; None without a hit on a panel with a top. ``spacing_rad``: the
-    lidar's rings' spacing."""
+    lidar's rings' spacing; ``local``: each panel's returns (PanelPlanes.local)."""
     o = np.asarray(origin, dtype=float)
     rel = grid - o
     ends: list[tuple[float, int]] = []
@@ -164,7 +165,7 @@ def _start_elevation(
         s, _, _ = planes.crossing(k, o, rel[mine])
         ends.append((float(planes.top[k] - (s * rel[mine, 2]).max()), -1))
         ends.append((-math.inf, +1))
-    for k, _, b in _top_edges(grid, rel, which, o, planes, gate_m):
+    for k, _, b in _top_edges(grid, rel, which, o, planes, gate_m, local):
         s, _, _ = planes.crossing(k, o, rel[[b]])
         lows = [e for e in ends if e[1] == +1 and math.isinf(e[0])]
         ends.remove(lows[0])
@@ -212,6 +213,14 @@ def _contiguous(
         out[mine[order[:lo]]] = -1
         out[mine[order[hi:]]] = -1
     return out
+
+
+def _gathered(
+    local: list[NDArray[np.intp]],
+) -> tuple[NDArray[np.intp], list[NDArray[np.intp]]]:
+    """The returns any panel looks at, and each panel's as indices into those."""
+    every = np.unique(np.concatenate(local)) if local else np.zeros(0, dtype=np.intp)
+    return every, [np.searchsorted(every, idx) for idx in local]
 
 
 def ring_spacing(frame: Frame3D) -> float:
@@ -324,14 +333,16 @@ def _fix3d(
     R0 = rotation_rpy(0.0, 0.0, yaw_of_azimuth(plan.pose.azimuth)) @ level_rotation(up)
     flat = Pose3D.from_rotation(R0, (plan.pose.easting, plan.pose.northing, 0.0))
 
-    def all_grid(pose: Pose3D) -> NDArray[np.float64]:  # every return, for the floors
-        return pose.sensor_to_grid(frame.points[about])
-
-    # only the returns near a panel in plan can be a panel's or pass over its top
+    # only the returns near a panel in plan can be a panel's or pass over its top; each
+    # panel looks at its own (local), and its floor at those a little further about
     grid = flat.sensor_to_grid(frame.points)
-    near = planes.near(grid, NEAR_M)
-    about = planes.near(grid, FLOOR_RADIUS_M)
+    near, local = _gathered(planes.local(grid, NEAR_M))
+    about, around = _gathered(planes.local(grid, FLOOR_RADIUS_M))
     pts, grid = frame.points[near], grid[near]
+
+    def floors(pose: Pose3D) -> NDArray[np.float64]:
+        return planes.floors(pose.sensor_to_grid(frame.points[about]), around) + FLOOR_CLEAR_M
+
     # the lines each ring draws across a panel, or without rings, 10 cm heights
     lines = (
         frame.ring[near].astype(np.intp)
@@ -346,9 +357,9 @@ def _fix3d(
     clear = gate
     # The elevation first, from hits in a gate tight but for the plan view's tilt error.
     loose = 2.5 * sig_r + START_SLACK_M
-    tight = planes.assign(grid, flat.position, loose, clear_m=clear)
+    tight = planes.assign(grid, flat.position, loose, clear_m=clear, local=local)
     spacing = ring_spacing(frame)
-    start = _start_elevation(grid, flat.position, tight, planes, 2.0 * loose, spacing)
+    start = _start_elevation(grid, flat.position, tight, planes, 2.0 * loose, spacing, local)
     if start is None:
         return refused("one_beacon", "no return on a surveyed panel in 3D")
     z0, spread = start
@@ -365,21 +376,21 @@ def _fix3d(
             margin = spread + 2.0 * sig_r + START_SLACK_M  # the start's elevation
             slack = 0.0 if adj is not None else min(reach, 2.0) * TILT_SLACK
             roof = None
-            floor = planes.floors(all_grid(pose), FLOOR_RADIUS_M) + FLOOR_CLEAR_M
+            floor = floors(pose)
             if adj is None:  # each panel cut at its highest tight hit, too
                 roof = planes.ceilings(grid, pose.position, tight, 2.0 * sig_r)
             else:
                 floor = np.fmax(floor, planes.bottoms(grid, pose.position, which, gate))
             which = planes.assign(
                 grid, pose.position, gate + slack, clear_m=clear, top_margin_m=margin,
-                bottoms=floor, reach_m=reach, ceilings=roof,
+                bottoms=floor, reach_m=reach, ceilings=roof, local=local,
             )  # fmt: skip
             which = _contiguous(which, grid, pose.position, planes, spacing)
             if len(_shown(which, lines, planes, cfg)) < 2:
                 continue
             adj = adjust_pose(
                 pts, which, planes, pose, range_sigma_m=sig_r, survey_sigma_m=sig_s,
-                gate_m=gate, lines=lines, elevation=False, tilt_prior=prior,
+                gate_m=gate, elevation=False, tilt_prior=prior, snooping_rounds=0,
             )  # fmt: skip
             pose = adj.pose
         if adj is None:
@@ -388,18 +399,18 @@ def _fix3d(
         for _ in range(3):
             adj = adjust_pose(
                 pts, which, planes, pose, range_sigma_m=sig_r, survey_sigma_m=sig_s,
-                gate_m=gate, lines=lines, tilt_prior=prior,
+                gate_m=gate, lines=lines, tilt_prior=prior, local=local,
             )  # fmt: skip
             pose = adj.pose
             if not adj.top_edges:
                 break
             grid = pose.sensor_to_grid(pts)
             margin = max(2.0 * math.sqrt(adj.covariance[2, 2]), 2.0 * sig_r)
-            floor = planes.floors(all_grid(pose), FLOOR_RADIUS_M) + FLOOR_CLEAR_M
-            floor = np.fmax(floor, planes.bottoms(grid, pose.position, which, gate))
+            floor = np.fmax(floors(pose), planes.bottoms(grid, pose.position, which, gate))
             again = planes.assign(
-                grid, pose.position, gate, clear_m=clear, top_margin_m=margin, bottoms=floor
-            )
+                grid, pose.position, gate, clear_m=clear, top_margin_m=margin, bottoms=floor,
+                local=local,
+            )  # fmt: skip
             again = _contiguous(again, grid, pose.position, planes, spacing)
             if np.array_equal(again, which) or len(_shown(again, lines, planes, cfg)) < 2:
                 break
@@ -419,7 +430,7 @@ def _fix3d(
     # every beam crossing a panel where the pose puts it hits it
     grid = adj.pose.sensor_to_grid(pts)
     hits = np.bincount(which[which >= 0], minlength=len(planes))
-    misfit = planes.misfits(grid, adj.pose.position, which, gate)
+    misfit = planes.misfits(grid, adj.pose.position, which, gate, local)
     seen = np.flatnonzero(misfit > np.maximum(MISFIT_LEAST, MISFIT_SHARE * hits))
     if seen.size:
         k = int(seen[np.argmax(misfit[seen])])
