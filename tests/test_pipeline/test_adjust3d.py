@@ -131,3 +131,96 @@ def test_a_survey_without_elevations_leaves_the_elevation_unobserved() -> None:
     assert adj.top_edges == 0
     assert adj.covariance[2, 2] == pytest.approx(UNBRACKETED, rel=1e-3)
     assert abs(_errors(adj, truth)[0]) < 5 * math.sqrt(adj.covariance[0, 0])
+
+
+def test_a_top_edge_bracket_moves_with_the_pose_as_its_derivatives_say() -> None:
+    from mast.core.frames import yaw_of_azimuth
+    from mast.pipeline.adjust3d import _brackets, _derivatives, _top_edges
+
+    walls, scene = paper_walls("convergent")
+    planes = PanelPlanes.of(scene.survey)
+    truth = Pose3D.from_degrees(7.0, 7.0, 1.2, 20.0, 6.0, -4.0)
+    frame = cast(truth, walls, 0.0, 0)
+    which = planes.assign(truth.sensor_to_grid(frame.points), truth.position, 0.01)
+    x = np.array(
+        [truth.easting, truth.northing, truth.azimuth, truth.pitch, truth.roll, truth.elevation]
+    )
+
+    def brackets(x: np.ndarray, tops=None):  # type: ignore[no-untyped-def]
+        R, d_roll, d_pitch, d_yaw = _derivatives(x[4], x[3], yaw_of_azimuth(x[2]))
+        rel = frame.points @ R.T
+        origin = np.array([x[0], x[1], x[5]])
+        if tops is None:
+            tops = _top_edges(rel + origin, rel, which, origin, planes, 0.01)
+        return tops, _brackets(tops, frame.points, rel, origin, planes, (d_yaw, d_pitch, d_roll))
+
+    tops, at = brackets(x)
+    assert len(at) == 2  # one per beacon
+    for j in range(6):
+        h = 1e-6
+        step = np.zeros(6)
+        step[j] = h
+        _, moved = brackets(x + step, tops)
+        for (middle, _, d), (middle2, _, _) in zip(at, moved, strict=True):
+            # the residual is Z - middle: its derivative by Z is 1, by the rest -d middle
+            numeric = (j == 5) - (middle2 - middle) / h
+            assert numeric == pytest.approx(d[j], abs=1e-4 + 1e-3 * abs(d[j]))
+
+
+def test_the_elevation_is_at_its_covariance_on_simulated_drifts() -> None:
+    from mast.sim.lidar3d import random_drift_scene
+
+    z = []
+    for seed in range(2):
+        scene = random_drift_scene(seed, frames=6, lidar="vlp16", range_sigma_m=0.02)
+        planes = PanelPlanes.of(scene.survey)
+        for i in range(6):
+            sim = scene.simulate(i)
+            if not sim.owed:
+                continue
+            which = np.full(len(sim.frame.points), -1, dtype=np.intp)
+            for k, surface in enumerate(sim.drift.surfaces):
+                if surface.kind == "beacon":
+                    j = planes.beacon.index(surface.beacon) + surface.panel - 1
+                    which[sim.surface_index == k] = j
+            adj = adjust_pose(
+                sim.frame.points, which, planes, sim.pose, range_sigma_m=0.02,
+                survey_sigma_m=0.0, gate_m=0.08,
+            )  # fmt: skip
+            assert adj.top_edges >= 1
+            z.append(_errors(adj, sim.pose) / np.sqrt(np.diag(adj.covariance)))
+    z_arr = np.array(z)
+    assert len(z_arr) >= 6
+    # a crossing-over rule that took only rising rays, or a bracket's derivatives
+    # without the crossing's own, put the elevation 3-40 sigmas out here
+    assert np.abs(z_arr).max() < 4.0, np.round(z_arr, 1)
+
+
+def test_misfits_see_a_panel_put_where_it_is_not() -> None:
+    walls, scene = paper_walls("divergent")
+    planes = PanelPlanes.of(scene.survey)
+    truth = Pose3D.from_degrees(7.0, 7.0, 1.2, 0.0, 3.0, 9.0)
+    frame = cast(truth, walls, 0.01, 2)
+    grid = truth.sensor_to_grid(frame.points)
+    which = planes.assign(grid, truth.position, 0.04)
+    assert planes.misfits(grid, truth.position, which, 0.04).max() <= 2
+    for wrong in (
+        replace(truth, easting=truth.easting + 0.06),  # the panels put 6 cm off
+        replace(truth, northing=truth.northing + 0.06),
+        replace(truth, azimuth=truth.azimuth + math.radians(1.0)),
+        replace(truth, pitch=truth.pitch + math.radians(3.0)),  # the top missed
+    ):
+        grid = wrong.sensor_to_grid(frame.points)
+        which = planes.assign(grid, wrong.position, 0.04)
+        misfit = planes.misfits(grid, wrong.position, which, 0.04)
+        hits = np.bincount(which[which >= 0], minlength=len(planes))
+        # the locator's rule (MISFIT_LEAST, MISFIT_SHARE)
+        assert np.any(misfit > np.maximum(3, 0.01 * hits)), (misfit, hits)
+
+
+def test_the_floor_is_no_cut_where_none_is_seen() -> None:
+    walls, scene = paper_walls("parallel")  # panels and walls, no floor
+    planes = PanelPlanes.of(scene.survey)
+    truth = Pose3D.from_degrees(7.0, 7.0, 1.2, 0.0)
+    grid = truth.sensor_to_grid(cast(truth, walls, 0.01, 0).points)
+    assert np.all(np.isnan(planes.floors(grid, planes.local(grid, 2.0))))

@@ -245,7 +245,7 @@ class PanelPlanes:
         :meth:`local` points, a metre or two about; their 2nd percentile, against stray
         low returns: the floor, or the wall's foot); NaN for a panel with fewer than 50,
         or where those lowest
-        returns do not spread out from the panel's plane by 30 cm (the lowest ring on a
+        returns do not spread out from its beacon's wall by 30 cm (the lowest ring on a
         wall is a line along it, and no floor). A beacon stands on no floor: near its
         plane's foot the floor is within the gate of the plane, and is no panel's."""
         out = np.full(len(self), np.nan)
@@ -255,7 +255,7 @@ class PanelPlanes:
             z = grid[close, 2]
             low = float(np.partition(z, len(z) // 50)[len(z) // 50])  # its 2nd percentile
             # a floor spreads out from the wall; the lowest ring on a wall is a line
-            across = np.sort(grid[close[np.abs(z - low) < 0.05], :2] @ self.normal[k])
+            across = np.sort(grid[close[np.abs(z - low) < 0.05], :2] @ self.wall[k, :2])
             n = across.size
             if n >= 20 and across[(9 * n) // 10 - 1] - across[n // 10] > 0.3:
                 out[k] = low

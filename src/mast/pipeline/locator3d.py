@@ -75,7 +75,7 @@ FLOOR_CLEAR_M = 0.15
 #: share of those that hit it, whichever is more (a return's noise beyond the gate, a
 #: ray grazing an edge).
 MISFIT_LEAST = 3
-MISFIT_SHARE = 0.05
+MISFIT_SHARE = 0.01
 #: How far about a panel, in plan, the lowest returns are its floor, metres.
 FLOOR_RADIUS_M = 2.0
 #: The plan view's tilt error in a return's place, for the first look, metres.
