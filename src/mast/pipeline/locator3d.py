@@ -27,8 +27,12 @@ view, then the six-parameter adjustment on the panels it names (docs/3d.md).
    loosely feels.
 6. **The elevation**: the adjustment with the top edges' brackets, and the panels cut
    again at their adjusted tops, until the assignment holds.
-7. **The tests**: two beacons each showing two panels with enough returns, the global
-   test of the adjustment, and the 3D position within the 2D fix's 99.9 % ellipse
+7. **The tests**: two beacons each showing two panels crossed by two rings of three
+   returns (the rule a frame is owed a fix by); the global test of the adjustment; the
+   tilt held to :data:`MAX_TILT_SIGMA_DEG` (an elevation held no better than
+   :data:`MAX_ELEVATION_SIGMA_M` is reported not observed); every beam crossing a panel
+   where the pose puts it hitting it (:meth:`~mast.pipeline.adjust3d.PanelPlanes.misfits`: the beam
+   verification of 2D, in 3D); and the 3D position within the 2D fix's 99.9 % ellipse
    widened by the plan view's smear (:data:`PLAN_SLACK_M`). A frame whose panels no
    ring crosses at the top keeps its fix with the elevation unobserved (its variance
    says so).
@@ -47,7 +51,13 @@ from mast.core.beacon import Survey
 from mast.core.frames import yaw_of_azimuth
 from mast.core.pose3d import Frame3D, Pose3D, rotation_rpy
 from mast.errors import InputError
-from mast.pipeline.adjust3d import Adjustment3D, PanelPlanes, _top_edges, adjust_pose
+from mast.pipeline.adjust3d import (
+    UNBRACKETED,
+    Adjustment3D,
+    PanelPlanes,
+    _top_edges,
+    adjust_pose,
+)
 from mast.pipeline.locator import Fix, LocatorConfig, locate
 from mast.pipeline.plan_view import estimate_up, level_rotation, plan_scan
 
@@ -64,6 +74,12 @@ TILT_SLACK = 0.04
 #: (the estimate is within 2 deg across the drift and is pitched by the plan view's
 #: tries along it).
 TILT_PRIOR_DEG = 5.0
+#: The largest sigma of roll or pitch a fix is given with, degrees (the panels seen
+#: hold the tilt by their heights' spread and their directions: one short panel's few
+#: rings may not), and of an elevation, metres (above it, the elevation is reported
+#: not observed: its brackets were a ring spacing wide).
+MAX_TILT_SIGMA_DEG = 0.3
+MAX_ELEVATION_SIGMA_M = 0.05
 #: The plan view's own error, beyond its covariance, in the test that the 3D position
 #: is where it put it: a vertical off by a degree smears each panel's plan view by its
 #: height times that (1.7 cm a metre up), metres.
@@ -427,6 +443,20 @@ def _fix3d(
             "freedom: the returns do not fit the surveyed panels",
             adj,
         )
+    # a tilt the panels hold too loosely is no survey's; an elevation only wide brackets
+    # hold is reported not observed (the record says so) rather than to decimetres
+    sd = np.sqrt(np.diag(adj.covariance))
+    if max(sd[3], sd[4]) > math.radians(MAX_TILT_SIGMA_DEG):
+        return refused(
+            "degenerate_geometry",
+            f"the panels seen hold the tilt to {math.degrees(max(sd[3], sd[4])):.2f} deg only",
+            adj,
+        )
+    if adj.top_edges and sd[2] > MAX_ELEVATION_SIGMA_M:
+        cov = adj.covariance.copy()
+        cov[2, :], cov[:, 2] = 0.0, 0.0
+        cov[2, 2] = UNBRACKETED
+        adj = replace(adj, covariance=cov, top_edges=0)
     # every beam crossing a panel where the pose puts it hits it
     grid = adj.pose.sensor_to_grid(pts)
     hits = np.bincount(which[which >= 0], minlength=len(planes))
