@@ -180,8 +180,7 @@ class PanelPlanes:
             # how far along its ray the return lies from the plane: its range error,
             # were it on the panel (a gate on it keeps both signs of the noise alike)
             off = np.abs(1.0 - s) * np.linalg.norm(rel, axis=1)
-            lo = clear / max(float(self.wall_sine[k, 0]), 0.2)
-            hi = self.length[k] - clear / max(float(self.wall_sine[k, 1]), 0.2)
+            lo, hi = self.inside(k, clear)
             on = (off < gate_m) & (t > lo) & (t < hi) & (s > 0)
             if math.isfinite(reach_m):
                 on &= np.abs(z - o[2]) <= reach_m
@@ -205,6 +204,15 @@ class PanelPlanes:
 
     def __len__(self) -> int:
         return len(self.beacon)
+
+    def inside(self, k: int, clear_m: float, least_m: float = 0.0) -> tuple[float, float]:
+        """Where along panel ``k`` (from its first edge) the wall at a free end is more
+        than ``clear_m`` off its plane: ``clear_m`` over :attr:`wall_sine` in from each
+        free end (a sine below 0.2 taken as 0.2), and at least ``least_m`` in from
+        either end."""
+        lo = max(least_m, clear_m / max(float(self.wall_sine[k, 0]), 0.2))
+        hi = self.length[k] - max(least_m, clear_m / max(float(self.wall_sine[k, 1]), 0.2))
+        return lo, hi
 
     def local(self, grid: NDArray[np.float64], margin_m: float) -> list[NDArray[np.intp]]:
         """Per panel, the grid points (n, 2 or 3) within ``margin_m`` of it in plan: all
@@ -288,14 +296,13 @@ class PanelPlanes:
         local: list[NDArray[np.intp]] | None = None,
     ) -> NDArray[np.intp]:
         """Per panel, the rays (its :meth:`local` ones, where given) that cross it and
-        do not fit it: crossing its plane well
-        inside its plan extent (:meth:`assign`'s clearance of the gate) between its
-        lowest and highest hits, and returning from beyond the plane by more than the
-        gate, or from in front of it by more than the gate but within three (nearer
-        still, something stands in front of it). A panel where the pose puts it is hit
-        by every such ray (a range noise beyond four sigmas aside); a panel put where it
-        is not is seen through, and one put tilted is missed at its top or bottom (the
-        beam verification of 2D, in 3D)."""
+        do not fit it: crossing its plane well inside its plan extent (:meth:`inside`
+        the gate) between its lowest and highest hits, and returning from beyond the
+        plane by more than the gate, or from in front of it by more than the gate but
+        within three (nearer still, something stands in front of it). A panel where the
+        pose puts it is hit by every such ray (a range noise beyond four sigmas aside);
+        a panel put where it is not is seen through, and one put tilted is missed at its
+        top or bottom (the beam verification of 2D, in 3D)."""
         o = np.asarray(origin, dtype=float).reshape(3)
         out = np.zeros(len(self), dtype=np.intp)
         near = local or self._everywhere(len(grid))
@@ -304,8 +311,7 @@ class PanelPlanes:
             rel = grid[near[k]] - o
             reach = np.linalg.norm(rel, axis=1)
             s, t, z = self.crossing(k, o, rel)
-            lo = max(0.05, gate_m / max(float(self.wall_sine[k, 0]), 0.2))
-            hi = self.length[k] - max(0.05, gate_m / max(float(self.wall_sine[k, 1]), 0.2))
+            lo, hi = self.inside(k, gate_m, 0.05)
             off = (1.0 - s) * reach  # along the ray: > 0 beyond the plane
             across = (t > lo) & (t < hi) & (z > mine.min()) & (z < mine.max()) & (s > 0)
             out[k] = int(
@@ -399,8 +405,7 @@ def _top_edges(
         # well inside: a ray just past a panel's side passes beside it, not over it; and
         # near a free end the wall just above the panel is within the gate of its plane
         inset = max(inset_m, 0.1 * planes.length[k])
-        lo = max(inset, gate_m / max(float(planes.wall_sine[k, 0]), 0.2))
-        hi = planes.length[k] - max(inset, gate_m / max(float(planes.wall_sine[k, 1]), 0.2))
+        lo, hi = planes.inside(k, gate_m, inset)
         # a hit well within the gate: the wall just above a panel, behind it by the
         # beacon's depth, may be within the gate, and is no hit
         s, t, _ = planes.crossing(k, origin, rel[on])

@@ -78,7 +78,7 @@ TILT_PRIOR_DEG = 5.0
 #: hold the tilt by their heights' spread and their directions: one short panel's few
 #: rings may not), and of an elevation, metres (above it, the elevation is reported
 #: not observed: its brackets were a ring spacing wide).
-MAX_TILT_SIGMA_DEG = 0.3
+MAX_TILT_SIGMA_DEG = 0.4
 MAX_ELEVATION_SIGMA_M = 0.05
 #: The plan view's own error, beyond its covariance, in the test that the 3D position
 #: is where it put it: a vertical off by a degree smears each panel's plan view by its
@@ -411,14 +411,15 @@ def _fix3d(
             pose = adj.pose
         if adj is None:
             return refused("one_beacon", _too_few(_shown(which, lines, planes, cfg), cfg))
-        # the elevation last, from the top edges of panels the tilt now holds
-        for _ in range(3):
+        # the elevation last, from the top edges of panels the tilt now holds; the
+        # panels cut again at the adjusted tops, until the assignment holds
+        for last in range(4):
             adj = adjust_pose(
                 pts, which, planes, pose, range_sigma_m=sig_r, survey_sigma_m=sig_s,
                 gate_m=gate, lines=lines, tilt_prior=prior, local=local,
             )  # fmt: skip
             pose = adj.pose
-            if not adj.top_edges:
+            if not adj.top_edges or last == 3:
                 break
             grid = pose.sensor_to_grid(pts)
             margin = max(2.0 * math.sqrt(adj.covariance[2, 2]), 2.0 * sig_r)
@@ -428,9 +429,11 @@ def _fix3d(
                 local=local,
             )  # fmt: skip
             again = _contiguous(again, grid, pose.position, planes, spacing)
-            if np.array_equal(again, which) or len(_shown(again, lines, planes, cfg)) < 2:
+            if np.array_equal(again, which):
                 break
             which = again
+            if len(_shown(which, lines, planes, cfg)) < 2:
+                break  # refused below: the adjusted pose shows fewer than two beacons
     except np.linalg.LinAlgError:  # the panels seen leave a direction unobserved
         return refused("one_beacon", "the panels seen do not hold the pose in 3D")
     beacons = _shown(which, lines, planes, cfg)
