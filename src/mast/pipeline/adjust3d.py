@@ -632,6 +632,7 @@ def adjust_pose(
     elevation: bool = True,
     tilt_prior: tuple[float, float, float] | None = None,
     local: list[NDArray[np.intp]] | None = None,
+    top_beacons: tuple[str, ...] | None = None,
 ) -> Adjustment3D:
     """All six parameters from a frame's returns ``points`` (sensor frame, (n, 3)), those
     on panels named by ``which`` (indices into ``planes``, -1 for none), from ``start``
@@ -656,7 +657,10 @@ def adjust_pose(
     variance :data:`UNBRACKETED`). ``tilt_prior`` (pitch, roll, sigma; radians) adds
     the two as observations (the vertical of the walls, say): a few panels' returns
     alone may leave the tilt loose. ``local``: each panel's :meth:`PanelPlanes.local`
-    returns, where the rays over its top are looked for."""
+    returns, where the rays over its top are looked for. ``top_beacons``: the beacons
+    whose top edges may bracket the elevation (all, unless given): a far beacon a ring
+    or two crosses gives a bracket whose one hit may be the wall's, and whose range
+    levers a tilt."""
     p = np.asarray(points, dtype=float)
     which = np.asarray(which, dtype=np.intp).copy()
     x = np.array(
@@ -672,7 +676,8 @@ def adjust_pose(
                       tops=tops, tilt_prior=tilt_prior, skip=frozenset(distrust),
                       local=local)  # fmt: skip
 
-    distrust: set[str] = set()  # beacons whose top edges failed their w-test
+    # beacons whose top edges failed their w-test, or are not to be used
+    distrust: set[str] = set() if top_beacons is None else set(planes.beacon) - set(top_beacons)
 
     solved = solve(x)
     if lines is not None:

@@ -417,6 +417,7 @@ def _fix3d(
             adj = adjust_pose(
                 pts, which, planes, pose, range_sigma_m=sig_r, survey_sigma_m=sig_s,
                 gate_m=gate, lines=lines, tilt_prior=prior, local=local,
+                top_beacons=_shown(which, lines, planes, cfg),
             )  # fmt: skip
             pose = adj.pose
             if not adj.top_edges or last == 3:
