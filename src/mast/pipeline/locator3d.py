@@ -78,7 +78,7 @@ TILT_PRIOR_DEG = 5.0
 #: hold the tilt by their heights' spread and their directions: one short panel's few
 #: rings may not), and of an elevation, metres (above it, the elevation is reported
 #: not observed: its brackets were a ring spacing wide).
-MAX_TILT_SIGMA_DEG = 0.4
+MAX_TILT_SIGMA_DEG = 0.3
 MAX_ELEVATION_SIGMA_M = 0.05
 #: The plan view's own error, beyond its covariance, in the test that the 3D position
 #: is where it put it: a vertical off by a degree smears each panel's plan view by its
