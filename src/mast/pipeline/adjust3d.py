@@ -25,8 +25,9 @@ elevation is its top end). Two kinds of evidence, each from the frame alone:
   and the beams' angular error at the two ends (:data:`BEAM_ANGLE_SIGMA`); its
   derivatives by all six parameters are those of the two rays that set its ends. The
   rays are chosen at the start of each adjustment and kept through its iterations
-  (chosen again, and the adjustment run again, until the choice holds); a beacon's
-  bracket that fails its w-test against the others is left out.
+  (chosen again, and the adjustment run again, until the choice holds, at most six
+  times: :attr:`Adjustment3D.settled`); a beacon's bracket that fails its w-test
+  against the others is left out.
 """
 
 from __future__ import annotations
@@ -360,8 +361,15 @@ class Adjustment3D:
     returns: int
     iterations: int
     top_edges: int
-    """Panels whose top edge bracketed the elevation (none: its variance is
+    """Beacons whose top edges bracketed the elevation (none: its variance is
     :data:`UNBRACKETED`)."""
+    used: NDArray[np.intp] | None = None
+    """The panel each return was taken for in the end (``which`` less the returns the
+    snooping left out), -1 for none."""
+    settled: bool = True
+    """Whether the top edges' rays, chosen again at the adjusted pose, held and passed
+    their w-test: where they alternate between two choices, the elevation and the tilt
+    they lever are not known, and a locator should not give the fix."""
 
 
 def _derivatives(roll: float, pitch: float, yaw: float) -> tuple[NDArray[np.float64], ...]:
@@ -636,9 +644,13 @@ def adjust_pose(
 ) -> Adjustment3D:
     """All six parameters from a frame's returns ``points`` (sensor frame, (n, 3)), those
     on panels named by ``which`` (indices into ``planes``, -1 for none), from ``start``
-    (see the module). The top edges enter as one observation each of the sensor's
-    elevation: the middle of the panel's bracket, with the variance of a uniform over
-    it, its derivatives by pitch and roll those of the two returns that set it.
+    (see the module). The top edges enter as one observation of the sensor's elevation
+    per beacon: the middle of the intersection of its panels' brackets, with a
+    uniform's variance over it and the beams' angular error at its ends, its
+    derivatives by all six parameters those of the two rays that set its ends. The
+    rays are chosen again at the adjusted pose until the choice holds and every
+    beacon's bracket passes its w-test (at most six times: :attr:`Adjustment3D.settled`
+    says whether it did).
 
     Returns that are not the panel's (the wall just above, below or beside one, within
     the gate of its plane) are found by data snooping: Baarda's w-test on each
@@ -693,6 +705,7 @@ def adjust_pose(
             break
         which[np.flatnonzero(which >= 0)[bad]] = -1
         solved = solve(solved.x)
+    settled = not elevation
     for _ in range(6 if elevation else 0):
         again = solve(solved.x)  # the top edges' rays chosen again where the pose moved
         same = again.tops == solved.tops
@@ -700,6 +713,7 @@ def adjust_pose(
         if same:
             worst = _failed_bracket(solved, planes)
             if worst is None:
+                settled = True
                 break
             distrust.add(worst)
             solved = solve(solved.x)
@@ -726,4 +740,6 @@ def adjust_pose(
         returns=n_points,
         iterations=solved.iterations,
         top_edges=len({planes.beacon[k] for k, _, _ in solved.tops}),
+        used=which,
+        settled=settled,
     )

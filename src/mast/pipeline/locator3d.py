@@ -11,7 +11,7 @@ view, then the six-parameter adjustment on the panels it names (docs/3d.md).
    below or above the sensor: where the plan view finds no fix, or its fix no 3D fix,
    the next of the bands (:attr:`Locator3DConfig.bands_m`) and pitches
    (:data:`PITCH_TRIES_DEG`) is tried (:func:`_tries`). No fix in any, no 3D fix: the
-   reason is the first 3D refusal's, or the first plan view's.
+   reason is the first refusal of a 3D adjustment's, or else the first refusal's.
 4. **The start**: the 2D pose with the levelling's pitch and roll, and the elevation
    where the most panels' top brackets agree (:func:`_start_elevation`: hits in a
    tight gate, each panel's run of them up from its middle, and the rays crossing over
@@ -21,21 +21,23 @@ view, then the six-parameter adjustment on the panels it names (docs/3d.md).
    half a metre of the sensor's height, where the plan view's tilt error moves a return
    least, then a metre, two, all (:data:`REACH_M`). Each panel is cut at its top (the
    start's elevation), above its floor (:data:`FLOOR_CLEAR_M`) and, once adjusted, at
-   the bottom its returns show; a return within the gate of two panels, or of a panel
-   and its beacon's wall, is neither's. The walls' vertical enters as an observation of
-   the tilt (:data:`TILT_PRIOR_DEG`), which only a frame whose panels hold the tilt
-   loosely feels.
-6. **The elevation**: the adjustment with the top edges' brackets, and the panels cut
-   again at their adjusted tops, until the assignment holds.
+   the bottom its returns show; a return within the gate of two panels is neither's,
+   one nearer its beacon's wall than its panel the wall's. The walls' vertical enters
+   as an observation of the tilt (:data:`TILT_PRIOR_DEG`), which only a frame whose
+   panels hold the tilt loosely feels.
+6. **The elevation**: the adjustment with the top edges' brackets of the beacons shown,
+   and the panels cut again at their adjusted tops, until the assignment holds.
 7. **The tests**: two beacons each showing two panels crossed by two rings of three
    returns (the rule a frame is owed a fix by); the global test of the adjustment; the
    tilt held to :data:`MAX_TILT_SIGMA_DEG` (an elevation held no better than
-   :data:`MAX_ELEVATION_SIGMA_M` is reported not observed); every beam crossing a panel
-   where the pose puts it hitting it (:meth:`~mast.pipeline.adjust3d.PanelPlanes.misfits`: the beam
-   verification of 2D, in 3D); and the 3D position within the 2D fix's 99.9 % ellipse
-   widened by the plan view's smear (:data:`PLAN_SLACK_M`). A frame whose panels no
-   ring crosses at the top keeps its fix with the elevation unobserved (its variance
-   says so).
+   :data:`MAX_ELEVATION_SIGMA_M` is reported not observed); the top edges' rays settled
+   (:attr:`~mast.pipeline.adjust3d.Adjustment3D.settled`); every beam crossing a panel
+   with returns, between its lowest and highest, hitting it where the pose puts it
+   (:meth:`~mast.pipeline.adjust3d.PanelPlanes.misfits`: the beam verification of 2D,
+   in 3D; a panel with no return is not looked at); and the 3D position within the 2D
+   fix's 99.9 % ellipse widened by the plan view's smear (:data:`PLAN_SLACK_M`). A
+   frame whose panels no ring crosses at the top keeps its fix with the elevation
+   unobserved (its variance says so).
 """
 
 from __future__ import annotations
@@ -134,8 +136,9 @@ class Locator3DConfig:
 @dataclass(frozen=True, slots=True)
 class Fix3D:
     """What the 3D locator concluded about one frame: ``status`` "fix" with ``pose`` and
-    ``adjustment``, or "no_fix" with ``reason`` (2D's reasons, or ``rejected``,
-    ``inconsistent``, ``one_beacon``) and ``detail``."""
+    ``adjustment``, or "no_fix" with ``reason`` (2D's reasons: the plan view's, or the 3D
+    tests' ``one_beacon``, ``rejected``, ``inconsistent``, ``degenerate_geometry``) and
+    ``detail``."""
 
     status: str
     pose: Pose3D | None
@@ -397,13 +400,14 @@ def _fix3d(
                 roof = planes.ceilings(grid, pose.position, tight, 2.0 * sig_r)
             else:
                 floor = np.fmax(floor, planes.bottoms(grid, pose.position, which, gate))
-            which = planes.assign(
+            trial = planes.assign(
                 grid, pose.position, gate + slack, clear_m=clear, top_margin_m=margin,
                 bottoms=floor, reach_m=reach, ceilings=roof, local=local,
             )  # fmt: skip
-            which = _contiguous(which, grid, pose.position, planes, spacing)
-            if len(_shown(which, lines, planes, cfg)) < 2:
-                continue
+            trial = _contiguous(trial, grid, pose.position, planes, spacing)
+            if len(_shown(trial, lines, planes, cfg)) < 2:
+                continue  # the last assignment that showed two beacons stands
+            which = trial
             adj = adjust_pose(
                 pts, which, planes, pose, range_sigma_m=sig_r, survey_sigma_m=sig_s,
                 gate_m=gate, elevation=False, tilt_prior=prior, snooping_rounds=0,
@@ -436,10 +440,19 @@ def _fix3d(
             if len(_shown(which, lines, planes, cfg)) < 2:
                 break  # refused below: the adjusted pose shows fewer than two beacons
     except np.linalg.LinAlgError:  # the panels seen leave a direction unobserved
-        return refused("one_beacon", "the panels seen do not hold the pose in 3D")
+        return refused("degenerate_geometry", "the panels seen do not hold the pose in 3D")
+    if adj.used is not None:
+        which = adj.used  # less the returns the snooping left out
     beacons = _shown(which, lines, planes, cfg)
     if len(beacons) < 2:
         return refused("one_beacon", _too_few(beacons, cfg), adj)
+    if not adj.settled:
+        return refused(
+            "inconsistent",
+            "the top edges' rays alternate between two choices: the elevation and the tilt "
+            "they lever are not known",
+            adj,
+        )
     if adj.test_p < cfg.reject_alpha:
         return refused(
             "rejected",
