@@ -525,6 +525,7 @@ def _solve(
     tops: list[tuple[int, int, int]] | None = None,
     tilt_prior: tuple[float, float, float] | None = None,
     skip: frozenset[str] = frozenset(),
+    panels: frozenset[int] | None = None,
     local: list[NDArray[np.intp]] | None = None,
 ) -> _Solved:
     """Gauss-Newton over (E, N, A, pitch, roll, Z) (see :func:`adjust_pose`), the top
@@ -553,7 +554,11 @@ def _solve(
         origin = np.array([x[0], x[1], x[5]])
         if tops is None:
             tops = _top_edges(rel + origin, rel, which, origin, planes, gate_m, local)
-            tops = [top for top in tops if planes.beacon[top[0]] not in skip]
+            tops = [
+                top
+                for top in tops
+                if planes.beacon[top[0]] not in skip and (panels is None or top[0] in panels)
+            ]
         if tops:
             seen = _brackets(tops, p, rel, origin, planes, (dR_yaw, dR_pitch, dR_roll))
             J = np.vstack([J, [dz for _, _, dz in seen]])
@@ -640,7 +645,7 @@ def adjust_pose(
     elevation: bool = True,
     tilt_prior: tuple[float, float, float] | None = None,
     local: list[NDArray[np.intp]] | None = None,
-    top_beacons: tuple[str, ...] | None = None,
+    top_panels: frozenset[int] | None = None,
 ) -> Adjustment3D:
     """All six parameters from a frame's returns ``points`` (sensor frame, (n, 3)), those
     on panels named by ``which`` (indices into ``planes``, -1 for none), from ``start``
@@ -669,10 +674,11 @@ def adjust_pose(
     variance :data:`UNBRACKETED`). ``tilt_prior`` (pitch, roll, sigma; radians) adds
     the two as observations (the vertical of the walls, say): a few panels' returns
     alone may leave the tilt loose. ``local``: each panel's :meth:`PanelPlanes.local`
-    returns, where the rays over its top are looked for. ``top_beacons``: the beacons
-    whose top edges may bracket the elevation (all, unless given): a far beacon a ring
+    returns, where the rays over its top are looked for. ``top_panels``: the panels
+    whose top edges may bracket the elevation (all, unless given): a far panel a ring
     or two crosses gives a bracket whose one hit may be the wall's, and whose range
-    levers a tilt."""
+    levers a tilt; a panel whose only returns are the floor at its foot gives a bracket
+    far from its top."""
     p = np.asarray(points, dtype=float)
     which = np.asarray(which, dtype=np.intp).copy()
     x = np.array(
@@ -685,11 +691,11 @@ def adjust_pose(
         if not elevation:
             tops = []
         return _solve(p, which, planes, x0, range_sigma_m, survey_sigma_m, gate_m, iterations,
-                      tops=tops, tilt_prior=tilt_prior, skip=frozenset(distrust),
+                      tops=tops, tilt_prior=tilt_prior, skip=frozenset(distrust), panels=top_panels,
                       local=local)  # fmt: skip
 
     # beacons whose top edges failed their w-test, or are not to be used
-    distrust: set[str] = set() if top_beacons is None else set(planes.beacon) - set(top_beacons)
+    distrust: set[str] = set()
 
     solved = solve(x)
     if lines is not None:

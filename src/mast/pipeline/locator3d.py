@@ -256,21 +256,26 @@ def ring_spacing(frame: Frame3D) -> float:
     return float(np.median(np.diff(angles)))
 
 
+def _shown_panels(
+    which: NDArray[np.intp], lines: NDArray[np.intp], planes: PanelPlanes, cfg: Locator3DConfig
+) -> frozenset[int]:
+    """The panels with at least ``cfg.min_line_returns`` returns on each of at least two
+    lines (rings): two lines at different heights span a panel's plane, as the rule a
+    frame is owed a fix by (:class:`mast.sim.lidar3d.OwedRule3D`) counts them."""
+    on = which >= 0
+    if not on.any():
+        return frozenset()
+    pairs, counts = np.unique(np.stack([which[on], lines[on]]), axis=1, return_counts=True)
+    rings = np.bincount(pairs[0][counts >= cfg.min_line_returns], minlength=len(planes))
+    return frozenset(int(k) for k in np.flatnonzero(rings >= 2))
+
+
 def _shown(
     which: NDArray[np.intp], lines: NDArray[np.intp], planes: PanelPlanes, cfg: Locator3DConfig
 ) -> tuple[str, ...]:
-    """The beacons showing at least two panels, each with at least
-    ``cfg.min_line_returns`` returns on each of at least two lines (rings): two lines at
-    different heights span a panel's plane, as the rule a frame is owed a fix by
-    (:class:`mast.sim.lidar3d.OwedRule3D`) counts them."""
-    on = which >= 0
-    if not on.any():
-        return ()
-    pairs, counts = np.unique(np.stack([which[on], lines[on]]), axis=1, return_counts=True)
-    full = pairs[0][counts >= cfg.min_line_returns]
-    rings = np.bincount(full, minlength=len(planes))
+    """The beacons showing at least two panels (:func:`_shown_panels`)."""
     shown: dict[str, int] = {}
-    for k in np.flatnonzero(rings >= 2):
+    for k in _shown_panels(which, lines, planes, cfg):
         shown[planes.beacon[k]] = shown.get(planes.beacon[k], 0) + 1
     return tuple(sorted(b for b, n in shown.items() if n >= 2))
 
@@ -421,7 +426,7 @@ def _fix3d(
             adj = adjust_pose(
                 pts, which, planes, pose, range_sigma_m=sig_r, survey_sigma_m=sig_s,
                 gate_m=gate, lines=lines, tilt_prior=prior, local=local,
-                top_beacons=_shown(which, lines, planes, cfg),
+                top_panels=_shown_panels(which, lines, planes, cfg),
             )  # fmt: skip
             pose = adj.pose
             if not adj.top_edges or last == 3:

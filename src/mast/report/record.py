@@ -498,6 +498,8 @@ class Stats3D:
         observed = bool(adj.top_edges > 0 and cov[2, 2] < UNBRACKETED / 2)
         if scaled:
             cov = cov * s0
+            if not observed:  # the unobserved elevation's variance stays the marker
+                cov[2, 2] = adj.covariance[2, 2]
         sigma = np.sqrt(np.maximum(np.diag(cov), 0.0))
         q = t_ppf(0.975, max(adj.dof, 1)) if scaled else norm_ppf(0.975)
         return cls(cov, sigma, q * sigma, code, lo, hi, scaled, observed)
@@ -539,9 +541,10 @@ def fix3d_record(
     ``azimuth_deg`` is the heading of the sensor's x axis projected on the horizontal.
     The corners identified, the segments and the excluded beacons are the plan view's
     (the 2D fix the 3D one starts from, :attr:`Fix3D.plan`), given also as
-    ``plan_view``. An elevation no panel's top edge bracketed is reported with
-    ``elevation_observed`` false and null ``sigma_elevation_m``: its value is then the
-    start's, from the highest returns on the panels. Without a fix the pose keys are
+    ``plan_view``. An elevation no beacon's top edges bracketed, or that they held no
+    better than :data:`mast.pipeline.locator3d.MAX_ELEVATION_SIGMA_M`, is reported with
+    ``elevation_observed`` false and null ``sigma_elevation_m``: its value is then not
+    to survey precision. Without a fix the pose keys are
     null, as in 2D, with the reason and detail.
     """
     inputs = inputs or ReportInputs()
@@ -729,8 +732,8 @@ def fix3d_text(
     z_line = (
         f"  Elevation {p.elevation:15.4f} m   σ {_mm2(sig[2])} mm   95% ± {_mm2(ci[2])} mm"
         if st.elevation_observed
-        else f"  Elevation {p.elevation:15.4f} m   NOT OBSERVED (no panel's top edge bracketed "
-        "it): from the highest returns on the panels"
+        else f"  Elevation {p.elevation:15.4f} m   NOT OBSERVED (no beacon's top edges "
+        "bracketed it to 5 cm): not to survey precision"
     )
     lines += [
         "Result        FIX (six degrees of freedom)",
@@ -745,7 +748,7 @@ def fix3d_text(
         f"chi-square test at 5 % (accept {st.chi2_lower:.3f} to {st.chi2_upper:.3f}): "
         f"{_TEST_WORDS[st.test_code]}",
         f"  Beacons used  {', '.join(fix.beacons)}; {adj.returns} returns on their panels, "
-        f"{adj.top_edges} top edge(s) bracketing the elevation",
+        f"{adj.top_edges} beacon(s) whose top edges bracket the elevation",
         f"How it was found: the plan view's 2D fix (E {fix.plan.pose.easting:.3f}, "
         f"N {fix.plan.pose.northing:.3f}) refined in six parameters, "
         f"{1e3 * fix.elapsed_s:.1f} ms in all"

@@ -456,6 +456,8 @@ class FixExports:
             },
         )
         z = record.get("elevation_m")  # a 3D lidar frame's fix has its elevation
+        if record.get("elevation_observed") is False:
+            z = None  # not to survey precision: no point-list elevation
         self._points.add(
             name, e, n, None if z is None else float(z), az, sigma_e, sigma_n, sigma_az
         )
