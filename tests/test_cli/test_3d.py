@@ -213,9 +213,11 @@ def test_track_writes_a_6dof_trajectory(
     assert (out / "fixes.geojson").exists()
     with (out / "fixes_points.csv").open(encoding="utf-8") as fh:
         points = list(csv.DictReader(fh))
-    assert [float(p["elevation"]) for p in points] == pytest.approx(
-        [r["elevation_m"] for r in fixed], abs=1e-3
-    )
+    # an elevation not observed (to 5 cm) is left empty in the point list
+    assert [float(p["elevation"]) if p["elevation"] else None for p in points] == [
+        pytest.approx(r["elevation_m"], abs=1e-3) if r["elevation_observed"] else None
+        for r in fixed
+    ]
 
 
 def test_live_replays_a_pointcloud2_topic(
