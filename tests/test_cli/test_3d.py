@@ -220,6 +220,35 @@ def test_track_writes_a_6dof_trajectory(
     ]
 
 
+def test_range_limits_on_3d_frames_are_named_as_not_applied(lidar_run: dict[str, Any]) -> None:
+    folder = lidar_run["folder"]
+    done = run_mast_text(
+        "locate", str(folder / "run.bag"), "-b", str(folder / "beacons.csv"),
+        "--scanner", "vlp16", "--range-max", "30", "--format", "json",
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    assert "--range-max applies to 2D scans" in done.stderr
+
+
+def test_several_3d_runs_are_refused_before_anything_is_written(
+    lidar_run: dict[str, Any], tmp_path: Path
+) -> None:
+    import shutil
+
+    folder = lidar_run["folder"]
+    second = tmp_path / "second.bag"
+    shutil.copy(folder / "run.bag", second)
+    out = tmp_path / "run"
+    done = run_mast_text(
+        "track", str(folder / "run.bag"), str(second), "-b", str(folder / "beacons.csv"),
+        "--scanner", "vlp16", "--out", str(out),
+    )  # fmt: skip
+    assert done.returncode == 2, done.stderr
+    assert "tracked one at a time" in done.stderr
+    assert len(done.stderr.strip().splitlines()) == 1
+    assert not (out / "config.toml").exists()  # a refused run leaves nothing
+
+
 def test_live_replays_a_pointcloud2_topic(
     lidar_run: dict[str, Any], validator: jsonschema.Draft202012Validator
 ) -> None:

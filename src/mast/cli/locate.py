@@ -163,7 +163,16 @@ def locate(
                         scan_file=str(scan_path),
                         topic=clouds,
                     ),
-                    ignored=[o for o, v in (("--near", near), ("--plot", plot)) if v is not None],
+                    ignored=[
+                        o
+                        for o, v in (
+                            ("--near", near),
+                            ("--plot", plot),
+                            ("--range-min", range_min),
+                            ("--range-max", range_max),
+                        )
+                        if v is not None
+                    ],
                     bar=bar,
                 )
                 numbered = True

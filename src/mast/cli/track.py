@@ -146,6 +146,13 @@ def track(
         cfg = lidar_config(cfg, defaults)
         run_config = replace(run_config, locator=cfg)
         settings = effective({"locator": cfg, "track": run_config}, "track")
+    if len(found) > 1 or scheduler is not None:
+        three_d = [r for r in found if cloud_topic(r, topic) is not None]
+        if three_d:
+            raise InputError(
+                "3D lidar runs (PointCloud2) are tracked one at a time, without --scheduler",
+                path=three_d[0],
+            )
     settings.write(out / "config.toml")  # once the inputs are read: a refused run leaves nothing
     inputs = report_inputs(
         beacons=beacons,
@@ -158,12 +165,6 @@ def track(
         crs=grid,
     )
     if len(found) > 1 or scheduler is not None:
-        three_d = [r for r in found if cloud_topic(r, topic) is not None]
-        if three_d:
-            raise InputError(
-                "3D lidar runs (PointCloud2) are tracked one at a time, without --scheduler",
-                path=three_d[0],
-            )
         outcomes = track_runs(
             found,
             beacons,
@@ -186,6 +187,11 @@ def track(
     (run,) = found
     inputs = replace(inputs, scan_file=str(run))
     if clouds is not None:  # a 3D lidar's PointCloud2 topic
+        for option, value in (("--range-min", range_min), ("--range-max", range_max)):
+            if value is not None:
+                typer.echo(
+                    f"mast: warning: {option} applies to 2D scans; {run} is 3D frames", err=True
+                )
         _track_frames(run, survey, out, clouds, inputs, cfg)
         return
 
