@@ -10,7 +10,8 @@ frames fixed are placed. The run's summary says so.
 A run writes ``fixes.jsonl`` (one 3D record a frame, :func:`mast.report.record.
 fix3d_record`), ``trajectory.csv`` and ``trajectory.tum`` with the full 6-DoF pose of
 each fix (:func:`mast.io.trajectory.write_trajectory3d_csv`, ``..._tum``), ``map.las``
-with the fixed frames' points in the grid at their real elevation, ``fixes.geojson``
+with the fixed frames' points in the grid at their real elevation (a frame whose
+elevation the fix did not observe to 5 cm is left out of it), ``fixes.geojson``
 and ``fixes_points.csv`` (the fixes' plan positions).
 """
 
@@ -283,6 +284,6 @@ def _write_map(
             if i > last:
                 break
             here = placed.get(i)
-            if here is None:
-                continue
+            if here is None or not here.elevation_observed:
+                continue  # a frame whose elevation is not known to 5 cm is no map's
             las.add(i, frame.stamp_ns, here.pose.sensor_to_grid(frame.points), frame.intensity)
