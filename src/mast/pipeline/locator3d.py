@@ -61,7 +61,7 @@ from mast.pipeline.adjust3d import (
     adjust_pose,
 )
 from mast.pipeline.locator import Fix, LocatorConfig, locate
-from mast.pipeline.plan_view import estimate_up, level_rotation, plan_scan
+from mast.pipeline.plan_view import estimate_up, level_rotation, plan_scan, rings_bottom_up
 
 __all__ = ["Fix3D", "Locator3DConfig", "locate3d"]
 
@@ -245,14 +245,9 @@ def _gathered(
 def ring_spacing(frame: Frame3D) -> float:
     """The angle between a frame's neighbouring rings (radians): the median step between
     the rings' median elevation angles; 2 deg (a VLP-16's) without rings."""
-    if frame.ring is None:
+    angles = [e for e, _ in rings_bottom_up(frame)]
+    if len(angles) < 2:
         return math.radians(2.0)
-    p = frame.points
-    elevation = np.arctan2(p[:, 2], np.hypot(p[:, 0], p[:, 1]))
-    rings = np.unique(frame.ring)
-    if rings.size < 2:
-        return math.radians(2.0)
-    angles = np.sort([np.median(elevation[frame.ring == r]) for r in rings])
     return float(np.median(np.diff(angles)))
 
 

@@ -34,7 +34,7 @@ from mast.core.pose3d import Frame3D
 from mast.core.scan import Scan
 from mast.errors import InputError
 
-__all__ = ["estimate_up", "level_rotation", "plan_scan"]
+__all__ = ["estimate_up", "level_rotation", "plan_scan", "rings_bottom_up"]
 
 
 def level_rotation(up: ArrayLike) -> NDArray[np.float64]:
@@ -198,22 +198,31 @@ def _patch_normals(
     return np.asarray(vectors[flat, :, 0], dtype=np.float64)
 
 
+def rings_bottom_up(frame: Frame3D) -> list[tuple[float, NDArray[np.intp]]]:
+    """Each ring of a frame (none without rings) as its median elevation angle (radians,
+    in the sensor frame) and its returns' indices, bottom to top whatever the driver's
+    numbering."""
+    if frame.ring is None:
+        return []
+    p = frame.points
+    elevation = np.arctan2(p[:, 2], np.hypot(p[:, 0], p[:, 1]))
+    out = []
+    for r in np.unique(frame.ring):
+        idx = np.flatnonzero(frame.ring == r)
+        out.append((float(np.median(elevation[idx])), idx))
+    out.sort(key=lambda item: item[0])
+    return out
+
+
 def _ring_normals(frame: Frame3D, sample: int) -> NDArray[np.float64] | None:
     """Normals from each ring and the one above it (see :func:`estimate_up`); None when
     the frame has fewer than two rings."""
-    assert frame.ring is not None
     p = frame.points
-    rings = np.unique(frame.ring)
-    if rings.size < 2:
+    by_ring = rings_bottom_up(frame)
+    if len(by_ring) < 2:
         return None
     bearing = np.arctan2(p[:, 1], p[:, 0])
-    elevation = np.arctan2(p[:, 2], np.hypot(p[:, 0], p[:, 1]))
-    by_ring = []
-    for r in rings:
-        idx = np.flatnonzero(frame.ring == r)
-        idx = idx[np.argsort(bearing[idx])]
-        by_ring.append((float(np.median(elevation[idx])), idx))
-    by_ring.sort(key=lambda item: item[0])  # bottom to top, whatever the driver's numbering
+    by_ring = [(e, idx[np.argsort(bearing[idx])]) for e, idx in by_ring]
     stride = max(1, len(p) // sample)
     out = []
     for (_, low), (_, high) in itertools.pairwise(by_ring):
