@@ -3228,7 +3228,7 @@ def _adjust_rounds(
 
 
 def _bound(info: NDArray[np.float64], max_condition: float) -> NDArray[np.float64]:
-    """``bounds._bound_reference``: ``info^-1``, or ``inf`` on the diagonal (0 off it)
+    """``bounds.inverse_bound``: ``info^-1``, or ``inf`` on the diagonal (0 off it)
     when ``info`` is not finite, singular, its inverse not finite, or its condition
     number above ``max_condition``."""
     out = np.eye(3)

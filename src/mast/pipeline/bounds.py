@@ -111,10 +111,6 @@ def inverse_bound(info: NDArray[np.float64]) -> NDArray[np.float64]:
     return out
 
 
-#: :func:`bound_of`'s reference (the name its kernel tests use).
-_bound_reference = inverse_bound
-
-
 def cramer_rao_bound(
     pose: Pose2D,
     angles_rad: NDArray[np.float64],
