@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, replace
 from datetime import UTC, datetime
 from typing import TYPE_CHECKING, Any, Generic, Protocol, TypeVar
@@ -117,6 +117,37 @@ class LiveSummary:
     interrupted: bool = False
 
 
+def _start_reader(
+    items: Iterable[_Item],
+    slot: LatestSlot[_Item],
+    stop: threading.Event,
+    max_scans: int | None,
+    each: Callable[[_Item], None] | None = None,
+) -> threading.Thread:
+    """The reader thread, started: every item off the source into ``slot`` (``each``
+    called on it first), until the source ends, ``max_scans`` are in or ``stop`` is set
+    by the source; its error, if any, handed to the locating thread through the slot."""
+
+    def read() -> None:
+        error: BaseException | None = None
+        try:
+            for index, received in enumerate(items):
+                if each is not None:
+                    each(received)
+                slot.put(index, received)
+                if max_scans is not None and index + 1 >= max_scans:
+                    break
+        except BaseException as err:  # handed to the locating thread
+            error = err
+        finally:
+            stop.set()
+            slot.close(error)
+
+    reader = threading.Thread(target=read, name="mast-live-reader", daemon=True)
+    reader.start()
+    return reader
+
+
 def run_live(
     source: Source,
     survey: Survey,
@@ -148,24 +179,12 @@ def run_live(
     stop = threading.Event()
     inputs = inputs or ReportInputs()
 
-    def read() -> None:
-        error: BaseException | None = None
-        try:
-            for index, received in enumerate(source.scans(stop, warn)):
-                for sink in sinks:
-                    sink.scan(received.scan)
-                slot.put(index, received)
-                if max_scans is not None and index + 1 >= max_scans:
-                    break
-        except BaseException as err:  # handed to the locating thread
-            error = err
-        finally:
-            stop.set()
-            slot.close(error)
+    def shown(received: Received) -> None:
+        for sink in sinks:
+            sink.scan(received.scan)
 
-    reader = threading.Thread(target=read, name="mast-live-reader", daemon=True)
     t0 = time.perf_counter()
-    reader.start()
+    reader = _start_reader(source.scans(stop, warn), slot, stop, max_scans, shown)
     # The survey's index, kernels and session, alive once the first scan is located,
     # frozen: the collector's full passes over them were the largest latencies.
     try:
@@ -240,22 +259,8 @@ def run_live3d(
     stop = threading.Event()
     inputs = inputs or ReportInputs()
 
-    def read() -> None:
-        error: BaseException | None = None
-        try:
-            for index, received in enumerate(source.frames(stop, warn)):
-                slot.put(index, received)
-                if max_scans is not None and index + 1 >= max_scans:
-                    break
-        except BaseException as err:  # handed to the locating thread
-            error = err
-        finally:
-            stop.set()
-            slot.close(error)
-
-    reader = threading.Thread(target=read, name="mast-live-reader", daemon=True)
     t0 = time.perf_counter()
-    reader.start()
+    reader = _start_reader(source.frames(stop, warn), slot, stop, max_scans)
     try:
         with QuietCollector() as heap:
             while (item := slot.take(interrupt)) is not None:
