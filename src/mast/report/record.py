@@ -176,6 +176,24 @@ def _corners(fix: Fix) -> list[tuple[str, int, int]]:
     return [(b, e, o) for (b, e), o in sorted(best.items())]
 
 
+def _record_head(
+    source: str | None, index: int | None, taken: Scan | Frame3D | None, inputs: ReportInputs
+) -> dict[str, Any]:
+    """A record's first keys: its ``source``; in a sequence (``index`` given) the scan's
+    or frame's number, ``stamp_ns`` and ``frame_id`` (where it is given) and the topic."""
+    rec: dict[str, Any] = {}
+    if source is not None:
+        rec["source"] = source
+    if index is not None:
+        rec["scan"] = index
+        if taken is not None:
+            rec["stamp_ns"] = taken.stamp_ns
+            rec["frame_id"] = taken.frame_id
+        if inputs.topic is not None:
+            rec["topic"] = inputs.topic
+    return rec
+
+
 def fix_record(
     fix: Fix,
     *,
@@ -194,16 +212,7 @@ def fix_record(
     ``frame_id`` are added when ``scan`` is; ``crs`` when the inputs name one.
     """
     inputs = inputs or ReportInputs()
-    rec: dict[str, Any] = {}
-    if source is not None:
-        rec["source"] = source
-    if index is not None:
-        rec["scan"] = index
-        if scan is not None:
-            rec["stamp_ns"] = scan.stamp_ns
-            rec["frame_id"] = scan.frame_id
-        if inputs.topic is not None:
-            rec["topic"] = inputs.topic
+    rec = _record_head(source, index, scan, inputs)
     rec["status"] = fix.status
     adj = fix.adjustment
     if fix.ok and adj is not None and fix.pose is not None:
@@ -549,16 +558,7 @@ def fix3d_record(
     """
     inputs = inputs or ReportInputs()
     plan = fix.plan
-    rec: dict[str, Any] = {}
-    if source is not None:
-        rec["source"] = source
-    if index is not None:
-        rec["scan"] = index
-        if frame is not None:
-            rec["stamp_ns"] = frame.stamp_ns
-            rec["frame_id"] = frame.frame_id
-        if inputs.topic is not None:
-            rec["topic"] = inputs.topic
+    rec = _record_head(source, index, frame, inputs)
     rec["status"] = fix.status
     rec["dimensions"] = 3
     adj = fix.adjustment
