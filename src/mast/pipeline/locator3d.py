@@ -94,6 +94,11 @@ FLOOR_CLEAR_M = 0.15
 #: ray grazing an edge).
 MISFIT_LEAST = 3
 MISFIT_SHARE = 0.01
+#: The heights about the sensor the vertical is grown through from the plan view's
+#: beacons (:func:`_vertical_from`), metres, and the loosest tilt it is tried with,
+#: degrees (a plan view is smeared by a degree's error a metre up by 1.7 cm).
+REFINE_REACH_M = (0.5, 1.0, 1.5)
+REFINE_TILT_SIGMA_DEG = 1.0
 #: How far about a panel, in plan, the lowest returns are its floor, metres.
 FLOOR_RADIUS_M = 2.0
 #: The plan view's tilt error in a return's place, for the first look, metres.
@@ -303,30 +308,45 @@ def locate3d(
     level = level_rotation(up)
     plan_cfg = LocatorConfig(range_sigma_m=cfg.range_sigma_m, survey_sigma_m=cfg.survey_sigma_m)
     first: Fix3D | None = None  # the first refusal: the frame's reason, where none fixes
-    for tilt, band in _tries(cfg):
+    tries = [(level.T @ _pitched(tilt), band) for tilt, band in _tries(cfg)]
+    refined = False
+    while tries:
         # the walls leave the pitch along the drift to the floor, which a grade tilts:
         # the same vertical pitched by a grade's worth, and the beacons at other heights
+        tried, band = tries.pop(0)
         t = time.perf_counter()
-        a = math.radians(tilt)
-        tried = level.T @ np.array([math.sin(a), 0.0, math.cos(a)])
         scan = plan_scan(frame, up=tried, band=band, resolution_deg=cfg.plan_resolution_deg)
         plan = locate(scan, survey, config=plan_cfg)
         spent["plan"] += time.perf_counter() - t
-        if not plan.ok or plan.pose is None:
-            if first is None:
-                first = Fix3D(
-                    "no_fix", None, None, plan.reason, f"plan view: {plan.detail}", plan, tried
-                )
-            continue
-        t = time.perf_counter()
-        fix = _fix3d(frame, planes, plan, tried, cfg)
-        spent["adjustment"] += time.perf_counter() - t
-        if fix.ok:
-            return replace(fix, elapsed_s=time.perf_counter() - t0, stages_s=spent)
-        if first is None or first.adjustment is None:  # a 3D refusal says more
-            first = fix
+        fix: Fix3D | None = None
+        if plan.ok and plan.pose is not None:
+            t = time.perf_counter()
+            fix = _fix3d(frame, planes, plan, tried, cfg)
+            spent["adjustment"] += time.perf_counter() - t
+            if fix.ok:
+                return replace(fix, elapsed_s=time.perf_counter() - t0, stages_s=spent)
+        elif first is None:
+            first = Fix3D(
+                "no_fix", None, None, plan.reason, f"plan view: {plan.detail}", plan, tried
+            )
+        if fix is not None and (first is None or first.adjustment is None):
+            first = fix  # a 3D refusal says more
+        if not refined:
+            # a beacon the plan view found, though smeared, holds the vertical itself
+            t = time.perf_counter()
+            better = _vertical_from(frame, planes, plan, tried, cfg)
+            spent["vertical"] += time.perf_counter() - t
+            if better is not None:
+                refined = True
+                tries[:0] = [(better, band) for band in cfg.bands_m[:2]]
     assert first is not None
     return replace(first, elapsed_s=time.perf_counter() - t0, stages_s=spent)
+
+
+def _pitched(tilt_deg: float) -> NDArray[np.float64]:
+    """The levelled vertical pitched by ``tilt_deg`` about the sensor's y axis."""
+    a = math.radians(tilt_deg)
+    return np.array([math.sin(a), 0.0, math.cos(a)])
 
 
 def _tries(cfg: Locator3DConfig) -> list[tuple[float, tuple[float, float]]]:
@@ -336,6 +356,70 @@ def _tries(cfg: Locator3DConfig) -> list[tuple[float, tuple[float, float]]]:
     for tilt in PITCH_TRIES_DEG[1:]:
         out += [(tilt, band) for band in cfg.bands_m[:2]]
     return out
+
+
+def _vertical_from(
+    frame: Frame3D, planes: PanelPlanes, plan: Fix, up: NDArray[np.float64], cfg: Locator3DConfig
+) -> NDArray[np.float64] | None:
+    """The grid's vertical in the sensor frame from the panels of the beacons the plan
+    view (seen with the vertical ``up``) found: its fix's, or where it has none, those
+    its best verified pose confirms (one beacon is enough: its panels are vertical
+    planes in different directions, which hold the vertical that the walls of a drift
+    leave free along it; and a look-alike's panels, taken for another beacon, are as
+    vertical). The tilt is grown out from the sensor's height as in the 3D fix, with
+    the elevation held. None without such a beacon, where fewer than two of its panels
+    are shown, or where the tilt is held no better than :data:`REFINE_TILT_SIGMA_DEG`."""
+    if plan.ok and plan.pose is not None:
+        pose2d, beacons = plan.pose, plan.beacons
+    elif plan.verified and plan.verified[0].supported:
+        pose2d, beacons = plan.verified[0].pose, plan.verified[0].supported
+    else:
+        return None
+    R0 = rotation_rpy(0.0, 0.0, yaw_of_azimuth(pose2d.azimuth)) @ level_rotation(up)
+    pose = Pose3D.from_rotation(R0, (pose2d.easting, pose2d.northing, 0.0))
+    grid = pose.sensor_to_grid(frame.points)
+    empty = np.zeros(0, dtype=np.intp)
+    local = [
+        idx if planes.beacon[k] in beacons else empty
+        for k, idx in enumerate(planes.local(grid, NEAR_M))
+    ]
+    near, local = _gathered(local)
+    if near.size == 0:
+        return None
+    pts = frame.points[near]
+    lines = (
+        frame.ring[near].astype(np.intp)
+        if frame.ring is not None
+        else np.floor(pts[:, 2] / 0.1).astype(np.intp)
+    )
+    sig_r = cfg.range_sigma_m
+    gate = 4.0 * sig_r
+    spacing = ring_spacing(frame)
+    prior = (pose.pitch, pose.roll, math.radians(TILT_PRIOR_DEG))
+    adj: Adjustment3D | None = None
+    try:
+        for reach in REFINE_REACH_M:
+            grid = pose.sensor_to_grid(pts)
+            slack = 0.0 if adj is not None else reach * TILT_SLACK
+            which = planes.assign(
+                grid, pose.position, gate + slack, clear_m=gate, reach_m=reach, local=local
+            )
+            which = _contiguous(which, grid, pose.position, planes, spacing)
+            if len(_shown_panels(which, lines, planes, cfg)) < 2:
+                continue
+            adj = adjust_pose(
+                pts, which, planes, pose, range_sigma_m=sig_r, survey_sigma_m=cfg.survey_sigma_m,
+                gate_m=gate, elevation=False, tilt_prior=prior, snooping_rounds=0,
+            )  # fmt: skip
+            pose = adj.pose
+    except np.linalg.LinAlgError:
+        return None
+    if adj is None:
+        return None
+    sd = np.sqrt(np.diag(adj.covariance))
+    if max(sd[3], sd[4]) > math.radians(REFINE_TILT_SIGMA_DEG):
+        return None
+    return np.asarray(pose.rotation[2], dtype=np.float64)  # the grid's z in the sensor frame
 
 
 def _fix3d(
