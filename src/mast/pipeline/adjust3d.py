@@ -56,6 +56,9 @@ UNBRACKETED = 1e6
 #: four range sigmas: this is 2.5, which a hit's noise across the panel passes 99 % of
 #: the time).
 HIT_SHARE = 0.625
+#: How far rough rock may bulge from a beacon's wall towards its panels' planes near a
+#: free end, where a return on it may pass for a panel's top hit, metres.
+ROCK_M = 0.05
 #: A lidar beam's angular error (one sigma, radians): the height of a top edge's bracket
 #: ends is a ray's direction's, known to this times its range.
 BEAM_ANGLE_SIGMA = 5e-4
@@ -298,7 +301,10 @@ class PanelPlanes:
     ) -> NDArray[np.intp]:
         """Per panel, the rays (its :meth:`local` ones, where given) that cross it and
         do not fit it: crossing its plane well inside its plan extent (:meth:`inside`
-        the gate) between its lowest and highest hits, and returning from beyond the
+        the gate) between its lowest and highest hits twice the gate clear of a free end
+        (:meth:`inside`: near one the wall just below or above a panel is within the
+        gate of its plane, and one such return would open the window to rays that pass
+        under or over the panel), and returning from beyond the
         plane by more than the gate, or from in front of it by more than the gate but
         within three (nearer still, something stands in front of it). A panel where the
         pose puts it is hit by every such ray (a range noise beyond four sigmas aside);
@@ -308,13 +314,18 @@ class PanelPlanes:
         out = np.zeros(len(self), dtype=np.intp)
         near = local or self._everywhere(len(grid))
         for k in np.unique(which[which >= 0]):
-            _, _, mine = self.crossing(k, o, grid[which == k] - o)
+            _, along, mine = self.crossing(k, o, grid[which == k] - o)
+            lo, hi = self.inside(k, 2.0 * gate_m)  # clear of a free end's wall
+            mine = mine[(along > lo) & (along < hi)]
+            if mine.size == 0:
+                continue
+            low, high = float(mine.min()), float(mine.max())
             rel = grid[near[k]] - o
             reach = np.linalg.norm(rel, axis=1)
             s, t, z = self.crossing(k, o, rel)
             lo, hi = self.inside(k, gate_m, 0.05)
             off = (1.0 - s) * reach  # along the ray: > 0 beyond the plane
-            across = (t > lo) & (t < hi) & (z > mine.min()) & (z < mine.max()) & (s > 0)
+            across = (t > lo) & (t < hi) & (z > low) & (z < high) & (s > 0)
             out[k] = int(
                 np.count_nonzero(
                     across & ((off > gate_m) | (off < -gate_m) & (off > -3.0 * gate_m))
@@ -412,8 +423,9 @@ def _top_edges(
         n, d = planes.normal[k], planes.offset[k]
         # well inside: a ray just past a panel's side passes beside it, not over it; and
         # near a free end the wall just above the panel is within the gate of its plane
+        # (and rough rock bulges towards it by up to ROCK_M)
         inset = max(inset_m, 0.1 * planes.length[k])
-        lo, hi = planes.inside(k, gate_m, inset)
+        lo, hi = planes.inside(k, gate_m + ROCK_M, inset)
         # a hit well within the gate: the wall just above a panel, behind it by the
         # beacon's depth, may be within the gate, and is no hit
         s, t, _ = planes.crossing(k, origin, rel[on])
@@ -472,9 +484,10 @@ def _brackets(
     says ``top_k - crossing over < Z <= top_k - highest hit``; a beacon's panels are
     crossed by the same rings, so their brackets are one piece of evidence, and the
     elevation is in their intersection (where it is uniform, were the hits and
-    crossings exact). Per beacon: the middle, its variance (the uniform's, a width
-    closed where the pose's error crossed its ends, and the beams' angular error at
-    its ends) and the derivatives of its residual ``Z - middle`` by (E, N, A, pitch,
+    crossings exact). Per beacon: the middle, its variance (the uniform's over the
+    width, or where the ends crossed, over the gap between them: an empty
+    intersection is as uncertain as it is wide; and the beams' angular error at its
+    ends) and the derivatives of its residual ``Z - middle`` by (E, N, A, pitch,
     roll, Z) (through the two rays that set its ends; ``dR`` R's derivatives by yaw,
     pitch and roll). Heights are where the rays cross the panel's plane, the hit's
     too: a ray's direction carries no range noise. Different beacons are crossed by
@@ -496,7 +509,9 @@ def _brackets(
         d[5] = 1.0
         # the beams' angular error moves each end by it times the range to the crossing
         reach = BEAM_ANGLE_SIGMA * np.linalg.norm([sa * rel[a], sb * rel[b]], axis=1)
-        spread = max(highs[hi] - lows[lo], 0.0) ** 2 / 12.0 + 0.25 * float(reach @ reach)
+        # an empty intersection (a panel's hit above another's ray over: one of them is
+        # not what it is taken for, or the tilt is off) is as uncertain as it is wide
+        spread = (highs[hi] - lows[lo]) ** 2 / 12.0 + 0.25 * float(reach @ reach)
         out.append((float(middle), spread, d))
     return out
 
