@@ -115,3 +115,37 @@ def test_a_survey_without_elevations_is_refused_for_a_3d_frame() -> None:
     frame = cast(Pose3D.from_degrees(7.0, 7.0, 1.2, 0.0), walls, 0.01, 0)
     with pytest.raises(InputError, match="needs the survey's elevations"):
         locate3d(frame, flat)
+
+
+@pytest.mark.parametrize(("seed", "index"), [(4, 3), (6, 0), (7, 2), (0, 3)])
+def test_hard_64_ring_frames_are_fixed_within_their_covariance_or_refused(
+    seed: int, index: int
+) -> None:
+    # Frames that once got a confidently wrong fix: 4/3 an elevation 0.19 m and a pitch
+    # 1.2 deg off (the top cut alternating while the pose jumped), 6/0 a pitch 1.45 deg
+    # off, 7/2 an elevation 10 sigma off (rough rock by a free end taken for a top hit),
+    # 0/3 an elevation 25 sigma off (a bracket whose panels disagreed taken as exact).
+    scene = random_drift_scene(seed, frames=6, lidar="os1-64", range_sigma_m=0.02, lookalikes=True)
+    sim = scene.simulate(index)
+    fix = locate3d(
+        sim.frame, scene.survey, config=Locator3DConfig(range_sigma_m=0.02, survey_sigma_m=0.0)
+    )
+    if not fix.ok:
+        assert fix.reason in {"inconsistent", "one_beacon", "rejected", "degenerate_geometry"}
+        return
+    assert fix.pose is not None
+    assert fix.adjustment is not None
+    p, t = fix.pose, sim.pose
+    err = np.array(
+        [
+            p.easting - t.easting,
+            p.northing - t.northing,
+            p.elevation - t.elevation,
+            p.roll - t.roll,
+            p.pitch - t.pitch,
+            (p.azimuth - t.azimuth + math.pi) % (2 * math.pi) - math.pi,
+        ]
+    )
+    assert np.all(np.abs(err) < 4.5 * np.sqrt(np.diag(fix.adjustment.covariance))), err
+    assert np.linalg.norm(err[:3]) < 0.1, err
+    assert np.degrees(np.abs(err[3:])).max() < 1.0, err

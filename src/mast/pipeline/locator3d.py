@@ -99,6 +99,13 @@ MISFIT_SHARE = 0.01
 #: degrees (a plan view is smeared by a degree's error a metre up by 1.7 cm).
 REFINE_REACH_M = (0.5, 1.0, 1.5)
 REFINE_TILT_SIGMA_DEG = 1.0
+#: The adjustments with the top edges, each on the panels cut again at the tops the last
+#: one put, until the cut holds; a fix whose cut still changes after these, and whose
+#: last adjustment moved a parameter by more than SETTLE_SIGMAS of its sigma, is refused
+#: (a few returns at a cut's edge may go in and out for ever; a pose that jumps does
+#: not know where it is).
+ELEVATION_ROUNDS = 5
+SETTLE_SIGMAS = 2.0
 #: How far about a panel, in plan, the lowest returns are its floor, metres.
 FLOOR_RADIUS_M = 2.0
 #: The plan view's tilt error in a return's place, for the first look, metres.
@@ -237,6 +244,22 @@ def _contiguous(
         out[mine[order[:lo]]] = -1
         out[mine[order[hi:]]] = -1
     return out
+
+
+def _moved(before: Pose3D, after: Pose3D, covariance: NDArray[np.float64]) -> NDArray[np.float64]:
+    """How far ``after`` is from ``before`` in each parameter (record order), in sigmas of
+    ``covariance``."""
+    d = np.array(
+        [
+            after.easting - before.easting,
+            after.northing - before.northing,
+            after.elevation - before.elevation,
+            after.roll - before.roll,
+            after.pitch - before.pitch,
+            (after.azimuth - before.azimuth + math.pi) % (2 * math.pi) - math.pi,
+        ]
+    )
+    return np.asarray(np.abs(d) / np.sqrt(np.diag(covariance)), dtype=np.float64)
 
 
 def _gathered(
@@ -501,14 +524,21 @@ def _fix3d(
             return refused("one_beacon", _too_few(_shown(which, lines, planes, cfg), cfg))
         # the elevation last, from the top edges of panels the tilt now holds; the
         # panels cut again at the adjusted tops, until the assignment holds
-        for last in range(4):
+        held = False  # the assignment the last adjustment ran on holds at its pose
+        moved = np.zeros(6)  # the last adjustment's move from the one before, in sigmas
+        for _ in range(ELEVATION_ROUNDS):
+            before, bracketed = pose, adj is not None and adj.top_edges > 0
             adj = adjust_pose(
                 pts, which, planes, pose, range_sigma_m=sig_r, survey_sigma_m=sig_s,
                 gate_m=gate, lines=lines, tilt_prior=prior, local=local,
                 top_panels=_shown_panels(which, lines, planes, cfg),
             )  # fmt: skip
             pose = adj.pose
-            if not adj.top_edges or last == 3:
+            moved = _moved(before, pose, adj.covariance)
+            if not (bracketed and adj.top_edges):
+                moved[2] = 0.0  # an elevation not observed in both is not compared
+            if not adj.top_edges:
+                held = True
                 break
             grid = pose.sensor_to_grid(pts)
             margin = max(2.0 * math.sqrt(adj.covariance[2, 2]), 2.0 * sig_r)
@@ -519,6 +549,7 @@ def _fix3d(
             )  # fmt: skip
             again = _contiguous(again, grid, pose.position, planes, spacing)
             if np.array_equal(again, which):
+                held = True
                 break
             which = again
             if len(_shown(which, lines, planes, cfg)) < 2:
@@ -530,6 +561,14 @@ def _fix3d(
     beacons = _shown(which, lines, planes, cfg)
     if len(beacons) < 2:
         return refused("one_beacon", _too_few(beacons, cfg), adj)
+    if not held and float(np.max(moved)) > SETTLE_SIGMAS:
+        return refused(
+            "inconsistent",
+            f"the panels' returns, cut again at the adjusted tops, still change after "
+            f"{ELEVATION_ROUNDS} adjustments, and the last moved the pose by "
+            f"{float(np.max(moved)):.1f} sigma: the elevation and the tilt do not settle",
+            adj,
+        )
     if not adj.settled:
         return refused(
             "inconsistent",
