@@ -32,6 +32,7 @@ elevation is its top end). Two kinds of evidence, each from the frame alone:
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -439,25 +440,36 @@ def _top_edges(
     return found
 
 
-def _height_gradient(
-    point: NDArray[np.float64],
+def _height_gradients(
+    points: NDArray[np.float64],
     rel: NDArray[np.float64],
-    s: float,
+    s: NDArray[np.float64],
     normal: NDArray[np.float64],
     dR: tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]],
 ) -> NDArray[np.float64]:
-    """How the height ``h = s rel_z`` at which a ray (its return ``point`` in the sensor
-    frame, ``rel`` in the grid's axes from the sensor) crosses a vertical plane of
-    horizontal ``normal`` changes with (E, N, A, pitch, roll, Z): ``s`` is the plane's
-    distance over the ray's, so moving the sensor or turning the ray moves it too."""
-    across = float(rel[:2] @ normal)
-    g = np.zeros(6)
-    g[:2] = -rel[2] * normal / across
+    """How the height ``h = s rel_z`` at which each ray (its return ``points`` (r, 3) in
+    the sensor frame, ``rel`` (r, 3) in the grid's axes from the sensor) crosses a
+    vertical plane of horizontal ``normal`` (r, 2) changes with (E, N, A, pitch, roll,
+    Z), (r, 6): ``s`` (r,) is the plane's distance over the ray's, so moving the sensor
+    or turning the ray moves it too."""
+    across = rel[:, 0] * normal[:, 0] + rel[:, 1] * normal[:, 1]
+    g = np.zeros((len(points), 6))
+    g[:, :2] = -(rel[:, 2] / across)[:, None] * normal
     for j, dRj in zip((2, 3, 4), dR, strict=True):
-        turn = dRj @ point
-        g[j] = s * turn[2] - s * rel[2] * float(turn[:2] @ normal) / across
-    g[2] = -g[2]  # d yaw / d A = -1
+        turn = points @ dRj.T
+        sideways = turn[:, 0] * normal[:, 0] + turn[:, 1] * normal[:, 1]
+        g[:, j] = s * turn[:, 2] - s * rel[:, 2] * sideways / across
+    g[:, 2] = -g[:, 2]  # d yaw / d A = -1
     return g
+
+
+@functools.lru_cache(maxsize=32)
+def _beacon_groups(beacon: tuple[str, ...]) -> tuple[tuple[str, ...], NDArray[np.intp]]:
+    """The beacons' names, sorted, and each panel's beacon as an index into them."""
+    names = tuple(sorted(set(beacon)))
+    number = np.array([names.index(b) for b in beacon], dtype=np.intp)
+    number.flags.writeable = False
+    return names, number
 
 
 def _brackets(
@@ -480,25 +492,37 @@ def _brackets(
     too: a ray's direction carries no range noise. Different beacons are crossed by
     different rings at different ranges: their brackets are independent observations
     (intersecting them too would let a tilt's error cross their ends)."""
-    out = []
-    for beacon in sorted({planes.beacon[k] for k, *_ in tops}):
-        mine = [(k, a, b, *planes.crossing(k, origin, rel[[a, b]])[0]) for k, a, b in tops
-                if planes.beacon[k] == beacon]  # fmt: skip
-        lows = [planes.top[k] - sb * rel[b, 2] for k, _, b, _, sb in mine]
-        highs = [planes.top[k] - sa * rel[a, 2] for k, a, _, sa, _ in mine]
-        lo, hi = int(np.argmax(lows)), int(np.argmin(highs))
-        _, a, _, sa, _ = mine[hi]
-        _, _, b, _, sb = mine[lo]
-        middle = 0.5 * (lows[lo] + highs[hi])
-        k_a, k_b = mine[hi][0], mine[lo][0]
-        d = 0.5 * (_height_gradient(p[a], rel[a], sa, planes.normal[k_a], dR))
-        d += 0.5 * (_height_gradient(p[b], rel[b], sb, planes.normal[k_b], dR))
-        d[5] = 1.0
-        # the beams' angular error moves each end by it times the range to the crossing
-        reach = BEAM_ANGLE_SIGMA * np.linalg.norm([sa * rel[a], sb * rel[b]], axis=1)
-        spread = max(highs[hi] - lows[lo], 0.0) ** 2 / 12.0 + 0.25 * float(reach @ reach)
-        out.append((float(middle), spread, d))
-    return out
+    if not tops:
+        return []
+    k, a, b = (np.array(column, dtype=np.intp) for column in zip(*tops, strict=True))
+    n = planes.normal[k]
+    plane = planes.offset[k] - (origin[0] * n[:, 0] + origin[1] * n[:, 1])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        sa = plane / (rel[a, 0] * n[:, 0] + rel[a, 1] * n[:, 1])
+        sb = plane / (rel[b, 0] * n[:, 0] + rel[b, 1] * n[:, 1])
+    lows = planes.top[k] - sb * rel[b, 2]
+    highs = planes.top[k] - sa * rel[a, 2]
+    _, number = _beacon_groups(planes.beacon)
+    group = number[k]
+    ends_lo, ends_hi = [], []  # per beacon, in name order: the tops setting its ends
+    for g in np.unique(group):
+        mine = np.flatnonzero(group == g)
+        ends_lo.append(mine[np.argmax(lows[mine])])
+        ends_hi.append(mine[np.argmin(highs[mine])])
+    lo, hi = np.array(ends_lo), np.array(ends_hi)
+    ray = np.concatenate([a[hi], b[lo]])
+    s = np.concatenate([sa[hi], sb[lo]])
+    grad = _height_gradients(p[ray], rel[ray], s, planes.normal[k[np.concatenate([hi, lo])]], dR)
+    half = len(hi)
+    d = 0.5 * grad[:half]
+    d += 0.5 * grad[half:]
+    d[:, 5] = 1.0
+    middle = 0.5 * (lows[lo] + highs[hi])
+    # the beams' angular error moves each end by it times the range to the crossing
+    reach = BEAM_ANGLE_SIGMA * np.linalg.norm(s[:, None] * rel[ray], axis=1)
+    width = np.maximum(highs[hi] - lows[lo], 0.0)
+    spread = width**2 / 12.0 + 0.25 * (reach[:half] ** 2 + reach[half:] ** 2)
+    return [(float(middle[i]), float(spread[i]), d[i]) for i in range(half)]
 
 
 @dataclass(slots=True)
@@ -535,47 +559,69 @@ def _solve(
     pts, k_of = p[mine], which[mine]
     n_k, d_k = planes.normal[k_of], planes.offset[k_of]
     ray = pts / np.linalg.norm(pts, axis=1)[:, None]
+    # n · (M q)[:2] for a 3×3 M is [n_x q, n_y q] · [M[0], M[1]]: the returns (and
+    # their rays) weighed by their normals once, each iteration's residuals, their
+    # derivatives by the three angles and the incidences are one product
+    weighed = np.hstack([n_k[:, :1] * pts, n_k[:, 1:] * pts, n_k[:, :1] * ray, n_k[:, 1:] * ray])
+    rotations = np.zeros((12, 5))
+    J = np.zeros((len(pts), 6))
+    J[:, :2] = n_k
     x = x0.copy()
     done = 0
+    rows = np.zeros(0, dtype=np.intp)  # the returns the top edges' rays are
+    picked: list[tuple[int, int, int]] = []  # the top edges, as rows' indices
     while True:
         done += 1
         R, dR_roll, dR_pitch, dR_yaw = _derivatives(x[4], x[3], yaw_of_azimuth(x[2]))
-        g = pts @ R.T
-        v = np.einsum("ij,ij->i", n_k, g[:, :2] + x[:2]) - d_k
-        J = np.zeros((len(pts), 6))
-        J[:, 0], J[:, 1] = n_k[:, 0], n_k[:, 1]
-        J[:, 2] = -np.einsum("ij,ij->i", n_k, (pts @ dR_yaw.T)[:, :2])  # d yaw / d A = -1
-        J[:, 3] = np.einsum("ij,ij->i", n_k, (pts @ dR_pitch.T)[:, :2])
-        J[:, 4] = np.einsum("ij,ij->i", n_k, (pts @ dR_roll.T)[:, :2])
+        for j, M in enumerate((R, dR_yaw, dR_pitch, dR_roll)):
+            rotations[:6, j] = M[:2].ravel()
+        rotations[6:, 4] = R[:2].ravel()
+        product = weighed @ rotations
+        v = product[:, 0] + (n_k @ x[:2] - d_k)
+        J[:, 2] = -product[:, 1]  # d yaw / d A = -1
+        J[:, 3], J[:, 4] = product[:, 2], product[:, 3]
         # the range noise along the ray, seen across the panel
-        cos_inc = np.abs(np.einsum("ij,ij->i", n_k, (ray @ R.T)[:, :2]))
+        cos_inc = np.abs(product[:, 4])
         W = 1.0 / np.maximum(range_sigma_m * cos_inc, 1e-3 * range_sigma_m) ** 2
-        rel = p @ R.T
         origin = np.array([x[0], x[1], x[5]])
         if tops is None:
+            rel = p @ R.T
             tops = _top_edges(rel + origin, rel, which, origin, planes, gate_m, local)
             tops = [
                 top
                 for top in tops
                 if planes.beacon[top[0]] not in skip and (panels is None or top[0] in panels)
             ]
+        if tops and not picked:  # only the top edges' rays are turned each iteration
+            rows, at = np.unique([r for _, a, b in tops for r in (a, b)], return_inverse=True)
+            picked = [(k, int(at[2 * i]), int(at[2 * i + 1])) for i, (k, _, _) in enumerate(tops)]
+        Jx, vx, Wx = [J], [v], [W]
         if tops:
-            seen = _brackets(tops, p, rel, origin, planes, (dR_yaw, dR_pitch, dR_roll))
-            J = np.vstack([J, [dz for _, _, dz in seen]])
-            v = np.concatenate([v, [x[5] - middle for middle, _, _ in seen]])
-            W = np.concatenate([W, [1.0 / (sp + survey_sigma_m**2) for _, sp, _ in seen]])
+            seen = _brackets(
+                picked, p[rows], p[rows] @ R.T, origin, planes, (dR_yaw, dR_pitch, dR_roll)
+            )
+            Jx.append(np.array([dz for _, _, dz in seen]))
+            vx.append(np.array([x[5] - middle for middle, _, _ in seen]))
+            Wx.append(np.array([1.0 / (sp + survey_sigma_m**2) for _, sp, _ in seen]))
         if tilt_prior is not None:  # the walls' vertical, as two observations
             pitch0, roll0, sd = tilt_prior
-            J = np.vstack([J, [[0.0, 0.0, 0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 0.0, 0.0, 1.0, 0.0]]])
-            v = np.concatenate([v, [x[3] - pitch0, x[4] - roll0]])
-            W = np.concatenate([W, [sd**-2, sd**-2]])
-        N = J.T @ (W[:, None] * J)
+            Jx.append(_TILT_ROWS)
+            vx.append(np.array([x[3] - pitch0, x[4] - roll0]))
+            Wx.append(np.array([sd**-2, sd**-2]))
+        Jt, vt, Wt = (np.concatenate(parts) for parts in (Jx, vx, Wx))
+        N = Jt.T @ (Wt[:, None] * Jt)
         if not tops:
             N[5, 5] += 1.0 / UNBRACKETED  # the elevation unobserved: kept, with no weight
-        step = np.linalg.solve(N, -(J.T @ (W * v)))
+        step = np.linalg.solve(N, -(Jt.T @ (Wt * vt)))
         x += step
-        if done >= iterations or np.all(np.abs(step) < [1e-7, 1e-7, 1e-9, 1e-9, 1e-9, 1e-7]):
-            return _Solved(x, J, W, v, N, len(pts), tops, done)
+        if done >= iterations or np.all(np.abs(step) < _CONVERGED):
+            return _Solved(x, Jt, Wt, vt, N, len(pts), tops, done)
+
+
+#: The tilt prior's two rows of the design matrix (pitch, roll).
+_TILT_ROWS = np.array([[0.0, 0.0, 0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 0.0, 0.0, 1.0, 0.0]])
+#: Steps below these end the Gauss-Newton iterations (E, N, A, pitch, roll, Z).
+_CONVERGED = np.array([1e-7, 1e-7, 1e-9, 1e-9, 1e-9, 1e-7])
 
 
 def _failed_bracket(solved: _Solved, planes: PanelPlanes) -> str | None:
@@ -617,8 +663,10 @@ def _snoop_pieces(
         xy = p[on] @ R[:2].T + solved.x[:2]
         t = np.einsum("ij,ij->i", xy - planes.start[k], planes.along[k]) / planes.length[k]
         quarter = np.clip(np.floor(4.0 * t), 0, 3).astype(np.intp)
-        _, piece = np.unique(np.stack([k, lines[on], quarter]), axis=1, return_inverse=True)
-        piece = piece.reshape(-1)
+        # the pieces in the order of (panel, line, quarter), as one key each
+        line = lines[on] - lines[on].min(initial=0)
+        key = (k * (int(line.max(initial=0)) + 1) + line) * 4 + quarter
+        _, piece = np.unique(key, return_inverse=True)
         r = solved.v[: solved.n_points] * np.sqrt(solved.W[: solved.n_points])
         count = np.bincount(piece)
         mean = np.bincount(piece, weights=r) / np.sqrt(count)
@@ -730,10 +778,10 @@ def adjust_pose(
     s0 = float(W[:n_points] @ (v[:n_points] ** 2)) / dof if dof > 0 else math.nan
     # The survey's error is one offset per panel, shared by all its returns.
     G = Q @ (J.T * W)
-    cov = Q.copy()
-    for k in np.unique(k_of):
-        g = G[:, :n_points][:, k_of == k].sum(axis=1)
-        cov += survey_sigma_m**2 * np.outer(g, g)
+    shared = np.zeros((n_points, len(planes)))
+    shared[np.arange(n_points), k_of] = 1.0
+    g = G[:, :n_points] @ shared  # (6, panels): each panel's offset's effect
+    cov = Q + survey_sigma_m**2 * (g @ g.T)
     # (E, N, A, pitch, roll, Z) → (E, N, Z, roll, pitch, A)
     order = [0, 1, 5, 4, 3, 2]
     pose = Pose3D(x[0], x[1], x[5], normalize_azimuth(x[2]), x[3], x[4])
