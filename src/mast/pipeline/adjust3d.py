@@ -34,7 +34,7 @@ from __future__ import annotations
 
 import functools
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -169,33 +169,50 @@ class PanelPlanes:
           sensor's height (a tilt's error moves a return by its height times it);
         * within the gate of no other panel's plane, and nearer the panel's plane than
           its beacon's wall (:attr:`wall`)."""
-        clear = 2.0 * gate_m if clear_m is None else clear_m
         o = np.asarray(origin, dtype=float).reshape(3)
+        rays = self._rays(grid - o, o, local or self._everywhere(len(grid)))
+        return self._assign(
+            rays, grid, gate_m, top_margin_m=top_margin_m, clear_m=clear_m, bottoms=bottoms,
+            reach_m=reach_m, ceilings=ceilings,
+        )  # fmt: skip
+
+    def _assign(
+        self,
+        rays: _Rays,
+        grid: NDArray[np.float64],
+        gate_m: float,
+        *,
+        top_margin_m: float = math.inf,
+        clear_m: float | None = None,
+        bottoms: NDArray[np.float64] | None = None,
+        reach_m: float = math.inf,
+        ceilings: NDArray[np.float64] | None = None,
+    ) -> NDArray[np.intp]:
+        """:meth:`assign` on the pairs of returns and panels of ``rays``."""
+        clear = 2.0 * gate_m if clear_m is None else clear_m
+        k, i, s, t, z = rays.k, rays.i, rays.s, rays.t, rays.z
+        # how far along its ray the return lies from the plane: its range error, were
+        # it on the panel (a gate on it keeps both signs of the noise alike)
+        off = np.abs(1.0 - s) * rays.reach[i]
+        lo, hi = self._inside_all(clear)
+        on = (off < gate_m) & (t > lo[k]) & (t < hi[k]) & (s > 0)
+        if math.isfinite(reach_m):
+            on &= np.abs(z - rays.origin[2]) <= reach_m
+        # each panel's highest and lowest crossing allowed (infinite: none)
+        cap = np.full(len(self), math.inf)
+        if math.isfinite(top_margin_m):
+            cap = np.where(np.isfinite(self.top), self.top + top_margin_m, math.inf)
+        if ceilings is not None:
+            cap = np.minimum(cap, np.where(np.isfinite(ceilings), ceilings, math.inf))
+        if np.isfinite(cap).any():
+            on &= z <= cap[k]
+        if bottoms is not None:
+            floor = np.where(np.isfinite(bottoms), bottoms, -math.inf)
+            on &= z >= floor[k]
         which = np.full(len(grid), -1, dtype=np.intp)
-        best = np.full(len(grid), gate_m)
-        claims = np.zeros(len(grid), dtype=np.intp)
-        for k, idx in enumerate(local or self._everywhere(len(grid))):
-            if idx.size == 0:
-                continue
-            rel = grid[idx] - o
-            s, t, z = self.crossing(k, o, rel)
-            # how far along its ray the return lies from the plane: its range error,
-            # were it on the panel (a gate on it keeps both signs of the noise alike)
-            off = np.abs(1.0 - s) * np.linalg.norm(rel, axis=1)
-            lo, hi = self.inside(k, clear)
-            on = (off < gate_m) & (t > lo) & (t < hi) & (s > 0)
-            if math.isfinite(reach_m):
-                on &= np.abs(z - o[2]) <= reach_m
-            if math.isfinite(self.top[k]) and math.isfinite(top_margin_m):
-                on &= z <= self.top[k] + top_margin_m
-            if bottoms is not None and math.isfinite(bottoms[k]):
-                on &= z >= bottoms[k]
-            if ceilings is not None and math.isfinite(ceilings[k]):
-                on &= z <= ceilings[k]
-            claims[idx] += on
-            closer = on & (off < best[idx])
-            which[idx[closer]], best[idx[closer]] = k, off[closer]
-        which[claims > 1] = -1  # near a joint, within the gate of two panels: neither's
+        which[i[on]] = k[on]
+        # near a joint, within the gate of two panels: neither's
+        which[np.bincount(i[on], minlength=len(grid)) > 1] = -1
         mine = np.flatnonzero(which >= 0)  # nearer its beacon's wall than it: the wall's
         ks, xy = which[mine], grid[mine, :2]
         wall = self.wall[ks]
@@ -203,6 +220,45 @@ class PanelPlanes:
         to_panel = np.abs(np.einsum("ij,ij->i", xy, self.normal[ks]) - self.offset[ks])
         which[mine[to_wall < to_panel]] = -1
         return which
+
+    def _rays(
+        self,
+        rel: NDArray[np.float64],
+        origin: NDArray[np.float64],
+        lists: Sequence[NDArray[np.intp]],
+    ) -> _Rays:
+        """The rays from ``origin`` to the returns ``origin + rel`` (n, 3), each return
+        paired with the panels whose ``lists`` (one per panel) name it, and where each
+        pair's ray crosses its panel's plane (as :meth:`crossing`)."""
+        o = np.asarray(origin, dtype=float).reshape(3)
+        i = np.concatenate(lists).astype(np.intp) if len(lists) else np.zeros(0, np.intp)
+        k = np.repeat(np.arange(len(lists), dtype=np.intp), [len(idx) for idx in lists])
+        n = self.normal[k]
+        r = rel[i]
+        plane = (self.offset - self.normal @ o[:2])[k]
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            s = plane / (r[:, 0] * n[:, 0] + r[:, 1] * n[:, 1])
+            x, y, z = o[0] + s * r[:, 0], o[1] + s * r[:, 1], o[2] + s * r[:, 2]
+            start, along = self.start[k], self.along[k]
+            t = (x - start[:, 0]) * along[:, 0] + (y - start[:, 1]) * along[:, 1]
+        return _Rays(o, rel, np.linalg.norm(rel, axis=1), i, k, s, t, z)
+
+    def _own(self, rays: _Rays, which: NDArray[np.intp]) -> tuple[_Rays, NDArray[np.intp]]:
+        """Rays holding each return ``which`` gives a panel paired with that panel
+        (``rays`` where it does), and those pairs (grouped by panel)."""
+        j = np.flatnonzero(rays.k == which[rays.i])
+        if j.size != np.count_nonzero(which >= 0):
+            rays = self._rays(rays.rel, rays.origin, _panel_lists(which, len(self)))
+            j = np.arange(len(rays.k))
+        return rays, j
+
+    def _inside_all(
+        self, clear_m: float, least_m: float | NDArray[np.float64] = 0.0
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """:meth:`inside` for every panel at once (``least_m`` one or one per panel)."""
+        lo = np.maximum(least_m, clear_m / np.maximum(self.wall_sine[:, 0], 0.2))
+        hi = self.length - np.maximum(least_m, clear_m / np.maximum(self.wall_sine[:, 1], 0.2))
+        return lo, hi
 
     def __len__(self) -> int:
         return len(self.beacon)
@@ -283,11 +339,16 @@ class PanelPlanes:
         above a panel (behind it by the beacon's depth) is no hit, and no ray crosses
         the panel between its highest hit and its top."""
         o = np.asarray(origin, dtype=float).reshape(3)
-        out = np.full(len(self), np.nan)
-        for k in np.unique(which[which >= 0]):
-            _, _, z = self.crossing(k, o, grid[which == k] - o)
-            out[k] = float(z.max()) + margin_m
-        return out
+        return self._ceilings(
+            self._rays(grid - o, o, _panel_lists(which, len(self))), which, margin_m
+        )
+
+    def _ceilings(
+        self, rays: _Rays, which: NDArray[np.intp], margin_m: float
+    ) -> NDArray[np.float64]:
+        """:meth:`ceilings` with the crossings of ``rays``."""
+        rays, j = self._own(rays, which)
+        return _per_panel(rays.k[j], rays.z[j], len(self), np.maximum, np.nan) + margin_m
 
     def misfits(
         self,
@@ -306,22 +367,20 @@ class PanelPlanes:
         a panel put where it is not is seen through, and one put tilted is missed at its
         top or bottom (the beam verification of 2D, in 3D)."""
         o = np.asarray(origin, dtype=float).reshape(3)
-        out = np.zeros(len(self), dtype=np.intp)
-        near = local or self._everywhere(len(grid))
-        for k in np.unique(which[which >= 0]):
-            _, _, mine = self.crossing(k, o, grid[which == k] - o)
-            rel = grid[near[k]] - o
-            reach = np.linalg.norm(rel, axis=1)
-            s, t, z = self.crossing(k, o, rel)
-            lo, hi = self.inside(k, gate_m, 0.05)
-            off = (1.0 - s) * reach  # along the ray: > 0 beyond the plane
-            across = (t > lo) & (t < hi) & (z > mine.min()) & (z < mine.max()) & (s > 0)
-            out[k] = int(
-                np.count_nonzero(
-                    across & ((off > gate_m) | (off < -gate_m) & (off > -3.0 * gate_m))
-                )
-            )
-        return out
+        rays = self._rays(grid - o, o, local or self._everywhere(len(grid)))
+        return self._misfits(rays, which, gate_m)
+
+    def _misfits(self, rays: _Rays, which: NDArray[np.intp], gate_m: float) -> NDArray[np.intp]:
+        """:meth:`misfits` with the crossings of ``rays``."""
+        own, j = self._own(rays, which)
+        low = _per_panel(own.k[j], own.z[j], len(self), np.minimum, math.inf)
+        high = _per_panel(own.k[j], own.z[j], len(self), np.maximum, -math.inf)
+        k, s, t, z = rays.k, rays.s, rays.t, rays.z
+        lo, hi = self._inside_all(gate_m, 0.05)
+        off = (1.0 - s) * rays.reach[rays.i]  # along the ray: > 0 beyond the plane
+        across = (t > lo[k]) & (t < hi[k]) & (z > low[k]) & (z < high[k]) & (s > 0)
+        bad = across & ((off > gate_m) | (off < -gate_m) & (off > -3.0 * gate_m))
+        return np.bincount(k[bad], minlength=len(self)).astype(np.intp)
 
     def bottoms(
         self,
@@ -335,15 +394,60 @@ class PanelPlanes:
         panel without returns there. Near a free end the wall below a panel is within
         the gate of its plane; below this it is not taken for the panel."""
         o = np.asarray(origin, dtype=float).reshape(3)
-        out = np.full(len(self), np.nan)
-        for k in np.unique(which[which >= 0]):
-            mine = grid[which == k]
-            t = (mine[:, :2] - self.start[k]) @ self.along[k]
-            mid = np.abs(t - self.length[k] / 2) < self.length[k] / 4
-            if mid.any():
-                _, _, z = self.crossing(k, o, mine[mid] - o)
-                out[k] = float(z.min()) - margin_m
-        return out
+        rays = self._rays(grid - o, o, _panel_lists(which, len(self)))
+        return self._bottoms(rays, grid, which, margin_m)
+
+    def _bottoms(
+        self, rays: _Rays, grid: NDArray[np.float64], which: NDArray[np.intp], margin_m: float
+    ) -> NDArray[np.float64]:
+        """:meth:`bottoms` with the crossings of ``rays``."""
+        rays, j = self._own(rays, which)
+        k, i = rays.k[j], rays.i[j]
+        start, along = self.start[k], self.along[k]
+        t = (grid[i, 0] - start[:, 0]) * along[:, 0] + (grid[i, 1] - start[:, 1]) * along[:, 1]
+        mid = np.abs(t - self.length[k] / 2) < self.length[k] / 4
+        return _per_panel(k[mid], rays.z[j[mid]], len(self), np.minimum, np.nan) - margin_m
+
+
+@dataclass(frozen=True, slots=True)
+class _Rays:
+    """The rays from the sensor at ``origin`` to returns ``origin + rel`` (n, 3), of
+    range ``reach`` (n,), each paired with the panels it is looked at for: pair j is
+    return ``i[j]`` and panel ``k[j]``, grouped by panel; ``s``, ``t`` and ``z`` where
+    each pair's ray crosses its panel's plane (:meth:`PanelPlanes.crossing`). One pose's
+    crossings, for all that looks at them."""
+
+    origin: NDArray[np.float64]
+    rel: NDArray[np.float64]
+    reach: NDArray[np.float64]
+    i: NDArray[np.intp]
+    k: NDArray[np.intp]
+    s: NDArray[np.float64]
+    t: NDArray[np.float64]
+    z: NDArray[np.float64]
+
+
+def _panel_lists(which: NDArray[np.intp], panels: int) -> list[NDArray[np.intp]]:
+    """Per panel, the returns ``which`` gives it, in their order."""
+    order = np.argsort(which, kind="stable")
+    ends = np.searchsorted(which[order], np.arange(panels + 1) - 0.5)
+    return [order[ends[k] : ends[k + 1]] for k in range(panels)]
+
+
+def _per_panel(
+    k: NDArray[np.intp],
+    values: NDArray[np.float64],
+    panels: int,
+    reduce: np.ufunc,
+    empty: float,
+) -> NDArray[np.float64]:
+    """``reduce`` (np.minimum, np.maximum) of ``values`` per panel ``k`` (grouped by
+    panel), ``empty`` for a panel with none."""
+    out = np.full(panels, empty)
+    if k.size:
+        first = np.flatnonzero(np.concatenate([[True], k[1:] != k[:-1]]))
+        out[k[first]] = reduce.reduceat(values, first)
+    return out
 
 
 @dataclass(frozen=True, slots=True)
@@ -395,49 +499,54 @@ def _top_edges(
     gate_m: float,
     local: list[NDArray[np.intp]] | None = None,
     inset_m: float = 0.05,
+    rays: _Rays | None = None,
 ) -> list[tuple[int, int, int]]:
     """For each panel with a top, both hit and passed over inside its plan extent: the
     panel, its highest hit and its lowest crossing over (above that hit: a ray
     crossing under the panel is no evidence of its top), heights where the rays cross
     the panel's plane. ``grid`` the returns in the grid, ``rel`` the same relative to the
     sensor origin ``origin``; the rays over a panel are looked for among its ``local``
-    ones (:meth:`PanelPlanes.local`), where given."""
-    found = []
-    near = local or planes._everywhere(len(grid))
-    for k in range(len(planes)):
-        if not math.isfinite(planes.top[k]):
-            continue
-        on = np.flatnonzero(which == k)
-        if on.size == 0:
-            continue
-        n, d = planes.normal[k], planes.offset[k]
-        # well inside: a ray just past a panel's side passes beside it, not over it; and
-        # near a free end the wall just above the panel is within the gate of its plane
-        inset = max(inset_m, 0.1 * planes.length[k])
-        lo, hi = planes.inside(k, gate_m, inset)
-        # a hit well within the gate: the wall just above a panel, behind it by the
-        # beacon's depth, may be within the gate, and is no hit
-        s, t, _ = planes.crossing(k, origin, rel[on])
-        across = grid[on, :2] @ n - d
-        close = (np.abs(across) <= HIT_SHARE * gate_m) & (t > lo) & (t < hi)
-        if not close.any():
-            continue
-        height = np.where(close, s * rel[on, 2], -np.inf)
-        a = int(on[np.argmax(height)])
-        top = float(height.max())
-        idx = near[k]
-        s, t, _ = planes.crossing(k, origin, rel[idx])  # s: where each ray crosses, 0..1
-        across = grid[idx, :2] @ n - d
-        side = float(origin[:2] @ n - d)
-        over = (s > 0) & (s < 1) & (t > inset) & (t < planes.length[k] - inset)
-        over &= (across * side < 0) & (np.abs(across) >= gate_m)
-        over &= s * rel[idx, 2] > top
-        if not over.any():
-            continue
-        above = np.flatnonzero(over)
-        b = int(idx[above[np.argmin(s[above] * rel[idx[above], 2])]])
-        found.append((k, a, b))
-    return found
+    ones (:meth:`PanelPlanes.local`), where given, or the pairs of ``rays`` (``rel``
+    from ``origin``), where given."""
+    if rays is None:
+        rays = planes._rays(rel, origin, local or planes._everywhere(len(grid)))
+    own, j = planes._own(rays, which)
+    n, d = planes.normal, planes.offset
+    # well inside: a ray just past a panel's side passes beside it, not over it; and
+    # near a free end the wall just above the panel is within the gate of its plane
+    inset = np.maximum(inset_m, 0.1 * planes.length)
+    lo, hi = planes._inside_all(gate_m, inset)
+    # a hit well within the gate: the wall just above a panel, behind it by the
+    # beacon's depth, may be within the gate, and is no hit
+    k, i, t = own.k[j], own.i[j], own.t[j]
+    across = grid[i, 0] * n[k, 0] + grid[i, 1] * n[k, 1] - d[k]
+    close = (np.abs(across) <= HIT_SHARE * gate_m) & (t > lo[k]) & (t < hi[k])
+    close &= np.isfinite(planes.top[k])
+    c = np.flatnonzero(close)
+    if c.size == 0:
+        return []
+    height = own.s[j[c]] * rel[i[c], 2]
+    # each panel's highest hit (the first return of them at a tie)
+    order = np.lexsort((i[c], -height, k[c]))
+    first = order[np.concatenate([[True], k[c[order[1:]]] != k[c[order[:-1]]]])]
+    hit = np.full(len(planes), math.inf)
+    hit[k[c[first]]] = height[first]
+    ray_of = np.full(len(planes), -1, dtype=np.intp)
+    ray_of[k[c[first]]] = i[c[first]]
+    # each such panel's lowest crossing over (s: where each ray crosses, 0..1), above
+    # its highest hit, the first of them at a tie
+    k, i, s, t = rays.k, rays.i, rays.s, rays.t
+    across = grid[i, 0] * n[k, 0] + grid[i, 1] * n[k, 1] - d[k]
+    side = origin[0] * n[:, 0] + origin[1] * n[:, 1] - d
+    over = (s > 0) & (s < 1) & (t > inset[k]) & (t < planes.length[k] - inset[k])
+    over &= (across * side[k] < 0) & (np.abs(across) >= gate_m)
+    over &= s * rel[i, 2] > hit[k]
+    c = np.flatnonzero(over)
+    order = np.lexsort((s[c] * rel[i[c], 2], k[c]))
+    first = (
+        order[np.concatenate([[True], k[c[order[1:]]] != k[c[order[:-1]]]])] if c.size else order
+    )
+    return [(int(k[c[f]]), int(ray_of[k[c[f]]]), int(i[c[f]])) for f in first]
 
 
 def _height_gradients(
