@@ -221,27 +221,35 @@ class PanelPlanes:
         which[mine[to_wall < to_panel]] = -1
         return which
 
+    def _pairs(self, lists: Sequence[NDArray[np.intp]]) -> _Pairs:
+        """Each return paired with the panels whose ``lists`` (one per panel) name it."""
+        i = np.concatenate(lists).astype(np.intp) if len(lists) else np.zeros(0, np.intp)
+        k = np.repeat(np.arange(len(lists), dtype=np.intp), [len(idx) for idx in lists])
+        return _Pairs(i, k, self.normal[k].T.copy(), self.along[k].T.copy())
+
     def _rays(
         self,
         rel: NDArray[np.float64],
         origin: NDArray[np.float64],
-        lists: Sequence[NDArray[np.intp]],
+        pairs: _Pairs | Sequence[NDArray[np.intp]],
     ) -> _Rays:
         """The rays from ``origin`` to the returns ``origin + rel`` (n, 3), each return
-        paired with the panels whose ``lists`` (one per panel) name it, and where each
-        pair's ray crosses its panel's plane (as :meth:`crossing`)."""
+        paired with the panels ``pairs`` name (or whose lists, one per panel, name it),
+        and where each pair's ray crosses its panel's plane (as :meth:`crossing`)."""
         o = np.asarray(origin, dtype=float).reshape(3)
-        i = np.concatenate(lists).astype(np.intp) if len(lists) else np.zeros(0, np.intp)
-        k = np.repeat(np.arange(len(lists), dtype=np.intp), [len(idx) for idx in lists])
-        n = self.normal[k]
-        r = rel[i]
+        if not isinstance(pairs, _Pairs):
+            pairs = self._pairs(pairs)
+        k = pairs.k
+        (nx, ny), (ax, ay) = pairs.normal, pairs.along
+        r = rel[pairs.i]
+        rx, ry = r[:, 0], r[:, 1]
         plane = (self.offset - self.normal @ o[:2])[k]
+        ahead = ((o[:2] - self.start) * self.along).sum(axis=1)[k]  # the sensor along it
         with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-            s = plane / (r[:, 0] * n[:, 0] + r[:, 1] * n[:, 1])
-            x, y, z = o[0] + s * r[:, 0], o[1] + s * r[:, 1], o[2] + s * r[:, 2]
-            start, along = self.start[k], self.along[k]
-            t = (x - start[:, 0]) * along[:, 0] + (y - start[:, 1]) * along[:, 1]
-        return _Rays(o, rel, np.linalg.norm(rel, axis=1), i, k, s, t, z)
+            s = plane / (rx * nx + ry * ny)
+            z = o[2] + s * r[:, 2]
+            t = ahead + s * (rx * ax + ry * ay)
+        return _Rays(o, rel, pairs.i, k, s, t, z)
 
     def _own(self, rays: _Rays, which: NDArray[np.intp]) -> tuple[_Rays, NDArray[np.intp]]:
         """Rays holding each return ``which`` gives a panel paired with that panel
@@ -409,22 +417,40 @@ class PanelPlanes:
         return _per_panel(k[mid], rays.z[j[mid]], len(self), np.minimum, np.nan) - margin_m
 
 
-@dataclass(frozen=True, slots=True)
+@dataclass(slots=True)
 class _Rays:
     """The rays from the sensor at ``origin`` to returns ``origin + rel`` (n, 3), of
-    range ``reach`` (n,), each paired with the panels it is looked at for: pair j is
-    return ``i[j]`` and panel ``k[j]``, grouped by panel; ``s``, ``t`` and ``z`` where
+    range ``reach`` (n,), each paired with the panels it is looked at for (as
+    :class:`_Pairs`); ``s``, ``t`` and ``z`` where
     each pair's ray crosses its panel's plane (:meth:`PanelPlanes.crossing`). One pose's
     crossings, for all that looks at them."""
 
     origin: NDArray[np.float64]
     rel: NDArray[np.float64]
-    reach: NDArray[np.float64]
     i: NDArray[np.intp]
     k: NDArray[np.intp]
     s: NDArray[np.float64]
     t: NDArray[np.float64]
     z: NDArray[np.float64]
+    _reach: NDArray[np.float64] | None = None
+
+    @property
+    def reach(self) -> NDArray[np.float64]:
+        """Each return's range (n,)."""
+        if self._reach is None:
+            self._reach = np.linalg.norm(self.rel, axis=1)
+        return self._reach
+
+
+@dataclass(frozen=True, slots=True)
+class _Pairs:
+    """Returns paired with the panels each is looked at for: pair j is return ``i[j]``
+    and panel ``k[j]``, grouped by panel; that panel's ``normal`` and ``along`` (2, m)."""
+
+    i: NDArray[np.intp]
+    k: NDArray[np.intp]
+    normal: NDArray[np.float64]
+    along: NDArray[np.float64]
 
 
 def _panel_lists(which: NDArray[np.intp], panels: int) -> list[NDArray[np.intp]]:
@@ -603,35 +629,70 @@ def _brackets(
     (intersecting them too would let a tilt's error cross their ends)."""
     if not tops:
         return []
-    k, a, b = (np.array(column, dtype=np.intp) for column in zip(*tops, strict=True))
-    n = planes.normal[k]
-    plane = planes.offset[k] - (origin[0] * n[:, 0] + origin[1] * n[:, 1])
-    with np.errstate(divide="ignore", invalid="ignore"):
-        sa = plane / (rel[a, 0] * n[:, 0] + rel[a, 1] * n[:, 1])
-        sb = plane / (rel[b, 0] * n[:, 0] + rel[b, 1] * n[:, 1])
-    lows = planes.top[k] - sb * rel[b, 2]
-    highs = planes.top[k] - sa * rel[a, 2]
-    _, number = _beacon_groups(planes.beacon)
-    group = number[k]
-    ends_lo, ends_hi = [], []  # per beacon, in name order: the tops setting its ends
-    for g in np.unique(group):
-        mine = np.flatnonzero(group == g)
-        ends_lo.append(mine[np.argmax(lows[mine])])
-        ends_hi.append(mine[np.argmin(highs[mine])])
-    lo, hi = np.array(ends_lo), np.array(ends_hi)
-    ray = np.concatenate([a[hi], b[lo]])
-    s = np.concatenate([sa[hi], sb[lo]])
-    grad = _height_gradients(p[ray], rel[ray], s, planes.normal[k[np.concatenate([hi, lo])]], dR)
-    half = len(hi)
-    d = 0.5 * grad[:half]
-    d += 0.5 * grad[half:]
-    d[:, 5] = 1.0
-    middle = 0.5 * (lows[lo] + highs[hi])
-    # the beams' angular error moves each end by it times the range to the crossing
-    reach = BEAM_ANGLE_SIGMA * np.linalg.norm(s[:, None] * rel[ray], axis=1)
-    width = np.maximum(highs[hi] - lows[lo], 0.0)
-    spread = width**2 / 12.0 + 0.25 * (reach[:half] ** 2 + reach[half:] ** 2)
-    return [(float(middle[i]), float(spread[i]), d[i]) for i in range(half)]
+    edges = _TopEdges.of(tops, planes)
+    middle, spread, d = edges.brackets(p[edges.rows], rel[edges.rows], origin, dR)
+    return [(float(middle[i]), float(spread[i]), d[i]) for i in range(len(middle))]
+
+
+@dataclass(frozen=True, slots=True)
+class _TopEdges:
+    """The top edges (panel, highest hit, lowest crossing over) an adjustment keeps
+    through its iterations, for :func:`_brackets`: the returns of their rays ``rows``,
+    and per top edge its panel's ``normal``, ``offset`` and ``top``, and its hit ``a``
+    and crossing over ``b`` as indices into ``rows``; ``member`` (beacons, top edges)
+    whose each is, the beacons in name order."""
+
+    rows: NDArray[np.intp]
+    a: NDArray[np.intp]
+    b: NDArray[np.intp]
+    normal: NDArray[np.float64]
+    offset: NDArray[np.float64]
+    top: NDArray[np.float64]
+    member: NDArray[np.bool_]
+
+    @classmethod
+    def of(cls, tops: list[tuple[int, int, int]], planes: PanelPlanes) -> _TopEdges:
+        k, a, b = (np.array(column, dtype=np.intp) for column in zip(*tops, strict=True))
+        rows, at = np.unique(np.concatenate([a, b]), return_inverse=True)
+        _, number = _beacon_groups(planes.beacon)
+        group = number[k]
+        member = np.unique(group)[:, None] == group[None, :]
+        return cls(rows, at[: len(k)], at[len(k) :], planes.normal[k], planes.offset[k],
+                   planes.top[k], member)  # fmt: skip
+
+    def brackets(
+        self,
+        p: NDArray[np.float64],
+        rel: NDArray[np.float64],
+        origin: NDArray[np.float64],
+        dR: tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]],
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+        """Per beacon (see :func:`_brackets`), the middle, its variance and the
+        derivatives (beacons, 6) of its residual, from the returns ``p`` of
+        :attr:`rows` and their ``rel`` from the sensor at ``origin``."""
+        n, a, b = self.normal, self.a, self.b
+        plane = self.offset - (origin[0] * n[:, 0] + origin[1] * n[:, 1])
+        with np.errstate(divide="ignore", invalid="ignore"):
+            sa = plane / (rel[a, 0] * n[:, 0] + rel[a, 1] * n[:, 1])
+            sb = plane / (rel[b, 0] * n[:, 0] + rel[b, 1] * n[:, 1])
+        lows = self.top - sb * rel[b, 2]
+        highs = self.top - sa * rel[a, 2]
+        # per beacon, the top edges setting its ends (the first, at a tie)
+        lo = np.argmax(np.where(self.member, lows, -math.inf), axis=1)
+        hi = np.argmin(np.where(self.member, highs, math.inf), axis=1)
+        ray = np.concatenate([a[hi], b[lo]])
+        s = np.concatenate([sa[hi], sb[lo]])
+        grad = _height_gradients(p[ray], rel[ray], s, n[np.concatenate([hi, lo])], dR)
+        half = len(hi)
+        d = 0.5 * grad[:half]
+        d += 0.5 * grad[half:]
+        d[:, 5] = 1.0
+        middle = 0.5 * (lows[lo] + highs[hi])
+        # the beams' angular error moves each end by it times the range to the crossing
+        reach = BEAM_ANGLE_SIGMA * np.linalg.norm(s[:, None] * rel[ray], axis=1)
+        width = np.maximum(highs[hi] - lows[lo], 0.0)
+        spread = width**2 / 12.0 + 0.25 * (reach[:half] ** 2 + reach[half:] ** 2)
+        return middle, spread, d
 
 
 @dataclass(slots=True)
@@ -659,10 +720,11 @@ def _solve(
     tilt_prior: tuple[float, float, float] | None = None,
     skip: frozenset[str] = frozenset(),
     panels: frozenset[int] | None = None,
-    local: list[NDArray[np.intp]] | None = None,
+    pairs: _Pairs | None = None,
 ) -> _Solved:
     """Gauss-Newton over (E, N, A, pitch, roll, Z) (see :func:`adjust_pose`), the top
-    edges' rays those given or, without, those chosen at ``x0``: kept through the
+    edges' rays those given or, without, those chosen at ``x0`` (among ``pairs``, each
+    panel's :meth:`PanelPlanes.local` returns, where given): kept through the
     iterations, so that a ray's choice cannot flip back and forth with the pose."""
     mine = which >= 0
     pts, k_of = p[mine], which[mine]
@@ -677,8 +739,7 @@ def _solve(
     J[:, :2] = n_k
     x = x0.copy()
     done = 0
-    rows = np.zeros(0, dtype=np.intp)  # the returns the top edges' rays are
-    picked: list[tuple[int, int, int]] = []  # the top edges, as rows' indices
+    edges: _TopEdges | None = None
     while True:
         done += 1
         R, dR_roll, dR_pitch, dR_yaw = _derivatives(x[4], x[3], yaw_of_azimuth(x[2]))
@@ -695,23 +756,23 @@ def _solve(
         origin = np.array([x[0], x[1], x[5]])
         if tops is None:
             rel = p @ R.T
-            tops = _top_edges(rel + origin, rel, which, origin, planes, gate_m, local)
+            if pairs is None:
+                pairs = planes._pairs(planes._everywhere(len(p)))
+            rays = planes._rays(rel, origin, pairs)
+            tops = _top_edges(rel + origin, rel, which, origin, planes, gate_m, rays=rays)
             tops = [
                 top
                 for top in tops
                 if planes.beacon[top[0]] not in skip and (panels is None or top[0] in panels)
             ]
-        if tops and not picked:  # only the top edges' rays are turned each iteration
-            rows, at = np.unique([r for _, a, b in tops for r in (a, b)], return_inverse=True)
-            picked = [(k, int(at[2 * i]), int(at[2 * i + 1])) for i, (k, _, _) in enumerate(tops)]
         Jx, vx, Wx = [J], [v], [W]
-        if tops:
-            seen = _brackets(
-                picked, p[rows], p[rows] @ R.T, origin, planes, (dR_yaw, dR_pitch, dR_roll)
-            )
-            Jx.append(np.array([dz for _, _, dz in seen]))
-            vx.append(np.array([x[5] - middle for middle, _, _ in seen]))
-            Wx.append(np.array([1.0 / (sp + survey_sigma_m**2) for _, sp, _ in seen]))
+        if tops:  # only the top edges' rays are turned each iteration
+            edges = edges or _TopEdges.of(tops, planes)
+            at = p[edges.rows]
+            middle, spread, dz = edges.brackets(at, at @ R.T, origin, (dR_yaw, dR_pitch, dR_roll))
+            Jx.append(dz)
+            vx.append(x[5] - middle)
+            Wx.append(1.0 / (spread + survey_sigma_m**2))
         if tilt_prior is not None:  # the walls' vertical, as two observations
             pitch0, roll0, sd = tilt_prior
             Jx.append(_TILT_ROWS)
@@ -849,10 +910,11 @@ def adjust_pose(
             tops = []
         return _solve(p, which, planes, x0, range_sigma_m, survey_sigma_m, gate_m, iterations,
                       tops=tops, tilt_prior=tilt_prior, skip=frozenset(distrust), panels=top_panels,
-                      local=local)  # fmt: skip
+                      pairs=pairs)  # fmt: skip
 
     # beacons whose top edges failed their w-test, or are not to be used
     distrust: set[str] = set()
+    pairs = planes._pairs(local) if local is not None else None
 
     solved = solve(x)
     if lines is not None:

@@ -419,7 +419,8 @@ def _fix3d(
     clear = gate
     # The elevation first, from hits in a gate tight but for the plan view's tilt error.
     loose = 2.5 * sig_r + START_SLACK_M
-    rays = planes._rays(grid - flat.position, flat.position, local)  # shared at a pose
+    pairs = planes._pairs(local)  # each pose's crossings, computed once (_rays)
+    rays = planes._rays(grid - flat.position, flat.position, pairs)
     tight = planes._assign(rays, grid, loose, clear_m=clear)
     spacing = ring_spacing(frame)
     start = _start_elevation(grid, flat.position, tight, planes, 2.0 * loose, spacing, local, rays)
@@ -436,7 +437,7 @@ def _fix3d(
         # next reach further, and its elevation cuts each panel at its top.
         for reach in REACH_M:
             grid = pose.sensor_to_grid(pts)
-            rays = planes._rays(grid - pose.position, pose.position, local)
+            rays = planes._rays(grid - pose.position, pose.position, pairs)
             margin = spread + 2.0 * sig_r + START_SLACK_M  # the start's elevation
             slack = 0.0 if adj is not None else min(reach, 2.0) * TILT_SLACK
             roof = None
@@ -472,7 +473,7 @@ def _fix3d(
             if not adj.top_edges or last == 3:
                 break
             grid = pose.sensor_to_grid(pts)
-            rays = planes._rays(grid - pose.position, pose.position, local)
+            rays = planes._rays(grid - pose.position, pose.position, pairs)
             margin = max(2.0 * math.sqrt(adj.covariance[2, 2]), 2.0 * sig_r)
             floor = np.fmax(floors(pose), planes._bottoms(rays, grid, which, gate))
             again = planes._assign(
