@@ -285,8 +285,16 @@ class PanelPlanes:
         its assignment, bottom, top edges and checks could use (the wall just behind
         it included), so that they need not look at the rest of a frame. A beacon's
         box, grown by the margin, is looked in first."""
+        return self._local(grid, margin_m)[0]
+
+    def _local(
+        self, grid: NDArray[np.float64], margin_m: float
+    ) -> tuple[list[NDArray[np.intp]], list[NDArray[np.float64]]]:
+        """:meth:`local`, and each of its points' squared distance from its panel."""
         xy = np.asarray(grid, dtype=float)[:, :2]
+        x, y = np.ascontiguousarray(xy[:, 0]), np.ascontiguousarray(xy[:, 1])
         out: list[NDArray[np.intp]] = []
+        far: list[NDArray[np.float64]] = []
         boxes: dict[str, NDArray[np.intp]] = {}
         for k in range(len(self)):
             b = self.beacon[k]
@@ -299,14 +307,18 @@ class PanelPlanes:
                     ]
                 )
                 lo, hi = ends.min(axis=0) - margin_m, ends.max(axis=0) + margin_m
-                x, y = xy[:, 0], xy[:, 1]
-                boxes[b] = np.flatnonzero((x >= lo[0]) & (x <= hi[0]) & (y >= lo[1]) & (y <= hi[1]))
+                box = np.flatnonzero((x >= lo[0]) & (x <= hi[0]))
+                across = y[box]
+                boxes[b] = box[(across >= lo[1]) & (across <= hi[1])]
             idx = boxes[b]
             rel = xy[idx] - self.start[k]
             t = np.clip(rel @ self.along[k], 0.0, self.length[k])
             gap = rel - t[:, None] * self.along[k]
-            out.append(idx[np.einsum("ij,ij->i", gap, gap) <= margin_m**2])
-        return out
+            square = np.einsum("ij,ij->i", gap, gap)
+            close = square <= margin_m**2
+            out.append(idx[close])
+            far.append(square[close])
+        return out, far
 
     def _everywhere(self, n: int) -> list[NDArray[np.intp]]:
         every = np.arange(n)
@@ -504,16 +516,24 @@ class Adjustment3D:
 
 
 def _derivatives(roll: float, pitch: float, yaw: float) -> tuple[NDArray[np.float64], ...]:
-    """R and its derivatives by roll, pitch and yaw."""
-    Kx = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
-    Ky = np.array([[0.0, 0.0, 1.0], [0.0, 0.0, 0.0], [-1.0, 0.0, 0.0]])
-    Kz = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 0.0]])
-    Rz, Ry, Rx = (
-        rotation_rpy(0.0, 0.0, yaw),
-        rotation_rpy(0.0, pitch, 0.0),
-        rotation_rpy(roll, 0.0, 0.0),
+    """R = Rz(yaw) Ry(pitch) Rx(roll) and its derivatives by roll, pitch and yaw (``R Kx``,
+    ``Rz Ry Ky Rx`` and ``Kz R``, K the turns' generators)."""
+    R = rotation_rpy(roll, pitch, yaw)
+    cr, sr = math.cos(roll), math.sin(roll)
+    cp, sp = math.cos(pitch), math.sin(pitch)
+    cy, sy = math.cos(yaw), math.sin(yaw)
+    d_roll = np.zeros((3, 3))
+    d_roll[:, 1], d_roll[:, 2] = R[:, 2], -R[:, 1]
+    d_pitch = np.array(
+        [
+            [-cy * sp, cy * cp * sr, cy * cp * cr],
+            [-sy * sp, sy * cp * sr, sy * cp * cr],
+            [-cp, -sp * sr, -sp * cr],
+        ]
     )
-    return Rz @ Ry @ Rx, Rz @ Ry @ Rx @ Kx, Rz @ Ry @ Ky @ Rx, Kz @ Rz @ Ry @ Rx
+    d_yaw = np.zeros((3, 3))
+    d_yaw[0], d_yaw[1] = -R[1], R[0]
+    return R, d_roll, d_pitch, d_yaw
 
 
 def _top_edges(
@@ -728,31 +748,25 @@ def _solve(
     iterations, so that a ray's choice cannot flip back and forth with the pose."""
     mine = which >= 0
     pts, k_of = p[mine], which[mine]
+    m = len(pts)
     n_k, d_k = planes.normal[k_of], planes.offset[k_of]
     ray = pts / np.linalg.norm(pts, axis=1)[:, None]
-    # n · (M q)[:2] for a 3×3 M is [n_x q, n_y q] · [M[0], M[1]]: the returns (and
-    # their rays) weighed by their normals once, each iteration's residuals, their
-    # derivatives by the three angles and the incidences are one product
-    weighed = np.hstack([n_k[:, :1] * pts, n_k[:, 1:] * pts, n_k[:, :1] * ray, n_k[:, 1:] * ray])
-    rotations = np.zeros((12, 5))
-    J = np.zeros((len(pts), 6))
-    J[:, :2] = n_k
+    # n · (M q + x)[:2] for a 3×3 M is [n_x q, n_y q, n] · [M[0], M[1], x[:2]]: the
+    # returns (and their rays) weighed by their normals once, each iteration's
+    # residuals, their derivatives by the three angles and the incidences are one product
+    weighed = np.hstack(
+        [n_k[:, :1] * pts, n_k[:, 1:] * pts, n_k[:, :1] * ray, n_k[:, 1:] * ray, n_k]
+    )
+    rotations = np.zeros((14, 5))
+    turns = np.array([-1.0, 1.0, 1.0])  # d yaw / d A = -1; pitch, roll
+    weight = range_sigma_m**-2
     x = x0.copy()
     done = 0
     edges: _TopEdges | None = None
+    J = v = W = np.zeros(0)  # the panel returns' rows, the brackets', the tilt prior's
     while True:
         done += 1
         R, dR_roll, dR_pitch, dR_yaw = _derivatives(x[4], x[3], yaw_of_azimuth(x[2]))
-        for j, M in enumerate((R, dR_yaw, dR_pitch, dR_roll)):
-            rotations[:6, j] = M[:2].ravel()
-        rotations[6:, 4] = R[:2].ravel()
-        product = weighed @ rotations
-        v = product[:, 0] + (n_k @ x[:2] - d_k)
-        J[:, 2] = -product[:, 1]  # d yaw / d A = -1
-        J[:, 3], J[:, 4] = product[:, 2], product[:, 3]
-        # the range noise along the ray, seen across the panel
-        cos_inc = np.abs(product[:, 4])
-        W = 1.0 / np.maximum(range_sigma_m * cos_inc, 1e-3 * range_sigma_m) ** 2
         origin = np.array([x[0], x[1], x[5]])
         if tops is None:
             rel = p @ R.T
@@ -765,27 +779,40 @@ def _solve(
                 for top in tops
                 if planes.beacon[top[0]] not in skip and (panels is None or top[0] in panels)
             ]
-        Jx, vx, Wx = [J], [v], [W]
-        if tops:  # only the top edges' rays are turned each iteration
-            edges = edges or _TopEdges.of(tops, planes)
+        if tops and edges is None:  # only the top edges' rays are turned each iteration
+            edges = _TopEdges.of(tops, planes)
+        if done == 1:  # the rows: the top edges are known now
+            rows = m + (len(edges.member) if edges is not None else 0)
+            rows += 2 if tilt_prior is not None else 0
+            J, v, W = np.zeros((rows, 6)), np.zeros(rows), np.zeros(rows)
+            J[:m, :2] = n_k
+            if tilt_prior is not None:  # the walls' vertical, as two observations
+                J[-2:] = _TILT_ROWS
+                W[-2:] = tilt_prior[2] ** -2
+        for j, M in enumerate((R, dR_yaw, dR_pitch, dR_roll)):
+            rotations[:6, j] = M[:2].ravel()
+        rotations[6:12, 4] = R[:2].ravel()
+        rotations[12:, 0] = x[:2]
+        product = weighed @ rotations
+        v[:m] = product[:, 0] - d_k
+        J[:m, 2:5] = product[:, 1:4] * turns
+        # the range noise along the ray, seen across the panel
+        incidence = product[:, 4] * product[:, 4]
+        W[:m] = weight / np.maximum(incidence, 1e-6)
+        if edges is not None:
             at = p[edges.rows]
             middle, spread, dz = edges.brackets(at, at @ R.T, origin, (dR_yaw, dR_pitch, dR_roll))
-            Jx.append(dz)
-            vx.append(x[5] - middle)
-            Wx.append(1.0 / (spread + survey_sigma_m**2))
-        if tilt_prior is not None:  # the walls' vertical, as two observations
-            pitch0, roll0, sd = tilt_prior
-            Jx.append(_TILT_ROWS)
-            vx.append(np.array([x[3] - pitch0, x[4] - roll0]))
-            Wx.append(np.array([sd**-2, sd**-2]))
-        Jt, vt, Wt = (np.concatenate(parts) for parts in (Jx, vx, Wx))
-        N = Jt.T @ (Wt[:, None] * Jt)
+            seen = slice(m, m + len(middle))
+            J[seen], v[seen], W[seen] = dz, x[5] - middle, 1.0 / (spread + survey_sigma_m**2)
+        if tilt_prior is not None:
+            v[-2:] = x[3] - tilt_prior[0], x[4] - tilt_prior[1]
+        N = J.T @ (W[:, None] * J)
         if not tops:
             N[5, 5] += 1.0 / UNBRACKETED  # the elevation unobserved: kept, with no weight
-        step = np.linalg.solve(N, -(Jt.T @ (Wt * vt)))
+        step = np.linalg.solve(N, -(J.T @ (W * v)))
         x += step
         if done >= iterations or np.all(np.abs(step) < _CONVERGED):
-            return _Solved(x, Jt, Wt, vt, N, len(pts), tops, done)
+            return _Solved(x, J, W, v, N, m, tops, done)
 
 
 #: The tilt prior's two rows of the design matrix (pitch, roll).

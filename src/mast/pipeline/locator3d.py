@@ -398,12 +398,15 @@ def _fix3d(
     # only the returns near a panel in plan can be a panel's or pass over its top; each
     # panel looks at its own (local), and its floor at those a little further about
     grid = flat.sensor_to_grid(frame.points)
-    near, local = _gathered(planes.local(grid, NEAR_M))
-    about, around = _gathered(planes.local(grid, FLOOR_RADIUS_M))
+    wide, square = planes._local(grid, FLOOR_RADIUS_M)  # the nearer, a part of them
+    near, local = _gathered([idx[d <= NEAR_M**2] for idx, d in zip(wide, square, strict=True)])
+    about, around = _gathered(wide)
     pts, grid = frame.points[near], grid[near]
 
+    looked = frame.points[about]
+
     def floors(pose: Pose3D) -> NDArray[np.float64]:
-        return planes.floors(pose.sensor_to_grid(frame.points[about]), around) + FLOOR_CLEAR_M
+        return planes.floors(pose.sensor_to_grid(looked), around) + FLOOR_CLEAR_M
 
     # the lines each ring draws across a panel, or without rings, 10 cm heights
     lines = (
