@@ -190,12 +190,13 @@ class PanelPlanes:
     ) -> NDArray[np.intp]:
         """:meth:`assign` on the pairs of returns and panels of ``rays``."""
         clear = 2.0 * gate_m if clear_m is None else clear_m
-        k, i, s, t, z = rays.k, rays.i, rays.s, rays.t, rays.z
+        s = rays.s
         # how far along its ray the return lies from the plane: its range error, were
         # it on the panel (a gate on it keeps both signs of the noise alike)
-        off = np.abs(1.0 - s) * rays.reach[i]
+        gated = np.flatnonzero((np.abs(1.0 - s) * rays.reach[rays.i] < gate_m) & (s > 0))
+        k, i, t, z = rays.k[gated], rays.i[gated], rays.t[gated], rays.z[gated]
         lo, hi = self._inside_all(clear)
-        on = (off < gate_m) & (t > lo[k]) & (t < hi[k]) & (s > 0)
+        on = (t > lo[k]) & (t < hi[k])
         if math.isfinite(reach_m):
             on &= np.abs(z - rays.origin[2]) <= reach_m
         # each panel's highest and lowest crossing allowed (infinite: none)
@@ -295,7 +296,7 @@ class PanelPlanes:
         x, y = np.ascontiguousarray(xy[:, 0]), np.ascontiguousarray(xy[:, 1])
         out: list[NDArray[np.intp]] = []
         far: list[NDArray[np.float64]] = []
-        boxes: dict[str, NDArray[np.intp]] = {}
+        boxes: dict[str, tuple[NDArray[np.intp], NDArray[np.float64], NDArray[np.float64]]] = {}
         for k in range(len(self)):
             b = self.beacon[k]
             if b not in boxes:
@@ -309,12 +310,14 @@ class PanelPlanes:
                 lo, hi = ends.min(axis=0) - margin_m, ends.max(axis=0) + margin_m
                 box = np.flatnonzero((x >= lo[0]) & (x <= hi[0]))
                 across = y[box]
-                boxes[b] = box[(across >= lo[1]) & (across <= hi[1])]
-            idx = boxes[b]
-            rel = xy[idx] - self.start[k]
-            t = np.clip(rel @ self.along[k], 0.0, self.length[k])
-            gap = rel - t[:, None] * self.along[k]
-            square = np.einsum("ij,ij->i", gap, gap)
+                box = box[(across >= lo[1]) & (across <= hi[1])]
+                boxes[b] = box, x[box], y[box]
+            idx, bx, by = boxes[b]
+            (sx, sy), (ax, ay) = self.start[k], self.along[k]
+            dx, dy = bx - sx, by - sy
+            t = np.clip(dx * ax + dy * ay, 0.0, self.length[k])
+            gx, gy = dx - t * ax, dy - t * ay
+            square = gx * gx + gy * gy
             close = square <= margin_m**2
             out.append(idx[close])
             far.append(square[close])
@@ -335,15 +338,20 @@ class PanelPlanes:
         wall is a line along it, and no floor). A beacon stands on no floor: near its
         plane's foot the floor is within the gate of the plane, and is no panel's."""
         out = np.full(len(self), np.nan)
+        height = np.ascontiguousarray(grid[:, 2])
         for k, close in enumerate(about):
             if close.size < 50:
                 continue
-            z = grid[close, 2]
+            z = height[close]
             low = float(np.partition(z, len(z) // 50)[len(z) // 50])  # its 2nd percentile
             # a floor spreads out from the wall; the lowest ring on a wall is a line
-            across = np.sort(grid[close[np.abs(z - low) < 0.05], :2] @ self.wall[k, :2])
-            n = across.size
-            if n >= 20 and across[(9 * n) // 10 - 1] - across[n // 10] > 0.3:
+            lowest = close[np.abs(z - low) < 0.05]
+            n = lowest.size
+            if n < 20:
+                continue
+            ends = (n // 10, (9 * n) // 10 - 1)  # its 10th and 90th percentiles
+            across = np.partition(grid[lowest, :2] @ self.wall[k, :2], ends)
+            if across[ends[1]] - across[ends[0]] > 0.3:
                 out[k] = low
         return out
 
@@ -515,25 +523,27 @@ class Adjustment3D:
     they lever are not known, and a locator should not give the fix."""
 
 
-def _derivatives(roll: float, pitch: float, yaw: float) -> tuple[NDArray[np.float64], ...]:
+def _derivatives(roll: float, pitch: float, yaw: float) -> NDArray[np.float64]:
     """R = Rz(yaw) Ry(pitch) Rx(roll) and its derivatives by roll, pitch and yaw (``R Kx``,
-    ``Rz Ry Ky Rx`` and ``Kz R``, K the turns' generators)."""
-    R = rotation_rpy(roll, pitch, yaw)
+    ``Rz Ry Ky Rx`` and ``Kz R``, K the turns' generators), (4, 3, 3)."""
     cr, sr = math.cos(roll), math.sin(roll)
     cp, sp = math.cos(pitch), math.sin(pitch)
     cy, sy = math.cos(yaw), math.sin(yaw)
-    d_roll = np.zeros((3, 3))
-    d_roll[:, 1], d_roll[:, 2] = R[:, 2], -R[:, 1]
-    d_pitch = np.array(
+    r0 = [cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr]  # as rotation_rpy
+    r1 = [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr]
+    r2 = [-sp, cp * sr, cp * cr]
+    return np.array(
         [
-            [-cy * sp, cy * cp * sr, cy * cp * cr],
-            [-sy * sp, sy * cp * sr, sy * cp * cr],
-            [-cp, -sp * sr, -sp * cr],
+            [r0, r1, r2],
+            [[0.0, r0[2], -r0[1]], [0.0, r1[2], -r1[1]], [0.0, r2[2], -r2[1]]],
+            [
+                [-cy * sp, cy * cp * sr, cy * cp * cr],
+                [-sy * sp, sy * cp * sr, sy * cp * cr],
+                [-cp, -sp * sr, -sp * cr],
+            ],
+            [[-r1[0], -r1[1], -r1[2]], r0, [0.0, 0.0, 0.0]],
         ]
     )
-    d_yaw = np.zeros((3, 3))
-    d_yaw[0], d_yaw[1] = -R[1], R[0]
-    return R, d_roll, d_pitch, d_yaw
 
 
 def _top_edges(
@@ -610,10 +620,10 @@ def _height_gradients(
     across = rel[:, 0] * normal[:, 0] + rel[:, 1] * normal[:, 1]
     g = np.zeros((len(points), 6))
     g[:, :2] = -(rel[:, 2] / across)[:, None] * normal
-    for j, dRj in zip((2, 3, 4), dR, strict=True):
-        turn = points @ dRj.T
-        sideways = turn[:, 0] * normal[:, 0] + turn[:, 1] * normal[:, 1]
-        g[:, j] = s * turn[:, 2] - s * rel[:, 2] * sideways / across
+    # each ray turned by each angle: turn[:, j] = dR[j] @ point
+    turn = (points @ np.concatenate([dRj.T for dRj in dR], axis=1)).reshape(-1, 3, 3)
+    sideways = turn[:, :, 0] * normal[:, :1] + turn[:, :, 1] * normal[:, 1:]
+    g[:, 2:5] = s[:, None] * turn[:, :, 2] - (s * rel[:, 2])[:, None] * sideways / across[:, None]
     g[:, 2] = -g[:, 2]  # d yaw / d A = -1
     return g
 
@@ -657,14 +667,14 @@ def _brackets(
 @dataclass(frozen=True, slots=True)
 class _TopEdges:
     """The top edges (panel, highest hit, lowest crossing over) an adjustment keeps
-    through its iterations, for :func:`_brackets`: the returns of their rays ``rows``,
-    and per top edge its panel's ``normal``, ``offset`` and ``top``, and its hit ``a``
-    and crossing over ``b`` as indices into ``rows``; ``member`` (beacons, top edges)
-    whose each is, the beacons in name order."""
+    through its iterations, for :func:`_brackets`: the returns of their rays ``rows``;
+    each top edge's two rays, its hit's and its crossing over's (those of all hits
+    first, then those of all crossings over), as indices ``ray`` into ``rows``, with
+    their panel's ``normal`` (2, rays), ``offset`` and ``top``; ``member`` (beacons, top
+    edges) whose each is, the beacons in name order."""
 
     rows: NDArray[np.intp]
-    a: NDArray[np.intp]
-    b: NDArray[np.intp]
+    ray: NDArray[np.intp]
     normal: NDArray[np.float64]
     offset: NDArray[np.float64]
     top: NDArray[np.float64]
@@ -673,12 +683,13 @@ class _TopEdges:
     @classmethod
     def of(cls, tops: list[tuple[int, int, int]], planes: PanelPlanes) -> _TopEdges:
         k, a, b = (np.array(column, dtype=np.intp) for column in zip(*tops, strict=True))
-        rows, at = np.unique(np.concatenate([a, b]), return_inverse=True)
+        rows, ray = np.unique(np.concatenate([a, b]), return_inverse=True)
         _, number = _beacon_groups(planes.beacon)
         group = number[k]
         member = np.unique(group)[:, None] == group[None, :]
-        return cls(rows, at[: len(k)], at[len(k) :], planes.normal[k], planes.offset[k],
-                   planes.top[k], member)  # fmt: skip
+        both = np.concatenate([k, k])
+        return cls(rows, ray, planes.normal[both].T.copy(), planes.offset[both],
+                   planes.top[both], member)  # fmt: skip
 
     def brackets(
         self,
@@ -690,27 +701,27 @@ class _TopEdges:
         """Per beacon (see :func:`_brackets`), the middle, its variance and the
         derivatives (beacons, 6) of its residual, from the returns ``p`` of
         :attr:`rows` and their ``rel`` from the sensor at ``origin``."""
-        n, a, b = self.normal, self.a, self.b
-        plane = self.offset - (origin[0] * n[:, 0] + origin[1] * n[:, 1])
+        (nx, ny), r = self.normal, rel[self.ray]
+        plane = self.offset - (origin[0] * nx + origin[1] * ny)
         with np.errstate(divide="ignore", invalid="ignore"):
-            sa = plane / (rel[a, 0] * n[:, 0] + rel[a, 1] * n[:, 1])
-            sb = plane / (rel[b, 0] * n[:, 0] + rel[b, 1] * n[:, 1])
-        lows = self.top - sb * rel[b, 2]
-        highs = self.top - sa * rel[a, 2]
+            s = plane / (r[:, 0] * nx + r[:, 1] * ny)
+        # a top edge says top - its crossing over < Z <= top - its hit: the highs, lows
+        ends = self.top - s * r[:, 2]
+        tops = self.member.shape[1]
         # per beacon, the top edges setting its ends (the first, at a tie)
-        lo = np.argmax(np.where(self.member, lows, -math.inf), axis=1)
-        hi = np.argmin(np.where(self.member, highs, math.inf), axis=1)
-        ray = np.concatenate([a[hi], b[lo]])
-        s = np.concatenate([sa[hi], sb[lo]])
-        grad = _height_gradients(p[ray], rel[ray], s, n[np.concatenate([hi, lo])], dR)
+        hi = np.argmin(np.where(self.member, ends[:tops], math.inf), axis=1)
+        lo = np.argmax(np.where(self.member, ends[tops:], -math.inf), axis=1) + tops
+        pick = np.concatenate([hi, lo])
+        normal = np.stack([nx[pick], ny[pick]], axis=1)
+        grad = _height_gradients(p[self.ray[pick]], r[pick], s[pick], normal, dR)
         half = len(hi)
         d = 0.5 * grad[:half]
         d += 0.5 * grad[half:]
         d[:, 5] = 1.0
-        middle = 0.5 * (lows[lo] + highs[hi])
+        middle = 0.5 * (ends[lo] + ends[hi])
         # the beams' angular error moves each end by it times the range to the crossing
-        reach = BEAM_ANGLE_SIGMA * np.linalg.norm(s[:, None] * rel[ray], axis=1)
-        width = np.maximum(highs[hi] - lows[lo], 0.0)
+        reach = BEAM_ANGLE_SIGMA * np.linalg.norm(s[pick, None] * r[pick], axis=1)
+        width = np.maximum(ends[hi] - ends[lo], 0.0)
         spread = width**2 / 12.0 + 0.25 * (reach[:half] ** 2 + reach[half:] ** 2)
         return middle, spread, d
 
@@ -766,7 +777,8 @@ def _solve(
     J = v = W = np.zeros(0)  # the panel returns' rows, the brackets', the tilt prior's
     while True:
         done += 1
-        R, dR_roll, dR_pitch, dR_yaw = _derivatives(x[4], x[3], yaw_of_azimuth(x[2]))
+        D = _derivatives(x[4], x[3], yaw_of_azimuth(x[2]))
+        R = D[0]
         origin = np.array([x[0], x[1], x[5]])
         if tops is None:
             rel = p @ R.T
@@ -789,8 +801,7 @@ def _solve(
             if tilt_prior is not None:  # the walls' vertical, as two observations
                 J[-2:] = _TILT_ROWS
                 W[-2:] = tilt_prior[2] ** -2
-        for j, M in enumerate((R, dR_yaw, dR_pitch, dR_roll)):
-            rotations[:6, j] = M[:2].ravel()
+        rotations[:6, :4] = D[_BY_PARAMETER, :2].reshape(4, 6).T  # R, d yaw, d pitch, d roll
         rotations[6:12, 4] = R[:2].ravel()
         rotations[12:, 0] = x[:2]
         product = weighed @ rotations
@@ -801,7 +812,7 @@ def _solve(
         W[:m] = weight / np.maximum(incidence, 1e-6)
         if edges is not None:
             at = p[edges.rows]
-            middle, spread, dz = edges.brackets(at, at @ R.T, origin, (dR_yaw, dR_pitch, dR_roll))
+            middle, spread, dz = edges.brackets(at, at @ R.T, origin, (D[3], D[2], D[1]))
             seen = slice(m, m + len(middle))
             J[seen], v[seen], W[seen] = dz, x[5] - middle, 1.0 / (spread + survey_sigma_m**2)
         if tilt_prior is not None:
@@ -815,6 +826,8 @@ def _solve(
             return _Solved(x, J, W, v, N, m, tops, done)
 
 
+#: R and its derivatives by yaw, pitch and roll, as :func:`_derivatives` stacks them.
+_BY_PARAMETER = np.array([0, 3, 2, 1])
 #: The tilt prior's two rows of the design matrix (pitch, roll).
 _TILT_ROWS = np.array([[0.0, 0.0, 0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 0.0, 0.0, 1.0, 0.0]])
 #: Steps below these end the Gauss-Newton iterations (E, N, A, pitch, roll, Z).
@@ -834,7 +847,7 @@ def _failed_bracket(solved: _Solved, planes: PanelPlanes) -> str | None:
         return None
     Q = np.linalg.inv(solved.N)
     J, W = solved.J[rows], solved.W[rows]
-    qvv = 1.0 / W - np.einsum("ij,jk,ik->i", J, Q, J)
+    qvv = 1.0 / W - ((J @ Q) * J).sum(axis=1)
     ok = qvv > 1e-6 / W
     w = np.where(ok, np.abs(solved.v[rows]) / np.sqrt(np.where(ok, qvv, 1.0)), 0.0)
     worst = int(np.argmax(w))
@@ -950,7 +963,7 @@ def adjust_pose(
         n = solved.n_points
         Q = np.linalg.inv(solved.N)
         Jp, Wp = solved.J[:n], solved.W[:n]
-        leverage = np.einsum("ij,jk,ik->i", Jp, Q, Jp) * Wp
+        leverage = ((Jp @ Q) * Jp).sum(axis=1) * Wp
         w = solved.v[:n] * np.sqrt(Wp) / np.sqrt(np.maximum(1.0 - leverage, 1e-9))
         bad = np.abs(w) > w_critical(n)
         if not bad.any():
