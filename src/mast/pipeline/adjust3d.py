@@ -224,9 +224,15 @@ class PanelPlanes:
 
     def _pairs(self, lists: Sequence[NDArray[np.intp]]) -> _Pairs:
         """Each return paired with the panels whose ``lists`` (one per panel) name it."""
+        if isinstance(lists, _Local):
+            return lists.pairs
         i = np.concatenate(lists).astype(np.intp) if len(lists) else np.zeros(0, np.intp)
         k = np.repeat(np.arange(len(lists), dtype=np.intp), [len(idx) for idx in lists])
         return _Pairs(i, k, self.normal[k].T.copy(), self.along[k].T.copy())
+
+    def _paired(self, lists: Sequence[NDArray[np.intp]]) -> _Local:
+        """Each panel's ``lists`` of returns (:meth:`local`), carrying their pairs."""
+        return _Local(lists, self._pairs(lists))
 
     def _rays(
         self,
@@ -337,8 +343,17 @@ class PanelPlanes:
         returns do not spread out from its beacon's wall by 30 cm (the lowest ring on a
         wall is a line along it, and no floor). A beacon stands on no floor: near its
         plane's foot the floor is within the gate of the plane, and is no panel's."""
+        return self._floors(np.ascontiguousarray(grid[:, 2]), lambda idx: grid[idx, :2], about)
+
+    def _floors(
+        self,
+        height: NDArray[np.float64],
+        plan: Callable[[NDArray[np.intp]], NDArray[np.float64]],
+        about: list[NDArray[np.intp]],
+    ) -> NDArray[np.float64]:
+        """:meth:`floors` from the points' ``height`` (n,) and ``plan``, their places in
+        plan ((m, 2), of the points' indices it is given)."""
         out = np.full(len(self), np.nan)
-        height = np.ascontiguousarray(grid[:, 2])
         for k, close in enumerate(about):
             if close.size < 50:
                 continue
@@ -350,7 +365,7 @@ class PanelPlanes:
             if n < 20:
                 continue
             ends = (n // 10, (9 * n) // 10 - 1)  # its 10th and 90th percentiles
-            across = np.partition(grid[lowest, :2] @ self.wall[k, :2], ends)
+            across = np.partition(plan(lowest) @ self.wall[k, :2], ends)
             if across[ends[1]] - across[ends[0]] > 0.3:
                 out[k] = low
         return out
@@ -471,6 +486,15 @@ class _Pairs:
     k: NDArray[np.intp]
     normal: NDArray[np.float64]
     along: NDArray[np.float64]
+
+
+class _Local(list[NDArray[np.intp]]):
+    """Each panel's :meth:`PanelPlanes.local` returns, carrying their :class:`_Pairs`
+    (built once for every pose and adjustment that looks at them)."""
+
+    def __init__(self, lists: Sequence[NDArray[np.intp]], pairs: _Pairs) -> None:
+        super().__init__(lists)
+        self.pairs = pairs
 
 
 def _panel_lists(which: NDArray[np.intp], panels: int) -> list[NDArray[np.intp]]:

@@ -406,7 +406,14 @@ def _fix3d(
     looked = frame.points[about]
 
     def floors(pose: Pose3D) -> NDArray[np.float64]:
-        return planes.floors(pose.sensor_to_grid(looked), around) + FLOOR_CLEAR_M
+        # planes.floors on the pose's grid, of which they need the heights and the
+        # lowest returns' places in plan
+        R, at = pose.rotation, pose.position
+
+        def plan(idx: NDArray[np.intp]) -> NDArray[np.float64]:
+            return np.asarray(looked[idx] @ R[:2].T + at[:2], dtype=np.float64)
+
+        return planes._floors(looked @ R[2] + at[2], plan, around) + FLOOR_CLEAR_M
 
     # the lines each ring draws across a panel, or without rings, 10 cm heights
     lines = (
@@ -422,7 +429,8 @@ def _fix3d(
     clear = gate
     # The elevation first, from hits in a gate tight but for the plan view's tilt error.
     loose = 2.5 * sig_r + START_SLACK_M
-    pairs = planes._pairs(local)  # each pose's crossings, computed once (_rays)
+    local = planes._paired(local)  # each pose's crossings computed once (_rays)
+    pairs = local.pairs
     rays = planes._rays(grid - flat.position, flat.position, pairs)
     tight = planes._assign(rays, grid, loose, clear_m=clear)
     spacing = ring_spacing(frame)
