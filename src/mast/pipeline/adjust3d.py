@@ -615,10 +615,11 @@ def _top_edges(
     ray_of[k[c[first]]] = i[c[first]]
     # each such panel's lowest crossing over (s: where each ray crosses, 0..1), above
     # its highest hit, the first of them at a tie
-    k, i, s, t = rays.k, rays.i, rays.s, rays.t
+    ahead = np.flatnonzero(np.isfinite(hit)[rays.k] & (rays.s > 0) & (rays.s < 1))
+    k, i, s, t = rays.k[ahead], rays.i[ahead], rays.s[ahead], rays.t[ahead]
     across = grid[i, 0] * n[k, 0] + grid[i, 1] * n[k, 1] - d[k]
     side = origin[0] * n[:, 0] + origin[1] * n[:, 1] - d
-    over = (s > 0) & (s < 1) & (t > inset[k]) & (t < planes.length[k] - inset[k])
+    over = (t > inset[k]) & (t < planes.length[k] - inset[k])
     over &= (across * side[k] < 0) & (np.abs(across) >= gate_m)
     over &= s * rel[i, 2] > hit[k]
     c = np.flatnonzero(over)
@@ -841,10 +842,11 @@ def _solve(
             J[seen], v[seen], W[seen] = dz, x[5] - middle, 1.0 / (spread + survey_sigma_m**2)
         if tilt_prior is not None:
             v[-2:] = x[3] - tilt_prior[0], x[4] - tilt_prior[1]
-        N = J.T @ (W[:, None] * J)
+        WJ = W[:, None] * J
+        N = J.T @ WJ
         if not tops:
             N[5, 5] += 1.0 / UNBRACKETED  # the elevation unobserved: kept, with no weight
-        step = np.linalg.solve(N, -(J.T @ (W * v)))
+        step = np.linalg.solve(N, -(WJ.T @ v))
         x += step
         if done >= iterations or np.all(np.abs(step) < _CONVERGED):
             return _Solved(x, J, W, v, N, m, tops, done)
