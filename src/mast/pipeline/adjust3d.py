@@ -456,9 +456,9 @@ class PanelPlanes:
 class _Rays:
     """The rays from the sensor at ``origin`` to returns ``origin + rel`` (n, 3), of
     range ``reach`` (n,), each paired with the panels it is looked at for (as
-    :class:`_Pairs`); ``s``, ``t`` and ``z`` where
-    each pair's ray crosses its panel's plane (:meth:`PanelPlanes.crossing`). One pose's
-    crossings, for all that looks at them."""
+    :class:`_Pairs`); ``s``, ``t`` and ``z`` where each pair's ray crosses its panel's
+    plane (:meth:`PanelPlanes.crossing`). One pose's crossings, for all that looks at
+    them."""
 
     origin: NDArray[np.float64]
     rel: NDArray[np.float64]
