@@ -32,8 +32,9 @@ elevation is its top end). Two kinds of evidence, each from the frame alone:
 
 from __future__ import annotations
 
+import functools
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -171,33 +172,51 @@ class PanelPlanes:
           sensor's height (a tilt's error moves a return by its height times it);
         * within the gate of no other panel's plane, and nearer the panel's plane than
           its beacon's wall (:attr:`wall`)."""
-        clear = 2.0 * gate_m if clear_m is None else clear_m
         o = np.asarray(origin, dtype=float).reshape(3)
+        rays = self._rays(grid - o, o, local or self._everywhere(len(grid)))
+        return self._assign(
+            rays, grid, gate_m, top_margin_m=top_margin_m, clear_m=clear_m, bottoms=bottoms,
+            reach_m=reach_m, ceilings=ceilings,
+        )  # fmt: skip
+
+    def _assign(
+        self,
+        rays: _Rays,
+        grid: NDArray[np.float64],
+        gate_m: float,
+        *,
+        top_margin_m: float = math.inf,
+        clear_m: float | None = None,
+        bottoms: NDArray[np.float64] | None = None,
+        reach_m: float = math.inf,
+        ceilings: NDArray[np.float64] | None = None,
+    ) -> NDArray[np.intp]:
+        """:meth:`assign` on the pairs of returns and panels of ``rays``."""
+        clear = 2.0 * gate_m if clear_m is None else clear_m
+        s = rays.s
+        # how far along its ray the return lies from the plane: its range error, were
+        # it on the panel (a gate on it keeps both signs of the noise alike)
+        gated = np.flatnonzero((np.abs(1.0 - s) * rays.reach[rays.i] < gate_m) & (s > 0))
+        k, i, t, z = rays.k[gated], rays.i[gated], rays.t[gated], rays.z[gated]
+        lo, hi = self._inside_all(clear)
+        on = (t > lo[k]) & (t < hi[k])
+        if math.isfinite(reach_m):
+            on &= np.abs(z - rays.origin[2]) <= reach_m
+        # each panel's highest and lowest crossing allowed (infinite: none)
+        cap = np.full(len(self), math.inf)
+        if math.isfinite(top_margin_m):
+            cap = np.where(np.isfinite(self.top), self.top + top_margin_m, math.inf)
+        if ceilings is not None:
+            cap = np.minimum(cap, np.where(np.isfinite(ceilings), ceilings, math.inf))
+        if np.isfinite(cap).any():
+            on &= z <= cap[k]
+        if bottoms is not None:
+            floor = np.where(np.isfinite(bottoms), bottoms, -math.inf)
+            on &= z >= floor[k]
         which = np.full(len(grid), -1, dtype=np.intp)
-        best = np.full(len(grid), gate_m)
-        claims = np.zeros(len(grid), dtype=np.intp)
-        for k, idx in enumerate(local or self._everywhere(len(grid))):
-            if idx.size == 0:
-                continue
-            rel = grid[idx] - o
-            s, t, z = self.crossing(k, o, rel)
-            # how far along its ray the return lies from the plane: its range error,
-            # were it on the panel (a gate on it keeps both signs of the noise alike)
-            off = np.abs(1.0 - s) * np.linalg.norm(rel, axis=1)
-            lo, hi = self.inside(k, clear)
-            on = (off < gate_m) & (t > lo) & (t < hi) & (s > 0)
-            if math.isfinite(reach_m):
-                on &= np.abs(z - o[2]) <= reach_m
-            if math.isfinite(self.top[k]) and math.isfinite(top_margin_m):
-                on &= z <= self.top[k] + top_margin_m
-            if bottoms is not None and math.isfinite(bottoms[k]):
-                on &= z >= bottoms[k]
-            if ceilings is not None and math.isfinite(ceilings[k]):
-                on &= z <= ceilings[k]
-            claims[idx] += on
-            closer = on & (off < best[idx])
-            which[idx[closer]], best[idx[closer]] = k, off[closer]
-        which[claims > 1] = -1  # near a joint, within the gate of two panels: neither's
+        which[i[on]] = k[on]
+        # near a joint, within the gate of two panels: neither's
+        which[np.bincount(i[on], minlength=len(grid)) > 1] = -1
         mine = np.flatnonzero(which >= 0)  # nearer its beacon's wall than it: the wall's
         ks, xy = which[mine], grid[mine, :2]
         wall = self.wall[ks]
@@ -205,6 +224,59 @@ class PanelPlanes:
         to_panel = np.abs(np.einsum("ij,ij->i", xy, self.normal[ks]) - self.offset[ks])
         which[mine[to_wall < to_panel]] = -1
         return which
+
+    def _pairs(self, lists: Sequence[NDArray[np.intp]]) -> _Pairs:
+        """Each return paired with the panels whose ``lists`` (one per panel) name it."""
+        if isinstance(lists, _Local):
+            return lists.pairs
+        i = np.concatenate(lists).astype(np.intp) if len(lists) else np.zeros(0, np.intp)
+        k = np.repeat(np.arange(len(lists), dtype=np.intp), [len(idx) for idx in lists])
+        return _Pairs(i, k, self.normal[k].T.copy(), self.along[k].T.copy())
+
+    def _paired(self, lists: Sequence[NDArray[np.intp]]) -> _Local:
+        """Each panel's ``lists`` of returns (:meth:`local`), carrying their pairs."""
+        return _Local(lists, self._pairs(lists))
+
+    def _rays(
+        self,
+        rel: NDArray[np.float64],
+        origin: NDArray[np.float64],
+        pairs: _Pairs | Sequence[NDArray[np.intp]],
+    ) -> _Rays:
+        """The rays from ``origin`` to the returns ``origin + rel`` (n, 3), each return
+        paired with the panels ``pairs`` name (or whose lists, one per panel, name it),
+        and where each pair's ray crosses its panel's plane (as :meth:`crossing`)."""
+        o = np.asarray(origin, dtype=float).reshape(3)
+        if not isinstance(pairs, _Pairs):
+            pairs = self._pairs(pairs)
+        k = pairs.k
+        (nx, ny), (ax, ay) = pairs.normal, pairs.along
+        r = rel[pairs.i]
+        rx, ry = r[:, 0], r[:, 1]
+        plane = (self.offset - self.normal @ o[:2])[k]
+        ahead = ((o[:2] - self.start) * self.along).sum(axis=1)[k]  # the sensor along it
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            s = plane / (rx * nx + ry * ny)
+            z = o[2] + s * r[:, 2]
+            t = ahead + s * (rx * ax + ry * ay)
+        return _Rays(o, rel, pairs.i, k, s, t, z)
+
+    def _own(self, rays: _Rays, which: NDArray[np.intp]) -> tuple[_Rays, NDArray[np.intp]]:
+        """Rays holding each return ``which`` gives a panel paired with that panel
+        (``rays`` where it does), and those pairs (grouped by panel)."""
+        j = np.flatnonzero(rays.k == which[rays.i])
+        if j.size != np.count_nonzero(which >= 0):
+            rays = self._rays(rays.rel, rays.origin, _panel_lists(which, len(self)))
+            j = np.arange(len(rays.k))
+        return rays, j
+
+    def _inside_all(
+        self, clear_m: float, least_m: float | NDArray[np.float64] = 0.0
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """:meth:`inside` for every panel at once (``least_m`` one or one per panel)."""
+        lo = np.maximum(least_m, clear_m / np.maximum(self.wall_sine[:, 0], 0.2))
+        hi = self.length - np.maximum(least_m, clear_m / np.maximum(self.wall_sine[:, 1], 0.2))
+        return lo, hi
 
     def __len__(self) -> int:
         return len(self.beacon)
@@ -223,9 +295,17 @@ class PanelPlanes:
         its assignment, bottom, top edges and checks could use (the wall just behind
         it included), so that they need not look at the rest of a frame. A beacon's
         box, grown by the margin, is looked in first."""
+        return self._local(grid, margin_m)[0]
+
+    def _local(
+        self, grid: NDArray[np.float64], margin_m: float
+    ) -> tuple[list[NDArray[np.intp]], list[NDArray[np.float64]]]:
+        """:meth:`local`, and each of its points' squared distance from its panel."""
         xy = np.asarray(grid, dtype=float)[:, :2]
+        x, y = np.ascontiguousarray(xy[:, 0]), np.ascontiguousarray(xy[:, 1])
         out: list[NDArray[np.intp]] = []
-        boxes: dict[str, NDArray[np.intp]] = {}
+        far: list[NDArray[np.float64]] = []
+        boxes: dict[str, tuple[NDArray[np.intp], NDArray[np.float64], NDArray[np.float64]]] = {}
         for k in range(len(self)):
             b = self.beacon[k]
             if b not in boxes:
@@ -237,14 +317,20 @@ class PanelPlanes:
                     ]
                 )
                 lo, hi = ends.min(axis=0) - margin_m, ends.max(axis=0) + margin_m
-                x, y = xy[:, 0], xy[:, 1]
-                boxes[b] = np.flatnonzero((x >= lo[0]) & (x <= hi[0]) & (y >= lo[1]) & (y <= hi[1]))
-            idx = boxes[b]
-            rel = xy[idx] - self.start[k]
-            t = np.clip(rel @ self.along[k], 0.0, self.length[k])
-            gap = rel - t[:, None] * self.along[k]
-            out.append(idx[np.einsum("ij,ij->i", gap, gap) <= margin_m**2])
-        return out
+                box = np.flatnonzero((x >= lo[0]) & (x <= hi[0]))
+                across = y[box]
+                box = box[(across >= lo[1]) & (across <= hi[1])]
+                boxes[b] = box, x[box], y[box]
+            idx, bx, by = boxes[b]
+            (sx, sy), (ax, ay) = self.start[k], self.along[k]
+            dx, dy = bx - sx, by - sy
+            t = np.clip(dx * ax + dy * ay, 0.0, self.length[k])
+            gx, gy = dx - t * ax, dy - t * ay
+            square = gx * gx + gy * gy
+            close = square <= margin_m**2
+            out.append(idx[close])
+            far.append(square[close])
+        return out, far
 
     def _everywhere(self, n: int) -> list[NDArray[np.intp]]:
         every = np.arange(n)
@@ -260,16 +346,30 @@ class PanelPlanes:
         returns do not spread out from its beacon's wall by 30 cm (the lowest ring on a
         wall is a line along it, and no floor). A beacon stands on no floor: near its
         plane's foot the floor is within the gate of the plane, and is no panel's."""
+        return self._floors(np.ascontiguousarray(grid[:, 2]), lambda idx: grid[idx, :2], about)
+
+    def _floors(
+        self,
+        height: NDArray[np.float64],
+        plan: Callable[[NDArray[np.intp]], NDArray[np.float64]],
+        about: list[NDArray[np.intp]],
+    ) -> NDArray[np.float64]:
+        """:meth:`floors` from the points' ``height`` (n,) and ``plan``, their places in
+        plan ((m, 2), of the points' indices it is given)."""
         out = np.full(len(self), np.nan)
         for k, close in enumerate(about):
             if close.size < 50:
                 continue
-            z = grid[close, 2]
+            z = height[close]
             low = float(np.partition(z, len(z) // 50)[len(z) // 50])  # its 2nd percentile
             # a floor spreads out from the wall; the lowest ring on a wall is a line
-            across = np.sort(grid[close[np.abs(z - low) < 0.05], :2] @ self.wall[k, :2])
-            n = across.size
-            if n >= 20 and across[(9 * n) // 10 - 1] - across[n // 10] > 0.3:
+            lowest = close[np.abs(z - low) < 0.05]
+            n = lowest.size
+            if n < 20:
+                continue
+            ends = (n // 10, (9 * n) // 10 - 1)  # its 10th and 90th percentiles
+            across = np.partition(plan(lowest) @ self.wall[k, :2], ends)
+            if across[ends[1]] - across[ends[0]] > 0.3:
                 out[k] = low
         return out
 
@@ -285,11 +385,16 @@ class PanelPlanes:
         above a panel (behind it by the beacon's depth) is no hit, and no ray crosses
         the panel between its highest hit and its top."""
         o = np.asarray(origin, dtype=float).reshape(3)
-        out = np.full(len(self), np.nan)
-        for k in np.unique(which[which >= 0]):
-            _, _, z = self.crossing(k, o, grid[which == k] - o)
-            out[k] = float(z.max()) + margin_m
-        return out
+        return self._ceilings(
+            self._rays(grid - o, o, _panel_lists(which, len(self))), which, margin_m
+        )
+
+    def _ceilings(
+        self, rays: _Rays, which: NDArray[np.intp], margin_m: float
+    ) -> NDArray[np.float64]:
+        """:meth:`ceilings` with the crossings of ``rays``."""
+        rays, j = self._own(rays, which)
+        return _per_panel(rays.k[j], rays.z[j], len(self), np.maximum, np.nan) + margin_m
 
     def misfits(
         self,
@@ -311,27 +416,22 @@ class PanelPlanes:
         a panel put where it is not is seen through, and one put tilted is missed at its
         top or bottom (the beam verification of 2D, in 3D)."""
         o = np.asarray(origin, dtype=float).reshape(3)
-        out = np.zeros(len(self), dtype=np.intp)
-        near = local or self._everywhere(len(grid))
-        for k in np.unique(which[which >= 0]):
-            _, along, mine = self.crossing(k, o, grid[which == k] - o)
-            lo, hi = self.inside(k, 2.0 * gate_m)  # clear of a free end's wall
-            mine = mine[(along > lo) & (along < hi)]
-            if mine.size == 0:
-                continue
-            low, high = float(mine.min()), float(mine.max())
-            rel = grid[near[k]] - o
-            reach = np.linalg.norm(rel, axis=1)
-            s, t, z = self.crossing(k, o, rel)
-            lo, hi = self.inside(k, gate_m, 0.05)
-            off = (1.0 - s) * reach  # along the ray: > 0 beyond the plane
-            across = (t > lo) & (t < hi) & (z > low) & (z < high) & (s > 0)
-            out[k] = int(
-                np.count_nonzero(
-                    across & ((off > gate_m) | (off < -gate_m) & (off > -3.0 * gate_m))
-                )
-            )
-        return out
+        rays = self._rays(grid - o, o, local or self._everywhere(len(grid)))
+        return self._misfits(rays, which, gate_m)
+
+    def _misfits(self, rays: _Rays, which: NDArray[np.intp], gate_m: float) -> NDArray[np.intp]:
+        """:meth:`misfits` with the crossings of ``rays``."""
+        own, j = self._own(rays, which)
+        clear_lo, clear_hi = self._inside_all(2.0 * gate_m)  # clear of a free end's wall
+        j = j[(own.t[j] > clear_lo[own.k[j]]) & (own.t[j] < clear_hi[own.k[j]])]
+        low = _per_panel(own.k[j], own.z[j], len(self), np.minimum, math.inf)
+        high = _per_panel(own.k[j], own.z[j], len(self), np.maximum, -math.inf)
+        k, s, t, z = rays.k, rays.s, rays.t, rays.z
+        lo, hi = self._inside_all(gate_m, 0.05)
+        off = (1.0 - s) * rays.reach[rays.i]  # along the ray: > 0 beyond the plane
+        across = (t > lo[k]) & (t < hi[k]) & (z > low[k]) & (z < high[k]) & (s > 0)
+        bad = across & ((off > gate_m) | (off < -gate_m) & (off > -3.0 * gate_m))
+        return np.bincount(k[bad], minlength=len(self)).astype(np.intp)
 
     def bottoms(
         self,
@@ -345,15 +445,87 @@ class PanelPlanes:
         panel without returns there. Near a free end the wall below a panel is within
         the gate of its plane; below this it is not taken for the panel."""
         o = np.asarray(origin, dtype=float).reshape(3)
-        out = np.full(len(self), np.nan)
-        for k in np.unique(which[which >= 0]):
-            mine = grid[which == k]
-            t = (mine[:, :2] - self.start[k]) @ self.along[k]
-            mid = np.abs(t - self.length[k] / 2) < self.length[k] / 4
-            if mid.any():
-                _, _, z = self.crossing(k, o, mine[mid] - o)
-                out[k] = float(z.min()) - margin_m
-        return out
+        rays = self._rays(grid - o, o, _panel_lists(which, len(self)))
+        return self._bottoms(rays, grid, which, margin_m)
+
+    def _bottoms(
+        self, rays: _Rays, grid: NDArray[np.float64], which: NDArray[np.intp], margin_m: float
+    ) -> NDArray[np.float64]:
+        """:meth:`bottoms` with the crossings of ``rays``."""
+        rays, j = self._own(rays, which)
+        k, i = rays.k[j], rays.i[j]
+        start, along = self.start[k], self.along[k]
+        t = (grid[i, 0] - start[:, 0]) * along[:, 0] + (grid[i, 1] - start[:, 1]) * along[:, 1]
+        mid = np.abs(t - self.length[k] / 2) < self.length[k] / 4
+        return _per_panel(k[mid], rays.z[j[mid]], len(self), np.minimum, np.nan) - margin_m
+
+
+@dataclass(slots=True)
+class _Rays:
+    """The rays from the sensor at ``origin`` to returns ``origin + rel`` (n, 3), of
+    range ``reach`` (n,), each paired with the panels it is looked at for (as
+    :class:`_Pairs`); ``s``, ``t`` and ``z`` where each pair's ray crosses its panel's
+    plane (:meth:`PanelPlanes.crossing`). One pose's crossings, for all that looks at
+    them."""
+
+    origin: NDArray[np.float64]
+    rel: NDArray[np.float64]
+    i: NDArray[np.intp]
+    k: NDArray[np.intp]
+    s: NDArray[np.float64]
+    t: NDArray[np.float64]
+    z: NDArray[np.float64]
+    _reach: NDArray[np.float64] | None = None
+
+    @property
+    def reach(self) -> NDArray[np.float64]:
+        """Each return's range (n,)."""
+        if self._reach is None:
+            self._reach = np.linalg.norm(self.rel, axis=1)
+        return self._reach
+
+
+@dataclass(frozen=True, slots=True)
+class _Pairs:
+    """Returns paired with the panels each is looked at for: pair j is return ``i[j]``
+    and panel ``k[j]``, grouped by panel; that panel's ``normal`` and ``along`` (2, m)."""
+
+    i: NDArray[np.intp]
+    k: NDArray[np.intp]
+    normal: NDArray[np.float64]
+    along: NDArray[np.float64]
+
+
+class _Local(list[NDArray[np.intp]]):
+    """Each panel's :meth:`PanelPlanes.local` returns, carrying their :class:`_Pairs`
+    (built once for every pose and adjustment that looks at them)."""
+
+    def __init__(self, lists: Sequence[NDArray[np.intp]], pairs: _Pairs) -> None:
+        super().__init__(lists)
+        self.pairs = pairs
+
+
+def _panel_lists(which: NDArray[np.intp], panels: int) -> list[NDArray[np.intp]]:
+    """Per panel, the returns ``which`` gives it, in their order."""
+    order = np.argsort(which, kind="stable")
+    ends = np.searchsorted(which[order], np.arange(panels + 1) - 0.5)
+    return [order[ends[k] : ends[k + 1]] for k in range(panels)]
+
+
+def _per_panel(
+    k: NDArray[np.intp],
+    values: NDArray[np.float64],
+    panels: int,
+    reduce: np.ufunc,
+    empty: float,
+) -> NDArray[np.float64]:
+    """``reduce`` (np.minimum, np.maximum) of ``values`` per panel ``k`` (grouped by
+    panel), ``empty`` for a panel with none."""
+    out = np.full(panels, empty)
+    if k.size:
+        first = np.flatnonzero(np.concatenate([[True], k[1:] != k[:-1]]))
+        out[k[first]] = reduce.reduceat(values, first)
+    return out
 
 
 @dataclass(frozen=True, slots=True)
@@ -383,17 +555,27 @@ class Adjustment3D:
     they lever are not known, and a locator should not give the fix."""
 
 
-def _derivatives(roll: float, pitch: float, yaw: float) -> tuple[NDArray[np.float64], ...]:
-    """R and its derivatives by roll, pitch and yaw."""
-    Kx = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
-    Ky = np.array([[0.0, 0.0, 1.0], [0.0, 0.0, 0.0], [-1.0, 0.0, 0.0]])
-    Kz = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 0.0]])
-    Rz, Ry, Rx = (
-        rotation_rpy(0.0, 0.0, yaw),
-        rotation_rpy(0.0, pitch, 0.0),
-        rotation_rpy(roll, 0.0, 0.0),
+def _derivatives(roll: float, pitch: float, yaw: float) -> NDArray[np.float64]:
+    """R = Rz(yaw) Ry(pitch) Rx(roll) and its derivatives by roll, pitch and yaw (``R Kx``,
+    ``Rz Ry Ky Rx`` and ``Kz R``, K the turns' generators), (4, 3, 3)."""
+    cr, sr = math.cos(roll), math.sin(roll)
+    cp, sp = math.cos(pitch), math.sin(pitch)
+    cy, sy = math.cos(yaw), math.sin(yaw)
+    r0 = [cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr]  # as rotation_rpy
+    r1 = [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr]
+    r2 = [-sp, cp * sr, cp * cr]
+    return np.array(
+        [
+            [r0, r1, r2],
+            [[0.0, r0[2], -r0[1]], [0.0, r1[2], -r1[1]], [0.0, r2[2], -r2[1]]],
+            [
+                [-cy * sp, cy * cp * sr, cy * cp * cr],
+                [-sy * sp, sy * cp * sr, sy * cp * cr],
+                [-cp, -sp * sr, -sp * cr],
+            ],
+            [[-r1[0], -r1[1], -r1[2]], r0, [0.0, 0.0, 0.0]],
+        ]
     )
-    return Rz @ Ry @ Rx, Rz @ Ry @ Rx @ Kx, Rz @ Ry @ Ky @ Rx, Kz @ Rz @ Ry @ Rx
 
 
 def _top_edges(
@@ -405,71 +587,88 @@ def _top_edges(
     gate_m: float,
     local: list[NDArray[np.intp]] | None = None,
     inset_m: float = 0.05,
+    rays: _Rays | None = None,
 ) -> list[tuple[int, int, int]]:
     """For each panel with a top, both hit and passed over inside its plan extent: the
     panel, its highest hit and its lowest crossing over (above that hit: a ray
     crossing under the panel is no evidence of its top), heights where the rays cross
     the panel's plane. ``grid`` the returns in the grid, ``rel`` the same relative to the
     sensor origin ``origin``; the rays over a panel are looked for among its ``local``
-    ones (:meth:`PanelPlanes.local`), where given."""
-    found = []
-    near = local or planes._everywhere(len(grid))
-    for k in range(len(planes)):
-        if not math.isfinite(planes.top[k]):
-            continue
-        on = np.flatnonzero(which == k)
-        if on.size == 0:
-            continue
-        n, d = planes.normal[k], planes.offset[k]
-        # well inside: a ray just past a panel's side passes beside it, not over it; and
-        # near a free end the wall just above the panel is within the gate of its plane
-        # (and rough rock bulges towards it by up to ROCK_M)
-        inset = max(inset_m, 0.1 * planes.length[k])
-        lo, hi = planes.inside(k, gate_m + ROCK_M, inset)
-        # a hit well within the gate: the wall just above a panel, behind it by the
-        # beacon's depth, may be within the gate, and is no hit
-        s, t, _ = planes.crossing(k, origin, rel[on])
-        across = grid[on, :2] @ n - d
-        close = (np.abs(across) <= HIT_SHARE * gate_m) & (t > lo) & (t < hi)
-        if not close.any():
-            continue
-        height = np.where(close, s * rel[on, 2], -np.inf)
-        a = int(on[np.argmax(height)])
-        top = float(height.max())
-        idx = near[k]
-        s, t, _ = planes.crossing(k, origin, rel[idx])  # s: where each ray crosses, 0..1
-        across = grid[idx, :2] @ n - d
-        side = float(origin[:2] @ n - d)
-        over = (s > 0) & (s < 1) & (t > inset) & (t < planes.length[k] - inset)
-        over &= (across * side < 0) & (np.abs(across) >= gate_m)
-        over &= s * rel[idx, 2] > top
-        if not over.any():
-            continue
-        above = np.flatnonzero(over)
-        b = int(idx[above[np.argmin(s[above] * rel[idx[above], 2])]])
-        found.append((k, a, b))
-    return found
+    ones (:meth:`PanelPlanes.local`), where given, or the pairs of ``rays`` (``rel``
+    from ``origin``), where given."""
+    if rays is None:
+        rays = planes._rays(rel, origin, local or planes._everywhere(len(grid)))
+    own, j = planes._own(rays, which)
+    n, d = planes.normal, planes.offset
+    # well inside: a ray just past a panel's side passes beside it, not over it; and
+    # near a free end the wall just above the panel is within the gate of its plane
+    # (and rough rock bulges towards it by up to ROCK_M)
+    inset = np.maximum(inset_m, 0.1 * planes.length)
+    lo, hi = planes._inside_all(gate_m + ROCK_M, inset)
+    # a hit well within the gate: the wall just above a panel, behind it by the
+    # beacon's depth, may be within the gate, and is no hit
+    k, i, t = own.k[j], own.i[j], own.t[j]
+    across = grid[i, 0] * n[k, 0] + grid[i, 1] * n[k, 1] - d[k]
+    close = (np.abs(across) <= HIT_SHARE * gate_m) & (t > lo[k]) & (t < hi[k])
+    close &= np.isfinite(planes.top[k])
+    c = np.flatnonzero(close)
+    if c.size == 0:
+        return []
+    height = own.s[j[c]] * rel[i[c], 2]
+    # each panel's highest hit (the first return of them at a tie)
+    order = np.lexsort((i[c], -height, k[c]))
+    first = order[np.concatenate([[True], k[c[order[1:]]] != k[c[order[:-1]]]])]
+    hit = np.full(len(planes), math.inf)
+    hit[k[c[first]]] = height[first]
+    ray_of = np.full(len(planes), -1, dtype=np.intp)
+    ray_of[k[c[first]]] = i[c[first]]
+    # each such panel's lowest crossing over (s: where each ray crosses, 0..1), above
+    # its highest hit, the first of them at a tie
+    ahead = np.flatnonzero(np.isfinite(hit)[rays.k] & (rays.s > 0) & (rays.s < 1))
+    k, i, s, t = rays.k[ahead], rays.i[ahead], rays.s[ahead], rays.t[ahead]
+    across = grid[i, 0] * n[k, 0] + grid[i, 1] * n[k, 1] - d[k]
+    side = origin[0] * n[:, 0] + origin[1] * n[:, 1] - d
+    over = (t > inset[k]) & (t < planes.length[k] - inset[k])
+    over &= (across * side[k] < 0) & (np.abs(across) >= gate_m)
+    over &= s * rel[i, 2] > hit[k]
+    c = np.flatnonzero(over)
+    order = np.lexsort((s[c] * rel[i[c], 2], k[c]))
+    first = (
+        order[np.concatenate([[True], k[c[order[1:]]] != k[c[order[:-1]]]])] if c.size else order
+    )
+    return [(int(k[c[f]]), int(ray_of[k[c[f]]]), int(i[c[f]])) for f in first]
 
 
-def _height_gradient(
-    point: NDArray[np.float64],
+def _height_gradients(
+    points: NDArray[np.float64],
     rel: NDArray[np.float64],
-    s: float,
+    s: NDArray[np.float64],
     normal: NDArray[np.float64],
     dR: tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]],
 ) -> NDArray[np.float64]:
-    """How the height ``h = s rel_z`` at which a ray (its return ``point`` in the sensor
-    frame, ``rel`` in the grid's axes from the sensor) crosses a vertical plane of
-    horizontal ``normal`` changes with (E, N, A, pitch, roll, Z): ``s`` is the plane's
-    distance over the ray's, so moving the sensor or turning the ray moves it too."""
-    across = float(rel[:2] @ normal)
-    g = np.zeros(6)
-    g[:2] = -rel[2] * normal / across
-    for j, dRj in zip((2, 3, 4), dR, strict=True):
-        turn = dRj @ point
-        g[j] = s * turn[2] - s * rel[2] * float(turn[:2] @ normal) / across
-    g[2] = -g[2]  # d yaw / d A = -1
+    """How the height ``h = s rel_z`` at which each ray (its return ``points`` (r, 3) in
+    the sensor frame, ``rel`` (r, 3) in the grid's axes from the sensor) crosses a
+    vertical plane of horizontal ``normal`` (r, 2) changes with (E, N, A, pitch, roll,
+    Z), (r, 6): ``s`` (r,) is the plane's distance over the ray's, so moving the sensor
+    or turning the ray moves it too."""
+    across = rel[:, 0] * normal[:, 0] + rel[:, 1] * normal[:, 1]
+    g = np.zeros((len(points), 6))
+    g[:, :2] = -(rel[:, 2] / across)[:, None] * normal
+    # each ray turned by each angle: turn[:, j] = dR[j] @ point
+    turn = (points @ np.concatenate([dRj.T for dRj in dR], axis=1)).reshape(-1, 3, 3)
+    sideways = turn[:, :, 0] * normal[:, :1] + turn[:, :, 1] * normal[:, 1:]
+    g[:, 2:5] = s[:, None] * turn[:, :, 2] - (s * rel[:, 2])[:, None] * sideways / across[:, None]
+    g[:, 2] = -g[:, 2]  # d yaw / d A = -1
     return g
+
+
+@functools.lru_cache(maxsize=32)
+def _beacon_groups(beacon: tuple[str, ...]) -> tuple[tuple[str, ...], NDArray[np.intp]]:
+    """The beacons' names, sorted, and each panel's beacon as an index into them."""
+    names = tuple(sorted(set(beacon)))
+    number = np.array([names.index(b) for b in beacon], dtype=np.intp)
+    number.flags.writeable = False
+    return names, number
 
 
 def _brackets(
@@ -493,27 +692,75 @@ def _brackets(
     too: a ray's direction carries no range noise. Different beacons are crossed by
     different rings at different ranges: their brackets are independent observations
     (intersecting them too would let a tilt's error cross their ends)."""
-    out = []
-    for beacon in sorted({planes.beacon[k] for k, *_ in tops}):
-        mine = [(k, a, b, *planes.crossing(k, origin, rel[[a, b]])[0]) for k, a, b in tops
-                if planes.beacon[k] == beacon]  # fmt: skip
-        lows = [planes.top[k] - sb * rel[b, 2] for k, _, b, _, sb in mine]
-        highs = [planes.top[k] - sa * rel[a, 2] for k, a, _, sa, _ in mine]
-        lo, hi = int(np.argmax(lows)), int(np.argmin(highs))
-        _, a, _, sa, _ = mine[hi]
-        _, _, b, _, sb = mine[lo]
-        middle = 0.5 * (lows[lo] + highs[hi])
-        k_a, k_b = mine[hi][0], mine[lo][0]
-        d = 0.5 * (_height_gradient(p[a], rel[a], sa, planes.normal[k_a], dR))
-        d += 0.5 * (_height_gradient(p[b], rel[b], sb, planes.normal[k_b], dR))
-        d[5] = 1.0
+    if not tops:
+        return []
+    edges = _TopEdges.of(tops, planes)
+    middle, spread, d = edges.brackets(p[edges.rows], rel[edges.rows], origin, dR)
+    return [(float(middle[i]), float(spread[i]), d[i]) for i in range(len(middle))]
+
+
+@dataclass(frozen=True, slots=True)
+class _TopEdges:
+    """The top edges (panel, highest hit, lowest crossing over) an adjustment keeps
+    through its iterations, for :func:`_brackets`: the returns of their rays ``rows``;
+    each top edge's two rays, its hit's and its crossing over's (those of all hits
+    first, then those of all crossings over), as indices ``ray`` into ``rows``, with
+    their panel's ``normal`` (2, rays), ``offset`` and ``top``; ``member`` (beacons, top
+    edges) whose each is, the beacons in name order."""
+
+    rows: NDArray[np.intp]
+    ray: NDArray[np.intp]
+    normal: NDArray[np.float64]
+    offset: NDArray[np.float64]
+    top: NDArray[np.float64]
+    member: NDArray[np.bool_]
+
+    @classmethod
+    def of(cls, tops: list[tuple[int, int, int]], planes: PanelPlanes) -> _TopEdges:
+        k, a, b = (np.array(column, dtype=np.intp) for column in zip(*tops, strict=True))
+        rows, ray = np.unique(np.concatenate([a, b]), return_inverse=True)
+        _, number = _beacon_groups(planes.beacon)
+        group = number[k]
+        member = np.unique(group)[:, None] == group[None, :]
+        both = np.concatenate([k, k])
+        return cls(rows, ray, planes.normal[both].T.copy(), planes.offset[both],
+                   planes.top[both], member)  # fmt: skip
+
+    def brackets(
+        self,
+        p: NDArray[np.float64],
+        rel: NDArray[np.float64],
+        origin: NDArray[np.float64],
+        dR: tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]],
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+        """Per beacon (see :func:`_brackets`), the middle, its variance and the
+        derivatives (beacons, 6) of its residual, from the returns ``p`` of
+        :attr:`rows` and their ``rel`` from the sensor at ``origin``."""
+        (nx, ny), r = self.normal, rel[self.ray]
+        plane = self.offset - (origin[0] * nx + origin[1] * ny)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            s = plane / (r[:, 0] * nx + r[:, 1] * ny)
+        # a top edge says top - its crossing over < Z <= top - its hit: the highs, lows
+        ends = self.top - s * r[:, 2]
+        tops = self.member.shape[1]
+        # per beacon, the top edges setting its ends (the first, at a tie)
+        hi = np.argmin(np.where(self.member, ends[:tops], math.inf), axis=1)
+        lo = np.argmax(np.where(self.member, ends[tops:], -math.inf), axis=1) + tops
+        pick = np.concatenate([hi, lo])
+        normal = np.stack([nx[pick], ny[pick]], axis=1)
+        grad = _height_gradients(p[self.ray[pick]], r[pick], s[pick], normal, dR)
+        half = len(hi)
+        d = 0.5 * grad[:half]
+        d += 0.5 * grad[half:]
+        d[:, 5] = 1.0
+        middle = 0.5 * (ends[lo] + ends[hi])
         # the beams' angular error moves each end by it times the range to the crossing
-        reach = BEAM_ANGLE_SIGMA * np.linalg.norm([sa * rel[a], sb * rel[b]], axis=1)
+        reach = BEAM_ANGLE_SIGMA * np.linalg.norm(s[pick, None] * r[pick], axis=1)
         # an empty intersection (a panel's hit above another's ray over: one of them is
         # not what it is taken for, or the tilt is off) is as uncertain as it is wide
-        spread = (highs[hi] - lows[lo]) ** 2 / 12.0 + 0.25 * float(reach @ reach)
-        out.append((float(middle), spread, d))
-    return out
+        width = ends[hi] - ends[lo]
+        spread = width**2 / 12.0 + 0.25 * (reach[:half] ** 2 + reach[half:] ** 2)
+        return middle, spread, d
 
 
 @dataclass(slots=True)
@@ -541,56 +788,88 @@ def _solve(
     tilt_prior: tuple[float, float, float] | None = None,
     skip: frozenset[str] = frozenset(),
     panels: frozenset[int] | None = None,
-    local: list[NDArray[np.intp]] | None = None,
+    pairs: _Pairs | None = None,
 ) -> _Solved:
     """Gauss-Newton over (E, N, A, pitch, roll, Z) (see :func:`adjust_pose`), the top
-    edges' rays those given or, without, those chosen at ``x0``: kept through the
+    edges' rays those given or, without, those chosen at ``x0`` (among ``pairs``, each
+    panel's :meth:`PanelPlanes.local` returns, where given): kept through the
     iterations, so that a ray's choice cannot flip back and forth with the pose."""
     mine = which >= 0
     pts, k_of = p[mine], which[mine]
+    m = len(pts)
     n_k, d_k = planes.normal[k_of], planes.offset[k_of]
     ray = pts / np.linalg.norm(pts, axis=1)[:, None]
+    # n · (M q + x)[:2] for a 3×3 M is [n_x q, n_y q, n] · [M[0], M[1], x[:2]]: the
+    # returns (and their rays) weighed by their normals once, each iteration's
+    # residuals, their derivatives by the three angles and the incidences are one product
+    weighed = np.hstack(
+        [n_k[:, :1] * pts, n_k[:, 1:] * pts, n_k[:, :1] * ray, n_k[:, 1:] * ray, n_k]
+    )
+    rotations = np.zeros((14, 5))
+    turns = np.array([-1.0, 1.0, 1.0])  # d yaw / d A = -1; pitch, roll
+    weight = range_sigma_m**-2
     x = x0.copy()
     done = 0
+    edges: _TopEdges | None = None
+    J = v = W = np.zeros(0)  # the panel returns' rows, the brackets', the tilt prior's
     while True:
         done += 1
-        R, dR_roll, dR_pitch, dR_yaw = _derivatives(x[4], x[3], yaw_of_azimuth(x[2]))
-        g = pts @ R.T
-        v = np.einsum("ij,ij->i", n_k, g[:, :2] + x[:2]) - d_k
-        J = np.zeros((len(pts), 6))
-        J[:, 0], J[:, 1] = n_k[:, 0], n_k[:, 1]
-        J[:, 2] = -np.einsum("ij,ij->i", n_k, (pts @ dR_yaw.T)[:, :2])  # d yaw / d A = -1
-        J[:, 3] = np.einsum("ij,ij->i", n_k, (pts @ dR_pitch.T)[:, :2])
-        J[:, 4] = np.einsum("ij,ij->i", n_k, (pts @ dR_roll.T)[:, :2])
-        # the range noise along the ray, seen across the panel
-        cos_inc = np.abs(np.einsum("ij,ij->i", n_k, (ray @ R.T)[:, :2]))
-        W = 1.0 / np.maximum(range_sigma_m * cos_inc, 1e-3 * range_sigma_m) ** 2
-        rel = p @ R.T
+        D = _derivatives(x[4], x[3], yaw_of_azimuth(x[2]))
+        R = D[0]
         origin = np.array([x[0], x[1], x[5]])
         if tops is None:
-            tops = _top_edges(rel + origin, rel, which, origin, planes, gate_m, local)
+            rel = p @ R.T
+            if pairs is None:
+                pairs = planes._pairs(planes._everywhere(len(p)))
+            rays = planes._rays(rel, origin, pairs)
+            tops = _top_edges(rel + origin, rel, which, origin, planes, gate_m, rays=rays)
             tops = [
                 top
                 for top in tops
                 if planes.beacon[top[0]] not in skip and (panels is None or top[0] in panels)
             ]
-        if tops:
-            seen = _brackets(tops, p, rel, origin, planes, (dR_yaw, dR_pitch, dR_roll))
-            J = np.vstack([J, [dz for _, _, dz in seen]])
-            v = np.concatenate([v, [x[5] - middle for middle, _, _ in seen]])
-            W = np.concatenate([W, [1.0 / (sp + survey_sigma_m**2) for _, sp, _ in seen]])
-        if tilt_prior is not None:  # the walls' vertical, as two observations
-            pitch0, roll0, sd = tilt_prior
-            J = np.vstack([J, [[0.0, 0.0, 0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 0.0, 0.0, 1.0, 0.0]]])
-            v = np.concatenate([v, [x[3] - pitch0, x[4] - roll0]])
-            W = np.concatenate([W, [sd**-2, sd**-2]])
-        N = J.T @ (W[:, None] * J)
+        if tops and edges is None:  # only the top edges' rays are turned each iteration
+            edges = _TopEdges.of(tops, planes)
+        if done == 1:  # the rows: the top edges are known now
+            rows = m + (len(edges.member) if edges is not None else 0)
+            rows += 2 if tilt_prior is not None else 0
+            J, v, W = np.zeros((rows, 6)), np.zeros(rows), np.zeros(rows)
+            J[:m, :2] = n_k
+            if tilt_prior is not None:  # the walls' vertical, as two observations
+                J[-2:] = _TILT_ROWS
+                W[-2:] = tilt_prior[2] ** -2
+        rotations[:6, :4] = D[_BY_PARAMETER, :2].reshape(4, 6).T  # R, d yaw, d pitch, d roll
+        rotations[6:12, 4] = R[:2].ravel()
+        rotations[12:, 0] = x[:2]
+        product = weighed @ rotations
+        v[:m] = product[:, 0] - d_k
+        J[:m, 2:5] = product[:, 1:4] * turns
+        # the range noise along the ray, seen across the panel
+        incidence = product[:, 4] * product[:, 4]
+        W[:m] = weight / np.maximum(incidence, 1e-6)
+        if edges is not None:
+            at = p[edges.rows]
+            middle, spread, dz = edges.brackets(at, at @ R.T, origin, (D[3], D[2], D[1]))
+            seen = slice(m, m + len(middle))
+            J[seen], v[seen], W[seen] = dz, x[5] - middle, 1.0 / (spread + survey_sigma_m**2)
+        if tilt_prior is not None:
+            v[-2:] = x[3] - tilt_prior[0], x[4] - tilt_prior[1]
+        WJ = W[:, None] * J
+        N = J.T @ WJ
         if not tops:
             N[5, 5] += 1.0 / UNBRACKETED  # the elevation unobserved: kept, with no weight
-        step = np.linalg.solve(N, -(J.T @ (W * v)))
+        step = np.linalg.solve(N, -(WJ.T @ v))
         x += step
-        if done >= iterations or np.all(np.abs(step) < [1e-7, 1e-7, 1e-9, 1e-9, 1e-9, 1e-7]):
-            return _Solved(x, J, W, v, N, len(pts), tops, done)
+        if done >= iterations or np.all(np.abs(step) < _CONVERGED):
+            return _Solved(x, J, W, v, N, m, tops, done)
+
+
+#: R and its derivatives by yaw, pitch and roll, as :func:`_derivatives` stacks them.
+_BY_PARAMETER = np.array([0, 3, 2, 1])
+#: The tilt prior's two rows of the design matrix (pitch, roll).
+_TILT_ROWS = np.array([[0.0, 0.0, 0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 0.0, 0.0, 1.0, 0.0]])
+#: Steps below these end the Gauss-Newton iterations (E, N, A, pitch, roll, Z).
+_CONVERGED = np.array([1e-7, 1e-7, 1e-9, 1e-9, 1e-9, 1e-7])
 
 
 def _failed_bracket(solved: _Solved, planes: PanelPlanes) -> str | None:
@@ -606,7 +885,7 @@ def _failed_bracket(solved: _Solved, planes: PanelPlanes) -> str | None:
         return None
     Q = np.linalg.inv(solved.N)
     J, W = solved.J[rows], solved.W[rows]
-    qvv = 1.0 / W - np.einsum("ij,jk,ik->i", J, Q, J)
+    qvv = 1.0 / W - ((J @ Q) * J).sum(axis=1)
     ok = qvv > 1e-6 / W
     w = np.where(ok, np.abs(solved.v[rows]) / np.sqrt(np.where(ok, qvv, 1.0)), 0.0)
     worst = int(np.argmax(w))
@@ -632,8 +911,10 @@ def _snoop_pieces(
         xy = p[on] @ R[:2].T + solved.x[:2]
         t = np.einsum("ij,ij->i", xy - planes.start[k], planes.along[k]) / planes.length[k]
         quarter = np.clip(np.floor(4.0 * t), 0, 3).astype(np.intp)
-        _, piece = np.unique(np.stack([k, lines[on], quarter]), axis=1, return_inverse=True)
-        piece = piece.reshape(-1)
+        # the pieces in the order of (panel, line, quarter), as one key each
+        line = lines[on] - lines[on].min(initial=0)
+        key = (k * (int(line.max(initial=0)) + 1) + line) * 4 + quarter
+        _, piece = np.unique(key, return_inverse=True)
         r = solved.v[: solved.n_points] * np.sqrt(solved.W[: solved.n_points])
         count = np.bincount(piece)
         mean = np.bincount(piece, weights=r) / np.sqrt(count)
@@ -707,10 +988,11 @@ def adjust_pose(
             tops = []
         return _solve(p, which, planes, x0, range_sigma_m, survey_sigma_m, gate_m, iterations,
                       tops=tops, tilt_prior=tilt_prior, skip=frozenset(distrust), panels=top_panels,
-                      local=local)  # fmt: skip
+                      pairs=pairs)  # fmt: skip
 
     # beacons whose top edges failed their w-test, or are not to be used
     distrust: set[str] = set()
+    pairs = planes._pairs(local) if local is not None else None
 
     solved = solve(x)
     if lines is not None:
@@ -719,7 +1001,7 @@ def adjust_pose(
         n = solved.n_points
         Q = np.linalg.inv(solved.N)
         Jp, Wp = solved.J[:n], solved.W[:n]
-        leverage = np.einsum("ij,jk,ik->i", Jp, Q, Jp) * Wp
+        leverage = ((Jp @ Q) * Jp).sum(axis=1) * Wp
         w = solved.v[:n] * np.sqrt(Wp) / np.sqrt(np.maximum(1.0 - leverage, 1e-9))
         bad = np.abs(w) > w_critical(n)
         if not bad.any():
@@ -745,10 +1027,10 @@ def adjust_pose(
     s0 = float(W[:n_points] @ (v[:n_points] ** 2)) / dof if dof > 0 else math.nan
     # The survey's error is one offset per panel, shared by all its returns.
     G = Q @ (J.T * W)
-    cov = Q.copy()
-    for k in np.unique(k_of):
-        g = G[:, :n_points][:, k_of == k].sum(axis=1)
-        cov += survey_sigma_m**2 * np.outer(g, g)
+    shared = np.zeros((n_points, len(planes)))
+    shared[np.arange(n_points), k_of] = 1.0
+    g = G[:, :n_points] @ shared  # (6, panels): each panel's offset's effect
+    cov = Q + survey_sigma_m**2 * (g @ g.T)
     # (E, N, A, pitch, roll, Z) → (E, N, Z, roll, pitch, A)
     order = [0, 1, 5, 4, 3, 2]
     pose = Pose3D(x[0], x[1], x[5], normalize_azimuth(x[2]), x[3], x[4])

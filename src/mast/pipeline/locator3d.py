@@ -57,6 +57,9 @@ from mast.pipeline.adjust3d import (
     UNBRACKETED,
     Adjustment3D,
     PanelPlanes,
+    _panel_lists,
+    _per_panel,
+    _Rays,
     _top_edges,
     adjust_pose,
 )
@@ -177,6 +180,7 @@ def _start_elevation(
     gate_m: float,
     spacing_rad: float,
     local: list[NDArray[np.intp]],
+    rays: _Rays | None = None,
 ) -> tuple[float, float] | None:
     """The sensor's elevation where the most panels' top brackets agree (``grid`` seen
     from ``origin`` at elevation 0, ``which`` tight hits): each panel with a hit says
@@ -184,19 +188,23 @@ def _start_elevation(
     wall within the gate of a panel's plane far above it makes one panel's bracket
     wrong, not the most. The middle and half the width of the interval the most
     brackets share; None without a hit on a panel with a top. ``spacing_rad``: the
-    lidar's rings' spacing; ``local``: each panel's returns (PanelPlanes.local)."""
+    lidar's rings' spacing; ``local``: each panel's returns (PanelPlanes.local);
+    ``rays``: their crossings seen from ``origin``, where the caller has them."""
     o = np.asarray(origin, dtype=float)
     rel = grid - o
+    if rays is None:
+        rays = planes._rays(rel, o, local)
     ends: list[tuple[float, int]] = []
-    which = _contiguous(which, grid, o, planes, spacing_rad)
-    for k in np.unique(which[which >= 0]):
-        if not math.isfinite(planes.top[k]):
+    which = _contiguous(which, grid, o, planes, spacing_rad, rays)
+    own, j = planes._own(rays, which)
+    k_of = own.k[j]
+    highest = _per_panel(k_of, own.s[j] * own.rel[own.i[j], 2], len(planes), np.maximum, 0.0)
+    for hit in np.flatnonzero(np.bincount(k_of, minlength=len(planes))):
+        if not math.isfinite(planes.top[hit]):
             continue
-        mine = np.flatnonzero(which == k)
-        s, _, _ = planes.crossing(k, o, rel[mine])
-        ends.append((float(planes.top[k] - (s * rel[mine, 2]).max()), -1))
+        ends.append((float(planes.top[hit] - highest[hit]), -1))
         ends.append((-math.inf, +1))
-    for k, _, b in _top_edges(grid, rel, which, o, planes, gate_m, local):
+    for k, _, b in _top_edges(grid, rel, which, o, planes, gate_m, local, rays=rays):
         s, _, _ = planes.crossing(k, o, rel[[b]])
         lows = [e for e in ends if e[1] == +1 and math.isinf(e[0])]
         ends.remove(lows[0])
@@ -223,26 +231,42 @@ def _contiguous(
     origin: NDArray[np.float64],
     planes: PanelPlanes,
     spacing_rad: float,
+    rays: _Rays | None = None,
 ) -> NDArray[np.intp]:
     """``which`` with each panel's returns kept to the run of heights (where their rays
     cross its plane) about their median that no gap wider than 1.5 ring spacings at
-    their range, plus 5 cm, breaks: a panel is one piece, and the roof, the floor or
-    the wall far above or below within the gate of its plane is not of it."""
+    their range (their median), plus 5 cm, breaks: a panel is one piece, and the roof,
+    the floor or the wall far above or below within the gate of its plane is not of it.
+    ``rays``: the crossings seen from ``origin``, where the caller has them."""
     out = which.copy()
-    rel = grid - origin
-    for k in np.unique(which[which >= 0]):
-        mine = np.flatnonzero(which == k)
-        s, _, _ = planes.crossing(k, origin, rel[mine])
-        h = s * rel[mine, 2]
-        gap = 1.5 * spacing_rad * float(np.median(np.linalg.norm(rel[mine], axis=1))) + 0.05
-        order = np.argsort(h)
-        middle = int(np.searchsorted(h[order], np.median(h)))
-        breaks = np.flatnonzero(np.diff(h[order]) > gap)  # between order[i] and order[i+1]
-        below, above = breaks[breaks < middle], breaks[breaks >= middle]
-        lo = int(below.max()) + 1 if below.size else 0
-        hi = int(above.min()) + 1 if above.size else len(order)
-        out[mine[order[:lo]]] = -1
-        out[mine[order[hi:]]] = -1
+    if rays is None:
+        o = np.asarray(origin, dtype=float).reshape(3)
+        rays = planes._rays(grid - o, o, _panel_lists(which, len(planes)))
+    rays, j = planes._own(rays, which)
+    if j.size == 0:
+        return out
+    # every panel's returns at once: by panel, and by height within it
+    k, i = rays.k[j], rays.i[j]
+    h = rays.s[j] * rays.rel[i, 2]
+    by_height = np.lexsort((h, k))
+    k, i, h = k[by_height], i[by_height], h[by_height]
+    first = np.flatnonzero(np.concatenate([[True], k[1:] != k[:-1]]))
+    count = np.diff(np.append(first, len(k)))
+    panel = np.repeat(np.arange(len(first)), count)  # each return's panel, 0.. here
+    at = np.arange(len(k)) - first[panel]  # its place by height on its panel
+    reach = rays.reach[i]
+    reach = reach[np.lexsort((reach, k))]
+    gap = 1.5 * spacing_rad * _sorted_medians(reach, first, count) + 0.05
+    middle = np.bincount(panel[h < _sorted_medians(h, first, count)[panel]], minlength=len(first))
+    # the gaps (between a return and the next up) wider than that, below the median
+    # height and from it up: the run is from the highest below to the lowest above
+    wide = np.flatnonzero((np.diff(h) > gap[panel[:-1]]) & (panel[1:] == panel[:-1]))
+    below = at[wide] < middle[panel[wide]]
+    lo = np.zeros(len(first), dtype=np.intp)
+    np.maximum.at(lo, panel[wide[below]], at[wide[below]] + 1)
+    hi = count.copy()
+    np.minimum.at(hi, panel[wide[~below]], at[wide[~below]] + 1)
+    out[i[(at < lo[panel]) | (at >= hi[panel])]] = -1
     return out
 
 
@@ -262,12 +286,27 @@ def _moved(before: Pose3D, after: Pose3D, covariance: NDArray[np.float64]) -> ND
     return np.asarray(np.abs(d) / np.sqrt(np.diag(covariance)), dtype=np.float64)
 
 
+def _sorted_medians(
+    values: NDArray[np.float64], first: NDArray[np.intp], count: NDArray[np.intp]
+) -> NDArray[np.float64]:
+    """The median of each run ``values[first:first + count]``, each sorted (as
+    np.median: the middle one, or the mean of the middle two)."""
+    mid = first + count // 2
+    odd = values[mid]
+    return np.asarray(np.where(count % 2 == 1, odd, (values[mid - 1] + odd) / 2), dtype=np.float64)
+
+
 def _gathered(
     local: list[NDArray[np.intp]],
 ) -> tuple[NDArray[np.intp], list[NDArray[np.intp]]]:
     """The returns any panel looks at, and each panel's as indices into those."""
-    every = np.unique(np.concatenate(local)) if local else np.zeros(0, dtype=np.intp)
-    return every, [np.searchsorted(every, idx) for idx in local]
+    if not local:
+        return np.zeros(0, dtype=np.intp), []
+    stacked = np.concatenate(local)
+    looked = np.zeros(int(stacked.max(initial=-1)) + 1, dtype=bool)
+    looked[stacked] = True
+    place = np.cumsum(looked) - 1
+    return np.flatnonzero(looked), [place[idx] for idx in local]
 
 
 def ring_spacing(frame: Frame3D) -> float:
@@ -288,8 +327,12 @@ def _shown_panels(
     on = which >= 0
     if not on.any():
         return frozenset()
-    pairs, counts = np.unique(np.stack([which[on], lines[on]]), axis=1, return_counts=True)
-    rings = np.bincount(pairs[0][counts >= cfg.min_line_returns], minlength=len(planes))
+    line = lines[on] - lines[on].min()
+    span = int(line.max()) + 1
+    counts = np.bincount(which[on] * span + line)  # returns per (panel, line)
+    rings = np.bincount(
+        np.flatnonzero(counts >= cfg.min_line_returns) // span, minlength=len(planes)
+    )
     return frozenset(int(k) for k in np.flatnonzero(rings >= 2))
 
 
@@ -462,12 +505,22 @@ def _fix3d(
     # only the returns near a panel in plan can be a panel's or pass over its top; each
     # panel looks at its own (local), and its floor at those a little further about
     grid = flat.sensor_to_grid(frame.points)
-    near, local = _gathered(planes.local(grid, NEAR_M))
-    about, around = _gathered(planes.local(grid, FLOOR_RADIUS_M))
+    wide, square = planes._local(grid, FLOOR_RADIUS_M)  # the nearer, a part of them
+    near, local = _gathered([idx[d <= NEAR_M**2] for idx, d in zip(wide, square, strict=True)])
+    about, around = _gathered(wide)
     pts, grid = frame.points[near], grid[near]
 
+    looked = frame.points[about]
+
     def floors(pose: Pose3D) -> NDArray[np.float64]:
-        return planes.floors(pose.sensor_to_grid(frame.points[about]), around) + FLOOR_CLEAR_M
+        # planes.floors on the pose's grid, of which they need the heights and the
+        # lowest returns' places in plan
+        R, at = pose.rotation, pose.position
+
+        def plan(idx: NDArray[np.intp]) -> NDArray[np.float64]:
+            return np.asarray(looked[idx] @ R[:2].T + at[:2], dtype=np.float64)
+
+        return planes._floors(looked @ R[2] + at[2], plan, around) + FLOOR_CLEAR_M
 
     # the lines each ring draws across a panel, or without rings, 10 cm heights
     lines = (
@@ -483,9 +536,12 @@ def _fix3d(
     clear = gate
     # The elevation first, from hits in a gate tight but for the plan view's tilt error.
     loose = 2.5 * sig_r + START_SLACK_M
-    tight = planes.assign(grid, flat.position, loose, clear_m=clear, local=local)
+    local = planes._paired(local)  # each pose's crossings computed once (_rays)
+    pairs = local.pairs
+    rays = planes._rays(grid - flat.position, flat.position, pairs)
+    tight = planes._assign(rays, grid, loose, clear_m=clear)
     spacing = ring_spacing(frame)
-    start = _start_elevation(grid, flat.position, tight, planes, 2.0 * loose, spacing, local)
+    start = _start_elevation(grid, flat.position, tight, planes, 2.0 * loose, spacing, local, rays)
     if start is None:
         return refused("one_beacon", "no return on a surveyed panel in 3D")
     z0, spread = start
@@ -499,19 +555,20 @@ def _fix3d(
         # next reach further, and its elevation cuts each panel at its top.
         for reach in REACH_M:
             grid = pose.sensor_to_grid(pts)
+            rays = planes._rays(grid - pose.position, pose.position, pairs)
             margin = spread + 2.0 * sig_r + START_SLACK_M  # the start's elevation
             slack = 0.0 if adj is not None else min(reach, 2.0) * TILT_SLACK
             roof = None
             floor = floors(pose)
             if adj is None:  # each panel cut at its highest tight hit, too
-                roof = planes.ceilings(grid, pose.position, tight, 2.0 * sig_r)
+                roof = planes._ceilings(rays, tight, 2.0 * sig_r)
             else:
-                floor = np.fmax(floor, planes.bottoms(grid, pose.position, which, gate))
-            trial = planes.assign(
-                grid, pose.position, gate + slack, clear_m=clear, top_margin_m=margin,
-                bottoms=floor, reach_m=reach, ceilings=roof, local=local,
+                floor = np.fmax(floor, planes._bottoms(rays, grid, which, gate))
+            trial = planes._assign(
+                rays, grid, gate + slack, clear_m=clear, top_margin_m=margin, bottoms=floor,
+                reach_m=reach, ceilings=roof,
             )  # fmt: skip
-            trial = _contiguous(trial, grid, pose.position, planes, spacing)
+            trial = _contiguous(trial, grid, pose.position, planes, spacing, rays)
             if len(_shown(trial, lines, planes, cfg)) < 2:
                 continue  # the last assignment that showed two beacons stands
             which = trial
@@ -541,13 +598,13 @@ def _fix3d(
                 held = True
                 break
             grid = pose.sensor_to_grid(pts)
+            rays = planes._rays(grid - pose.position, pose.position, pairs)
             margin = max(2.0 * math.sqrt(adj.covariance[2, 2]), 2.0 * sig_r)
-            floor = np.fmax(floors(pose), planes.bottoms(grid, pose.position, which, gate))
-            again = planes.assign(
-                grid, pose.position, gate, clear_m=clear, top_margin_m=margin, bottoms=floor,
-                local=local,
-            )  # fmt: skip
-            again = _contiguous(again, grid, pose.position, planes, spacing)
+            floor = np.fmax(floors(pose), planes._bottoms(rays, grid, which, gate))
+            again = planes._assign(
+                rays, grid, gate, clear_m=clear, top_margin_m=margin, bottoms=floor
+            )
+            again = _contiguous(again, grid, pose.position, planes, spacing, rays)
             if np.array_equal(again, which):
                 held = True
                 break
