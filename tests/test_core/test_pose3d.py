@@ -79,3 +79,13 @@ def test_a_frame_refuses_what_is_not_a_frame() -> None:
     assert len(frame) == 2
     assert frame.ring is not None
     assert frame.ring.dtype == np.int32
+
+
+def test_a_pose_minus_another_is_in_record_order_with_the_azimuth_wrapped() -> None:
+    a = Pose3D.from_degrees(10.0, 20.0, 3.0, 359.0, 2.0, -1.0)
+    b = Pose3D.from_degrees(9.0, 22.0, 2.5, 1.0, 1.0, 1.0)
+    d = a.minus(b)
+    assert d[:3] == pytest.approx([1.0, -2.0, 0.5])
+    # roll, pitch, then the azimuth across north: -2 deg, not 358
+    assert np.degrees(d[3:]) == pytest.approx([-2.0, 1.0, -2.0])
+    assert np.degrees(b.minus(a)[5]) == pytest.approx(2.0)

@@ -39,16 +39,7 @@ def test_no_simulated_frame_gets_a_wrong_or_overconfident_fix() -> None:
             assert fix.adjustment is not None
             fixed += 1
             p, t = fix.pose, sim.pose
-            err = np.array(
-                [
-                    p.easting - t.easting,
-                    p.northing - t.northing,
-                    p.elevation - t.elevation,
-                    p.roll - t.roll,
-                    p.pitch - t.pitch,
-                    (p.azimuth - t.azimuth + math.pi) % (2 * math.pi) - math.pi,
-                ]
-            )
+            err = p.minus(t)
             assert math.hypot(err[0], err[1]) < 0.1
             # each of the six within 4.5 sigmas of its own covariance (a 1-in-150 000
             # draw each): a fix on the wall's returns, or a bracket the wall made, is
@@ -136,16 +127,7 @@ def test_hard_64_ring_frames_are_fixed_within_their_covariance_or_refused(
     assert fix.pose is not None
     assert fix.adjustment is not None
     p, t = fix.pose, sim.pose
-    err = np.array(
-        [
-            p.easting - t.easting,
-            p.northing - t.northing,
-            p.elevation - t.elevation,
-            p.roll - t.roll,
-            p.pitch - t.pitch,
-            (p.azimuth - t.azimuth + math.pi) % (2 * math.pi) - math.pi,
-        ]
-    )
+    err = p.minus(t)
     assert np.all(np.abs(err) < 4.5 * np.sqrt(np.diag(fix.adjustment.covariance))), err
     assert np.linalg.norm(err[:3]) < 0.1, err
     assert np.degrees(np.abs(err[3:])).max() < 1.0, err

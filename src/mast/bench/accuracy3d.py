@@ -130,18 +130,8 @@ class Accuracy3DSummary:
 
 def errors_3d(got: Pose3D, truth: Pose3D) -> NDArray[np.float64]:
     """``got - truth`` in :data:`~mast.pipeline.adjust3d.PARAMETERS` order, the azimuth
-    wrapped to (-pi, pi]."""
-    turn = math.remainder(got.azimuth - truth.azimuth, 2 * math.pi)
-    return np.array(
-        [
-            got.easting - truth.easting,
-            got.northing - truth.northing,
-            got.elevation - truth.elevation,
-            got.roll - truth.roll,
-            got.pitch - truth.pitch,
-            turn,
-        ]
-    )
+    wrapped to [-pi, pi]."""
+    return got.minus(truth)
 
 
 def _elevation_observed(covariance: NDArray[np.float64]) -> bool:

@@ -128,6 +128,21 @@ class Pose3D:
         """The 2D pose: position and azimuth, the elevation and tilt left out."""
         return Pose2D(self.easting, self.northing, self.azimuth)
 
+    def minus(self, other: Pose3D) -> NDArray[np.float64]:
+        """``self - other`` as (easting, northing, elevation, roll, pitch, azimuth), metres
+        and radians (a 3D record's ``covariance_order``), the azimuth's difference
+        wrapped to [-pi, pi]."""
+        return np.array(
+            [
+                self.easting - other.easting,
+                self.northing - other.northing,
+                self.elevation - other.elevation,
+                self.roll - other.roll,
+                self.pitch - other.pitch,
+                math.remainder(self.azimuth - other.azimuth, 2 * math.pi),
+            ]
+        )
+
     def sensor_to_grid(self, points: ArrayLike) -> NDArray[np.float64]:
         """(n, 3) points in the sensor frame → the grid."""
         p = np.asarray(points, dtype=float).reshape(-1, 3)

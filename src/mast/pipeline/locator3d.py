@@ -273,17 +273,7 @@ def _contiguous(
 def _moved(before: Pose3D, after: Pose3D, covariance: NDArray[np.float64]) -> NDArray[np.float64]:
     """How far ``after`` is from ``before`` in each parameter (record order), in sigmas of
     ``covariance``."""
-    d = np.array(
-        [
-            after.easting - before.easting,
-            after.northing - before.northing,
-            after.elevation - before.elevation,
-            after.roll - before.roll,
-            after.pitch - before.pitch,
-            (after.azimuth - before.azimuth + math.pi) % (2 * math.pi) - math.pi,
-        ]
-    )
-    return np.asarray(np.abs(d) / np.sqrt(np.diag(covariance)), dtype=np.float64)
+    return np.asarray(np.abs(after.minus(before)) / np.sqrt(np.diag(covariance)))
 
 
 def _sorted_medians(
