@@ -539,6 +539,7 @@ def _fix3d(
     adj: Adjustment3D | None = None
     which = tight
     prior = (flat.pitch, flat.roll, math.radians(TILT_PRIOR_DEG))
+    most: tuple[str, ...] = ()  # the most beacons a growth stage's cut showed
     try:
         # Grown from the sensor's height out: near it a tilt's error moves a return
         # little, so the tight gate holds from the start; each stage's tilt lets the
@@ -559,7 +560,9 @@ def _fix3d(
                 reach_m=reach, ceilings=roof,
             )  # fmt: skip
             trial = _contiguous(trial, grid, pose.position, planes, spacing, rays)
-            if len(_shown(trial, lines, planes, cfg)) < 2:
+            showing = _shown(trial, lines, planes, cfg)
+            most = max(most, showing, key=len)
+            if len(showing) < 2:
                 continue  # the last assignment that showed two beacons stands
             which = trial
             adj = adjust_pose(
@@ -567,8 +570,8 @@ def _fix3d(
                 gate_m=gate, elevation=False, tilt_prior=prior, snooping_rounds=0,
             )  # fmt: skip
             pose = adj.pose
-        if adj is None:
-            return refused("one_beacon", _too_few(_shown(which, lines, planes, cfg), cfg))
+        if adj is None:  # no stage's cut showed two beacons
+            return refused("one_beacon", _too_few(most, cfg))
         # the elevation last, from the top edges of panels the tilt now holds; the
         # panels cut again at the adjusted tops, until the assignment holds
         held = False  # the assignment the last adjustment ran on holds at its pose
