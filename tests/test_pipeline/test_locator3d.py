@@ -131,3 +131,21 @@ def test_hard_64_ring_frames_are_fixed_within_their_covariance_or_refused(
     assert np.all(np.abs(err) < 4.5 * np.sqrt(np.diag(fix.adjustment.covariance))), err
     assert np.linalg.norm(err[:3]) < 0.1, err
     assert np.degrees(np.abs(err[3:])).max() < 1.0, err
+
+
+def test_a_plan_view_of_one_beacon_starts_a_fix_the_2d_prior_confirms() -> None:
+    # Every plan view of this frame confirms one beacon only: the second is fixed in 3D
+    # where the first's pose puts it, and the plan view, levelled by that pose and
+    # located with it as a prior, confirms both (the fix's plan view has the prior).
+    scene = random_drift_scene(0, frames=6, lidar="os1-64", range_sigma_m=0.02)
+    sim = scene.simulate(4)
+    fix = locate3d(
+        sim.frame, scene.survey, config=Locator3DConfig(range_sigma_m=0.02, survey_sigma_m=0.0)
+    )
+    assert fix.ok
+    assert fix.pose is not None
+    assert fix.adjustment is not None
+    assert fix.plan.ok
+    assert fix.plan.config.prior is not None
+    err = fix.pose.minus(sim.pose)
+    assert np.all(np.abs(err) < 4.5 * np.sqrt(np.diag(fix.adjustment.covariance))), err

@@ -51,6 +51,7 @@ from numpy.typing import NDArray
 
 from mast.core.beacon import Survey
 from mast.core.frames import yaw_of_azimuth
+from mast.core.pose import Pose2D
 from mast.core.pose3d import Frame3D, Pose3D, rotation_rpy
 from mast.errors import InputError
 from mast.pipeline.adjust3d import (
@@ -65,6 +66,7 @@ from mast.pipeline.adjust3d import (
 )
 from mast.pipeline.locator import Fix, LocatorConfig, locate
 from mast.pipeline.plan_view import estimate_up, level_rotation, plan_scan, rings_bottom_up
+from mast.pipeline.tracking import Prior
 
 __all__ = ["Fix3D", "Locator3DConfig", "locate3d"]
 
@@ -109,6 +111,11 @@ REFINE_TILT_SIGMA_DEG = 1.0
 #: not know where it is).
 ELEVATION_ROUNDS = 5
 SETTLE_SIGMAS = 2.0
+#: Plan views confirming one beacon only that a frame tries to start from
+#: (:func:`_from_one_beacon`), and the window of the prior the 3D pose they give sets
+#: the plan view located again (metres, degrees).
+ONE_BEACON_STARTS = 2
+ONE_BEACON_PRIOR = (0.25, 2.0)
 #: How far about a panel, in plan, the lowest returns are its floor, metres.
 FLOOR_RADIUS_M = 2.0
 #: The plan view's tilt error in a return's place, for the first look, metres.
@@ -366,6 +373,7 @@ def locate3d(
     first: Fix3D | None = None  # the first refusal: the frame's reason, where none fixes
     tries = [(level.T @ _pitched(tilt), band) for tilt, band in _tries(cfg)]
     refined = False
+    singles = 0
     while tries:
         # the walls leave the pitch along the drift to the floor, which a grade tilts:
         # the same vertical pitched by a grade's worth, and the beacons at other heights
@@ -381,10 +389,16 @@ def locate3d(
             spent["adjustment"] += time.perf_counter() - t
             if fix.ok:
                 return replace(fix, elapsed_s=time.perf_counter() - t0, stages_s=spent)
-        elif first is None:
-            first = Fix3D(
-                "no_fix", None, None, plan.reason, f"plan view: {plan.detail}", plan, tried
-            )
+        else:
+            if first is None:
+                first = Fix3D(
+                    "no_fix", None, None, plan.reason, f"plan view: {plan.detail}", plan, tried
+                )
+            if plan.reason == "one_beacon" and singles < ONE_BEACON_STARTS:
+                singles += 1
+                fix = _from_one_beacon(frame, survey, planes, plan, tried, band, cfg, spent)
+                if fix is not None and fix.ok:
+                    return replace(fix, elapsed_s=time.perf_counter() - t0, stages_s=spent)
         if fix is not None and (first is None or first.adjustment is None):
             first = fix  # a 3D refusal says more
         if not refined:
@@ -397,6 +411,49 @@ def locate3d(
                 tries[:0] = [(better, band) for band in cfg.bands_m[:2]]
     assert first is not None
     return replace(first, elapsed_s=time.perf_counter() - t0, stages_s=spent)
+
+
+def _from_one_beacon(
+    frame: Frame3D,
+    survey: Survey,
+    planes: PanelPlanes,
+    plan: Fix,
+    up: NDArray[np.float64],
+    band: tuple[float, float],
+    cfg: Locator3DConfig,
+    spent: dict[str, float],
+) -> Fix3D | None:
+    """A 3D fix from a plan view that confirmed one beacon only (``plan``, seen with the
+    vertical ``up`` in ``band``), or None: its best verified pose starts the 3D stages,
+    which find the other beacons' panels where it puts them (a beacon the plan view
+    missed may be below or above the band, or smeared by the vertical's error); where
+    they show a second beacon and pass every 3D test, that pose's vertical and position
+    give the plan view again, located by 2D with the pose as its prior (a prior only
+    adds, and the 2D beam verification confirms both beacons), and that 2D fix the 3D
+    fix with every test, the plan view's agreement included. ``spent`` is added to."""
+    if not (plan.verified and plan.verified[0].supported):
+        return None
+    t = time.perf_counter()
+    first = _fix3d(frame, planes, plan, up, cfg, one_beacon=plan.verified[0].pose)
+    spent["adjustment"] += time.perf_counter() - t
+    if not first.ok or first.pose is None:
+        return None
+    t = time.perf_counter()
+    vertical = np.asarray(first.pose.rotation[2], dtype=np.float64)  # grid z, sensor frame
+    scan = plan_scan(frame, up=vertical, band=band, resolution_deg=cfg.plan_resolution_deg)
+    radius, degrees = ONE_BEACON_PRIOR
+    prior = Prior(first.pose.horizontal, radius, math.radians(degrees))
+    plan_cfg = LocatorConfig(
+        range_sigma_m=cfg.range_sigma_m, survey_sigma_m=cfg.survey_sigma_m, prior=prior
+    )
+    again = locate(scan, survey, config=plan_cfg)
+    spent["plan"] += time.perf_counter() - t
+    if not again.ok or again.pose is None:
+        return None
+    t = time.perf_counter()
+    fix = _fix3d(frame, planes, again, vertical, cfg)
+    spent["adjustment"] += time.perf_counter() - t
+    return fix
 
 
 def _pitched(tilt_deg: float) -> NDArray[np.float64]:
@@ -479,18 +536,26 @@ def _vertical_from(
 
 
 def _fix3d(
-    frame: Frame3D, planes: PanelPlanes, plan: Fix, up: NDArray[np.float64], cfg: Locator3DConfig
+    frame: Frame3D,
+    planes: PanelPlanes,
+    plan: Fix,
+    up: NDArray[np.float64],
+    cfg: Locator3DConfig,
+    one_beacon: Pose2D | None = None,
 ) -> Fix3D:
     """The six parameters from the plan view's 2D fix ``plan``, seen with the vertical
-    ``up`` (steps 4 to 7 of the module)."""
+    ``up`` (steps 4 to 7 of the module); or, where the plan view confirmed one beacon
+    only, from its best verified pose ``one_beacon`` (no 2D fix for the 3D position to agree
+    with: the 3D fix must show a second beacon where that pose puts it)."""
 
     def refused(reason: str | None, detail: str, adj: Adjustment3D | None = None) -> Fix3D:
         return Fix3D("no_fix", None, adj, reason, detail, plan, up)
 
-    assert plan.pose is not None
+    pose2d = one_beacon or plan.pose
+    assert pose2d is not None
     # the 2D pose, with the levelling's tilt: R = Rz(yaw) @ L, L = Ry(pitch) Rx(roll)
-    R0 = rotation_rpy(0.0, 0.0, yaw_of_azimuth(plan.pose.azimuth)) @ level_rotation(up)
-    flat = Pose3D.from_rotation(R0, (plan.pose.easting, plan.pose.northing, 0.0))
+    R0 = rotation_rpy(0.0, 0.0, yaw_of_azimuth(pose2d.azimuth)) @ level_rotation(up)
+    flat = Pose3D.from_rotation(R0, (pose2d.easting, pose2d.northing, 0.0))
 
     # only the returns near a panel in plan can be a panel's or pass over its top; each
     # panel looks at its own (local), and its floor at those a little further about
@@ -660,9 +725,12 @@ def _fix3d(
             f"pose puts it do not fit it ({hits[k]} do)",
             adj,
         )
+    if one_beacon is not None:
+        return Fix3D("fix", adj.pose, adj, None, "", plan, up, beacons)
     # the 3D position must be where the plan view put it (within both sigmas and the
     # plan view's smear)
     assert plan.adjustment is not None
+    assert plan.pose is not None
     d = np.array([adj.pose.easting - plan.pose.easting, adj.pose.northing - plan.pose.northing])
     c = plan.adjustment.covariance[:2, :2] + adj.covariance[:2, :2] + PLAN_SLACK_M**2 * np.eye(2)
     if float(d @ np.linalg.solve(c, d)) > 13.8:  # chi-square, 2 dof, 0.1 %
