@@ -10,8 +10,13 @@ view, then the six-parameter adjustment on the panels it names (docs/3d.md).
    along the drift to the floor, which a grade tilts, and a beacon may stand wholly
    below or above the sensor: where the plan view finds no fix, or its fix no 3D fix,
    the next of the bands (:attr:`Locator3DConfig.bands_m`) and pitches
-   (:data:`PITCH_TRIES_DEG`) is tried (:func:`_tries`). No fix in any, no 3D fix: the
-   reason is the first refusal of a 3D adjustment's, or else the first refusal's.
+   (:data:`PITCH_TRIES_DEG`) is tried (:func:`_tries`). After the first try that
+   fails, the beacons its plan view found, even one, give the vertical
+   (:func:`_vertical_from`), tried next. A plan view that confirms one beacon only
+   starts the 3D stages from that beacon's pose; a second beacon they find is
+   confirmed by the plan view located again with the pose as a 2D prior
+   (:func:`_from_one_beacon`). No fix in any, no 3D fix: the reason is the first
+   refusal of a 3D adjustment's, or else the first refusal's.
 4. **The start**: the 2D pose with the levelling's pitch and roll, and the elevation
    where the most panels' top brackets agree (:func:`_start_elevation`: hits in a
    tight gate, each panel's run of them up from its middle, and the rays crossing over
