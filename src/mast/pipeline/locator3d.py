@@ -376,6 +376,7 @@ def locate3d(
     first: Fix3D | None = None  # the first refusal: the frame's reason, where none fixes
     tries = [(level.T @ _pitched(tilt), band) for tilt, band in _tries(cfg)]
     refined = False
+    spacing: float | None = None  # the rings' (ring_spacing), once for the frame
     while tries:
         # the walls leave the pitch along the drift to the floor, which a grade tilts:
         # the same vertical pitched by a grade's worth, and the beacons at other heights
@@ -387,7 +388,8 @@ def locate3d(
         fix: Fix3D | None = None
         if plan.ok and plan.pose is not None:
             t = time.perf_counter()
-            fix = _fix3d(frame, planes, plan, tried, cfg)
+            spacing = ring_spacing(frame) if spacing is None else spacing
+            fix = _fix3d(frame, planes, plan, tried, cfg, spacing=spacing)
             spent["adjustment"] += time.perf_counter() - t
             if fix.ok:
                 return replace(fix, elapsed_s=time.perf_counter() - t0, stages_s=spent)
@@ -400,7 +402,9 @@ def locate3d(
         if not refined:
             # a beacon the plan view found, though smeared, holds the vertical itself
             t = time.perf_counter()
-            better = _vertical_from(frame, planes, plan, tried, cfg)
+            if spacing is None and (plan.pose is not None or plan.verified):
+                spacing = ring_spacing(frame)  # where _vertical_from may need it
+            better = _vertical_from(frame, planes, plan, tried, cfg, spacing=spacing)
             spent["vertical"] += time.perf_counter() - t
             if better is not None:
                 refined = True
@@ -425,7 +429,13 @@ def _tries(cfg: Locator3DConfig) -> list[tuple[float, tuple[float, float]]]:
 
 
 def _vertical_from(
-    frame: Frame3D, planes: PanelPlanes, plan: Fix, up: NDArray[np.float64], cfg: Locator3DConfig
+    frame: Frame3D,
+    planes: PanelPlanes,
+    plan: Fix,
+    up: NDArray[np.float64],
+    cfg: Locator3DConfig,
+    *,
+    spacing: float | None = None,
 ) -> NDArray[np.float64] | None:
     """The grid's vertical in the sensor frame from the panels of the beacons the plan
     view (seen with the vertical ``up``) found: its fix's, or where it has none, those
@@ -460,7 +470,7 @@ def _vertical_from(
     )
     sig_r = cfg.range_sigma_m
     gate = 4.0 * sig_r
-    spacing = ring_spacing(frame)
+    spacing = ring_spacing(frame) if spacing is None else spacing
     prior = (pose.pitch, pose.roll, math.radians(TILT_PRIOR_DEG))
     adj: Adjustment3D | None = None
     try:
@@ -489,7 +499,13 @@ def _vertical_from(
 
 
 def _fix3d(
-    frame: Frame3D, planes: PanelPlanes, plan: Fix, up: NDArray[np.float64], cfg: Locator3DConfig
+    frame: Frame3D,
+    planes: PanelPlanes,
+    plan: Fix,
+    up: NDArray[np.float64],
+    cfg: Locator3DConfig,
+    *,
+    spacing: float | None = None,
 ) -> Fix3D:
     """The six parameters from the plan view's 2D fix ``plan``, seen with the vertical
     ``up`` (steps 4 to 7 of the module)."""
@@ -540,7 +556,7 @@ def _fix3d(
     pairs = local.pairs
     rays = planes._rays(grid - flat.position, flat.position, pairs)
     tight = planes._assign(rays, grid, loose, clear_m=clear)
-    spacing = ring_spacing(frame)
+    spacing = ring_spacing(frame) if spacing is None else spacing
     start = _start_elevation(grid, flat.position, tight, planes, 2.0 * loose, spacing, local, rays)
     if start is None:
         return refused("one_beacon", "no return on a surveyed panel in 3D")
