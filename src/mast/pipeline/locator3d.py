@@ -379,6 +379,7 @@ def locate3d(
     tries = [(level.T @ _pitched(tilt), band) for tilt, band in _tries(cfg)]
     refined = False
     singles = 0
+    spacing: float | None = None  # the rings' (ring_spacing), once for the frame
     while tries:
         # the walls leave the pitch along the drift to the floor, which a grade tilts:
         # the same vertical pitched by a grade's worth, and the beacons at other heights
@@ -390,7 +391,8 @@ def locate3d(
         fix: Fix3D | None = None
         if plan.ok and plan.pose is not None:
             t = time.perf_counter()
-            fix = _fix3d(frame, planes, plan, tried, cfg)
+            spacing = ring_spacing(frame) if spacing is None else spacing
+            fix = _fix3d(frame, planes, plan, tried, cfg, spacing=spacing)
             spent["adjustment"] += time.perf_counter() - t
             if fix.ok:
                 return replace(fix, elapsed_s=time.perf_counter() - t0, stages_s=spent)
@@ -401,7 +403,10 @@ def locate3d(
                 )
             if plan.reason == "one_beacon" and singles < ONE_BEACON_STARTS:
                 singles += 1
-                fix = _from_one_beacon(frame, survey, planes, plan, tried, band, cfg, spent)
+                spacing = ring_spacing(frame) if spacing is None else spacing
+                fix = _from_one_beacon(
+                    frame, survey, planes, plan, tried, band, cfg, spent, spacing=spacing
+                )
                 if fix is not None and fix.ok:
                     return replace(fix, elapsed_s=time.perf_counter() - t0, stages_s=spent)
         if fix is not None and (first is None or first.adjustment is None):
@@ -409,7 +414,9 @@ def locate3d(
         if not refined:
             # a beacon the plan view found, though smeared, holds the vertical itself
             t = time.perf_counter()
-            better = _vertical_from(frame, planes, plan, tried, cfg)
+            if spacing is None and (plan.pose is not None or plan.verified):
+                spacing = ring_spacing(frame)  # where _vertical_from may need it
+            better = _vertical_from(frame, planes, plan, tried, cfg, spacing=spacing)
             spent["vertical"] += time.perf_counter() - t
             if better is not None:
                 refined = True
@@ -427,6 +434,8 @@ def _from_one_beacon(
     band: tuple[float, float],
     cfg: Locator3DConfig,
     spent: dict[str, float],
+    *,
+    spacing: float | None = None,
 ) -> Fix3D | None:
     """A 3D fix from a plan view that confirmed one beacon only (``plan``, seen with the
     vertical ``up`` in ``band``), or None: its best verified pose starts the 3D stages,
@@ -435,11 +444,12 @@ def _from_one_beacon(
     they show a second beacon and pass every 3D test, that pose's vertical and position
     give the plan view again, located by 2D with the pose as its prior (a prior only
     adds, and the 2D beam verification confirms both beacons), and that 2D fix the 3D
-    fix with every test, the plan view's agreement included. ``spent`` is added to."""
+    fix with every test, the plan view's agreement included. ``spent`` is added to;
+    ``spacing`` is the frame's :func:`ring_spacing`, where known."""
     if not (plan.verified and plan.verified[0].supported):
         return None
     t = time.perf_counter()
-    first = _fix3d(frame, planes, plan, up, cfg, one_beacon=plan.verified[0].pose)
+    first = _fix3d(frame, planes, plan, up, cfg, one_beacon=plan.verified[0].pose, spacing=spacing)
     spent["adjustment"] += time.perf_counter() - t
     if not first.ok or first.pose is None:
         return None
@@ -456,7 +466,7 @@ def _from_one_beacon(
     if not again.ok or again.pose is None:
         return None
     t = time.perf_counter()
-    fix = _fix3d(frame, planes, again, vertical, cfg)
+    fix = _fix3d(frame, planes, again, vertical, cfg, spacing=spacing)
     spent["adjustment"] += time.perf_counter() - t
     return fix
 
@@ -477,7 +487,13 @@ def _tries(cfg: Locator3DConfig) -> list[tuple[float, tuple[float, float]]]:
 
 
 def _vertical_from(
-    frame: Frame3D, planes: PanelPlanes, plan: Fix, up: NDArray[np.float64], cfg: Locator3DConfig
+    frame: Frame3D,
+    planes: PanelPlanes,
+    plan: Fix,
+    up: NDArray[np.float64],
+    cfg: Locator3DConfig,
+    *,
+    spacing: float | None = None,
 ) -> NDArray[np.float64] | None:
     """The grid's vertical in the sensor frame from the panels of the beacons the plan
     view (seen with the vertical ``up``) found: its fix's, or where it has none, those
@@ -512,7 +528,7 @@ def _vertical_from(
     )
     sig_r = cfg.range_sigma_m
     gate = 4.0 * sig_r
-    spacing = ring_spacing(frame)
+    spacing = ring_spacing(frame) if spacing is None else spacing
     prior = (pose.pitch, pose.roll, math.radians(TILT_PRIOR_DEG))
     adj: Adjustment3D | None = None
     try:
@@ -546,7 +562,9 @@ def _fix3d(
     plan: Fix,
     up: NDArray[np.float64],
     cfg: Locator3DConfig,
+    *,
     one_beacon: Pose2D | None = None,
+    spacing: float | None = None,
 ) -> Fix3D:
     """The six parameters from the plan view's 2D fix ``plan``, seen with the vertical
     ``up`` (steps 4 to 7 of the module); or, where the plan view confirmed one beacon
@@ -600,7 +618,7 @@ def _fix3d(
     pairs = local.pairs
     rays = planes._rays(grid - flat.position, flat.position, pairs)
     tight = planes._assign(rays, grid, loose, clear_m=clear)
-    spacing = ring_spacing(frame)
+    spacing = ring_spacing(frame) if spacing is None else spacing
     start = _start_elevation(grid, flat.position, tight, planes, 2.0 * loose, spacing, local, rays)
     if start is None:
         return refused("one_beacon", "no return on a surveyed panel in 3D")

@@ -24,7 +24,6 @@ where the 3D adjustment starts (docs/3d.md).
 
 from __future__ import annotations
 
-import itertools
 import math
 
 import numpy as np
@@ -160,15 +159,14 @@ def _floor_normal(
     Rings reach the floor metres apart, too far for the ring normals to see it."""
     L = level_rotation(up)
     q = p[:: max(1, len(p) // 20_000)] @ L.T  # a floor is seen by far fewer returns
-    keep = (np.hypot(q[:, 0], q[:, 1]) < reach_m) & (q[:, 2] < -0.3)
-    q = q[keep]
+    q = q[q[:, 2] < -0.3]
+    q = q[np.hypot(q[:, 0], q[:, 1]) < reach_m]
     if len(q) < 50:
         return None
     cells = np.floor(q[:, :2] / cell_m).astype(np.int64)
-    key = cells[:, 0] * 100_003 + cells[:, 1]
-    order = np.lexsort((q[:, 2], key))
-    first = order[np.r_[True, key[order][1:] != key[order][:-1]]]
-    low = q[first]
+    cells -= cells.min(axis=0)
+    key = cells[:, 0] * (int(cells[:, 1].max()) + 1) + cells[:, 1]  # ordered as (x, y)
+    low = q[_first_lowest(key, q[:, 2])]
     if len(low) < 30:
         return None
     A = np.c_[low[:, 0], low[:, 1], np.ones(len(low))]
@@ -180,6 +178,20 @@ def _floor_normal(
             return None
     n = np.array([-coef[0], -coef[1], 1.0])
     return np.asarray(L.T @ (n / np.linalg.norm(n)), dtype=np.float64)
+
+
+def _first_lowest(key: NDArray[np.int64], z: NDArray[np.float64]) -> NDArray[np.intp]:
+    """The index of the lowest ``z`` of each ``key`` (the first where two are as low),
+    by increasing key: ``order[0]`` of each key's run of ``np.lexsort((z, key))``, with a
+    radix sort on the keys (non-negative) where they fit 16 bits."""
+    small = key.astype(np.uint16) if int(key.max()) < 1 << 16 else key
+    order = np.argsort(small, kind="stable")  # each key's returns in their order
+    k, zs = key[order], z[order]
+    new = np.r_[True, k[1:] != k[:-1]]
+    run = np.cumsum(new)  # each return's key, counted from 1
+    at = np.flatnonzero(zs == np.minimum.reduceat(zs, np.flatnonzero(new))[run - 1])
+    first = np.r_[True, run[at][1:] != run[at][:-1]]
+    return np.asarray(order[at[first]], dtype=np.intp)
 
 
 def _patch_normals(
@@ -202,14 +214,34 @@ def rings_bottom_up(frame: Frame3D) -> list[tuple[float, NDArray[np.intp]]]:
     """Each ring of a frame (none without rings) as its median elevation angle (radians,
     in the sensor frame) and its returns' indices, bottom to top whatever the driver's
     numbering."""
-    if frame.ring is None:
+    if frame.ring is None or frame.ring.size == 0:
         return []
+    ring = frame.ring
+    lo = int(ring.min())
+    if int(ring.max()) - lo < 1 << 16:  # a radix sort, on 16-bit keys
+        small = (ring - lo).astype(np.uint16)
+        counts = np.bincount(small)
+        counts = counts[counts > 0]
+        order = np.argsort(small, kind="stable")
+    else:
+        _, counts = np.unique(ring, return_counts=True)
+        order = np.argsort(ring, kind="stable")
+    # order: the returns by ring number, each ring's in their order
     p = frame.points
-    elevation = np.arctan2(p[:, 2], np.hypot(p[:, 0], p[:, 1]))
+    elevation = np.hypot(p[:, 0], p[:, 1])
+    elevation = np.arctan2(p[:, 2], elevation, out=elevation)[order]
+    ends = np.cumsum(counts)
     out = []
-    for r in np.unique(frame.ring):
-        idx = np.flatnonzero(frame.ring == r)
-        out.append((float(np.median(elevation[idx])), idx))
+    for start, end in zip(ends - counts, ends, strict=True):
+        part, half = elevation[start:end], int(end - start) // 2
+        # np.median's order statistics, partitioned in place
+        if (end - start) % 2:
+            part.partition(half)
+            median = float(part[half])
+        else:
+            part.partition((half - 1, half))
+            median = float((part[half - 1] + part[half]) / 2)
+        out.append((median, order[start:end]))
     out.sort(key=lambda item: item[0])
     return out
 
@@ -217,24 +249,43 @@ def rings_bottom_up(frame: Frame3D) -> list[tuple[float, NDArray[np.intp]]]:
 def _ring_normals(frame: Frame3D, sample: int) -> NDArray[np.float64] | None:
     """Normals from each ring and the one above it (see :func:`estimate_up`); None when
     the frame has fewer than two rings."""
-    p = frame.points
     by_ring = rings_bottom_up(frame)
     if len(by_ring) < 2:
         return None
-    bearing = np.arctan2(p[:, 1], p[:, 0])
-    by_ring = [(e, idx[np.argsort(bearing[idx])]) for e, idx in by_ring]
-    stride = max(1, len(p) // sample)
-    out = []
-    for (_, low), (_, high) in itertools.pairwise(by_ring):
+    x, y, z = np.array(frame.points.T)  # each coordinate contiguous
+    bearing = np.arctan2(y, x)
+    rings, bearings = [], []
+    for _, idx in by_ring:
+        b = bearing[idx]
+        # a sort by bearing: stable, which is quick on a ring in the order it was
+        # scanned; where two returns are at one bearing, the same as np.argsort's
+        order = np.argsort(b, kind="stable")
+        b = b[order]
+        if b.size > 1 and (b[1:] == b[:-1]).any():
+            order = np.argsort(bearing[idx])
+            b = bearing[idx][order]
+        rings.append(idx[order])
+        bearings.append(b)
+    stride = max(1, len(x) // sample)
+    here, after, above = [], [], []
+    for k in range(len(rings) - 1):
+        low, high = rings[k], rings[k + 1]
         if low.size < 3 or high.size < 2:
             continue
-        here = low[:-1:stride]
-        along = p[low[1::stride][: here.size]] - p[here]
-        at = np.clip(np.searchsorted(bearing[high], bearing[here]), 0, high.size - 1)
-        up = p[high[at]] - p[here]
-        n = np.cross(along, up)
-        size = np.linalg.norm(n, axis=1)
-        ok = (np.linalg.norm(along, axis=1) < 0.3) & (np.linalg.norm(up, axis=1) < 0.6)
-        ok &= size > 1e-6
-        out.append(n[ok] / size[ok, None])
-    return np.vstack(out) if out else np.zeros((0, 3))
+        at = slice(0, low.size - 1, stride)
+        here.append(low[at])
+        after.append(low[1::stride][: here[-1].size])
+        near = np.searchsorted(bearings[k + 1], bearings[k][at])
+        above.append(high[np.minimum(near, high.size - 1)])
+    if not here:
+        return np.zeros((0, 3))
+    h, a, u = np.concatenate(here), np.concatenate(after), np.concatenate(above)
+    ax, ay, az = x[a] - x[h], y[a] - y[h], z[a] - z[h]  # the step along the ring
+    ux, uy, uz = x[u] - x[h], y[u] - y[h], z[u] - z[h]  # and to the ring above
+    # their cross product, and the lengths, as np.cross and np.linalg.norm have them
+    nx, ny, nz = ay * uz - az * uy, az * ux - ax * uz, ax * uy - ay * ux
+    size = np.sqrt(nx * nx + ny * ny + nz * nz)
+    ok = np.sqrt(ax * ax + ay * ay + az * az) < 0.3
+    ok &= np.sqrt(ux * ux + uy * uy + uz * uz) < 0.6
+    ok &= size > 1e-6
+    return np.stack([nx[ok] / size[ok], ny[ok] / size[ok], nz[ok] / size[ok]], axis=1)
