@@ -20,18 +20,7 @@ CASES = [("parallel", 0.0, 0.0), ("convergent", 6.0, -4.0), ("divergent", -8.0, 
 
 
 def _errors(adj: Adjustment3D, truth: Pose3D) -> np.ndarray:
-    p = adj.pose
-    turn = (p.azimuth - truth.azimuth + math.pi) % (2 * math.pi) - math.pi
-    return np.array(
-        [
-            p.easting - truth.easting,
-            p.northing - truth.northing,
-            p.elevation - truth.elevation,
-            p.roll - truth.roll,
-            p.pitch - truth.pitch,
-            turn,
-        ]
-    )
+    return adj.pose.minus(truth)
 
 
 def _adjust(variant: str, truth: Pose3D, noise: float, seed: int, survey: Survey | None = None):  # type: ignore[no-untyped-def]
