@@ -409,7 +409,8 @@ class PanelPlanes:
         the gate) between its lowest and highest hits twice the gate clear of a free end
         (:meth:`inside`: near one the wall just below or above a panel is within the
         gate of its plane, and one such return would open the window to rays that pass
-        under or over the panel), and returning from beyond the
+        under or over the panel; a panel with no such hit, a short end panel at a
+        shallow angle to its wall, is not looked at), and returning from beyond the
         plane by more than the gate, or from in front of it by more than the gate but
         within three (nearer still, something stands in front of it). A panel where the
         pose puts it is hit by every such ray (a range noise beyond four sigmas aside);

@@ -401,13 +401,14 @@ def locate3d(
                 first = Fix3D(
                     "no_fix", None, None, plan.reason, f"plan view: {plan.detail}", plan, tried
                 )
-            if plan.reason == "one_beacon" and singles < ONE_BEACON_STARTS:
+            alone = plan.verified[0].supported if plan.verified else ()
+            if plan.reason == "one_beacon" and len(alone) == 1 and singles < ONE_BEACON_STARTS:
                 singles += 1
                 spacing = ring_spacing(frame) if spacing is None else spacing
                 fix = _from_one_beacon(
                     frame, survey, planes, plan, tried, band, cfg, spent, spacing=spacing
                 )
-                if fix is not None and fix.ok:
+                if fix.ok:
                     return replace(fix, elapsed_s=time.perf_counter() - t0, stages_s=spent)
         if fix is not None and (first is None or first.adjustment is None):
             first = fix  # a 3D refusal says more
@@ -436,23 +437,31 @@ def _from_one_beacon(
     spent: dict[str, float],
     *,
     spacing: float | None = None,
-) -> Fix3D | None:
-    """A 3D fix from a plan view that confirmed one beacon only (``plan``, seen with the
-    vertical ``up`` in ``band``), or None: its best verified pose starts the 3D stages,
-    which find the other beacons' panels where it puts them (a beacon the plan view
-    missed may be below or above the band, or smeared by the vertical's error); where
-    they show a second beacon and pass every 3D test, that pose's vertical and position
-    give the plan view again, located by 2D with the pose as its prior (a prior only
-    adds, and the 2D beam verification confirms both beacons), and that 2D fix the 3D
-    fix with every test, the plan view's agreement included. ``spent`` is added to;
+) -> Fix3D:
+    """A 3D fix, or the 3D refusal, from a plan view that confirmed one beacon only
+    (``plan``, seen with the vertical ``up`` in ``band``; its best verified pose
+    supported by that one beacon): that pose starts the 3D stages, which find the other
+    beacons' panels where it puts them (a beacon the plan view missed may be below or
+    above the band, or smeared by the vertical's error); where they show that beacon
+    and a second and pass every 3D test, that pose's vertical and position give the
+    plan view again, located by 2D with the pose as its prior (a prior only adds, and
+    the 2D beam verification confirms both beacons), and that 2D fix the 3D fix with
+    every test, the plan view's agreement included. ``spent`` is added to;
     ``spacing`` is the frame's :func:`ring_spacing`, where known."""
-    if not (plan.verified and plan.verified[0].supported):
-        return None
     t = time.perf_counter()
     first = _fix3d(frame, planes, plan, up, cfg, one_beacon=plan.verified[0].pose, spacing=spacing)
     spent["adjustment"] += time.perf_counter() - t
     if not first.ok or first.pose is None:
-        return None
+        return first
+    if plan.verified[0].supported[0] not in first.beacons:
+        return replace(
+            first,
+            status="no_fix",
+            pose=None,
+            reason="inconsistent",
+            detail=f"in 3D, the plan view's one beacon {plan.verified[0].supported[0]} is not "
+            f"among those shown ({', '.join(first.beacons)})",
+        )
     t = time.perf_counter()
     vertical = np.asarray(first.pose.rotation[2], dtype=np.float64)  # grid z, sensor frame
     scan = plan_scan(frame, up=vertical, band=band, resolution_deg=cfg.plan_resolution_deg)
@@ -464,7 +473,13 @@ def _from_one_beacon(
     again = locate(scan, survey, config=plan_cfg)
     spent["plan"] += time.perf_counter() - t
     if not again.ok or again.pose is None:
-        return None
+        return replace(
+            first,
+            status="no_fix",
+            pose=None,
+            reason=again.reason,
+            detail=f"plan view located again near the one-beacon 3D pose: {again.detail}",
+        )
     t = time.perf_counter()
     fix = _fix3d(frame, planes, again, vertical, cfg, spacing=spacing)
     spent["adjustment"] += time.perf_counter() - t
@@ -690,8 +705,9 @@ def _fix3d(
                 held = True
                 break
             which = again
-            if len(_shown(which, lines, planes, cfg)) < 2:
-                break  # refused below: the adjusted pose shows fewer than two beacons
+            fewer = _shown(which, lines, planes, cfg)
+            if len(fewer) < 2:  # the adjusted pose's own cut shows fewer than two beacons
+                return refused("one_beacon", _too_few(fewer, cfg), adj)
     except np.linalg.LinAlgError:  # the panels seen leave a direction unobserved
         return refused("degenerate_geometry", "the panels seen do not hold the pose in 3D")
     if adj.used is not None:
@@ -699,7 +715,7 @@ def _fix3d(
     beacons = _shown(which, lines, planes, cfg)
     if len(beacons) < 2:
         return refused("one_beacon", _too_few(beacons, cfg), adj)
-    if not held and float(np.max(moved)) > SETTLE_SIGMAS:
+    if not held and float(np.max(moved)) > SETTLE_SIGMAS:  # every round ran
         return refused(
             "inconsistent",
             f"the panels' returns, cut again at the adjusted tops, still change after "
