@@ -678,6 +678,7 @@ def _fix3d(
         # the elevation last, from the top edges of panels the tilt now holds; the
         # panels cut again at the adjusted tops, until the assignment holds
         held = False  # the assignment the last adjustment ran on holds at its pose
+        thinned = False
         moved = np.zeros(6)  # the last adjustment's move from the one before, in sigmas
         for _ in range(ELEVATION_ROUNDS):
             before, bracketed = pose, adj is not None and adj.top_edges > 0
@@ -704,10 +705,10 @@ def _fix3d(
             if np.array_equal(again, which):
                 held = True
                 break
+            if len(_shown(again, lines, planes, cfg)) < 2:
+                thinned = True  # the adjusted pose's own cut shows fewer than two beacons:
+                break  # the last adjustment's own assignment is tested below
             which = again
-            fewer = _shown(which, lines, planes, cfg)
-            if len(fewer) < 2:  # the adjusted pose's own cut shows fewer than two beacons
-                return refused("one_beacon", _too_few(fewer, cfg), adj)
     except np.linalg.LinAlgError:  # the panels seen leave a direction unobserved
         return refused("degenerate_geometry", "the panels seen do not hold the pose in 3D")
     if adj.used is not None:
@@ -715,11 +716,16 @@ def _fix3d(
     beacons = _shown(which, lines, planes, cfg)
     if len(beacons) < 2:
         return refused("one_beacon", _too_few(beacons, cfg), adj)
-    if not held and float(np.max(moved)) > SETTLE_SIGMAS:  # every round ran
+    if not held and float(np.max(moved)) > SETTLE_SIGMAS:
+        why = (
+            "cut again at the adjusted tops, the panels show fewer than two beacons"
+            if thinned
+            else f"the panels' returns, cut again at the adjusted tops, still change after "
+            f"{ELEVATION_ROUNDS} adjustments"
+        )
         return refused(
             "inconsistent",
-            f"the panels' returns, cut again at the adjusted tops, still change after "
-            f"{ELEVATION_ROUNDS} adjustments, and the last moved the pose by "
+            f"{why}, and the last adjustment moved the pose by "
             f"{float(np.max(moved)):.1f} sigma: the elevation and the tilt do not settle",
             adj,
         )
