@@ -379,7 +379,7 @@ def locate3d(
     tries = [(level.T @ _pitched(tilt), band) for tilt, band in _tries(cfg)]
     refined = False
     singles = 0
-    spacing: float | None = None  # the rings' (ring_spacing), once for the frame
+    spacing = ring_spacing(frame)
     while tries:
         # the walls leave the pitch along the drift to the floor, which a grade tilts:
         # the same vertical pitched by a grade's worth, and the beacons at other heights
@@ -391,7 +391,6 @@ def locate3d(
         fix: Fix3D | None = None
         if plan.ok and plan.pose is not None:
             t = time.perf_counter()
-            spacing = ring_spacing(frame) if spacing is None else spacing
             fix = _fix3d(frame, planes, plan, tried, cfg, spacing=spacing)
             spent["adjustment"] += time.perf_counter() - t
             if fix.ok:
@@ -404,7 +403,6 @@ def locate3d(
             alone = plan.verified[0].supported if plan.verified else ()
             if plan.reason == "one_beacon" and len(alone) == 1 and singles < ONE_BEACON_STARTS:
                 singles += 1
-                spacing = ring_spacing(frame) if spacing is None else spacing
                 fix = _from_one_beacon(
                     frame, survey, planes, plan, tried, band, cfg, spent, spacing=spacing
                 )
@@ -415,8 +413,6 @@ def locate3d(
         if not refined:
             # a beacon the plan view found, though smeared, holds the vertical itself
             t = time.perf_counter()
-            if spacing is None and (plan.pose is not None or plan.verified):
-                spacing = ring_spacing(frame)  # where _vertical_from may need it
             better = _vertical_from(frame, planes, plan, tried, cfg, spacing=spacing)
             spent["vertical"] += time.perf_counter() - t
             if better is not None:
@@ -486,6 +482,21 @@ def _from_one_beacon(
     return fix
 
 
+def _levelled(pose2d: Pose2D, up: NDArray[np.float64]) -> Pose3D:
+    """The 2D pose with the levelling's tilt (``R = Rz(yaw) L``, ``L = Ry(pitch) Rx(roll)``
+    levelling by the vertical ``up``), at elevation 0."""
+    R0 = rotation_rpy(0.0, 0.0, yaw_of_azimuth(pose2d.azimuth)) @ level_rotation(up)
+    return Pose3D.from_rotation(R0, (pose2d.easting, pose2d.northing, 0.0))
+
+
+def _lines(frame: Frame3D, near: NDArray[np.intp]) -> NDArray[np.intp]:
+    """The line each of the returns ``near`` draws across a panel: its ring, or without
+    rings, its 10 cm height."""
+    if frame.ring is not None:
+        return np.asarray(frame.ring[near], dtype=np.intp)
+    return np.asarray(np.floor(frame.points[near, 2] / 0.1), dtype=np.intp)
+
+
 def _pitched(tilt_deg: float) -> NDArray[np.float64]:
     """The levelled vertical pitched by ``tilt_deg`` about the sensor's y axis."""
     a = math.radians(tilt_deg)
@@ -524,8 +535,7 @@ def _vertical_from(
         pose2d, beacons = plan.verified[0].pose, plan.verified[0].supported
     else:
         return None
-    R0 = rotation_rpy(0.0, 0.0, yaw_of_azimuth(pose2d.azimuth)) @ level_rotation(up)
-    pose = Pose3D.from_rotation(R0, (pose2d.easting, pose2d.northing, 0.0))
+    pose = _levelled(pose2d, up)
     grid = pose.sensor_to_grid(frame.points)
     empty = np.zeros(0, dtype=np.intp)
     local = [
@@ -536,11 +546,7 @@ def _vertical_from(
     if near.size == 0:
         return None
     pts = frame.points[near]
-    lines = (
-        frame.ring[near].astype(np.intp)
-        if frame.ring is not None
-        else np.floor(pts[:, 2] / 0.1).astype(np.intp)
-    )
+    lines = _lines(frame, near)
     sig_r = cfg.range_sigma_m
     gate = 4.0 * sig_r
     spacing = ring_spacing(frame) if spacing is None else spacing
@@ -591,9 +597,7 @@ def _fix3d(
 
     pose2d = one_beacon or plan.pose
     assert pose2d is not None
-    # the 2D pose, with the levelling's tilt: R = Rz(yaw) @ L, L = Ry(pitch) Rx(roll)
-    R0 = rotation_rpy(0.0, 0.0, yaw_of_azimuth(pose2d.azimuth)) @ level_rotation(up)
-    flat = Pose3D.from_rotation(R0, (pose2d.easting, pose2d.northing, 0.0))
+    flat = _levelled(pose2d, up)
 
     # only the returns near a panel in plan can be a panel's or pass over its top; each
     # panel looks at its own (local), and its floor at those a little further about
@@ -610,17 +614,12 @@ def _fix3d(
         # lowest returns' places in plan
         R, at = pose.rotation, pose.position
 
-        def plan(idx: NDArray[np.intp]) -> NDArray[np.float64]:
+        def in_plan(idx: NDArray[np.intp]) -> NDArray[np.float64]:
             return np.asarray(looked[idx] @ R[:2].T + at[:2], dtype=np.float64)
 
-        return planes._floors(looked @ R[2] + at[2], plan, around) + FLOOR_CLEAR_M
+        return planes._floors(looked @ R[2] + at[2], in_plan, around) + FLOOR_CLEAR_M
 
-    # the lines each ring draws across a panel, or without rings, 10 cm heights
-    lines = (
-        frame.ring[near].astype(np.intp)
-        if frame.ring is not None
-        else np.floor(pts[:, 2] / 0.1).astype(np.intp)
-    )
+    lines = _lines(frame, near)
     sig_r, sig_s = cfg.range_sigma_m, cfg.survey_sigma_m
     gate = 4.0 * sig_r
     # The wall at a free end is within a gate of the panel's plane for gate / sine:
