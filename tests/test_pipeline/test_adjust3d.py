@@ -11,9 +11,10 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from mast.core.beacon import Survey
+from mast.core.beacon import Beacon, Survey
 from mast.core.pose3d import Pose3D
 from mast.pipeline.adjust3d import UNBRACKETED, Adjustment3D, PanelPlanes, adjust_pose
+from mast.sim.lidar3d import random_drift_scene
 from tests._raycast3d import cast, cast_labelled, paper_walls
 
 CASES = [("parallel", 0.0, 0.0), ("convergent", 6.0, -4.0), ("divergent", -8.0, 9.0)]
@@ -213,3 +214,65 @@ def test_the_floor_is_no_cut_where_none_is_seen() -> None:
     truth = Pose3D.from_degrees(7.0, 7.0, 1.2, 0.0)
     grid = truth.sensor_to_grid(cast(truth, walls, 0.01, 0).points)
     assert np.all(np.isnan(planes.floors(grid, planes.local(grid, 2.0))))
+
+
+def _hat(order: int) -> Survey:
+    """One hat on the wall x = 0, standing 0.2 m out into the drift (x > 0); its edges in
+    either order along the wall."""
+    edges = np.array([[0.0, 0.0], [0.2, 0.3], [0.2, 0.9], [0.0, 1.1]])
+    return Survey([Beacon("H", edges[::order].copy(), elevations=np.full(4, 2.0))])
+
+
+@pytest.mark.parametrize("order", [1, -1])
+def test_a_panel_faces_the_drift_its_beacon_stands_out_to(order: int) -> None:
+    planes = PanelPlanes.of(_hat(order))
+    assert np.all(planes.front != 0)
+    # in front of the beacon every panel faces the sensor; behind the wall none does
+    assert planes.facing(np.array([3.0, 0.55, 1.0])).all()
+    assert not planes.facing(np.array([-3.0, 0.55, 1.0])).any()
+    # past one end, along the wall, the far end panel turns its back (the middle's and
+    # the near end's faces are still turned to the drift)
+    past = planes.facing(np.array([1.0, 4.0, 1.0]))
+    p1, p3 = (0, 2) if order == 1 else (2, 0)
+    assert past[p3] and not past[p1]
+    # a beacon flat on its chord tells no side: every panel is taken to face
+    flat = np.array([[0.0, 0.0], [0.001, 0.3], [0.001, 0.9], [0.0, 1.1]])
+    planes = PanelPlanes.of(Survey([Beacon("F", flat, elevations=np.full(4, 2.0))]))
+    assert np.all(planes.front == 0)
+    assert planes.facing(np.array([-3.0, 0.55, 1.0])).all()
+
+
+def test_at_a_joint_a_return_goes_to_the_panel_turned_to_the_sensor() -> None:
+    planes = PanelPlanes.of(_hat(1))
+    blind = replace(planes, front=np.zeros(len(planes)))
+    # returns on P2 (x = 0.2) up to its joint with P3 at y = 0.9, seen from beyond the
+    # hat's first end: P3 turns its back, and near the joint its plane is within the gate
+    y = np.linspace(0.5, 0.899, 40)
+    p2 = np.column_stack([np.full_like(y, 0.2), y, np.full_like(y, 1.0)])
+    behind = np.array([1.0, -3.0, 1.0])
+    assert not planes.facing(behind)[2] and planes.facing(behind)[1]
+    assert np.all(planes.assign(p2, behind, 0.04) == 1)
+    near_joint = blind.assign(p2, behind, 0.04) == -1
+    assert near_joint.any() and not near_joint[:10].any()  # neither's, looked at alike
+    # seen from beyond the other end, both turn to the sensor: neither's near the joint
+    ahead = np.array([1.0, 5.0, 1.0])
+    assert planes.facing(ahead)[1:].all()
+    assert np.array_equal(planes.assign(p2, ahead, 0.04), blind.assign(p2, ahead, 0.04))
+
+
+def test_a_return_a_panel_cuts_off_by_height_is_not_its_neighbours() -> None:
+    walls, scene = paper_walls("divergent")
+    planes = PanelPlanes.of(scene.survey)
+    truth = Pose3D.from_degrees(7.0, 7.0, 1.2, 0.0, 3.0, 9.0)
+    grid = truth.sensor_to_grid(cast(truth, walls, 0.01, 1).points)
+    which = planes.assign(grid, truth.position, 0.04)
+    # the middle panels cut off 5 cm below their highest returns: their returns by the
+    # joints, within the gate of an end panel's plane too, stay neither's
+    middle = np.array([p == 2 for p in planes.panel])
+    high = np.full(len(planes), -np.inf)
+    for k in np.flatnonzero(middle):
+        high[k] = grid[which == k, 2].max() - 0.05
+    cut = planes.assign(grid, truth.position, 0.04, bottoms=high)
+    on_middle = middle[np.maximum(which, 0)] & (which >= 0)
+    assert np.array_equal(cut[~on_middle], which[~on_middle])
+    assert np.count_nonzero(cut[on_middle] >= 0) < np.count_nonzero(on_middle)

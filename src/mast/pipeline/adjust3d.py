@@ -88,6 +88,15 @@ class PanelPlanes:
     P3); infinite at a joint. Near a wall end the wall above and below a panel is
     within a gate of its plane for gate / sine: those returns are not the panel's.
     At a joint the returns within the gate of both panels' planes are neither's."""
+    front: NDArray[np.float64]
+    """(k,): the side of each panel's plane, as the sign of ``n · X - d``, its face turns
+    to: the side of the chord e1-e4 its beacon's middle edges e2 and e3 stand out to (a
+    beacon stands on its wall, so its faces turn to the drift: the panels' normals turn
+    with the polyline, each on the same side of it as the chord's). 0 where the middle
+    edges lie within a centimetre of the chord, with no side told. Near a joint, a
+    return within the gate of a panel turning its face to the sensor and of one turned
+    away is the first's: there the one turned away is behind it (past a free end, where
+    rough rock may leave a gap, the back of a panel may be seen: its returns are kept)."""
     wall: NDArray[np.float64]
     """(k, 3): the wall each panel's beacon is mounted on, the vertical plane through its
     free ends e1 and e4, as (nx, ny, d) with ``n · X = d``. A shallow beacon's middle
@@ -97,12 +106,15 @@ class PanelPlanes:
     @classmethod
     def of(cls, survey: Survey) -> PanelPlanes:
         starts, alongs, lengths, tops, ids, panels, sines = [], [], [], [], [], [], []
-        walls = []
+        walls: list[tuple[float, float, float]] = []
+        fronts: list[float] = []
         for b in survey:
             chord = b.edges[3] - b.edges[0]
             chord = chord / np.hypot(*chord)
             wall = np.array([chord[1], -chord[0]])
             walls += [(wall[0], wall[1], float(wall @ b.edges[0]))] * 3
+            bulge = float(wall @ (0.5 * (b.edges[1] + b.edges[2]) - b.edges[0]))
+            fronts += [0.0 if abs(bulge) < 0.01 else math.copysign(1.0, bulge)] * 3
             for k in range(3):
                 a, c = b.edges[k], b.edges[k + 1]
                 u = c - a
@@ -130,6 +142,7 @@ class PanelPlanes:
             panel=tuple(panels),
             wall_sine=np.array(sines, dtype=float).reshape(-1, 2),
             wall=np.array(walls, dtype=float).reshape(-1, 3),
+            front=np.array(fronts, dtype=float),
         )
 
     def crossing(
@@ -170,8 +183,10 @@ class PanelPlanes:
           below ``bottoms`` nor above ``ceilings`` (per panel, where given and finite:
           the survey has no bottom edge, the data do), and within ``reach_m`` of the
           sensor's height (a tilt's error moves a return by its height times it);
-        * within the gate of no other panel's plane, and nearer the panel's plane than
-          its beacon's wall (:attr:`wall`)."""
+        * within the gate of no other panel's plane inside its extent (whatever the
+          heights), or of none turning its face to the sensor (:meth:`facing`) where
+          the panel does; and nearer the panel's plane than its beacon's wall
+          (:attr:`wall`)."""
         o = np.asarray(origin, dtype=float).reshape(3)
         rays = self._rays(grid - o, o, local or self._everywhere(len(grid)))
         return self._assign(
@@ -199,7 +214,11 @@ class PanelPlanes:
         gated = np.flatnonzero((np.abs(1.0 - s) * rays.reach[rays.i] < gate_m) & (s > 0))
         k, i, t, z = rays.k[gated], rays.i[gated], rays.t[gated], rays.z[gated]
         lo, hi = self._inside_all(clear)
-        on = (t > lo[k]) & (t < hi[k])
+        # the panels whose plane (within the gate) and extent a return is on: it is
+        # one of theirs, or neither's (their heights are the beacon's, not one panel's:
+        # cut off one by a height, a return is not its neighbour's for that)
+        near = (t > lo[k]) & (t < hi[k])
+        on = near.copy()
         if math.isfinite(reach_m):
             on &= np.abs(z - rays.origin[2]) <= reach_m
         # each panel's highest and lowest crossing allowed (infinite: none)
@@ -213,10 +232,15 @@ class PanelPlanes:
         if bottoms is not None:
             floor = np.where(np.isfinite(bottoms), bottoms, -math.inf)
             on &= z >= floor[k]
-        which = np.full(len(grid), -1, dtype=np.intp)
+        # near a joint, within the gate of two panels: neither's, unless one only turns
+        # its face to the sensor (the other is behind it there)
+        n = len(grid)
+        turned = self.facing(rays.origin)[k]
+        facing = np.bincount(i[near & turned], minlength=n)[i]
+        either = np.bincount(i[near], minlength=n)[i]
+        on &= np.where(facing > 0, turned & (facing == 1), either == 1)
+        which = np.full(n, -1, dtype=np.intp)
         which[i[on]] = k[on]
-        # near a joint, within the gate of two panels: neither's
-        which[np.bincount(i[on], minlength=len(grid)) > 1] = -1
         mine = np.flatnonzero(which >= 0)  # nearer its beacon's wall than it: the wall's
         ks, xy = which[mine], grid[mine, :2]
         wall = self.wall[ks]
@@ -280,6 +304,12 @@ class PanelPlanes:
 
     def __len__(self) -> int:
         return len(self.beacon)
+
+    def facing(self, origin: NDArray[np.float64]) -> NDArray[np.bool_]:
+        """(k,): whether each panel turns its face to a sensor at ``origin`` (a panel
+        with no side told does, :attr:`front`)."""
+        side = self.normal @ np.asarray(origin, dtype=float)[:2] - self.offset
+        return np.asarray(self.front * side >= 0.0)
 
     def inside(self, k: int, clear_m: float, least_m: float = 0.0) -> tuple[float, float]:
         """Where along panel ``k`` (from its first edge) the wall at a free end is more
