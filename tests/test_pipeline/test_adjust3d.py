@@ -14,7 +14,6 @@ import pytest
 from mast.core.beacon import Beacon, Survey
 from mast.core.pose3d import Pose3D
 from mast.pipeline.adjust3d import UNBRACKETED, Adjustment3D, PanelPlanes, adjust_pose
-from mast.sim.lidar3d import random_drift_scene
 from tests._raycast3d import cast, cast_labelled, paper_walls
 
 CASES = [("parallel", 0.0, 0.0), ("convergent", 6.0, -4.0), ("divergent", -8.0, 9.0)]
@@ -234,7 +233,8 @@ def test_a_panel_faces_the_drift_its_beacon_stands_out_to(order: int) -> None:
     # the near end's faces are still turned to the drift)
     past = planes.facing(np.array([1.0, 4.0, 1.0]))
     p1, p3 = (0, 2) if order == 1 else (2, 0)
-    assert past[p3] and not past[p1]
+    assert past[p3]
+    assert not past[p1]
     # a beacon flat on its chord tells no side: every panel is taken to face
     flat = np.array([[0.0, 0.0], [0.001, 0.3], [0.001, 0.9], [0.0, 1.1]])
     planes = PanelPlanes.of(Survey([Beacon("F", flat, elevations=np.full(4, 2.0))]))
@@ -250,10 +250,12 @@ def test_at_a_joint_a_return_goes_to_the_panel_turned_to_the_sensor() -> None:
     y = np.linspace(0.5, 0.899, 40)
     p2 = np.column_stack([np.full_like(y, 0.2), y, np.full_like(y, 1.0)])
     behind = np.array([1.0, -3.0, 1.0])
-    assert not planes.facing(behind)[2] and planes.facing(behind)[1]
+    assert not planes.facing(behind)[2]
+    assert planes.facing(behind)[1]
     assert np.all(planes.assign(p2, behind, 0.04) == 1)
     near_joint = blind.assign(p2, behind, 0.04) == -1
-    assert near_joint.any() and not near_joint[:10].any()  # neither's, looked at alike
+    assert near_joint.any()  # neither's, looked at alike
+    assert not near_joint[:10].any()
     # seen from beyond the other end, both turn to the sensor: neither's near the joint
     ahead = np.array([1.0, 5.0, 1.0])
     assert planes.facing(ahead)[1:].all()
