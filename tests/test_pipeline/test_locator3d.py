@@ -1,6 +1,7 @@
 """The 3D locator (pipeline.locator3d) on simulated drifts: never a wrong or overconfident
 fix, tilted frames fixed at the paper's layout within their covariance, the plan view's
-tries, a panel kept to one run of heights, and a survey without elevations refused."""
+tries, a panel kept to one run of heights and near a free end on the rings its beacon
+shows clear of it, and a survey without elevations refused."""
 
 from __future__ import annotations
 
@@ -19,6 +20,7 @@ from mast.pipeline.locator3d import (
     Locator3DConfig,
     _contiguous,
     _tries,
+    _witnessed,
     locate3d,
 )
 from mast.sim.lidar3d import random_drift_scene
@@ -98,6 +100,27 @@ def test_a_panel_is_one_run_of_heights() -> None:
     kept = _contiguous(which2, grid2, truth.position, planes, math.radians(2.0))
     assert kept[-1] == -1
     assert np.array_equal(kept[:-1], which)
+
+
+def test_a_return_near_a_free_end_is_kept_on_a_ring_its_beacon_shows_clear_of_it() -> None:
+    _, scene = paper_walls("parallel")  # two beacons: panels 0-2 and 3-5
+    planes = PanelPlanes.of(scene.survey)
+    lines = np.array([5, 5, 5, 5, 6, 6, 7, 7, 7, 7, 7])
+    which = np.array([1, 1, 1, -1, 1, -1, 4, 4, 4, -1, -1])  # cut clear of the free ends
+    nearer = np.array([1, 1, 1, 0, 1, 0, 4, 4, 4, 3, 2])  # cut nearer them
+    # each return on the middle of the panel it is given (or the first beacon's P1)
+    k = np.where(which >= 0, which, 0)
+    grid = planes.start[k] + 0.5 * planes.length[k, None] * planes.along[k]
+    gate = 0.04
+    kept = _witnessed(which, nearer, grid, lines, planes, 3, gate)
+    # ring 5 crosses the first beacon at three returns clear of its ends: its return by
+    # the free end is P1's; ring 6 puts one there only (the wall above or below the
+    # beacon, at that height, may be all it is); ring 7 crosses the second beacon only
+    assert kept.tolist() == [1, 1, 1, 0, 1, -1, 4, 4, 4, 3, -1]
+    assert _witnessed(which, which, grid, lines, planes, 3, gate).tolist() == which.tolist()
+    # the wall a beacon stands on is no witness: returns within the gate and the rock's
+    # bulge of it do not count (the paper's middle panels stand 0.2 m out)
+    assert _witnessed(which, nearer, grid, lines, planes, 3, 0.2).tolist() == which.tolist()
 
 
 def test_a_survey_without_elevations_is_refused_for_a_3d_frame() -> None:
