@@ -119,6 +119,8 @@ def test_the_benchmark_counts_wrong_fixes_by_its_rule(
     assert s.wrong == (s.frames if all_wrong else 0)
     if not offset:
         assert all(r == 0.0 for r in s.ratio[:2])  # no error at all
+        assert s.ratio_points[:2] == (0.0, 0.0)
+        assert math.isnan(s.ratio_points[2])  # the points hold no elevation
         assert s.coverage == (1.0,) * 6
     else:
         assert min(s.coverage) == 0.0
@@ -138,7 +140,7 @@ def test_a_short_run_of_the_locator_fills_its_tables_and_rows(tmp_path: Path) ->
     assert s.ms_per_kpoint_median > 0
     assert 25_000 < s.points_median < 32_000  # a VLP-16's frame
     table = lines[0]
-    for heading in ("owed", "fix %", "WRONG", "ms / 1000 pts", *SHORT):
+    for heading in ("owed", "fix %", "WRONG", "ms / 1000 pts", "points' own", *SHORT):
         assert heading in table
     assert "vlp16-2cm" in table
     rows = (tmp_path / "accuracy3d_vlp16-2cm.csv").read_text().splitlines()

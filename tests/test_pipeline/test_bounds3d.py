@@ -199,6 +199,19 @@ def test_without_a_top_the_elevation_is_unobserved_and_the_rest_bounded() -> Non
     assert np.all(np.isfinite(bound.sigma[FIVE]))
 
 
+def test_the_points_own_bound_leaves_the_brackets_out() -> None:
+    points, panel, planes, survey = _frame()
+    full = cramer_rao_bound3d(TRUTH, points, panel, planes, range_sigma_m=SIGMA)
+    own = cramer_rao_bound3d(TRUTH, points, panel, planes, range_sigma_m=SIGMA, top_edges=False)
+    assert own.brackets == ()
+    assert math.isinf(own.covariance[Z, Z])
+    # the same as a survey without tops; the brackets only narrow the five
+    flat = Survey([replace(b, elevations=None) for b in survey])
+    alone = cramer_rao_bound3d(TRUTH, points, panel, PanelPlanes.of(flat), range_sigma_m=SIGMA)
+    assert np.allclose(own.sigma[FIVE], alone.sigma[FIVE], rtol=1e-9)
+    assert np.all(own.sigma[FIVE] >= full.sigma[FIVE] * (1 - 1e-9))
+
+
 @pytest.mark.parametrize("survey_sigma", [0.0, 0.003])
 def test_the_bound_is_the_adjustments_covariance_on_the_same_returns(
     survey_sigma: float,

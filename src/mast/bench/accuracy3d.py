@@ -109,6 +109,9 @@ class Accuracy3DSummary:
     wrong: int
     misses: str
     ratio: tuple[float, ...]
+    ratio_points: tuple[float, ...]
+    """RMS error over the panel points' own bound (no bracket: a true Cramér–Rao bound of
+    the five they observe; NaN for the elevation)."""
     coverage: tuple[float, ...]
     sigma_over_crb: tuple[float, ...]
     pos_err_median_mm: float
@@ -152,9 +155,12 @@ def is_wrong_3d(fix: Fix3D, truth: Pose3D) -> bool:
     )
 
 
-def truth_bound_3d(sim: SimulatedFrame3D, planes: PanelPlanes, *, range_sigma_m: float) -> Bound3D:
+def truth_bound_3d(
+    sim: SimulatedFrame3D, planes: PanelPlanes, *, range_sigma_m: float, top_edges: bool = True
+) -> Bound3D:
     """The six-parameter bound of a simulated frame at its true pose: every return on a
-    surveyed beacon panel (the simulator's labels), at its noise-free range."""
+    surveyed beacon panel (the simulator's labels), at its noise-free range; without
+    ``top_edges``, the panel points' own bound of the five they observe."""
     index = {(b, p): k for k, (b, p) in enumerate(zip(planes.beacon, planes.panel, strict=True))}
     panel_of = np.array(
         [
@@ -166,8 +172,9 @@ def truth_bound_3d(sim: SimulatedFrame3D, planes: PanelPlanes, *, range_sigma_m:
     pts = sim.frame.points
     exact = pts * (sim.true_range_m / np.linalg.norm(pts, axis=1))[:, None]
     return cramer_rao_bound3d(
-        sim.pose, exact, panel_of[sim.surface_index], planes, range_sigma_m=range_sigma_m
-    )
+        sim.pose, exact, panel_of[sim.surface_index], planes, range_sigma_m=range_sigma_m,
+        top_edges=top_edges,
+    )  # fmt: skip
 
 
 Locator3D = Callable[[Frame3D, Survey, Locator3DConfig, PanelPlanes], Fix3D]
@@ -209,6 +216,12 @@ def frame_row(
         row["crb_brackets"] = len(bound.brackets)
         for name, c in zip(SHORT, bound.sigma, strict=True):
             row[f"crb_{name}"] = c if (name != "Z" or z_ok) else math.inf
+        points = truth_bound_3d(
+            sim, planes, range_sigma_m=config.range_sigma_m, top_edges=False
+        ).sigma
+        for name, c in zip(SHORT, points, strict=True):
+            if name != "Z":
+                row[f"crbp_{name}"] = c
     return row
 
 
@@ -294,8 +307,11 @@ def summarise_3d(config: str, rows: list[dict[str, object]], seconds: float) -> 
     for r in owed:
         if not r["fixed"]:
             reasons[str(r["reason"])] = reasons.get(str(r["reason"]), 0) + 1
-    ratio, coverage, efficiency = [], [], []
+    ratio, coverage, efficiency, ratio_points = [], [], [], []
     for name in SHORT:
+        sel = [r for r in owed_fixed if math.isfinite(float(r.get(f"crbp_{name}", math.nan)))]  # type: ignore[arg-type]
+        e, c = col(sel, f"err_{name}"), col(sel, f"crbp_{name}")
+        ratio_points.append(float(np.sqrt(np.mean((e / c) ** 2))) if e.size else math.nan)
         sel = [r for r in owed_fixed if math.isfinite(float(r.get(f"crb_{name}", math.nan)))]  # type: ignore[arg-type]
         if name == "Z":
             sel = [r for r in sel if r.get("elevation_observed")]
@@ -320,6 +336,7 @@ def summarise_3d(config: str, rows: list[dict[str, object]], seconds: float) -> 
         wrong=sum(int(r["wrong"]) for r in rows),  # type: ignore[call-overload]
         misses=", ".join(f"{k} {v}" for k, v in sorted(reasons.items(), key=lambda kv: -kv[1])),
         ratio=tuple(ratio),
+        ratio_points=tuple(ratio_points),
         coverage=tuple(coverage),
         sigma_over_crb=tuple(efficiency),
         pos_err_median_mm=_quantiles(pos)[0],
@@ -396,8 +413,24 @@ def table_3d(summaries: Sequence[Accuracy3DSummary]) -> str:
                 for r, c, e in zip(s.ratio, s.coverage, s.sigma_over_crb, strict=True)
             ),
         )
+    third = Table(
+        title="RMS error over the panel points' own Cramér–Rao bound (no top-edge bracket; "
+        "the locator's brackets may beat it)",
+        title_justify="left",
+        box=box.MARKDOWN,
+    )
+    third.add_column("config")
+    for name in SHORT:
+        if name != "Z":
+            third.add_column(name, justify="right")
+    for s in summaries:
+        third.add_row(
+            s.config,
+            *(_f(r, ".2f") for name, r in zip(SHORT, s.ratio_points, strict=True) if name != "Z"),
+        )
     console = Console(width=320)
     with console.capture() as cap:
         console.print(first)
         console.print(second)
+        console.print(third)
     return "\n".join(line.rstrip() for line in cap.get().rstrip().splitlines())

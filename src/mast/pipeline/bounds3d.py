@@ -281,16 +281,21 @@ def cramer_rao_bound3d(
     *,
     range_sigma_m: float,
     survey_sigma_m: float = 0.0,
+    top_edges: bool = True,
 ) -> Bound3D:
     """The six-parameter bound (see the module) of a frame taken at ``pose``: ``points``
     (n, 3) every return in the sensor frame (noise-free: the truth's ranges along the
     rays), ``panel`` (n,) the panel each return is on (index into ``planes``; -1 for
-    anything else, so that the rays over a panel's top are found among them)."""
+    anything else, so that the rays over a panel's top are found among them). Without
+    ``top_edges`` no bracket enters: the panel points' own Cramér–Rao bound of the five
+    they observe, the elevation unobserved (a bracket's uniform variance is no Fisher
+    information, and at the truth a beacon's tightest bracket may be a millimetre wide
+    by luck, which would pin the tilt its derivatives reach)."""
     if range_sigma_m <= 0:
         raise ValueError("a bound needs a range sigma above zero")
     p = np.asarray(points, dtype=float).reshape(-1, 3)
     which = np.asarray(panel, dtype=np.intp)
-    brackets = top_brackets(pose, p, which, planes)
+    brackets = top_brackets(pose, p, which, planes) if top_edges else ()
     info = information3d(
         pose, p, which, planes, range_sigma_m=range_sigma_m, survey_sigma_m=survey_sigma_m,
         brackets=brackets,
