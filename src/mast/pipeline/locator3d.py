@@ -122,6 +122,10 @@ SETTLE_SIGMAS = 2.0
 #: the plan view located again (metres, degrees).
 ONE_BEACON_STARTS = 2
 ONE_BEACON_PRIOR = (0.25, 2.0)
+#: The band that plan view is located again in first: from this far below the lowest
+#: top of the beacons the 3D pose shows to this far below the highest, metres (then the
+#: try's own band).
+ONE_BEACON_BAND_M = (0.4, 0.05)
 #: Nearer a free end than the clearance (the gate over the sine of the panel's angle to
 #: the wall), down to this share of it, a panel keeps the returns of the rings that
 #: cross its beacon clear of both free ends (:func:`_witnessed`). On five draws of 367
@@ -483,7 +487,8 @@ def _from_one_beacon(
     beacons' panels where it puts them (a beacon the plan view missed may be below or
     above the band, or smeared by the vertical's error); where they show that beacon
     and a second and pass every 3D test, that pose's vertical and position give the
-    plan view again, located by 2D with the pose as its prior (a prior only adds, and
+    plan view again, in the band of those beacons' tops (:data:`ONE_BEACON_BAND_M`) and
+    then in ``band``, located by 2D with the pose as its prior (a prior only adds, and
     the 2D beam verification confirms both beacons), and that 2D fix the 3D fix with
     every test, the plan view's agreement included. ``spent`` is added to;
     ``spacing`` is the frame's :func:`ring_spacing`, where known."""
@@ -503,13 +508,23 @@ def _from_one_beacon(
         )
     t = time.perf_counter()
     vertical = np.asarray(first.pose.rotation[2], dtype=np.float64)  # grid z, sensor frame
-    scan = plan_scan(frame, up=vertical, band=band, resolution_deg=cfg.plan_resolution_deg)
+    # the plan view where the pose puts the tops of the beacons it shows (the try's band
+    # may have missed the second), then in the try's band
+    tops = [
+        float(np.mean(b.elevations)) - first.pose.elevation
+        for b in survey
+        if b.id in first.beacons and b.elevations is not None
+    ]
     radius, degrees = ONE_BEACON_PRIOR
     prior = Prior(first.pose.horizontal, radius, math.radians(degrees))
     plan_cfg = LocatorConfig(
         range_sigma_m=cfg.range_sigma_m, survey_sigma_m=cfg.survey_sigma_m, prior=prior
     )
-    again = locate(scan, survey, config=plan_cfg)
+    for in_band in ((min(tops) - ONE_BEACON_BAND_M[0], max(tops) - ONE_BEACON_BAND_M[1]), band):
+        scan = plan_scan(frame, up=vertical, band=in_band, resolution_deg=cfg.plan_resolution_deg)
+        again = locate(scan, survey, config=plan_cfg)
+        if again.ok:
+            break
     spent["plan"] += time.perf_counter() - t
     if not again.ok or again.pose is None:
         return replace(
