@@ -396,15 +396,19 @@ def table_3d(summaries: Sequence[Accuracy3DSummary]) -> str:
             _f(s.ms_per_kpoint_median, ".1f"),
             s.misses or "-",
         )
-    second = Table(
-        title="3D accuracy of the owed frames' fixes, per parameter: RMS/CRB, 95 % coverage, "
+
+    def per_parameter(title: str, names: Sequence[str]) -> Table:
+        table = Table(title=title, title_justify="left", box=box.MARKDOWN)
+        table.add_column("config")
+        for name in names:
+            table.add_column(name, justify="right")
+        return table
+
+    second = per_parameter(
+        "3D accuracy of the owed frames' fixes, per parameter: RMS/CRB, 95 % coverage, "
         "median sigma/CRB (Z: against the top-edge bracket's reference)",
-        title_justify="left",
-        box=box.MARKDOWN,
+        SHORT,
     )
-    second.add_column("config")
-    for name in SHORT:
-        second.add_column(name, justify="right")
     for s in summaries:
         second.add_row(
             s.config,
@@ -413,16 +417,11 @@ def table_3d(summaries: Sequence[Accuracy3DSummary]) -> str:
                 for r, c, e in zip(s.ratio, s.coverage, s.sigma_over_crb, strict=True)
             ),
         )
-    third = Table(
-        title="RMS error over the panel points' own Cramér–Rao bound (no top-edge bracket; "
+    third = per_parameter(
+        "RMS error over the panel points' own Cramér–Rao bound (no top-edge bracket; "
         "the locator's brackets may beat it)",
-        title_justify="left",
-        box=box.MARKDOWN,
+        [name for name in SHORT if name != "Z"],
     )
-    third.add_column("config")
-    for name in SHORT:
-        if name != "Z":
-            third.add_column(name, justify="right")
     for s in summaries:
         third.add_row(
             s.config,
