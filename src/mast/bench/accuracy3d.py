@@ -362,8 +362,8 @@ def _f(x: float, fmt: str) -> str:
 
 
 def table_3d(summaries: Sequence[Accuracy3DSummary]) -> str:
-    """The summaries as two tables, as text: fixes, errors and time; then per parameter
-    RMS/CRB, coverage and sigma/CRB."""
+    """The summaries as three tables, as text: fixes, errors and time; per parameter
+    RMS/CRB, coverage and sigma/CRB; and the RMS error over the panel points' own bound."""
     from rich import box
     from rich.console import Console
     from rich.table import Table

@@ -87,7 +87,8 @@ class PanelPlanes:
     (the wall's direction) where that end is the beacon's free end (e1 of P1, e4 of
     P3); infinite at a joint. Near a wall end the wall above and below a panel is
     within a gate of its plane for gate / sine: those returns are not the panel's.
-    At a joint the returns within the gate of both panels' planes are neither's."""
+    At a joint the returns within the gate of both panels' planes are neither's, unless
+    only one of the two turns its face to the sensor (:attr:`front`)."""
     front: NDArray[np.float64]
     """(k,): the side of each panel's plane, as the sign of ``n · X - d``, its face turns
     to: the side of the chord e1-e4 its beacon's middle edges e2 and e3 stand out to (a

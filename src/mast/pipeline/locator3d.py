@@ -513,14 +513,17 @@ def _from_one_beacon(
     tops = [
         float(np.mean(b.elevations)) - first.pose.elevation
         for b in survey
-        if b.id in first.beacons and b.elevations is not None
+        if b.id in first.beacons and b.elevations is not None and np.isfinite(b.elevations).all()
     ]
     radius, degrees = ONE_BEACON_PRIOR
     prior = Prior(first.pose.horizontal, radius, math.radians(degrees))
     plan_cfg = LocatorConfig(
         range_sigma_m=cfg.range_sigma_m, survey_sigma_m=cfg.survey_sigma_m, prior=prior
     )
-    for in_band in ((min(tops) - ONE_BEACON_BAND_M[0], max(tops) - ONE_BEACON_BAND_M[1]), band):
+    bands = [band]
+    if tops:
+        bands.insert(0, (min(tops) - ONE_BEACON_BAND_M[0], max(tops) - ONE_BEACON_BAND_M[1]))
+    for in_band in bands:
         scan = plan_scan(frame, up=vertical, band=in_band, resolution_deg=cfg.plan_resolution_deg)
         again = locate(scan, survey, config=plan_cfg)
         if again.ok:
