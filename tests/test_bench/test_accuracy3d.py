@@ -19,6 +19,8 @@ from mast.bench.accuracy3d import (
     Accuracy3DConfig,
     is_wrong_3d,
     run_accuracy3d,
+    summarise_3d,
+    table_3d,
 )
 from mast.core.beacon import Survey
 from mast.core.pose3d import Frame3D, Pose3D
@@ -125,6 +127,24 @@ def test_the_benchmark_counts_wrong_fixes_by_its_rule(
     else:
         assert min(s.coverage) == 0.0
     assert s.config in lines[0]
+
+
+def test_the_tilt_held_fix_rate_counts_only_the_owed_frames_whose_bound_holds_the_tilt() -> None:
+    def row(owed: int, fixed: int, held: int | None) -> dict[str, object]:
+        r: dict[str, object] = {"owed": owed, "fixed": fixed, "wrong": 0, "reason": "",
+                                "elapsed_ms": 1.0, "points": 1000}  # fmt: skip
+        if held is not None:
+            r["tilt_held"] = held
+        return r
+
+    rows = [row(1, 1, 1), row(1, 0, 1), row(1, 0, 0), row(1, 1, 0), row(0, 1, None)]
+    s = summarise_3d("x", rows, 1.0)
+    assert (s.owed, s.owed_fixed, s.owed_tilt_held) == (4, 2, 2)
+    assert s.tilt_held_fix_rate == 0.5
+    assert "2, 50.0" in table_3d([s])
+    none = summarise_3d("x", [row(1, 0, 0)], 1.0)
+    assert none.owed_tilt_held == 0
+    assert math.isnan(none.tilt_held_fix_rate)
 
 
 def test_a_short_run_of_the_locator_fills_its_tables_and_rows(tmp_path: Path) -> None:

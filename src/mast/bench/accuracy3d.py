@@ -9,7 +9,10 @@ fix (:data:`mast.sim.lidar3d.OWED_3D`); every frame simulated is located, owed o
 
 Per configuration:
 
-- **fix rate** over the owed frames, and the fixes of frames not owed;
+- **fix rate** over the owed frames, and the fixes of frames not owed; and over the
+  owed frames whose panel points' own bound (no top-edge bracket) holds roll and pitch
+  within :data:`mast.pipeline.locator3d.MAX_TILT_SIGMA_DEG`, the loosest tilt a fix is
+  given with (the others the rule owes a fix cannot have one);
 - **wrong fixes**, owed or not (:func:`is_wrong_3d`): more than 0.1 m off in position
   (in 3D where the fix observes its elevation, in plan otherwise) or more than 1° off in
   azimuth, roll or pitch;
@@ -45,7 +48,7 @@ from mast.core.beacon import Survey
 from mast.core.pose3d import Frame3D, Pose3D
 from mast.pipeline.adjust3d import UNBRACKETED, PanelPlanes
 from mast.pipeline.bounds3d import Bound3D, cramer_rao_bound3d
-from mast.pipeline.locator3d import Fix3D, Locator3DConfig, locate3d
+from mast.pipeline.locator3d import MAX_TILT_SIGMA_DEG, Fix3D, Locator3DConfig, locate3d
 from mast.sim.lidar3d import SimulatedFrame3D, simulate_frames
 
 __all__ = [
@@ -105,6 +108,11 @@ class Accuracy3DSummary:
     owed: int
     owed_fixed: int
     fix_rate: float
+    owed_tilt_held: int
+    """Owed frames whose panel points' own bound holds roll and pitch within
+    :data:`~mast.pipeline.locator3d.MAX_TILT_SIGMA_DEG` (the loosest tilt a fix is given
+    with): the others may be owed by the rule but cannot be fixed at all."""
+    tilt_held_fix_rate: float
     fixed_not_owed: int
     wrong: int
     misses: str
@@ -201,6 +209,16 @@ def frame_row(
         "reason": fix.reason or "",
         "elapsed_ms": 1e3 * fix.elapsed_s,
     }
+    if sim.owed:
+        # the panel points' own bound: whether the frame holds the tilt within what a fix
+        # is given with (MAX_TILT_SIGMA_DEG), fixed or not
+        points = truth_bound_3d(
+            sim, planes, range_sigma_m=config.range_sigma_m, top_edges=False
+        ).sigma
+        for name, c in zip(SHORT, points, strict=True):
+            if name != "Z":
+                row[f"crbp_{name}"] = c
+        row["tilt_held"] = int(max(points[3], points[4]) <= math.radians(MAX_TILT_SIGMA_DEG))
     if not (fix.ok and fix.pose is not None and fix.adjustment is not None):
         return row
     err = errors_3d(fix.pose, sim.pose)
@@ -216,12 +234,6 @@ def frame_row(
         row["crb_brackets"] = len(bound.brackets)
         for name, c in zip(SHORT, bound.sigma, strict=True):
             row[f"crb_{name}"] = c if (name != "Z" or z_ok) else math.inf
-        points = truth_bound_3d(
-            sim, planes, range_sigma_m=config.range_sigma_m, top_edges=False
-        ).sigma
-        for name, c in zip(SHORT, points, strict=True):
-            if name != "Z":
-                row[f"crbp_{name}"] = c
     return row
 
 
@@ -303,6 +315,7 @@ def summarise_3d(config: str, rows: list[dict[str, object]], seconds: float) -> 
 
     owed = [r for r in rows if r["owed"]]
     owed_fixed = [r for r in owed if r["fixed"]]
+    held = [r for r in owed if r.get("tilt_held")]
     reasons: dict[str, int] = {}
     for r in owed:
         if not r["fixed"]:
@@ -332,6 +345,8 @@ def summarise_3d(config: str, rows: list[dict[str, object]], seconds: float) -> 
         owed=len(owed),
         owed_fixed=len(owed_fixed),
         fix_rate=len(owed_fixed) / len(owed) if owed else math.nan,
+        owed_tilt_held=len(held),
+        tilt_held_fix_rate=sum(1 for r in held if r["fixed"]) / len(held) if held else math.nan,
         fixed_not_owed=sum(1 for r in rows if r["fixed"] and not r["owed"]),
         wrong=sum(int(r["wrong"]) for r in rows),  # type: ignore[call-overload]
         misses=", ".join(f"{k} {v}" for k, v in sorted(reasons.items(), key=lambda kv: -kv[1])),
@@ -374,8 +389,9 @@ def table_3d(summaries: Sequence[Accuracy3DSummary]) -> str:
         box=box.MARKDOWN,
     )
     for col_name in (
-        "config", "owed", "fixed", "fix %", "not owed fixed", "WRONG", "E,N mm", "Z mm",
-        "roll °", "pitch °", "A °", "ms / frame", "ms / 1000 pts", "misses (owed)",
+        "config", "owed", "fixed", "fix %", "tilt held: owed, fix %", "not owed fixed",
+        "WRONG", "E,N mm", "Z mm", "roll °", "pitch °", "A °", "ms / frame", "ms / 1000 pts",
+        "misses (owed)",
     ):  # fmt: skip
         left = col_name.startswith(("config", "m"))
         first.add_column(col_name, justify="left" if left else "right", no_wrap=True)
@@ -385,6 +401,7 @@ def table_3d(summaries: Sequence[Accuracy3DSummary]) -> str:
             str(s.owed),
             str(s.owed_fixed),
             _f(100 * s.fix_rate, ".1f"),
+            f"{s.owed_tilt_held}, {_f(100 * s.tilt_held_fix_rate, '.1f')}",
             str(s.fixed_not_owed),
             str(s.wrong),
             f"{_f(s.pos_err_median_mm, '.1f')} / {_f(s.pos_err_p95_mm, '.1f')}",
