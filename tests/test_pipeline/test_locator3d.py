@@ -1,7 +1,8 @@
 """The 3D locator (pipeline.locator3d) on simulated drifts: never a wrong or overconfident
 fix, tilted frames fixed at the paper's layout within their covariance, the plan view's
 tries, a panel kept to one run of heights and near a free end on the rings its beacon
-shows clear of it, and a survey without elevations refused."""
+shows clear of it (a shallow middle panel by its mean off the wall the ring shows), and
+a survey without elevations refused."""
 
 from __future__ import annotations
 
@@ -121,6 +122,37 @@ def test_a_return_near_a_free_end_is_kept_on_a_ring_its_beacon_shows_clear_of_it
     # the wall a beacon stands on is no witness: returns within the gate and the rock's
     # bulge of it do not count (the paper's middle panels stand 0.2 m out)
     assert _witnessed(which, nearer, grid, lines, planes, 3, 0.2).tolist() == which.tolist()
+
+
+def test_a_shallow_middle_panel_witnesses_its_ring_by_its_mean_off_the_wall_the_ring_shows() -> (
+    None
+):
+    _, scene = paper_walls("parallel")  # the first beacon: panels 0-2, its middle 0.2 m out
+    planes = PanelPlanes.of(scene.survey)
+    e1 = planes.start[0]
+    e4 = planes.start[2] + planes.length[2] * planes.along[2]
+    chord = (e4 - e1) / np.linalg.norm(e4 - e1)
+    out = planes.front[0] * planes.wall[0, :2]  # from the wall out to the drift
+    middle = planes.start[1] + np.outer(
+        np.linspace(0.2, 0.8, 8) * planes.length[1], planes.along[1]
+    )
+    past = np.vstack([e1 - np.outer([0.05, 0.1, 0.15], chord), e4 + np.outer([0.05, 0.1], chord)])
+    end = planes.start[0] + 0.1 * planes.length[0] * planes.along[0]  # by P1's free end
+    grid = np.vstack([middle, past, end[None]])
+    lines = np.full(len(grid), 5)
+    which = np.r_[np.full(8, 1), np.full(5, -1), -1]
+    nearer = np.r_[np.full(8, 1), np.full(5, -1), 0]
+    gate = 0.2  # each middle return within the gate and the rock's bulge of the wall
+    assert _witnessed(which, nearer, grid, lines, planes, 3, gate)[-1] == 0
+    # a pose off across the wall by the panel's depth: the wall the middle panel is put
+    # on, and the wall past the ends, stand off the chord alike, and witness nothing
+    moved = grid.copy()
+    moved[8:13] += 0.2 * out
+    assert _witnessed(which, nearer, moved, lines, planes, 3, gate)[-1] == -1
+    # with no wall shown past the ends, the chord is the wall
+    alone = np.r_[np.arange(8), 13]
+    kept = _witnessed(which[alone], nearer[alone], grid[alone], lines[alone], planes, 3, gate)
+    assert kept[-1] == 0
 
 
 def test_a_survey_without_elevations_is_refused_for_a_3d_frame() -> None:
