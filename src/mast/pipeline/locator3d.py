@@ -334,11 +334,12 @@ def _witnessed(
     far = on[off > gate_m + ROCK_M]
     counts = np.bincount(beacon[which[far]] * span + lines[far] - low, minlength=len(ids) * span)
     wanted = beacon[nearer[extra]]
-    for b in np.unique(wanted):
+    key = wanted * span + lines[extra] - low
+    for b in np.unique(wanted[counts[key] < least]):  # those the returns alone do not
         counts[b * span : (b + 1) * span] += least * _standing_off(
             which, grid, lines - low, span, planes, np.flatnonzero(beacon == b), least, gate_m
         )
-    ok = extra[counts[wanted * span + lines[extra] - low] >= least]
+    ok = extra[counts[key] >= least]
     out = which.copy()
     out[ok] = nearer[ok]
     return out
@@ -372,7 +373,7 @@ def _standing_off(
     t = rel @ chord
     d = side * (rel @ planes.wall[first, :2])  # off the chord, out to the drift
     valid = (line >= 0) & (line < span)
-    mine = valid & np.isin(which, panels)
+    mine = valid & (which >= first) & (which <= last)  # a beacon's panels are in order
     past = (t < 0.0) & (t > -WALL_PAST_M) | (t > length) & (t < length + WALL_PAST_M)
     past &= valid & (which < 0) & (np.abs(d) < NEAR_M)
     n = np.bincount(line[mine], minlength=span)
