@@ -153,6 +153,11 @@ def test_a_shallow_middle_panel_witnesses_its_ring_by_its_mean_off_the_wall_the_
     alone = np.r_[np.arange(8), 13]
     kept = _witnessed(which[alone], nearer[alone], grid[alone], lines[alone], planes, 3, gate)
     assert kept[-1] == 0
+    # a gate widened for the tilt's error: the wall the ring shows moves with the tilt as
+    # its returns do, and the range noise's gate holds; the chord does not move
+    assert _witnessed(which, nearer, grid, lines, planes, 3, 2 * gate, gate)[-1] == 0
+    args = (which[alone], nearer[alone], grid[alone], lines[alone], planes, 3, 2 * gate, gate)
+    assert _witnessed(*args)[-1] == -1
 
 
 def test_a_survey_without_elevations_is_refused_for_a_3d_frame() -> None:

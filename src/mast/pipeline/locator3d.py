@@ -310,6 +310,7 @@ def _witnessed(
     planes: PanelPlanes,
     least: int,
     gate_m: float,
+    noise_gate_m: float | None = None,
 ) -> NDArray[np.intp]:
     """``which`` (each panel cut clear of its free ends) and those returns ``nearer`` (cut
     nearer them) gives a panel where ``which`` gives none, on the lines (rings) whose
@@ -320,7 +321,9 @@ def _witnessed(
     each more than ``gate_m`` and :data:`~mast.pipeline.adjust3d.ROCK_M` off the chord
     e1-e4 (the wall a beacon stands on, within the gate of its panels' planes where the
     pose is a little off, is no witness), or by :func:`_standing_off` (a shallow
-    beacon's middle panel, within the gate of its wall, by the mean of its returns)."""
+    beacon's middle panel, within the gate of its wall, by the mean of its returns;
+    ``noise_gate_m`` the gate of the range noise alone, where ``gate_m`` is widened for
+    the tilt's error)."""
     extra = np.flatnonzero((nearer >= 0) & (which < 0))
     on = np.flatnonzero(which >= 0)
     if extra.size == 0 or on.size == 0:
@@ -337,8 +340,9 @@ def _witnessed(
     key = wanted * span + lines[extra] - low
     for b in np.unique(wanted[counts[key] < least]):  # those the returns alone do not
         counts[b * span : (b + 1) * span] += least * _standing_off(
-            which, grid, lines - low, span, planes, np.flatnonzero(beacon == b), least, gate_m
-        )
+            which, grid, lines - low, span, planes, np.flatnonzero(beacon == b), least, gate_m,
+            gate_m if noise_gate_m is None else noise_gate_m,
+        )  # fmt: skip
     ok = extra[counts[key] >= least]
     out = which.copy()
     out[ok] = nearer[ok]
@@ -354,6 +358,7 @@ def _standing_off(
     panels: NDArray[np.intp],
     least: int,
     gate_m: float,
+    noise_gate_m: float,
 ) -> NDArray[np.bool_]:
     """Per line (``line``, 0 to ``span``), whether its ``n >= least`` returns of ``which``
     on the beacon of ``panels`` (its three, in order) stand, on average, off the wall by
@@ -361,8 +366,9 @@ def _standing_off(
     gates over the root of n (a mean's noise): the wall where the same line shows it
     just past the beacon's free ends (:data:`WALL_PAST_M`, the median of at least
     ``least`` of its returns there; else the chord e1-e4). Measured from the wall the
-    line itself shows, a pose off across the wall moves the wall as it moves the
-    returns, and does not make the wall stand off itself."""
+    line itself shows, a pose off across the wall, or tilted, moves the wall as it moves
+    the returns, and does not make the wall stand off itself: there the gate is the
+    range noise's (``noise_gate_m``), from the chord ``gate_m``."""
     first, last = int(panels[0]), int(panels[-1])
     e1 = planes.start[first]
     chord = planes.start[last] + planes.along[last] * planes.length[last] - e1
@@ -379,6 +385,7 @@ def _standing_off(
     n = np.bincount(line[mine], minlength=span)
     mean = np.bincount(line[mine], weights=d[mine], minlength=span) / np.maximum(n, 1)
     wall = np.zeros(span)
+    gate = np.full(span, gate_m)
     if past.any():
         lp, dp = line[past], d[past]
         order = np.lexsort((dp, lp))
@@ -387,7 +394,8 @@ def _standing_off(
         count = np.diff(np.r_[starts, len(lp)])
         shown = count >= least
         wall[lp[starts[shown]]] = _sorted_medians(dp, starts, count)[shown]
-    bar = ROCK_M + WITNESS_MEAN_GATES * gate_m / np.sqrt(np.maximum(n, 1))
+        gate[lp[starts[shown]]] = noise_gate_m
+    bar = ROCK_M + WITNESS_MEAN_GATES * gate / np.sqrt(np.maximum(n, 1))
     return np.asarray((n >= least) & (mean - wall > bar), dtype=np.bool_)
 
 
@@ -775,7 +783,7 @@ def _fix3d(
             )
             for c in (clear, WITNESSED_CLEAR * clear)
         )
-        return _witnessed(which, nearer, grid, lines, planes, cfg.min_line_returns, gate_m)
+        return _witnessed(which, nearer, grid, lines, planes, cfg.min_line_returns, gate_m, gate)
 
     # The elevation first, from hits in a gate tight but for the plan view's tilt error.
     loose = 2.5 * sig_r + START_SLACK_M
