@@ -20,6 +20,7 @@ from mast.pipeline.locator3d import (
     PITCH_TRIES_DEG,
     Locator3DConfig,
     _contiguous,
+    _on_one_beacon,
     _tries,
     _witnessed,
     locate3d,
@@ -158,6 +159,24 @@ def test_a_shallow_middle_panel_witnesses_its_ring_by_its_mean_off_the_wall_the_
     assert _witnessed(which, nearer, grid, lines, planes, 3, 2 * gate, gate)[-1] == 0
     args = (which[alone], nearer[alone], grid[alone], lines[alone], planes, 3, 2 * gate, gate)
     assert _witnessed(*args)[-1] == -1
+
+
+def test_one_beacons_panels_move_a_growth_stages_pose_where_they_hold_the_tilt() -> None:
+    walls, scene = paper_walls("convergent")
+    planes = PanelPlanes.of(scene.survey)
+    truth = Pose3D.from_degrees(7.0, 7.0, 1.2, 0.0, 3.0, -2.0)
+    frame = cast(truth, walls, 0.005, 0)
+    which = planes.assign(truth.sensor_to_grid(frame.points), truth.position, 0.02)
+    which[which >= 3] = -1  # the first beacon's three panels only
+    off = replace(truth, pitch=truth.pitch + math.radians(2.0), elevation=1.5)
+    prior = (off.pitch, off.roll, math.radians(5.0))
+    moved = _on_one_beacon(frame.points, which, planes, off, prior, 0.005, 0.0, 0.02)
+    assert abs(math.degrees(moved.pitch - truth.pitch)) < 0.2
+    assert abs(math.degrees(moved.roll - truth.roll)) < 0.2
+    assert moved.elevation == 1.5  # held
+    # one panel alone leaves a tilt to the walls' loose vertical: the pose stays
+    which[which != int(np.bincount(which[which >= 0]).argmax())] = -1
+    assert _on_one_beacon(frame.points, which, planes, off, prior, 0.005, 0.0, 0.02) == off
 
 
 def test_a_survey_without_elevations_is_refused_for_a_3d_frame() -> None:

@@ -24,12 +24,14 @@ view, then the six-parameter adjustment on the panels it names (docs/3d.md).
 5. **The tilt, grown out** (:func:`mast.pipeline.adjust3d.adjust_pose`, elevation
    held): on the returns within four range sigmas of the panels, first those within
    half a metre of the sensor's height, where the plan view's tilt error moves a return
-   least, then a metre, two, all (:data:`REACH_M`). Each panel is cut at its top (the
-   start's elevation), above its floor (:data:`FLOOR_CLEAR_M`) and, once adjusted, at
-   the bottom its returns show; a return within the gate of two panels is neither's,
-   one nearer its beacon's wall than its panel the wall's. The walls' vertical enters
-   as an observation of the tilt (:data:`TILT_PRIOR_DEG`), which only a frame whose
-   panels hold the tilt loosely feels.
+   least, then a metre, two, all (:data:`REACH_M`); a stage that shows one beacon only,
+   before any shows two, moves the pose onto its panels (:func:`_on_one_beacon`). Each
+   panel is cut at its top (the start's elevation), above its floor
+   (:data:`FLOOR_CLEAR_M`) and, once adjusted, at the bottom its returns show; a
+   return within the gate of two panels is neither's, one nearer its beacon's wall
+   than its panel the wall's. The walls' vertical enters as an observation of the tilt
+   (:data:`TILT_PRIOR_DEG`), which only a frame whose panels hold the tilt loosely
+   feels.
 6. **The elevation**: the adjustment with the top edges' brackets of the beacons shown,
    and the panels cut again at their adjusted tops, until the assignment holds.
 7. **The tests**: two beacons each showing two panels crossed by two rings of three
@@ -708,6 +710,33 @@ def _vertical_from(
     return np.asarray(pose.rotation[2], dtype=np.float64)  # the grid's z in the sensor frame
 
 
+def _on_one_beacon(
+    pts: NDArray[np.float64],
+    which: NDArray[np.intp],
+    planes: PanelPlanes,
+    pose: Pose3D,
+    prior: tuple[float, float, float],
+    range_sigma_m: float,
+    survey_sigma_m: float,
+    gate_m: float,
+) -> Pose3D:
+    """``pose`` moved (its elevation held) onto the panels of the one beacon a growth
+    stage's cut shows before any shows two, where they hold the tilt to
+    :data:`REFINE_TILT_SIGMA_DEG`: a beacon's panels are vertical planes in different
+    directions, which hold the tilt the plan view's vertical may be degrees off in, so
+    the next stage reaches further from it (a second beacon's end panel a tilt's error
+    had moved out of the gate, say). The fix still needs two beacons; as it stands,
+    ``pose``."""
+    one = adjust_pose(
+        pts, which, planes, pose, range_sigma_m=range_sigma_m, survey_sigma_m=survey_sigma_m,
+        gate_m=gate_m, elevation=False, tilt_prior=prior, snooping_rounds=0,
+    )  # fmt: skip
+    sd = np.sqrt(np.diag(one.covariance))
+    if max(sd[3], sd[4]) > math.radians(REFINE_TILT_SIGMA_DEG):
+        return pose
+    return replace(one.pose, elevation=pose.elevation)
+
+
 def _fix3d(
     frame: Frame3D,
     planes: PanelPlanes,
@@ -824,6 +853,8 @@ def _fix3d(
             showing = _shown(trial, lines, planes, cfg)
             most = max(most, showing, key=len)
             if len(showing) < 2:
+                if adj is None and showing:
+                    pose = _on_one_beacon(pts, trial, planes, pose, prior, sig_r, sig_s, gate)
                 continue  # the last assignment that showed two beacons stands
             which = trial
             adj = adjust_pose(
