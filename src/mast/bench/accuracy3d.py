@@ -12,7 +12,8 @@ Per configuration:
 - **fix rate** over the owed frames, and the fixes of frames not owed; and over the
   owed frames whose panel points' own bound (no top-edge bracket) holds roll and pitch
   within :data:`mast.pipeline.locator3d.MAX_TILT_SIGMA_DEG`, the loosest tilt a fix is
-  given with (the others the rule owes a fix cannot have one);
+  given with (the others' tilt rests on their top edges' brackets, if on anything: the
+  rule owes them a fix their panels alone cannot give);
 - **wrong fixes**, owed or not (:func:`is_wrong_3d`): more than 0.1 m off in position
   (in 3D where the fix observes its elevation, in plan otherwise) or more than 1° off in
   azimuth, roll or pitch;
@@ -111,7 +112,8 @@ class Accuracy3DSummary:
     owed_tilt_held: int
     """Owed frames whose panel points' own bound holds roll and pitch within
     :data:`~mast.pipeline.locator3d.MAX_TILT_SIGMA_DEG` (the loosest tilt a fix is given
-    with): the others may be owed by the rule but cannot be fixed at all."""
+    with): the others are owed by the rule a fix that their panels alone cannot give,
+    and only their top edges' brackets may."""
     tilt_held_fix_rate: float
     fixed_not_owed: int
     wrong: int
