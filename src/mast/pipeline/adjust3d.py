@@ -443,7 +443,8 @@ class PanelPlanes:
         under or over the panel; a panel with no such hit, a short end panel at a
         shallow angle to its wall, is not looked at), and returning from beyond the
         plane by more than the gate, or from in front of it by more than the gate but
-        within three (nearer still, something stands in front of it). A panel where the
+        within three (nearer still, something stands in front of it) on no other panel
+        (``which``: a return on another panel is a beam that panel stopped). A panel where the
         pose puts it is hit by every such ray (a range noise beyond four sigmas aside);
         a panel put where it is not is seen through, and one put tilted is missed at its
         top or bottom (the beam verification of 2D, in 3D)."""
@@ -462,7 +463,12 @@ class PanelPlanes:
         lo, hi = self._inside_all(gate_m, 0.05)
         off = (1.0 - s) * rays.reach[rays.i]  # along the ray: > 0 beyond the plane
         across = (t > lo[k]) & (t < hi[k]) & (z > low[k]) & (z < high[k]) & (s > 0)
-        bad = across & ((off > gate_m) | (off < -gate_m) & (off > -3.0 * gate_m))
+        # in front of the panel on another panel (a deep beacon's middle panel before an
+        # end panel, seen from the side): the beam was stopped by a panel where the pose
+        # puts that one, and says nothing against this one
+        other = which[rays.i]
+        shaded = (other >= 0) & (other != k)
+        bad = across & ((off > gate_m) | (off < -gate_m) & (off > -3.0 * gate_m) & ~shaded)
         return np.bincount(k[bad], minlength=len(self)).astype(np.intp)
 
     def bottoms(
