@@ -561,9 +561,15 @@ def _per_panel(
     panel), ``empty`` for a panel with none."""
     out = np.full(panels, empty)
     if k.size:
-        first = np.flatnonzero(np.concatenate([[True], k[1:] != k[:-1]]))
+        first, _ = _runs(k)
         out[k[first]] = reduce.reduceat(values, first)
     return out
+
+
+def _runs(keys: NDArray[np.intp]) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+    """Where each run of equal ``keys`` (grouped, not empty) starts, and its length."""
+    first = np.flatnonzero(np.concatenate([[True], keys[1:] != keys[:-1]]))
+    return first, np.diff(np.append(first, len(keys)))
 
 
 @dataclass(frozen=True, slots=True)

@@ -69,6 +69,7 @@ from mast.pipeline.adjust3d import (
     _panel_lists,
     _per_panel,
     _Rays,
+    _runs,
     _top_edges,
     adjust_pose,
 )
@@ -284,8 +285,7 @@ def _contiguous(
     h = rays.s[j] * rays.rel[i, 2]
     by_height = np.lexsort((h, k))
     k, i, h = k[by_height], i[by_height], h[by_height]
-    first = np.flatnonzero(np.concatenate([[True], k[1:] != k[:-1]]))
-    count = np.diff(np.append(first, len(k)))
+    first, count = _runs(k)
     panel = np.repeat(np.arange(len(first)), count)  # each return's panel, 0.. here
     at = np.arange(len(k)) - first[panel]  # its place by height on its panel
     reach = rays.reach[i]
@@ -399,8 +399,7 @@ def _standing_off(
         lp, dp = line[past], d[past]
         order = np.lexsort((dp, lp))
         lp, dp = lp[order], dp[order]
-        starts = np.flatnonzero(np.r_[True, lp[1:] != lp[:-1]])
-        count = np.diff(np.r_[starts, len(lp)])
+        starts, count = _runs(lp)
         shown = count >= least
         wall[lp[starts[shown]]] = _sorted_medians(dp, starts, count)[shown]
         gate[lp[starts[shown]]] = noise_gate_m
@@ -702,17 +701,11 @@ def _vertical_from(
             which = _contiguous(which, grid, pose.position, planes, spacing)
             if len(_shown_panels(which, lines, planes, cfg)) < 2:
                 continue
-            adj = adjust_pose(
-                pts, which, planes, pose, range_sigma_m=sig_r, survey_sigma_m=cfg.survey_sigma_m,
-                gate_m=gate, elevation=False, tilt_prior=prior, snooping_rounds=0,
-            )  # fmt: skip
+            adj = _adjust_tilt(pts, which, planes, pose, prior, sig_r, cfg.survey_sigma_m, gate)
             pose = adj.pose
     except np.linalg.LinAlgError:
         return None
-    if adj is None:
-        return None
-    sd = np.sqrt(np.diag(adj.covariance))
-    if max(sd[3], sd[4]) > math.radians(REFINE_TILT_SIGMA_DEG):
+    if adj is None or _tilt_sigma(adj) > math.radians(REFINE_TILT_SIGMA_DEG):
         return None
     return np.asarray(pose.rotation[2], dtype=np.float64)  # the grid's z in the sensor frame
 
@@ -738,16 +731,36 @@ def _on_one_beacon(
     beyond 3.5 sigma, the one beacon's panels alone 628 and 9 (the cut's other returns
     hold the position and azimuth the one beacon leaves loose)."""
     try:
-        one = adjust_pose(
-            pts, which, planes, pose, range_sigma_m=range_sigma_m, survey_sigma_m=survey_sigma_m,
-            gate_m=gate_m, elevation=False, tilt_prior=prior, snooping_rounds=0,
-        )  # fmt: skip
+        one = _adjust_tilt(pts, which, planes, pose, prior, range_sigma_m, survey_sigma_m, gate_m)
     except np.linalg.LinAlgError:
         return pose
-    sd = np.sqrt(np.diag(one.covariance))
-    if max(sd[3], sd[4]) > math.radians(REFINE_TILT_SIGMA_DEG):
+    if _tilt_sigma(one) > math.radians(REFINE_TILT_SIGMA_DEG):
         return pose
     return one.pose  # the elevation, unobserved, is the start's
+
+
+def _adjust_tilt(
+    pts: NDArray[np.float64],
+    which: NDArray[np.intp],
+    planes: PanelPlanes,
+    pose: Pose3D,
+    prior: tuple[float, float, float],
+    range_sigma_m: float,
+    survey_sigma_m: float,
+    gate_m: float,
+) -> Adjustment3D:
+    """The adjustment of a growth stage: the elevation held, the walls' vertical
+    ``prior`` an observation of the tilt, no snooping (the next stage's cut sorts the
+    returns again)."""
+    return adjust_pose(
+        pts, which, planes, pose, range_sigma_m=range_sigma_m, survey_sigma_m=survey_sigma_m,
+        gate_m=gate_m, elevation=False, tilt_prior=prior, snooping_rounds=0,
+    )  # fmt: skip
+
+
+def _tilt_sigma(adj: Adjustment3D) -> float:
+    """The larger of an adjustment's roll and pitch sigmas, radians."""
+    return math.sqrt(max(adj.covariance[3, 3], adj.covariance[4, 4]))
 
 
 def _fix3d(
@@ -870,10 +883,7 @@ def _fix3d(
                     pose = _on_one_beacon(pts, trial, planes, pose, prior, sig_r, sig_s, gate)
                 continue  # the last assignment that showed two beacons stands
             which = trial
-            adj = adjust_pose(
-                pts, which, planes, pose, range_sigma_m=sig_r, survey_sigma_m=sig_s,
-                gate_m=gate, elevation=False, tilt_prior=prior, snooping_rounds=0,
-            )  # fmt: skip
+            adj = _adjust_tilt(pts, which, planes, pose, prior, sig_r, sig_s, gate)
             pose = adj.pose
         if adj is None:  # no stage's cut showed two beacons
             return refused("one_beacon", _too_few(most, cfg))
@@ -945,14 +955,14 @@ def _fix3d(
         )
     # a tilt the panels hold too loosely is no survey's; an elevation only wide brackets
     # hold is reported not observed (the record says so) rather than to decimetres
-    sd = np.sqrt(np.diag(adj.covariance))
-    if max(sd[3], sd[4]) > math.radians(MAX_TILT_SIGMA_DEG):
+    tilt = _tilt_sigma(adj)
+    if tilt > math.radians(MAX_TILT_SIGMA_DEG):
         return refused(
             "degenerate_geometry",
-            f"the panels seen hold the tilt to {math.degrees(max(sd[3], sd[4])):.2f} deg only",
+            f"the panels seen hold the tilt to {math.degrees(tilt):.2f} deg only",
             adj,
         )
-    if adj.top_edges and sd[2] > MAX_ELEVATION_SIGMA_M:
+    if adj.top_edges and math.sqrt(adj.covariance[2, 2]) > MAX_ELEVATION_SIGMA_M:
         cov = adj.covariance.copy()
         cov[2, :], cov[:, 2] = 0.0, 0.0
         cov[2, 2] = UNBRACKETED
