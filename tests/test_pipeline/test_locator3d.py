@@ -231,3 +231,39 @@ def test_a_plan_view_of_one_beacon_starts_a_fix_the_2d_prior_confirms() -> None:
     assert fix.plan.config.prior is not None
     err = fix.pose.minus(sim.pose)
     assert np.all(np.abs(err) < 4.5 * np.sqrt(np.diag(fix.adjustment.covariance))), err
+
+
+def test_a_one_beacon_3d_fix_stands_where_the_plan_view_located_again_finds_none() -> None:
+    # A beacon 1.5 m away fills the plan view; the second, 10 m off, is crossed by two
+    # rings of 5 and 10 returns, smeared out of every band: located again with the 3D
+    # pose as its prior, the plan view still confirms the first beacon only. The 3D fix
+    # shows both and passes every 3D test (it had been refused 1 mm and 0.04 deg off).
+    scene = random_drift_scene(4, frames=6, lidar="vlp16", range_sigma_m=0.01, lookalikes=True)
+    sim = scene.simulate(3)
+    fix = locate3d(
+        sim.frame, scene.survey, config=Locator3DConfig(range_sigma_m=0.01, survey_sigma_m=0.0)
+    )
+    assert fix.ok
+    assert fix.pose is not None
+    assert fix.adjustment is not None
+    assert not fix.plan.ok  # the one-beacon plan view it started from
+    assert set(fix.beacons) >= {"B1", "B2"}
+    err = fix.pose.minus(sim.pose)
+    assert np.all(np.abs(err) < 4.5 * np.sqrt(np.diag(fix.adjustment.covariance))), err
+
+
+def test_floor_returns_by_a_walls_foot_are_no_end_panels() -> None:
+    # The floor rises 22 cm from the drift's middle to the wall's foot under a beacon
+    # whose end panel no ring crosses: with the floor taken from 2 m about, one ring's
+    # floor returns passed for that panel and levered a fix 1.06 deg off in roll.
+    scene = random_drift_scene(34, frames=6, lidar="vlp16", range_sigma_m=0.03, lookalikes=True)
+    sim = scene.simulate(4)
+    fix = locate3d(
+        sim.frame, scene.survey, config=Locator3DConfig(range_sigma_m=0.03, survey_sigma_m=0.0)
+    )
+    assert fix.ok
+    assert fix.pose is not None
+    assert fix.adjustment is not None
+    err = fix.pose.minus(sim.pose)
+    assert np.all(np.abs(err) < 4.5 * np.sqrt(np.diag(fix.adjustment.covariance))), err
+    assert np.degrees(np.abs(err[3:])).max() < 1.0, err

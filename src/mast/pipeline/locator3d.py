@@ -15,8 +15,8 @@ view, then the six-parameter adjustment on the panels it names (docs/3d.md).
    (:func:`_vertical_from`), tried next. A plan view that confirms one beacon only
    starts the 3D stages from that beacon's pose; a second beacon they find is
    confirmed by the plan view located again with the pose as a 2D prior, where that
-   plan view finds a fix at all (:func:`_from_one_beacon`). No fix in any, no 3D fix: the reason is the first
-   refusal of a 3D adjustment's, or else the first refusal's.
+   plan view finds a fix at all (:func:`_from_one_beacon`). No fix in any, no 3D fix:
+   the reason is the first refusal of a 3D adjustment's, or else the first refusal's.
 4. **The start**: the 2D pose with the levelling's pitch and roll, and the elevation
    where the most panels' top brackets agree (:func:`_start_elevation`: hits in a
    tight gate, each panel's run of them up from its middle, and the rays crossing over
