@@ -267,3 +267,37 @@ def test_floor_returns_by_a_walls_foot_are_no_end_panels() -> None:
     err = fix.pose.minus(sim.pose)
     assert np.all(np.abs(err) < 4.5 * np.sqrt(np.diag(fix.adjustment.covariance))), err
     assert np.degrees(np.abs(err[3:])).max() < 1.0, err
+
+
+def test_a_one_beacon_3d_fix_the_plan_view_confirms_no_beacon_near_is_refused() -> None:
+    # Located again near the one-beacon 3D pose, this plan view confirms no beacon at
+    # all: that 3D fix was 1.7 deg off in pitch and 0.7 deg in azimuth at 120 sigma.
+    scene = random_drift_scene(49, frames=6, lidar="vlp16", range_sigma_m=0.02, lookalikes=True)
+    sim = scene.simulate(2)
+    fix = locate3d(
+        sim.frame, scene.survey, config=Locator3DConfig(range_sigma_m=0.02, survey_sigma_m=0.0)
+    )
+    if fix.ok:
+        assert fix.pose is not None
+        assert fix.adjustment is not None
+        err = fix.pose.minus(sim.pose)
+        assert np.all(np.abs(err) < 4.5 * np.sqrt(np.diag(fix.adjustment.covariance))), err
+    else:
+        assert fix.reason in {"inconsistent", "one_beacon"}
+
+
+def test_a_shallow_beacons_rings_are_witnessed_together_off_its_wall() -> None:
+    # B3 stands 11 cm off its wall; at 3 cm noise its middle panel's four returns a ring
+    # clear no ring's bar (14 cm), so its end panel, all of it nearer the free end than
+    # the gate over the sine allows, had no return: 17 rings pooled clear it.
+    scene = random_drift_scene(11, frames=6, lidar="os1-64", range_sigma_m=0.03, lookalikes=True)
+    sim = scene.simulate(2)
+    fix = locate3d(
+        sim.frame, scene.survey, config=Locator3DConfig(range_sigma_m=0.03, survey_sigma_m=0.0)
+    )
+    assert fix.ok, fix.detail
+    assert fix.pose is not None
+    assert fix.adjustment is not None
+    assert "B3" in fix.beacons
+    err = fix.pose.minus(sim.pose)
+    assert np.all(np.abs(err) < 4.5 * np.sqrt(np.diag(fix.adjustment.covariance))), err
