@@ -286,18 +286,18 @@ def test_a_one_beacon_3d_fix_the_plan_view_confirms_no_beacon_near_is_refused() 
         assert fix.reason in {"inconsistent", "one_beacon"}
 
 
-def test_a_shallow_beacons_rings_are_witnessed_together_off_its_wall() -> None:
-    # B3 stands 11 cm off its wall; at 3 cm noise its middle panel's four returns a ring
-    # clear no ring's bar (14 cm), so its end panel, all of it nearer the free end than
-    # the gate over the sine allows, had no return: 17 rings pooled clear it.
-    scene = random_drift_scene(11, frames=6, lidar="os1-64", range_sigma_m=0.03, lookalikes=True)
-    sim = scene.simulate(2)
+def test_a_one_beacon_3d_fix_without_the_plan_views_agreement_holds_the_tilt_tighter() -> None:
+    # The benchmark's VLP-16 3 cm frame with look-alikes, scene 1 frame 9: its plan view
+    # located again confirms the first beacon alone, and the 3D fix, its tilt held to
+    # 0.29 deg, came out 1.05 deg off in pitch (3.6 sigma).
+    scene = random_drift_scene(0, 1, frames=10, lidar="vlp16", range_sigma_m=0.03, lookalikes=True)
+    sim = list(scene.frames())[9]
     fix = locate3d(
         sim.frame, scene.survey, config=Locator3DConfig(range_sigma_m=0.03, survey_sigma_m=0.0)
     )
-    assert fix.ok, fix.detail
-    assert fix.pose is not None
-    assert fix.adjustment is not None
-    assert "B3" in fix.beacons
-    err = fix.pose.minus(sim.pose)
-    assert np.all(np.abs(err) < 4.5 * np.sqrt(np.diag(fix.adjustment.covariance))), err
+    if fix.ok:
+        assert fix.pose is not None
+        assert fix.adjustment is not None
+        err = fix.pose.minus(sim.pose)
+        assert np.degrees(np.abs(err[3:])).max() < 1.0, err
+        assert np.all(np.abs(err) < 3.5 * np.sqrt(np.diag(fix.adjustment.covariance))), err

@@ -130,6 +130,10 @@ ONE_BEACON_PRIOR = (0.25, 2.0)
 #: top of the beacons the 3D pose shows to this far below the highest, metres (then the
 #: try's own band).
 ONE_BEACON_BAND_M = (0.4, 0.05)
+#: The largest sigma of roll or pitch a one-beacon 3D fix is given with where the plan
+#: view located again confirms its first beacon alone, degrees: without the plan view's
+#: agreement, a fix held to 0.29 deg came out 1.05 deg off in pitch (3.6 sigma).
+ALONE_TILT_SIGMA_DEG = 0.2
 #: Nearer a free end than the clearance (the gate over the sine of the panel's angle to
 #: the wall), down to this share of it, a panel keeps the returns of the rings that
 #: cross its beacon clear of both free ends (:func:`_witnessed`). On five draws of 367
@@ -145,15 +149,6 @@ WITNESSED_CLEAR = 0.5
 #: far beacon's middle panel put on its wall, which the pose's error made stand off it).
 WITNESS_MEAN_GATES = 1.5
 WALL_PAST_M = 0.3
-#: Consecutive lines short of that bar each are witnessed together where at least
-#: WITNESS_RUN of them each stand off the wall by WITNESS_RUN_ROCK rock bulges and their
-#: pooled mean clears the bar for their pooled count: a beacon 11 cm deep at 3 cm noise,
-#: four returns a ring on its middle panel, clears it over its rings only (a bar of 14 cm
-#: a ring). On my eleven draws 666 -> 675 owed fixes, twenty more 488 -> 489, none wrong;
-#: runs of two each past one bulge gave a fix 6 deg off in pitch (a wall's rings pooled
-#: with the beacon's, and the roof taken for its end panel).
-WITNESS_RUN = 3
-WITNESS_RUN_ROCK = 1.5
 #: How far about a panel, in plan, the lowest returns are its floor, metres (a floor
 #: may rise to the wall's foot: at 2 m the lowest returns of a drift's middle, 22 cm
 #: below the floor under a beacon, let one ring's floor returns pass for an end panel and
@@ -390,11 +385,7 @@ def _standing_off(
     from the chord gave a fix 16 sigma off in azimuth; 1.5 none). With the median's
     own noise (about 0.7 sigma from three returns) the bar from the wall shown is at
     least 2.5 sigmas of the difference beyond the rock's bulge. A beacon whose middle
-    edges stand out to neither side witnesses nothing. Lines short of the bar are
-    witnessed together where :data:`WITNESS_RUN` or more consecutive ones each stand off
-    by :data:`WITNESS_RUN_ROCK` bulges and their pooled mean clears the bar for their
-    pooled count (a beacon is one block of heights; the wall above or below it stands
-    off by no bulge)."""
+    edges stand out to neither side witnesses nothing."""
     first, last = int(panels[0]), int(panels[-1])
     if planes.front[first] == 0:
         return np.zeros(span, dtype=np.bool_)
@@ -422,17 +413,7 @@ def _standing_off(
         wall[lp[starts[shown]]] = _sorted_medians(dp, starts, count)[shown]
         gate[lp[starts[shown]]] = noise_gate_m
     bar = ROCK_M + WITNESS_MEAN_GATES * gate / np.sqrt(np.maximum(n, 1))
-    off = mean - wall
-    out = (n >= least) & (off > bar)
-    each = np.flatnonzero((n >= least) & (off > WITNESS_RUN_ROCK * ROCK_M))
-    for run in np.split(each, np.flatnonzero(np.diff(each) > 1) + 1):
-        if run.size < WITNESS_RUN:
-            continue
-        total = int(n[run].sum())
-        pooled = float(off[run] @ n[run]) / total
-        if pooled > ROCK_M + WITNESS_MEAN_GATES * float(gate[run].max()) / math.sqrt(total):
-            out[run] = True
-    return np.asarray(out, dtype=np.bool_)
+    return np.asarray((n >= least) & (mean - wall > bar), dtype=np.bool_)
 
 
 def _moved(before: Pose3D, after: Pose3D, covariance: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -598,7 +579,8 @@ def _from_one_beacon(
     the 2D beam verification confirms both beacons), and that 2D fix the 3D fix with
     every test, the plan view's agreement included. Where that plan view confirms the
     first beacon alone, near the 3D pose (a thin second beacon, two rings of a few
-    returns, smeared out of its band), the one-beacon 3D fix stands on its own tests;
+    returns, smeared out of its band), the one-beacon 3D fix stands on its own tests,
+    with its tilt held to :data:`ALONE_TILT_SIGMA_DEG`;
     where it confirms no beacon near the 3D pose, the frame is refused (a 3D fix there
     was 1.7 deg off in pitch and 0.7 deg in azimuth); where it finds a fix, the 3D fix
     from it must pass (taking the one-beacon 3D fix there too gave one 2.1 deg off in
@@ -645,7 +627,12 @@ def _from_one_beacon(
         # the plan view confirms the first beacon where the 3D pose puts it, and says
         # nothing of the second (smeared out of its band): the 3D tests stand
         alone = again.verified[0].supported if again.verified else ()
-        if again.reason == "one_beacon" and alone == plan.verified[0].supported:
+        if (
+            again.reason == "one_beacon"
+            and alone == plan.verified[0].supported
+            and first.adjustment is not None
+            and _tilt_sigma(first.adjustment) <= math.radians(ALONE_TILT_SIGMA_DEG)
+        ):
             return first
         return replace(
             first,
