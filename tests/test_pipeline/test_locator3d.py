@@ -14,8 +14,11 @@ import pytest
 
 from mast.core.beacon import Survey
 from mast.core.pose3d import Pose3D
+from mast.core.scan import Scan
 from mast.errors import InputError
+from mast.pipeline import locator3d
 from mast.pipeline.adjust3d import PanelPlanes
+from mast.pipeline.locator import Fix, LocatorConfig
 from mast.pipeline.locator3d import (
     PITCH_TRIES_DEG,
     Locator3DConfig,
@@ -25,7 +28,8 @@ from mast.pipeline.locator3d import (
     _witnessed,
     locate3d,
 )
-from mast.sim.lidar3d import random_drift_scene
+from mast.report.record import fix3d_record, fix3d_text
+from mast.sim.lidar3d import SimulatedFrame3D, random_drift_scene
 from tests._raycast3d import cast, paper_walls
 
 
@@ -233,16 +237,20 @@ def test_a_plan_view_of_one_beacon_starts_a_fix_the_2d_prior_confirms() -> None:
     assert np.all(np.abs(err) < 4.5 * np.sqrt(np.diag(fix.adjustment.covariance))), err
 
 
-def test_a_one_beacon_3d_fix_stands_where_the_plan_view_located_again_finds_none() -> None:
+def _thin_second_beacon() -> tuple[SimulatedFrame3D, Survey]:
     # A beacon 1.5 m away fills the plan view; the second, 10 m off, is crossed by two
-    # rings of 5 and 10 returns, smeared out of every band: located again with the 3D
-    # pose as its prior, the plan view still confirms the first beacon only. The 3D fix
-    # shows both and passes every 3D test (it had been refused 1 mm and 0.04 deg off).
+    # rings of 5 and 10 returns, smeared out of every band.
     scene = random_drift_scene(4, frames=6, lidar="vlp16", range_sigma_m=0.01, lookalikes=True)
-    sim = scene.simulate(3)
-    fix = locate3d(
-        sim.frame, scene.survey, config=Locator3DConfig(range_sigma_m=0.01, survey_sigma_m=0.0)
-    )
+    return scene.simulate(3), scene.survey
+
+
+def test_a_one_beacon_3d_fix_stands_where_the_plan_view_located_again_finds_none() -> None:
+    # Located again with the 3D pose as its prior, the plan view still confirms the
+    # first beacon only. The 3D fix shows both and passes every 3D test (it had been
+    # refused 1 mm and 0.04 deg off); its record names the panels the 3D fix used.
+    sim, survey = _thin_second_beacon()
+    cfg = Locator3DConfig(range_sigma_m=0.01, survey_sigma_m=0.0)
+    fix = locate3d(sim.frame, survey, config=cfg)
     assert fix.ok
     assert fix.pose is not None
     assert fix.adjustment is not None
@@ -250,6 +258,35 @@ def test_a_one_beacon_3d_fix_stands_where_the_plan_view_located_again_finds_none
     assert set(fix.beacons) >= {"B1", "B2"}
     err = fix.pose.minus(sim.pose)
     assert np.all(np.abs(err) < 4.5 * np.sqrt(np.diag(fix.adjustment.covariance))), err
+    rec = fix3d_record(fix, frame=sim.frame, range_sigma_m=0.01, survey_sigma_m=0.0)
+    assert rec["plan_view"] == {"status": "no_fix", "reason": "one_beacon"}
+    assert len(rec["panels"]["B2"]) >= 2
+    text = fix3d_text(fix, frame=sim.frame, range_sigma_m=0.01, survey_sigma_m=0.0)
+    assert "a plan view confirming one beacon" in text
+
+
+@pytest.mark.parametrize("confirmed", [(), ("B2",)])
+def test_a_one_beacon_3d_fix_the_plan_view_located_again_does_not_confirm_is_refused(
+    confirmed: tuple[str, ...], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # The same frame, its plan view located again confirming no beacon near the 3D pose,
+    # or another beacon than the first: the one-beacon 3D fix does not stand.
+    sim, survey = _thin_second_beacon()
+    real = locator3d.locate
+
+    def located(scan: Scan, survey: Survey, *, config: LocatorConfig) -> Fix:
+        got = real(scan, survey, config=config)
+        if config.prior is None or got.ok:
+            return got
+        verified = [replace(v, supported=confirmed) for v in got.verified[:1]]
+        reason = "one_beacon" if confirmed else "inconsistent"
+        return replace(got, reason=reason, verified=verified)
+
+    monkeypatch.setattr(locator3d, "locate", located)
+    cfg = Locator3DConfig(range_sigma_m=0.01, survey_sigma_m=0.0)
+    fix = locate3d(sim.frame, survey, config=cfg)
+    assert not fix.ok
+    assert fix.detail.startswith("plan view located again near the one-beacon 3D pose")
 
 
 def test_floor_returns_by_a_walls_foot_are_no_end_panels() -> None:
@@ -277,13 +314,8 @@ def test_a_one_beacon_3d_fix_the_plan_view_confirms_no_beacon_near_is_refused() 
     fix = locate3d(
         sim.frame, scene.survey, config=Locator3DConfig(range_sigma_m=0.02, survey_sigma_m=0.0)
     )
-    if fix.ok:
-        assert fix.pose is not None
-        assert fix.adjustment is not None
-        err = fix.pose.minus(sim.pose)
-        assert np.all(np.abs(err) < 4.5 * np.sqrt(np.diag(fix.adjustment.covariance))), err
-    else:
-        assert fix.reason in {"inconsistent", "one_beacon"}
+    assert not fix.ok
+    assert fix.reason in {"inconsistent", "one_beacon"}
 
 
 def test_a_one_beacon_3d_fix_without_the_plan_views_agreement_holds_the_tilt_tighter() -> None:

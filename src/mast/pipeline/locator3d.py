@@ -16,8 +16,9 @@ view, then the six-parameter adjustment on the panels it names (docs/3d.md).
    starts the 3D stages from that beacon's pose; a second beacon they find is
    confirmed by the plan view located again with the pose as a 2D prior, where that
    plan view finds a fix (:func:`_from_one_beacon`; where it confirms the first beacon
-   alone, the 3D tests stand). No fix in any, no 3D fix:
-   the reason is the first refusal of a 3D adjustment's, or else the first refusal's.
+   alone, the 3D tests stand, the tilt held to :data:`ALONE_TILT_SIGMA_DEG`). No fix in
+   any, no 3D fix: the reason is the first refusal of a 3D adjustment's, or else the
+   first refusal's.
 4. **The start**: the 2D pose with the levelling's pitch and roll, and the elevation
    where the most panels' top brackets agree (:func:`_start_elevation`: hits in a
    tight gate, each panel's run of them up from its middle, and the rays crossing over
@@ -205,9 +206,13 @@ class Fix3D:
     reason: str | None
     detail: str
     plan: Fix
-    """The 2D fix of the plan view."""
+    """The plan view's 2D locate the 3D stages started from: its fix, or, for a fix
+    started from one beacon whose plan view located again confirmed that beacon alone
+    (:func:`_from_one_beacon`), that first plan view's refusal (``one_beacon``)."""
     up: NDArray[np.float64]
     beacons: tuple[str, ...] = ()
+    panels: dict[str, tuple[int, ...]] = field(default_factory=dict)
+    """For a fix, beacon id → the panels (1..3) whose returns the adjustment used."""
     elapsed_s: float = 0.0
     stages_s: dict[str, float] = field(default_factory=dict)
 
@@ -624,8 +629,9 @@ def _from_one_beacon(
             break
     spent["plan"] += time.perf_counter() - t
     if not again.ok or again.pose is None:
-        # the plan view confirms the first beacon where the 3D pose puts it, and says
-        # nothing of the second (smeared out of its band): the 3D tests stand
+        # the plan view (in the last band tried) confirms the first beacon where the 3D
+        # pose puts it, and says nothing of the second (smeared out of its band): the 3D
+        # tests stand, the tilt held to ALONE_TILT_SIGMA_DEG
         alone = again.verified[0].supported if again.verified else ()
         if (
             again.reason == "one_beacon"
@@ -1006,8 +1012,9 @@ def _fix3d(
             f"pose puts it do not fit it ({hits[k]} do)",
             adj,
         )
+    panels = _panels_of(which, planes)
     if one_beacon is not None:
-        return Fix3D("fix", adj.pose, adj, None, "", plan, up, beacons)
+        return Fix3D("fix", adj.pose, adj, None, "", plan, up, beacons, panels)
     # the 3D position must be where the plan view put it (within both sigmas and the
     # plan view's smear)
     assert plan.adjustment is not None
@@ -1020,4 +1027,12 @@ def _fix3d(
             f"the 3D position is {1e3 * float(np.hypot(*d)):.1f} mm from the plan view's fix",
             adj,
         )
-    return Fix3D("fix", adj.pose, adj, None, "", plan, up, beacons)
+    return Fix3D("fix", adj.pose, adj, None, "", plan, up, beacons, panels)
+
+
+def _panels_of(which: NDArray[np.intp], planes: PanelPlanes) -> dict[str, tuple[int, ...]]:
+    """Beacon id → the panels (1..3) ``which`` gives a return."""
+    out: dict[str, list[int]] = {}
+    for k in np.unique(which[which >= 0]).tolist():
+        out.setdefault(planes.beacon[k], []).append(planes.panel[k])
+    return {b: tuple(sorted(p)) for b, p in out.items()}

@@ -549,9 +549,11 @@ def fix3d_record(
 
     ``azimuth_deg`` is the heading of the sensor's x axis projected on the horizontal.
     The corners identified, the segments and the excluded beacons are the plan view's
-    (the 2D fix the 3D one starts from, :attr:`Fix3D.plan`), given also as
-    ``plan_view``. An elevation no beacon's top edges bracketed, or that they held no
-    better than :data:`mast.pipeline.locator3d.MAX_ELEVATION_SIGMA_M`, is reported with
+    (the 2D locate the 3D one starts from, :attr:`Fix3D.plan`: its fix, or for a fix
+    started from one beacon its ``one_beacon`` refusal), given also as ``plan_view``;
+    ``panels`` are those whose returns the 3D adjustment used. An elevation no beacon's
+    top edges bracketed, or that they held no better than
+    :data:`mast.pipeline.locator3d.MAX_ELEVATION_SIGMA_M`, is reported with
     ``elevation_observed`` false and null ``sigma_elevation_m``: its value is then not
     to survey precision. Without a fix the pose keys are
     null, as in 2D, with the reason and detail.
@@ -625,7 +627,8 @@ def fix3d_record(
         )
     rec["beacons"] = list(fix.beacons)
     rec["excluded_beacons"] = list(plan.excluded_beacons)
-    rec["panels"] = {b: sorted(ps) for b, ps in plan.panels.items() if b in fix.beacons}
+    used = fix.panels or plan.panels  # the 3D adjustment's, for a fix
+    rec["panels"] = {b: sorted(ps) for b, ps in used.items() if b in fix.beacons}
     rec["points_used"] = adj.returns if fix.ok and adj is not None else 0
     seg, ident = plan.segmentation, plan.identification
     rec["segments"] = None if seg is None else len(seg.segments)
@@ -753,6 +756,8 @@ def fix3d_text(
         f"N {fix.plan.pose.northing:.3f}) refined in six parameters, "
         f"{1e3 * fix.elapsed_s:.1f} ms in all"
         if fix.plan.pose is not None
-        else "",
+        else f"How it was found: a plan view confirming one beacon started the six "
+        f"parameters, which found the others where it put them, "
+        f"{1e3 * fix.elapsed_s:.1f} ms in all",
     ]
     return "\n".join(line for line in lines if line)
