@@ -11,6 +11,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from numpy.typing import NDArray
 
 from mast.core.beacon import Survey
 from mast.core.pose3d import Pose3D
@@ -21,6 +22,7 @@ from mast.pipeline.adjust3d import PanelPlanes
 from mast.pipeline.locator import Fix, LocatorConfig
 from mast.pipeline.locator3d import (
     PITCH_TRIES_DEG,
+    Fix3D,
     Locator3DConfig,
     _contiguous,
     _on_one_beacon,
@@ -29,7 +31,7 @@ from mast.pipeline.locator3d import (
     locate3d,
 )
 from mast.report.record import fix3d_record, fix3d_text
-from mast.sim.lidar3d import SimulatedFrame3D, random_drift_scene
+from mast.sim.lidar3d import DriftScene3D, SimulatedFrame3D, random_drift_scene
 from tests._raycast3d import cast, paper_walls
 
 
@@ -224,40 +226,43 @@ def test_a_plan_view_of_one_beacon_starts_a_fix_the_2d_prior_confirms() -> None:
     # where the first's pose puts it, and the plan view, levelled by that pose and
     # located with it as a prior, confirms both (the fix's plan view has the prior).
     scene = random_drift_scene(0, frames=6, lidar="os1-64", range_sigma_m=0.02)
-    sim = scene.simulate(4)
-    fix = locate3d(
-        sim.frame, scene.survey, config=Locator3DConfig(range_sigma_m=0.02, survey_sigma_m=0.0)
-    )
-    assert fix.ok
-    assert fix.pose is not None
-    assert fix.adjustment is not None
+    sim, fix = _located(scene, 4, 0.02)
+    _within(fix, sim)
     assert fix.plan.ok
     assert fix.plan.config.prior is not None
+
+
+def _located(scene: DriftScene3D, index: int, sigma: float) -> tuple[SimulatedFrame3D, Fix3D]:
+    """Frame ``index`` of ``scene`` and its fix (range sigma ``sigma``, no survey sigma)."""
+    sim = scene.simulate(index)
+    cfg = Locator3DConfig(range_sigma_m=sigma, survey_sigma_m=0.0)
+    return sim, locate3d(sim.frame, scene.survey, config=cfg)
+
+
+def _within(fix: Fix3D, sim: SimulatedFrame3D, sigmas: float = 4.5) -> NDArray[np.float64]:
+    """The fix's errors (record order), each asserted within ``sigmas`` of its own."""
+    assert fix.ok, fix.detail
+    assert fix.pose is not None
+    assert fix.adjustment is not None
     err = fix.pose.minus(sim.pose)
-    assert np.all(np.abs(err) < 4.5 * np.sqrt(np.diag(fix.adjustment.covariance))), err
+    assert np.all(np.abs(err) < sigmas * np.sqrt(np.diag(fix.adjustment.covariance))), err
+    return err
 
 
-def _thin_second_beacon() -> tuple[SimulatedFrame3D, Survey]:
-    # A beacon 1.5 m away fills the plan view; the second, 10 m off, is crossed by two
-    # rings of 5 and 10 returns, smeared out of every band.
-    scene = random_drift_scene(4, frames=6, lidar="vlp16", range_sigma_m=0.01, lookalikes=True)
-    return scene.simulate(3), scene.survey
+def _thin_second_beacon() -> DriftScene3D:
+    # Frame 3: a beacon 1.5 m away fills the plan view; the second, 10 m off, is crossed
+    # by two rings of 5 and 10 returns, smeared out of every band.
+    return random_drift_scene(4, frames=6, lidar="vlp16", range_sigma_m=0.01, lookalikes=True)
 
 
 def test_a_one_beacon_3d_fix_stands_where_the_plan_view_located_again_finds_none() -> None:
     # Located again with the 3D pose as its prior, the plan view still confirms the
     # first beacon only. The 3D fix shows both and passes every 3D test (it had been
     # refused 1 mm and 0.04 deg off); its record names the panels the 3D fix used.
-    sim, survey = _thin_second_beacon()
-    cfg = Locator3DConfig(range_sigma_m=0.01, survey_sigma_m=0.0)
-    fix = locate3d(sim.frame, survey, config=cfg)
-    assert fix.ok
-    assert fix.pose is not None
-    assert fix.adjustment is not None
+    sim, fix = _located(_thin_second_beacon(), 3, 0.01)
+    _within(fix, sim)
     assert not fix.plan.ok  # the one-beacon plan view it started from
     assert set(fix.beacons) >= {"B1", "B2"}
-    err = fix.pose.minus(sim.pose)
-    assert np.all(np.abs(err) < 4.5 * np.sqrt(np.diag(fix.adjustment.covariance))), err
     rec = fix3d_record(fix, frame=sim.frame, range_sigma_m=0.01, survey_sigma_m=0.0)
     assert rec["plan_view"] == {"status": "no_fix", "reason": "one_beacon"}
     assert len(rec["panels"]["B2"]) >= 2
@@ -271,7 +276,6 @@ def test_a_one_beacon_3d_fix_the_plan_view_located_again_does_not_confirm_is_ref
 ) -> None:
     # The same frame, its plan view located again confirming no beacon near the 3D pose,
     # or another beacon than the first: the one-beacon 3D fix does not stand.
-    sim, survey = _thin_second_beacon()
     real = locator3d.locate
 
     def located(scan: Scan, survey: Survey, *, config: LocatorConfig) -> Fix:
@@ -283,8 +287,7 @@ def test_a_one_beacon_3d_fix_the_plan_view_located_again_does_not_confirm_is_ref
         return replace(got, reason=reason, verified=verified)
 
     monkeypatch.setattr(locator3d, "locate", located)
-    cfg = Locator3DConfig(range_sigma_m=0.01, survey_sigma_m=0.0)
-    fix = locate3d(sim.frame, survey, config=cfg)
+    _, fix = _located(_thin_second_beacon(), 3, 0.01)
     assert not fix.ok
     assert fix.detail.startswith("plan view located again near the one-beacon 3D pose")
 
@@ -294,26 +297,15 @@ def test_floor_returns_by_a_walls_foot_are_no_end_panels() -> None:
     # whose end panel no ring crosses: with the floor taken from 2 m about, one ring's
     # floor returns passed for that panel and levered a fix 1.06 deg off in roll.
     scene = random_drift_scene(34, frames=6, lidar="vlp16", range_sigma_m=0.03, lookalikes=True)
-    sim = scene.simulate(4)
-    fix = locate3d(
-        sim.frame, scene.survey, config=Locator3DConfig(range_sigma_m=0.03, survey_sigma_m=0.0)
-    )
-    assert fix.ok
-    assert fix.pose is not None
-    assert fix.adjustment is not None
-    err = fix.pose.minus(sim.pose)
-    assert np.all(np.abs(err) < 4.5 * np.sqrt(np.diag(fix.adjustment.covariance))), err
-    assert np.degrees(np.abs(err[3:])).max() < 1.0, err
+    sim, fix = _located(scene, 4, 0.03)
+    assert np.degrees(np.abs(_within(fix, sim)[3:])).max() < 1.0
 
 
 def test_a_one_beacon_3d_fix_the_plan_view_confirms_no_beacon_near_is_refused() -> None:
     # Located again near the one-beacon 3D pose, this plan view confirms no beacon at
     # all: that 3D fix was 1.7 deg off in pitch and 0.7 deg in azimuth at 120 sigma.
     scene = random_drift_scene(49, frames=6, lidar="vlp16", range_sigma_m=0.02, lookalikes=True)
-    sim = scene.simulate(2)
-    fix = locate3d(
-        sim.frame, scene.survey, config=Locator3DConfig(range_sigma_m=0.02, survey_sigma_m=0.0)
-    )
+    _, fix = _located(scene, 2, 0.02)
     assert not fix.ok
     assert fix.reason in {"inconsistent", "one_beacon"}
 
@@ -323,13 +315,6 @@ def test_a_one_beacon_3d_fix_without_the_plan_views_agreement_holds_the_tilt_tig
     # located again confirms the first beacon alone, and the 3D fix, its tilt held to
     # 0.29 deg, came out 1.05 deg off in pitch (3.6 sigma).
     scene = random_drift_scene(0, 1, frames=10, lidar="vlp16", range_sigma_m=0.03, lookalikes=True)
-    sim = list(scene.frames())[9]
-    fix = locate3d(
-        sim.frame, scene.survey, config=Locator3DConfig(range_sigma_m=0.03, survey_sigma_m=0.0)
-    )
+    sim, fix = _located(scene, 9, 0.03)
     if fix.ok:
-        assert fix.pose is not None
-        assert fix.adjustment is not None
-        err = fix.pose.minus(sim.pose)
-        assert np.degrees(np.abs(err[3:])).max() < 1.0, err
-        assert np.all(np.abs(err) < 3.5 * np.sqrt(np.diag(fix.adjustment.covariance))), err
+        assert np.degrees(np.abs(_within(fix, sim, 3.5)[3:])).max() < 1.0
