@@ -585,12 +585,12 @@ def _from_one_beacon(
     every test, the plan view's agreement included. Where that plan view confirms the
     first beacon alone, near the 3D pose (a thin second beacon, two rings of a few
     returns, smeared out of its band), the one-beacon 3D fix stands on its own tests,
-    with its tilt held to :data:`ALONE_TILT_SIGMA_DEG`;
-    where it confirms no beacon near the 3D pose, the frame is refused (a 3D fix there
-    was 1.7 deg off in pitch and 0.7 deg in azimuth); where it finds a fix, the 3D fix
-    from it must pass (taking the one-beacon 3D fix there too gave one 2.1 deg off in
-    pitch that the plan view's agreement refuses). ``spent`` is added to; ``spacing`` is the
-    frame's :func:`ring_spacing`, where known."""
+    with its tilt held to :data:`ALONE_TILT_SIGMA_DEG`; where it confirms no beacon
+    near the 3D pose, or another, the frame is refused (a 3D fix there was 1.7 deg off
+    in pitch and 0.7 deg in azimuth); where it finds a fix, the 3D fix from it must pass
+    (taking the one-beacon 3D fix there too gave one 2.1 deg off in pitch that the plan
+    view's agreement refuses). ``spent`` is added to; ``spacing`` is the frame's
+    :func:`ring_spacing`, where known."""
     t = time.perf_counter()
     first = _fix3d(frame, planes, plan, up, cfg, one_beacon=plan.verified[0].pose, spacing=spacing)
     spent["adjustment"] += time.perf_counter() - t
