@@ -627,8 +627,7 @@ def fix3d_record(
         )
     rec["beacons"] = list(fix.beacons)
     rec["excluded_beacons"] = list(plan.excluded_beacons)
-    used = fix.panels or plan.panels  # the 3D adjustment's, for a fix
-    rec["panels"] = {b: sorted(ps) for b, ps in used.items() if b in fix.beacons}
+    rec["panels"] = {b: list(ps) for b, ps in fix.panels.items() if b in fix.beacons}
     rec["points_used"] = adj.returns if fix.ok and adj is not None else 0
     seg, ident = plan.segmentation, plan.identification
     rec["segments"] = None if seg is None else len(seg.segments)
