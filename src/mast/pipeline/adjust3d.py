@@ -209,19 +209,33 @@ class PanelPlanes:
     ) -> NDArray[np.intp]:
         """:meth:`assign` on the pairs of returns and panels of ``rays``."""
         clear = 2.0 * gate_m if clear_m is None else clear_m
+        return self._assigns(
+            rays, grid, gate_m, (clear,), top_margin_m=top_margin_m, bottoms=bottoms,
+            reach_m=reach_m, ceilings=ceilings,
+        )[0]  # fmt: skip
+
+    def _assigns(
+        self,
+        rays: _Rays,
+        grid: NDArray[np.float64],
+        gate_m: float,
+        clears_m: Sequence[float],
+        *,
+        top_margin_m: float = math.inf,
+        bottoms: NDArray[np.float64] | None = None,
+        reach_m: float = math.inf,
+        ceilings: NDArray[np.float64] | None = None,
+    ) -> list[NDArray[np.intp]]:
+        """:meth:`_assign` with each of the clearances ``clears_m`` from the free ends,
+        the gate and the heights' cuts made once for all."""
         s = rays.s
         # how far along its ray the return lies from the plane: its range error, were
         # it on the panel (a gate on it keeps both signs of the noise alike)
         gated = np.flatnonzero((np.abs(1.0 - s) * rays.reach[rays.i] < gate_m) & (s > 0))
         k, i, t, z = rays.k[gated], rays.i[gated], rays.t[gated], rays.z[gated]
-        lo, hi = self._inside_all(clear)
-        # the panels whose plane (within the gate) and extent a return is on: it is
-        # one of theirs, or neither's (their heights are the beacon's, not one panel's:
-        # cut off one by a height, a return is not its neighbour's for that)
-        near = (t > lo[k]) & (t < hi[k])
-        on = near.copy()
+        cut = np.ones(len(k), dtype=np.bool_)  # the heights allowed
         if math.isfinite(reach_m):
-            on &= np.abs(z - rays.origin[2]) <= reach_m
+            cut &= np.abs(z - rays.origin[2]) <= reach_m
         # each panel's highest and lowest crossing allowed (infinite: none)
         cap = np.full(len(self), math.inf)
         if math.isfinite(top_margin_m):
@@ -229,26 +243,37 @@ class PanelPlanes:
         if ceilings is not None:
             cap = np.minimum(cap, np.where(np.isfinite(ceilings), ceilings, math.inf))
         if np.isfinite(cap).any():
-            on &= z <= cap[k]
+            cut &= z <= cap[k]
         if bottoms is not None:
             floor = np.where(np.isfinite(bottoms), bottoms, -math.inf)
-            on &= z >= floor[k]
-        # near a joint, within the gate of two panels: neither's, unless one only turns
-        # its face to the sensor (the other is behind it there)
+            cut &= z >= floor[k]
         n = len(grid)
         turned = self.facing(rays.origin)[k]
-        facing = np.bincount(i[near & turned], minlength=n)[i]
-        either = np.bincount(i[near], minlength=n)[i]
-        on &= np.where(facing > 0, turned & (facing == 1), either == 1)
-        which = np.full(n, -1, dtype=np.intp)
-        which[i[on]] = k[on]
-        mine = np.flatnonzero(which >= 0)  # nearer its beacon's wall than it: the wall's
-        ks, xy = which[mine], grid[mine, :2]
-        wall = self.wall[ks]
-        to_wall = np.abs(np.einsum("ij,ij->i", xy, wall[:, :2]) - wall[:, 2])
-        to_panel = np.abs(np.einsum("ij,ij->i", xy, self.normal[ks]) - self.offset[ks])
-        which[mine[to_wall < to_panel]] = -1
-        return which
+        out = []
+        for clear in clears_m:
+            lo, hi = self._inside_all(clear)
+            # the panels whose plane (within the gate) and extent a return is on: it is
+            # one of theirs, or neither's (their heights are the beacon's, not one
+            # panel's: cut off one by a height, a return is not its neighbour's for that)
+            near = (t > lo[k]) & (t < hi[k])
+            on = near & cut
+            # near a joint, within the gate of two panels: neither's, unless one only
+            # turns its face to the sensor (the other is behind it there)
+            facing = np.bincount(i[near & turned], minlength=n)[i]
+            either = np.bincount(i[near], minlength=n)[i]
+            on &= np.where(facing > 0, turned & (facing == 1), either == 1)
+            which = np.full(n, -1, dtype=np.intp)
+            which[i[on]] = k[on]
+            mine = np.flatnonzero(which >= 0)  # nearer its beacon's wall than it: the wall's
+            ks, xy = which[mine], np.take(grid, mine, axis=0)[:, :2]
+            wall = np.take(self.wall, ks, axis=0)
+            to_wall = np.abs(np.einsum("ij,ij->i", xy, wall[:, :2]) - wall[:, 2])
+            to_panel = np.abs(
+                np.einsum("ij,ij->i", xy, np.take(self.normal, ks, axis=0)) - self.offset[ks]
+            )
+            which[mine[to_wall < to_panel]] = -1
+            out.append(which)
+        return out
 
     def _pairs(self, lists: Sequence[NDArray[np.intp]]) -> _Pairs:
         """Each return paired with the panels whose ``lists`` (one per panel) name it."""
@@ -276,7 +301,7 @@ class PanelPlanes:
             pairs = self._pairs(pairs)
         k = pairs.k
         (nx, ny), (ax, ay) = pairs.normal, pairs.along
-        r = rel[pairs.i]
+        r = np.take(rel, pairs.i, axis=0)  # a 2D array's rows: take is 4x fancy indexing
         rx, ry = r[:, 0], r[:, 1]
         plane = (self.offset - self.normal @ o[:2])[k]
         ahead = ((o[:2] - self.start) * self.along).sum(axis=1)[k]  # the sensor along it
@@ -377,7 +402,9 @@ class PanelPlanes:
         returns do not spread out from its beacon's wall by 30 cm (the lowest ring on a
         wall is a line along it, and no floor). A beacon stands on no floor: near its
         plane's foot the floor is within the gate of the plane, and is no panel's."""
-        return self._floors(np.ascontiguousarray(grid[:, 2]), lambda idx: grid[idx, :2], about)
+        return self._floors(
+            np.ascontiguousarray(grid[:, 2]), lambda idx: np.take(grid, idx, axis=0)[:, :2], about
+        )
 
     def _floors(
         self,
@@ -839,9 +866,9 @@ def _solve(
     panel's :meth:`PanelPlanes.local` returns, where given): kept through the
     iterations, so that a ray's choice cannot flip back and forth with the pose."""
     mine = which >= 0
-    pts, k_of = p[mine], which[mine]
+    pts, k_of = np.compress(mine, p, axis=0), which[mine]
     m = len(pts)
-    n_k, d_k = planes.normal[k_of], planes.offset[k_of]
+    n_k, d_k = np.take(planes.normal, k_of, axis=0), planes.offset[k_of]
     ray = pts / np.linalg.norm(pts, axis=1)[:, None]
     # n · (M q + x)[:2] for a 3×3 M is [n_x q, n_y q, n] · [M[0], M[1], x[:2]]: the
     # returns (and their rays) weighed by their normals once, each iteration's
@@ -955,7 +982,7 @@ def _snoop_pieces(
         on = np.flatnonzero(which >= 0)
         k = which[on]
         R = rotation_rpy(solved.x[4], solved.x[3], yaw_of_azimuth(solved.x[2]))
-        xy = p[on] @ R[:2].T + solved.x[:2]
+        xy = np.take(p, on, axis=0) @ R[:2].T + solved.x[:2]
         t = np.einsum("ij,ij->i", xy - planes.start[k], planes.along[k]) / planes.length[k]
         quarter = np.clip(np.floor(4.0 * t), 0, 3).astype(np.intp)
         # the pieces in the order of (panel, line, quarter), as one key each

@@ -348,8 +348,8 @@ def _witnessed(
     beacon = np.array([ids[b] for b in planes.beacon], dtype=np.intp)
     low = int(min(lines[on].min(), lines[extra].min()))
     span = int(max(lines[on].max(), lines[extra].max())) - low + 1
-    wall = planes.wall[which[on]]
-    off = np.abs(np.einsum("ij,ij->i", grid[on, :2], wall[:, :2]) - wall[:, 2])
+    wall = np.take(planes.wall, which[on], axis=0)
+    off = np.abs(np.einsum("ij,ij->i", np.take(grid, on, axis=0)[:, :2], wall[:, :2]) - wall[:, 2])
     far = on[off > gate_m + ROCK_M]
     counts = np.bincount(beacon[which[far]] * span + lines[far] - low, minlength=len(ids) * span)
     wanted = beacon[nearer[extra]]
@@ -823,9 +823,9 @@ def _fix3d(
     wide, square = planes._local(grid, FLOOR_RADIUS_M)  # the nearer, a part of them
     near, local = _gathered([idx[d <= NEAR_M**2] for idx, d in zip(wide, square, strict=True)])
     about, around = _gathered(wide)
-    pts, grid = frame.points[near], grid[near]
+    pts, grid = np.take(frame.points, near, axis=0), np.take(grid, near, axis=0)
 
-    looked = frame.points[about]
+    looked = np.take(frame.points, about, axis=0)
 
     def floors(pose: Pose3D) -> NDArray[np.float64]:
         # planes.floors on the pose's grid, of which they need the heights and the
@@ -833,7 +833,7 @@ def _fix3d(
         R, at = pose.rotation, pose.position
 
         def in_plan(idx: NDArray[np.intp]) -> NDArray[np.float64]:
-            return np.asarray(looked[idx] @ R[:2].T + at[:2], dtype=np.float64)
+            return np.asarray(np.take(looked, idx, axis=0) @ R[:2].T + at[:2], dtype=np.float64)
 
         return planes._floors(looked @ R[2] + at[2], in_plan, around) + FLOOR_CLEAR_M
 
@@ -857,19 +857,10 @@ def _fix3d(
     ) -> NDArray[np.intp]:
         # each panel cut clear of a free end, and nearer it on the lines its beacon
         # shows clear of it (_witnessed)
-        which, nearer = (
-            planes._assign(
-                rays,
-                grid,
-                gate_m,
-                clear_m=c,
-                top_margin_m=top_margin_m,
-                bottoms=bottoms,
-                reach_m=reach_m,
-                ceilings=ceilings,
-            )
-            for c in (clear, WITNESSED_CLEAR * clear)
-        )
+        which, nearer = planes._assigns(
+            rays, grid, gate_m, (clear, WITNESSED_CLEAR * clear), top_margin_m=top_margin_m,
+            bottoms=bottoms, reach_m=reach_m, ceilings=ceilings,
+        )  # fmt: skip
         return _witnessed(which, nearer, grid, lines, planes, cfg.min_line_returns, gate_m, gate)
 
     # The elevation first, from hits in a gate tight but for the plan view's tilt error.
