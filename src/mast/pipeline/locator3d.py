@@ -450,10 +450,13 @@ def _gathered(
     return np.flatnonzero(looked), [place[idx] for idx in local]
 
 
-def ring_spacing(frame: Frame3D) -> float:
+def ring_spacing(
+    frame: Frame3D, rings: list[tuple[float, NDArray[np.intp]]] | None = None
+) -> float:
     """The angle between a frame's neighbouring rings (radians): the median step between
-    the rings' median elevation angles; 2 deg (a VLP-16's) without rings."""
-    angles = [e for e, _ in rings_bottom_up(frame)]
+    the rings' median elevation angles; 2 deg (a VLP-16's) without rings. ``rings``: the
+    frame's :func:`~mast.pipeline.plan_view.rings_bottom_up`, where known."""
+    angles = [e for e, _ in (rings_bottom_up(frame) if rings is None else rings)]
     if len(angles) < 2:
         return math.radians(2.0)
     return float(np.median(np.diff(angles)))
@@ -510,7 +513,8 @@ def locate3d(
     t0 = time.perf_counter()
     planes = planes or PanelPlanes.of(survey)
     spent = {"vertical": 0.0, "plan": 0.0, "adjustment": 0.0}
-    up = estimate_up(frame)
+    rings = rings_bottom_up(frame)  # for the vertical and the rings' spacing
+    up = estimate_up(frame, rings=rings)
     spent["vertical"] = time.perf_counter() - t0
     level = level_rotation(up)
     plan_cfg = LocatorConfig(range_sigma_m=cfg.range_sigma_m, survey_sigma_m=cfg.survey_sigma_m)
@@ -518,7 +522,7 @@ def locate3d(
     tries = [(level.T @ _pitched(tilt), band) for tilt, band in _tries(cfg)]
     refined = False
     singles = 0
-    spacing = ring_spacing(frame)
+    spacing = ring_spacing(frame, rings)
     while tries:
         # the walls leave the pitch along the drift to the floor, which a grade tilts:
         # the same vertical pitched by a grade's worth, and the beacons at other heights

@@ -105,6 +105,7 @@ def estimate_up(
     sample: int = 6000,
     neighbours: int = 10,
     flatness: float = 0.02,
+    rings: list[tuple[float, NDArray[np.intp]]] | None = None,
 ) -> NDArray[np.float64]:
     """The grid's vertical in the sensor frame, from the frame's own surfaces.
 
@@ -122,8 +123,9 @@ def estimate_up(
     the nearest returns of a return are mostly on its own ring). Without rings, from
     the ``neighbours`` nearest returns of ``sample`` returns, kept where that patch is
     flat and not a line (its smallest eigenvalue below ``flatness`` of the sum, its
-    middle one above a tenth)."""
-    normals = _ring_normals(frame, sample) if frame.ring is not None else None
+    middle one above a tenth). ``rings``: the frame's :func:`rings_bottom_up`, where the
+    caller has them."""
+    normals = _ring_normals(frame, sample, rings) if frame.ring is not None else None
     if normals is None:
         normals = _patch_normals(frame.points, sample, neighbours, flatness)
     z = np.abs(normals[:, 2])
@@ -246,10 +248,13 @@ def rings_bottom_up(frame: Frame3D) -> list[tuple[float, NDArray[np.intp]]]:
     return out
 
 
-def _ring_normals(frame: Frame3D, sample: int) -> NDArray[np.float64] | None:
+def _ring_normals(
+    frame: Frame3D, sample: int, by_ring: list[tuple[float, NDArray[np.intp]]] | None = None
+) -> NDArray[np.float64] | None:
     """Normals from each ring and the one above it (see :func:`estimate_up`); None when
-    the frame has fewer than two rings."""
-    by_ring = rings_bottom_up(frame)
+    the frame has fewer than two rings. ``by_ring``: its :func:`rings_bottom_up`, if known."""
+    if by_ring is None:
+        by_ring = rings_bottom_up(frame)
     if len(by_ring) < 2:
         return None
     x, y, z = np.array(frame.points.T)  # each coordinate contiguous
