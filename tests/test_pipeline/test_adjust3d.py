@@ -113,6 +113,35 @@ def test_a_return_far_off_its_panel_is_snooped_out() -> None:
     assert np.abs(_errors(dirty, truth) - _errors(clean, truth))[[0, 1, 3, 4, 5]].max() < 1e-3
 
 
+def test_a_return_grazing_its_panel_is_left_out() -> None:
+    """A return whose ray is within 2 deg of its panel's plane carries no usable range (as
+    in 2D and the bound): weighed as the range's, one lying 2 cm off the plane 1 deg from
+    grazing would be taken as known across it to a sixtieth of the range noise."""
+    walls, scene = paper_walls("parallel")
+    planes = PanelPlanes.of(scene.survey)
+    truth = Pose3D.from_degrees(7.0, 7.0, 1.2, 0.0, 2.0, -3.0)
+    frame = cast(truth, walls, 0.01, 3)
+    which = planes.assign(truth.sensor_to_grid(frame.points), truth.position, 0.04)
+    k = int(np.bincount(which[which >= 0]).argmax())  # the panel with the most returns
+    # a point on that panel's plane, 2 cm in front of it, whose ray is 1 deg off the plane
+    n, d = planes.normal[k], planes.offset[k]
+    o = truth.position
+    off = d - float(n @ o[:2]) - 0.02  # across the plane, from the sensor
+    along = np.array([-n[1], n[0]])
+    grid = np.array([*(o[:2] + off * n + along * abs(off) / math.tan(math.radians(1.0))), 1.5])
+    extra = (grid - o) @ truth.rotation  # into the sensor frame
+    pts = np.vstack([frame.points, extra])
+    named = np.append(which, k)
+    clean, grazed = (
+        adjust_pose(p, w, planes, truth, range_sigma_m=0.01, survey_sigma_m=0.0, gate_m=0.04)
+        for p, w in ((frame.points, which), (pts, named))
+    )
+    assert grazed.used is not None
+    assert grazed.used[-1] == -1
+    assert grazed.returns == clean.returns
+    assert np.abs(grazed.pose.minus(clean.pose)).max() < 1e-9
+
+
 def test_a_survey_without_elevations_leaves_the_elevation_unobserved() -> None:
     _, scene = paper_walls("parallel")
     flat = Survey([replace(b, elevations=None) for b in scene.survey])

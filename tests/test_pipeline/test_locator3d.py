@@ -304,10 +304,12 @@ def test_floor_returns_by_a_walls_foot_are_no_end_panels() -> None:
 def test_a_one_beacon_3d_fix_the_plan_view_confirms_no_beacon_near_is_refused() -> None:
     # Located again near the one-beacon 3D pose, this plan view confirms no beacon at
     # all: that 3D fix was 1.7 deg off in pitch and 0.7 deg in azimuth at 120 sigma.
+    # (The reason is the first 3D refusal of the frame's tries: since grazing returns
+    # are left out, an earlier try's adjustment is rejected by the global test.)
     scene = random_drift_scene(49, frames=6, lidar="vlp16", range_sigma_m=0.02, lookalikes=True)
     _, fix = _located(scene, 2, 0.02)
     assert not fix.ok
-    assert fix.reason in {"inconsistent", "one_beacon"}
+    assert fix.reason in {"inconsistent", "one_beacon", "rejected"}
 
 
 def test_a_one_beacon_3d_fix_without_the_plan_views_agreement_holds_the_tilt_tighter() -> None:
