@@ -892,16 +892,7 @@ def _solve(
         R = D[0]
         origin = np.array([x[0], x[1], x[5]])
         if tops is None:
-            rel = p @ R.T
-            if pairs is None:
-                pairs = planes._pairs(planes._everywhere(len(p)))
-            rays = planes._rays(rel, origin, pairs)
-            tops = _top_edges(rel + origin, rel, which, origin, planes, gate_m, rays=rays)
-            tops = [
-                top
-                for top in tops
-                if planes.beacon[top[0]] not in skip and (panels is None or top[0] in panels)
-            ]
+            tops = _chosen_tops(p, which, planes, R, origin, gate_m, skip, panels, pairs)
         if tops and edges is None:  # only the top edges' rays are turned each iteration
             edges = _TopEdges.of(tops, planes)
         if done == 1:  # the rows: the top edges are known now
@@ -936,6 +927,32 @@ def _solve(
         x += step
         if done >= iterations or np.all(np.abs(step) < _CONVERGED):
             return _Solved(x, J, W, v, N, m, tops, done)
+
+
+def _chosen_tops(
+    p: NDArray[np.float64],
+    which: NDArray[np.intp],
+    planes: PanelPlanes,
+    R: NDArray[np.float64],
+    origin: NDArray[np.float64],
+    gate_m: float,
+    skip: frozenset[str] = frozenset(),
+    panels: frozenset[int] | None = None,
+    pairs: _Pairs | None = None,
+) -> list[tuple[int, int, int]]:
+    """The top edges' rays (:func:`_top_edges`) chosen with the sensor at ``origin``
+    turned by ``R``, among ``pairs`` (every return with every panel, where not given),
+    but those of the beacons in ``skip`` and of panels not in ``panels`` (where given)."""
+    rel = p @ R.T
+    if pairs is None:
+        pairs = planes._pairs(planes._everywhere(len(p)))
+    rays = planes._rays(rel, origin, pairs)
+    tops = _top_edges(rel + origin, rel, which, origin, planes, gate_m, rays=rays)
+    return [
+        top
+        for top in tops
+        if planes.beacon[top[0]] not in skip and (panels is None or top[0] in panels)
+    ]
 
 
 #: R and its derivatives by yaw, pitch and roll, as :func:`_derivatives` stacks them.
@@ -1105,16 +1122,22 @@ def adjust_pose(
         solved = solve(solved.x)
     settled = not elevation
     for _ in range(6 if elevation else 0):
-        again = solve(solved.x)  # the top edges' rays chosen again where the pose moved
-        same = again.tops == solved.tops
-        solved = again
-        if same:
-            worst = _failed_bracket(solved, planes)
-            if worst is None:
-                settled = True
-                break
-            distrust.add(worst)
-            solved = solve(solved.x)
+        # the top edges' rays chosen again where the pose moved: the same rays, the same
+        # adjustment (it has converged on them); others, the adjustment again on them
+        x = solved.x
+        origin = np.array([x[0], x[1], x[5]])
+        R = _derivatives(x[4], x[3], yaw_of_azimuth(x[2]))[0]
+        tops = _chosen_tops(p, which, planes, R, origin, gate_m, frozenset(distrust), top_panels,
+                            pairs)  # fmt: skip
+        if tops != solved.tops:
+            solved = solve(x, tops)
+            continue
+        worst = _failed_bracket(solved, planes)
+        if worst is None:
+            settled = True
+            break
+        distrust.add(worst)
+        solved = solve(solved.x)
     x, J, W, v, n_points = solved.x, solved.J, solved.W, solved.v, solved.n_points
     k_of = which[which >= 0]
     Q = np.linalg.inv(solved.N)
