@@ -338,6 +338,12 @@ PANEL_HEIGHT_M = (0.5, 1.2)
 TOP_EDGE_M = (1.5, 2.5)
 #: A beacon or look-alike is kept this far, metres, from a bend's vertex.
 BEND_CLEARANCE_M = 4.0
+#: A look-alike keeps this far, in plan, from every beacon and look-alike before it: two
+#: plates cannot pass through each other (one drawn across a beacon's panels had
+#: replaced half their returns with its own), metres; and so many places are drawn for
+#: it before it is left out.
+LOOKALIKE_CLEARANCE_M = 0.3
+LOOKALIKE_PLACES = 20
 
 
 def _design(rng: np.random.Generator) -> BeaconDesign:
@@ -348,6 +354,23 @@ def _design(rng: np.random.Generator) -> BeaconDesign:
         chord = float(rng.uniform(0.7, 1.8))
         return paper_design(chord, chord * float(rng.uniform(0.1, 0.2)))
     return DRIFT_CATALOGUE[int(rng.integers(len(DRIFT_CATALOGUE)))]
+
+
+def _gap(a: NDArray[np.float64], b: NDArray[np.float64], step_m: float = 0.01) -> float:
+    """The least distance in plan between two polylines (their corners, (n, 2)), to
+    about ``step_m``: each sampled that finely."""
+
+    def sampled(p: NDArray[np.float64]) -> NDArray[np.float64]:
+        parts = [
+            p[k]
+            + np.linspace(0.0, 1.0, max(2, int(np.hypot(*(p[k + 1] - p[k])) / step_m) + 1))[:, None]
+            * (p[k + 1] - p[k])
+            for k in range(len(p) - 1)
+        ]
+        return np.concatenate(parts)
+
+    pa, pb = sampled(a), sampled(b)
+    return float(np.sqrt(((pa[:, None, :] - pb[None, :, :]) ** 2).sum(axis=2).min()))
 
 
 def _mount(tunnel: Tunnel, station: float, side: str, design: BeaconDesign) -> NDArray[np.float64]:
@@ -454,10 +477,17 @@ def random_drift_scene(
             side = "right" if side == "left" else "left"
     stretch = (float(rng.uniform(22.0, 30.0)) - 4.0, s - 1.0)
     if lookalikes:
+        taken = [b.edges for b in beacons]
         for j in range(int(rng.integers(1, 3))):
-            st = clear(float(rng.uniform(*stretch)))
-            shape = _panel_lookalike(rng)
-            edges = _mount(tunnel, st, "left" if rng.random() < 0.5 else "right", shape)
+            for _ in range(LOOKALIKE_PLACES):
+                st = clear(float(rng.uniform(*stretch)))
+                shape = _panel_lookalike(rng)
+                edges = _mount(tunnel, st, "left" if rng.random() < 0.5 else "right", shape)
+                if all(_gap(edges, other) >= LOOKALIKE_CLEARANCE_M for other in taken):
+                    break
+            else:
+                continue  # no place clear of the others along the stretch
+            taken.append(edges)
             top = float(bare.floor_at(edges.mean(axis=0))[0]) + float(rng.uniform(*TOP_EDGE_M))
             tall = float(rng.uniform(*PANEL_HEIGHT_M))
             for k in range(len(edges) - 1):
