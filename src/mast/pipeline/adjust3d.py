@@ -1123,13 +1123,13 @@ def adjust_pose(
     settled = not elevation
     for _ in range(6 if elevation else 0):
         # the top edges' rays chosen again where the pose moved: the same rays, the same
-        # adjustment (it has converged on them); others, the adjustment again on them
+        # adjustment (where it converged on them); others, the adjustment again on them
         x = solved.x
         origin = np.array([x[0], x[1], x[5]])
         R = _derivatives(x[4], x[3], yaw_of_azimuth(x[2]))[0]
         tops = _chosen_tops(p, which, planes, R, origin, gate_m, frozenset(distrust), top_panels,
                             pairs)  # fmt: skip
-        if tops != solved.tops:
+        if tops != solved.tops or solved.iterations >= iterations:
             solved = solve(x, tops)
             continue
         worst = _failed_bracket(solved, planes)

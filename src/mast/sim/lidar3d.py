@@ -418,7 +418,9 @@ def random_drift_scene(
     apart, mostly on alternate walls, panels 0.5-1.2 m tall with top edges 1.5-2.5 m
     above the floor; the survey gives each edge's top elevation. ``lookalikes`` adds one
     or two brackets and boards on stand-offs (:mod:`mast.sim.hard`'s look-alikes)
-    mounted as plates ``Surface("lookalike", "L1", k)``.
+    mounted as plates ``Surface("lookalike", "L1", k)``, each 0.3 m clear in plan of the
+    beacons and of the look-alike before it (:data:`LOOKALIKE_CLEARANCE_M`; one with no
+    clear place in :data:`LOOKALIKE_PLACES` draws is left out).
     The poses are along the beacons' stretch, at least 1.2 m from the walls, facing
     either way along the drift (±10°), the sensor 1.5-2.5 m above the floor and the
     vehicle rolled and pitched by up to ±10° on top of the floor's slope.
@@ -478,8 +480,8 @@ def random_drift_scene(
     stretch = (float(rng.uniform(22.0, 30.0)) - 4.0, s - 1.0)
     if lookalikes:
         taken = [b.edges for b in beacons]
-        for j in range(int(rng.integers(1, 3))):
-            for _ in range(LOOKALIKE_PLACES):
+        for _ in range(int(rng.integers(1, 3))):
+            for _place in range(LOOKALIKE_PLACES):
                 st = clear(float(rng.uniform(*stretch)))
                 shape = _panel_lookalike(rng)
                 edges = _mount(tunnel, st, "left" if rng.random() < 0.5 else "right", shape)
@@ -499,7 +501,7 @@ def random_drift_scene(
                             (float(b[0]), float(b[1])),
                             top - tall,
                             top,
-                            Surface("lookalike", f"L{j + 1}", k + 1),
+                            Surface("lookalike", f"L{len(taken) - len(beacons)}", k + 1),
                             float(rng.uniform(60.0, 220.0)),
                         )
                     )
