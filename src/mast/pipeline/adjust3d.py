@@ -1029,7 +1029,8 @@ def _grazing(
     barely crosses the plane, its direction's error and its footprint fully), and the
     bound (:mod:`mast.pipeline.bounds3d`) leaves them out too. Weighed as the range's,
     one such return, the neighbouring panel's at a joint and alone on its panel, held a
-    fix's northing to 0.56 mm and moved it 5.4 mm (9.8 sigma)."""
+    fix's northing to 0.56 mm and moved it 5.4 mm (9.8 sigma). Left out of ``which``, it
+    is no panel's highest hit for the top edges either."""
     on = np.flatnonzero(which >= 0)
     u = np.take(p, on, axis=0) @ pose.rotation.T
     n = np.take(planes.normal, which[on], axis=0)
