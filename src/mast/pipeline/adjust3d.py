@@ -892,7 +892,7 @@ def _solve(
         R = D[0]
         origin = np.array([x[0], x[1], x[5]])
         if tops is None:
-            tops = _chosen_tops(p, which, planes, R, origin, gate_m, skip, panels, pairs)
+            tops = _chosen_tops(p, which, planes, x, gate_m, skip, panels, pairs)
         if tops and edges is None:  # only the top edges' rays are turned each iteration
             edges = _TopEdges.of(tops, planes)
         if done == 1:  # the rows: the top edges are known now
@@ -933,16 +933,17 @@ def _chosen_tops(
     p: NDArray[np.float64],
     which: NDArray[np.intp],
     planes: PanelPlanes,
-    R: NDArray[np.float64],
-    origin: NDArray[np.float64],
+    x: NDArray[np.float64],
     gate_m: float,
     skip: frozenset[str] = frozenset(),
     panels: frozenset[int] | None = None,
     pairs: _Pairs | None = None,
 ) -> list[tuple[int, int, int]]:
-    """The top edges' rays (:func:`_top_edges`) chosen with the sensor at ``origin``
-    turned by ``R``, among ``pairs`` (every return with every panel, where not given),
+    """The top edges' rays (:func:`_top_edges`) chosen at the pose ``x`` (E, N, A,
+    pitch, roll, Z), among ``pairs`` (every return with every panel, where not given),
     but those of the beacons in ``skip`` and of panels not in ``panels`` (where given)."""
+    R = _derivatives(x[4], x[3], yaw_of_azimuth(x[2]))[0]
+    origin = np.array([x[0], x[1], x[5]])
     rel = p @ R.T
     if pairs is None:
         pairs = planes._pairs(planes._everywhere(len(p)))
@@ -1125,13 +1126,10 @@ def adjust_pose(
     for _ in range(6 if elevation else 0):
         # the top edges' rays chosen again where the pose moved: the same rays, the same
         # adjustment (where it converged on them); others, the adjustment again on them
-        x = solved.x
-        origin = np.array([x[0], x[1], x[5]])
-        R = _derivatives(x[4], x[3], yaw_of_azimuth(x[2]))[0]
-        tops = _chosen_tops(p, which, planes, R, origin, gate_m, frozenset(distrust), top_panels,
-                            pairs)  # fmt: skip
+        tops = _chosen_tops(p, which, planes, solved.x, gate_m, frozenset(distrust),
+                            top_panels, pairs)  # fmt: skip
         if tops != solved.tops or solved.iterations >= iterations:
-            solved = solve(x, tops)
+            solved = solve(solved.x, tops)
             continue
         worst = _failed_bracket(solved, planes)
         if worst is None:
