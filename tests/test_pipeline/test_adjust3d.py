@@ -322,6 +322,46 @@ def test_at_a_joint_a_return_goes_to_the_panel_turned_to_the_sensor() -> None:
     assert np.array_equal(planes.assign(p2, ahead, 0.04), blind.assign(p2, ahead, 0.04))
 
 
+def test_a_panel_is_seen_down_to_its_third_lowest_middle_return() -> None:
+    planes = PanelPlanes.of(_hat(1))
+    sensor = np.array([2.0, 0.6, 1.0])
+    # on P2 (x = 0.2, 0.3 < y < 0.9): one stray low return, then rings at 0.6 m and up,
+    # in its middle half; lower returns still near its ends are not looked at
+    y = np.array([0.6, 0.5, 0.55, 0.7, 0.6, 0.65, 0.32, 0.88])
+    z = np.array([0.3, 0.6, 0.6, 0.6, 0.8, 0.8, 0.1, 0.1])
+    pts = np.column_stack([np.full_like(y, 0.2), y, z])
+    which = np.full(len(y), 1)
+    seen = planes.seen(pts, sensor, which)
+    assert seen[1] == pytest.approx(0.6)
+    assert np.isnan(seen[[0, 2]]).all()  # no returns there
+    assert np.isnan(planes.seen(pts[:2], sensor, which[:2])[1])  # two in the middle only
+
+
+def test_inside_its_known_heights_a_return_is_the_panels_whatever_its_noise() -> None:
+    planes = PanelPlanes.of(_hat(1))
+    sensor = np.array([2.0, 0.15, 1.0])
+    # returns on P1's ray at its middle (0.1, 0.15), 6 cm further along it than the
+    # panel: noise, within the 8 cm gate, that puts them nearer the wall x = 0 (4 cm)
+    # than the panel's plane (5 cm)
+    z = np.linspace(0.6, 2.04, 73)
+    pts = np.column_stack([np.full_like(z, 0.04), np.full_like(z, 0.15), z])
+    tops_unknown = planes.assign(pts, sensor, 0.08, clear_m=0.04)
+    assert np.all(tops_unknown == -1)  # the wall's, as far as anything can tell
+    seen = np.full(len(planes), 0.5)  # the lowest height its returns show it at
+    known = planes.assign(pts, sensor, 0.08, clear_m=0.04, top_margin_m=0.05, boxes=seen)
+    assert np.array_equal(
+        planes.assign(pts, sensor, 0.08, clear_m=0.04, top_margin_m=0.05), tops_unknown
+    )  # no heights seen, no box
+    # the panel hides the wall between its bottom and top: its returns there are its own
+    # (where their rays cross its plane, 1.9 m of the 1.96 m out to them)
+    crossing = sensor[2] + (z - sensor[2]) * 1.9 / 1.96
+    inside = (crossing > 0.55) & (crossing < 1.95)
+    assert 60 < np.count_nonzero(inside) < len(z)
+    assert np.all(known[inside] == 0)
+    # within the tops' margin, where the wall above may show, the nearer plane decides
+    assert np.all(known[~inside] == -1)
+
+
 def test_a_return_a_panel_cuts_off_by_height_is_not_its_neighbours() -> None:
     walls, scene = paper_walls("divergent")
     planes = PanelPlanes.of(scene.survey)

@@ -63,6 +63,9 @@ HIT_SHARE = 0.625
 #: How far rough rock may bulge from a beacon's wall towards its panels' planes near a
 #: free end, where a return on it may pass for a panel's top hit, metres.
 ROCK_M = 0.05
+#: A panel is seen down to its this-many-th lowest return of its middle half
+#: (:meth:`PanelPlanes.seen`).
+SEEN_NTH = 3
 #: A lidar beam's angular error (one sigma, radians): the height of a top edge's bracket
 #: ends is a ray's direction's, known to this times its range.
 BEAM_ANGLE_SIGMA = 5e-4
@@ -173,6 +176,7 @@ class PanelPlanes:
         reach_m: float = math.inf,
         ceilings: NDArray[np.float64] | None = None,
         local: list[NDArray[np.intp]] | None = None,
+        boxes: NDArray[np.float64] | None = None,
     ) -> NDArray[np.intp]:
         """The panel each grid point (n, 3), seen from the sensor at ``origin``, lies
         on, or -1 (looking at each panel's :meth:`local` points only, where given):
@@ -190,12 +194,14 @@ class PanelPlanes:
         * within the gate of no other panel's plane inside its extent (whatever the
           heights), or of none turning its face to the sensor (:meth:`facing`) where
           the panel does; and nearer the panel's plane than its beacon's wall
-          (:attr:`wall`)."""
+          (:attr:`wall`), unless it crosses the panel between ``boxes`` (per panel: the
+          heights its returns show it at, :meth:`seen`) and its top, each
+          ``top_margin_m`` inside, where the panel hides the wall."""
         o = np.asarray(origin, dtype=float).reshape(3)
         rays = self._rays(grid - o, o, local or self._everywhere(len(grid)))
         return self._assign(
             rays, grid, gate_m, top_margin_m=top_margin_m, clear_m=clear_m, bottoms=bottoms,
-            reach_m=reach_m, ceilings=ceilings,
+            reach_m=reach_m, ceilings=ceilings, boxes=boxes,
         )  # fmt: skip
 
     def _assign(
@@ -209,12 +215,13 @@ class PanelPlanes:
         bottoms: NDArray[np.float64] | None = None,
         reach_m: float = math.inf,
         ceilings: NDArray[np.float64] | None = None,
+        boxes: NDArray[np.float64] | None = None,
     ) -> NDArray[np.intp]:
         """:meth:`assign` on the pairs of returns and panels of ``rays``."""
         clear = 2.0 * gate_m if clear_m is None else clear_m
         return self._assigns(
             rays, grid, gate_m, (clear,), top_margin_m=top_margin_m, bottoms=bottoms,
-            reach_m=reach_m, ceilings=ceilings,
+            reach_m=reach_m, ceilings=ceilings, boxes=boxes,
         )[0]  # fmt: skip
 
     def _assigns(
@@ -228,9 +235,12 @@ class PanelPlanes:
         bottoms: NDArray[np.float64] | None = None,
         reach_m: float = math.inf,
         ceilings: NDArray[np.float64] | None = None,
+        boxes: NDArray[np.float64] | None = None,
     ) -> list[NDArray[np.intp]]:
         """:meth:`_assign` with each of the clearances ``clears_m`` from the free ends,
-        the gate and the heights' cuts made once for all."""
+        the gate and the heights' cuts made once for all. Where ``boxes`` (per panel, from
+        :meth:`seen`) and the top are known, a crossing between them, each ``top_margin_m``
+        inside, is the panel's without the wall test."""
         s = rays.s
         # how far along its ray the return lies from the plane: its range error, were
         # it on the panel (a gate on it keeps both signs of the noise alike)
@@ -250,6 +260,15 @@ class PanelPlanes:
         if bottoms is not None:
             floor = np.where(np.isfinite(bottoms), bottoms, -math.inf)
             cut &= z >= floor[k]
+        # crossing a panel between the heights its returns show it at (``boxes``) and its
+        # top, each less the margin, a ray meets the panel, not the wall behind it (the
+        # plate hides the wall there): no wall test, whose choice by the return's own
+        # place would keep the noise that points one way
+        boxed = np.zeros(len(k), dtype=np.bool_)
+        if boxes is not None and math.isfinite(top_margin_m):
+            inner = np.fmin(self.top - top_margin_m, cap)
+            inner = np.where(np.isfinite(boxes) & np.isfinite(self.top), inner, -math.inf)
+            boxed = (z < inner[k]) & (z > boxes[k] + top_margin_m)
         n = len(grid)
         turned = self.facing(rays.origin)[k]
         out = []
@@ -267,7 +286,9 @@ class PanelPlanes:
             on &= np.where(facing > 0, turned & (facing == 1), either == 1)
             which = np.full(n, -1, dtype=np.intp)
             which[i[on]] = k[on]
-            mine = np.flatnonzero(which >= 0)  # nearer its beacon's wall than it: the wall's
+            tested = np.zeros(n, dtype=np.bool_)
+            tested[i[on & ~boxed]] = True
+            mine = np.flatnonzero(tested)  # nearer its beacon's wall than it: the wall's
             ks, xy = which[mine], np.take(grid, mine, axis=0)[:, :2]
             wall = np.take(self.wall, ks, axis=0)
             to_wall = np.abs(np.einsum("ij,ij->i", xy, wall[:, :2]) - wall[:, 2])
@@ -520,12 +541,45 @@ class PanelPlanes:
         self, rays: _Rays, grid: NDArray[np.float64], which: NDArray[np.intp], margin_m: float
     ) -> NDArray[np.float64]:
         """:meth:`bottoms` with the crossings of ``rays``."""
+        k, z = self._middle(rays, grid, which)
+        return _per_panel(k, z, len(self), np.minimum, np.nan) - margin_m
+
+    def seen(
+        self, grid: NDArray[np.float64], origin: NDArray[np.float64], which: NDArray[np.intp]
+    ) -> NDArray[np.float64]:
+        """Each panel's lowest height its returns show it at: the third lowest crossing
+        of the middle half of the panel (one return of the wall just below, let through
+        by its noise, does not lower it; :meth:`assign`'s ``boxes``); NaN for a panel
+        with fewer than three returns there."""
+        o = np.asarray(origin, dtype=float).reshape(3)
+        rays = self._rays(grid - o, o, _panel_lists(which, len(self)))
+        return self._seen(rays, grid, which)
+
+    def _seen(
+        self, rays: _Rays, grid: NDArray[np.float64], which: NDArray[np.intp]
+    ) -> NDArray[np.float64]:
+        """:meth:`seen` with the crossings of ``rays``."""
+        k, z = self._middle(rays, grid, which)
+        out = np.full(len(self), np.nan)
+        if k.size:
+            order = np.lexsort((z, k))
+            k, z = k[order], z[order]
+            first, count = _runs(k)
+            third = count >= SEEN_NTH
+            out[k[first[third]]] = z[first[third] + SEEN_NTH - 1]
+        return out
+
+    def _middle(
+        self, rays: _Rays, grid: NDArray[np.float64], which: NDArray[np.intp]
+    ) -> tuple[NDArray[np.intp], NDArray[np.float64]]:
+        """The panels and crossing heights of the returns ``which`` gives a panel in
+        the middle half of it, where no wall is near its plane."""
         rays, j = self._own(rays, which)
         k, i = rays.k[j], rays.i[j]
         start, along = self.start[k], self.along[k]
         t = (grid[i, 0] - start[:, 0]) * along[:, 0] + (grid[i, 1] - start[:, 1]) * along[:, 1]
         mid = np.abs(t - self.length[k] / 2) < self.length[k] / 4
-        return _per_panel(k[mid], rays.z[j[mid]], len(self), np.minimum, np.nan) - margin_m
+        return k[mid], rays.z[j[mid]]
 
 
 @dataclass(slots=True)

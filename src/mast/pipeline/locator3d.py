@@ -858,12 +858,13 @@ def _fix3d(
         bottoms: NDArray[np.float64],
         reach_m: float = math.inf,
         ceilings: NDArray[np.float64] | None = None,
+        boxes: NDArray[np.float64] | None = None,
     ) -> NDArray[np.intp]:
         # each panel cut clear of a free end, and nearer it on the lines its beacon
         # shows clear of it (_witnessed)
         which, nearer = planes._assigns(
             rays, grid, gate_m, (clear, WITNESSED_CLEAR * clear), top_margin_m=top_margin_m,
-            bottoms=bottoms, reach_m=reach_m, ceilings=ceilings,
+            bottoms=bottoms, reach_m=reach_m, ceilings=ceilings, boxes=boxes,
         )  # fmt: skip
         return _witnessed(which, nearer, grid, lines, planes, cfg.min_line_returns, gate_m, gate)
 
@@ -892,15 +893,16 @@ def _fix3d(
             rays = planes._rays(grid - pose.position, pose.position, pairs)
             margin = spread + 2.0 * sig_r + START_SLACK_M  # the start's elevation
             slack = 0.0 if adj is not None else min(reach, 2.0) * TILT_SLACK
-            roof = None
+            roof = boxes = None
             floor = floors(pose)
             if adj is None:  # each panel cut at its highest tight hit, too
                 roof = planes._ceilings(rays, tight, 2.0 * sig_r)
             else:
                 floor = np.fmax(floor, planes._bottoms(rays, grid, which, gate))
+                boxes = planes._seen(rays, grid, which)
             trial = cut(
                 rays, grid, gate + slack, top_margin_m=margin, bottoms=floor, reach_m=reach,
-                ceilings=roof,
+                ceilings=roof, boxes=boxes,
             )  # fmt: skip
             trial = _contiguous(trial, grid, pose.position, planes, spacing, rays)
             showing = _shown(trial, lines, planes, cfg)
@@ -937,7 +939,8 @@ def _fix3d(
             rays = planes._rays(grid - pose.position, pose.position, pairs)
             margin = max(2.0 * math.sqrt(adj.covariance[2, 2]), 2.0 * sig_r)
             floor = np.fmax(floors(pose), planes._bottoms(rays, grid, which, gate))
-            again = cut(rays, grid, gate, top_margin_m=margin, bottoms=floor)
+            boxes = planes._seen(rays, grid, which)
+            again = cut(rays, grid, gate, top_margin_m=margin, bottoms=floor, boxes=boxes)
             again = _contiguous(again, grid, pose.position, planes, spacing, rays)
             if np.array_equal(again, which):
                 held = True
