@@ -114,23 +114,24 @@ def test_a_return_far_off_its_panel_is_snooped_out() -> None:
 
 
 def test_a_return_grazing_its_panel_is_left_out() -> None:
-    """A return whose ray is within 2 deg of its panel's plane carries no usable range (as
-    in 2D and the bound): weighed as the range's, one lying 2 cm off the plane 1 deg from
-    grazing would be taken as known across it to a sixtieth of the range noise. (The
-    azimuth and the tilt are such that the ray turned the wrong way would not graze.)"""
+    """A return whose ray is within 4 deg of its panel's plane carries no usable range (as
+    in 2D, where the limit is 2 deg, and the bound): weighed as the range's, one lying 2 cm
+    off the plane 3.5 deg from grazing would be taken as known across it to a sixteenth
+    of the range noise. (The azimuth and the tilt are such that the ray turned the wrong way
+    would not graze.)"""
     walls, scene = paper_walls("parallel")
     planes = PanelPlanes.of(scene.survey)
     truth = Pose3D.from_degrees(7.0, 7.0, 1.2, 30.0, 2.0, -3.0)
     frame = cast(truth, walls, 0.01, 3)
     which = planes.assign(truth.sensor_to_grid(frame.points), truth.position, 0.04)
     k = int(np.bincount(which[which >= 0]).argmax())  # the panel with the most returns
-    # a point 2 cm off that panel's plane, whose ray is 1 deg off the plane (tens of
+    # a point 2 cm off that panel's plane, whose ray is 3.5 deg off the plane (tens of
     # metres along it from the sensor), named the panel's by hand, as a wrong cut would
     n, d = planes.normal[k], planes.offset[k]
     o = truth.position
     off = d - float(n @ o[:2]) - 0.02  # across the plane, from the sensor
     along = np.array([-n[1], n[0]])
-    grid = np.array([*(o[:2] + off * n + along * abs(off) / math.tan(math.radians(1.0))), 1.5])
+    grid = np.array([*(o[:2] + off * n + along * abs(off) / math.tan(math.radians(3.5))), 1.5])
     extra = (grid - o) @ truth.rotation  # into the sensor frame
     pts = np.vstack([frame.points, extra])
     named = np.append(which, k)

@@ -11,9 +11,9 @@ elevation is its top end). Two kinds of evidence, each from the frame alone:
   height, so panels of different directions (the deflection angles, two beacons)
   observe pitch and roll. The elevation does not enter (the plane is vertical).
   Gauss-Newton with analytic derivatives of ``R = Rz(yaw) Ry(pitch) Rx(roll)``; each
-  return weighed by its range sigma projected on the panel's normal, and one within 2°
+  return weighed by its range sigma projected on the panel's normal, and one within 4°
   of grazing its panel left out (it carries no usable range, as in 2D:
-  :data:`mast.pipeline.adjustment.MIN_INCIDENCE_COS`); the survey's
+  :data:`GRAZING_DEG`); the survey's
   sigma, shared by every return of a panel, is propagated into the covariance after
   (as in 2D, :func:`mast.pipeline.adjustment.survey_covariance`).
 * **Top edges** (elevation). Every ray that crosses a panel's plane inside its plan
@@ -48,7 +48,6 @@ from mast.core.pose import normalize_azimuth
 from mast.core.pose3d import Pose3D, rotation_rpy
 from mast.core.quantiles import chi2_sf
 from mast.core.stats import w_critical
-from mast.pipeline.adjustment import MIN_INCIDENCE_COS
 
 __all__ = ["Adjustment3D", "PanelPlanes", "adjust_pose"]
 
@@ -63,6 +62,16 @@ HIT_SHARE = 0.625
 #: How far rough rock may bulge from a beacon's wall towards its panels' planes near a
 #: free end, where a return on it may pass for a panel's top hit, metres.
 ROCK_M = 0.05
+#: A return whose ray is nearer than this to grazing its panel, degrees, is no panel
+#: return for the adjustment (:func:`_grazing`) nor for the bound
+#: (:mod:`mast.pipeline.bounds3d`). In 2D it is 2 deg
+#: (:data:`mast.pipeline.adjustment.MIN_INCIDENCE_COS`). In 3D, near grazing a ray
+#: crosses the plane along it cot(angle) times the pose's error across it away, so
+#: which panel, or wall, it meets is the pose's guess: wall returns by a near beacon's
+#: short end panel, alone on it, 2.3 deg off grazing held a fix 1.4 deg off in pitch
+#: (6 sigma), and 3.4 deg off one 21 mm off in easting (21 sigma). Each degree more
+#: leaves a few more frames whose tilt the panels then hold too loosely (degenerate).
+GRAZING_DEG = 4.0
 #: A panel is seen down to its this-many-th lowest return of its middle half
 #: (:meth:`PanelPlanes.seen`).
 SEEN_NTH = 3
@@ -1078,10 +1087,10 @@ def _snoop_pieces(
 def _grazing(
     p: NDArray[np.float64], which: NDArray[np.intp], planes: PanelPlanes, pose: Pose3D
 ) -> NDArray[np.intp]:
-    """The returns ``which`` gives a panel whose rays, at ``pose``, are within 2 deg of
-    grazing it (:data:`~mast.pipeline.adjustment.MIN_INCIDENCE_COS`): a flat plane's
-    grazing ray would claim a precision across it no real panel gives (its range noise
-    barely crosses the plane, its direction's error and its footprint fully), and the
+    """The returns ``which`` gives a panel whose rays, at ``pose``, are within
+    :data:`GRAZING_DEG` of grazing it: a flat plane's grazing ray would claim a
+    precision across it no real panel gives (its range noise barely crosses the plane,
+    its direction's error and its footprint fully), and the
     bound (:mod:`mast.pipeline.bounds3d`) leaves them out too. Weighed as the range's,
     one such return, the neighbouring panel's at a joint and alone on its panel, held a
     fix's northing to 0.56 mm and moved it 5.4 mm (9.8 sigma). Left out of ``which``, it
@@ -1090,7 +1099,7 @@ def _grazing(
     u = np.take(p, on, axis=0) @ pose.rotation.T
     n = np.take(planes.normal, which[on], axis=0)
     cos = np.abs(u[:, 0] * n[:, 0] + u[:, 1] * n[:, 1]) / np.linalg.norm(u, axis=1)
-    return np.asarray(on[cos < MIN_INCIDENCE_COS], dtype=np.intp)
+    return np.asarray(on[cos < math.sin(math.radians(GRAZING_DEG))], dtype=np.intp)
 
 
 def adjust_pose(

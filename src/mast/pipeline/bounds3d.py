@@ -9,8 +9,8 @@ Its range noise ``sigma_r`` along its ray moves it across the plane by
 panel (``u`` the ray's direction). With known panels and correspondences and
 independent Gaussian ranges, the Fisher information is ``sum g g^T / (sigma_r cos i)^2``,
 ``g`` the residual's derivatives by the pose. That is the range's own information:
-``d rho / d theta = -g / cos i``. Returns within 2° of grazing a panel are left out,
-as in 2D (:data:`mast.pipeline.adjustment.MIN_INCIDENCE_COS`): a flat plane's grazing
+``d rho / d theta = -g / cos i``. Returns within 4° of grazing a panel are left out,
+as by the adjustment (:data:`mast.pipeline.adjust3d.GRAZING_DEG`): a flat plane's grazing
 ray would claim an information no real panel edge gives. The panels are vertical, so
 the points carry nothing on the elevation.
 
@@ -48,8 +48,8 @@ from numpy.typing import NDArray
 
 from mast.core.frames import yaw_of_azimuth
 from mast.core.pose3d import Pose3D, rotation_rpy
+from mast.pipeline import adjust3d
 from mast.pipeline.adjust3d import PanelPlanes
-from mast.pipeline.adjustment import MIN_INCIDENCE_COS
 from mast.pipeline.bounds import inverse_bound
 
 __all__ = [
@@ -243,7 +243,7 @@ def _top_rows(
 
 
 def _usable(cos_inc: NDArray[np.float64]) -> NDArray[np.bool_]:
-    return np.asarray(np.abs(cos_inc) > MIN_INCIDENCE_COS)
+    return np.asarray(np.abs(cos_inc) > math.sin(math.radians(adjust3d.GRAZING_DEG)))
 
 
 def information3d(
