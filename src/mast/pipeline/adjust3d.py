@@ -11,7 +11,7 @@ elevation is its top end). Two kinds of evidence, each from the frame alone:
   height, so panels of different directions (the deflection angles, two beacons)
   observe pitch and roll. The elevation does not enter (the plane is vertical).
   Gauss-Newton with analytic derivatives of ``R = Rz(yaw) Ry(pitch) Rx(roll)``; each
-  return weighed by its range sigma projected on the panel's normal, and one within 4°
+  return weighed by its range sigma projected on the panel's normal, and one within 2°
   of grazing its panel left out (it carries no usable range, as in 2D:
   :data:`GRAZING_DEG`); the survey's
   sigma, shared by every return of a panel, is propagated into the covariance after
@@ -64,14 +64,12 @@ HIT_SHARE = 0.625
 ROCK_M = 0.05
 #: A return whose ray is nearer than this to grazing its panel, degrees, is no panel
 #: return for the adjustment (:func:`_grazing`) nor for the bound
-#: (:mod:`mast.pipeline.bounds3d`). In 2D it is 2 deg
-#: (:data:`mast.pipeline.adjustment.MIN_INCIDENCE_COS`). In 3D, near grazing a ray
-#: crosses the plane along it cot(angle) times the pose's error across it away, so
-#: which panel, or wall, it meets is the pose's guess: wall returns by a near beacon's
-#: short end panel, alone on it, 2.3 deg off grazing held a fix 1.4 deg off in pitch
-#: (6 sigma), and 3.4 deg off one 21 mm off in easting (21 sigma). Each degree more
-#: leaves a few more frames whose tilt the panels then hold too loosely (degenerate).
-GRAZING_DEG = 4.0
+#: (:mod:`mast.pipeline.bounds3d`), as in 2D
+#: (:data:`mast.pipeline.adjustment.MIN_INCIDENCE_COS`). 3 to 5 deg, tried, trade one
+#: wrong fix for others (docs/3d.md).
+GRAZING_DEG = 2.0
+#: Its cosine of incidence: a return whose ray's is below it is left out.
+GRAZING_COS = math.sin(math.radians(GRAZING_DEG))
 #: A panel is seen down to its this-many-th lowest return of its middle half
 #: (:meth:`PanelPlanes.seen`).
 SEEN_NTH = 3
@@ -275,7 +273,7 @@ class PanelPlanes:
         # place would keep the noise that points one way
         boxed = np.zeros(len(k), dtype=np.bool_)
         if boxes is not None and math.isfinite(top_margin_m):
-            inner = np.fmin(self.top - top_margin_m, cap)
+            inner = np.fmin(self.top, cap) - top_margin_m
             inner = np.where(np.isfinite(boxes) & np.isfinite(self.top), inner, -math.inf)
             boxed = (z < inner[k]) & (z > boxes[k] + top_margin_m)
         n = len(grid)
@@ -544,39 +542,34 @@ class PanelPlanes:
         the gate of its plane; below this it is not taken for the panel."""
         o = np.asarray(origin, dtype=float).reshape(3)
         rays = self._rays(grid - o, o, _panel_lists(which, len(self)))
-        return self._bottoms(rays, grid, which, margin_m)
-
-    def _bottoms(
-        self, rays: _Rays, grid: NDArray[np.float64], which: NDArray[np.intp], margin_m: float
-    ) -> NDArray[np.float64]:
-        """:meth:`bottoms` with the crossings of ``rays``."""
-        k, z = self._middle(rays, grid, which)
-        return _per_panel(k, z, len(self), np.minimum, np.nan) - margin_m
+        return self._lows(rays, grid, which, margin_m)[0]
 
     def seen(
         self, grid: NDArray[np.float64], origin: NDArray[np.float64], which: NDArray[np.intp]
     ) -> NDArray[np.float64]:
-        """Each panel's lowest height its returns show it at: the third lowest crossing
-        of the middle half of the panel (one return of the wall just below, let through
-        by its noise, does not lower it; :meth:`assign`'s ``boxes``); NaN for a panel
-        with fewer than three returns there."""
+        """Each panel's lowest height its returns show it at: the :data:`SEEN_NTH`-th
+        lowest crossing of the middle half of the panel (one return of the wall just
+        below, let through by its noise, does not lower it; :meth:`assign`'s
+        ``boxes``); NaN for a panel with fewer returns there."""
         o = np.asarray(origin, dtype=float).reshape(3)
         rays = self._rays(grid - o, o, _panel_lists(which, len(self)))
-        return self._seen(rays, grid, which)
+        return self._lows(rays, grid, which, 0.0)[1]
 
-    def _seen(
-        self, rays: _Rays, grid: NDArray[np.float64], which: NDArray[np.intp]
-    ) -> NDArray[np.float64]:
-        """:meth:`seen` with the crossings of ``rays``."""
+    def _lows(
+        self, rays: _Rays, grid: NDArray[np.float64], which: NDArray[np.intp], margin_m: float
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """:meth:`bottoms` (less ``margin_m``) and :meth:`seen`, with the crossings of
+        ``rays``, from one look at the panels' middle halves."""
         k, z = self._middle(rays, grid, which)
-        out = np.full(len(self), np.nan)
+        bottoms = _per_panel(k, z, len(self), np.minimum, np.nan) - margin_m
+        seen = np.full(len(self), np.nan)
         if k.size:
             order = np.lexsort((z, k))
             k, z = k[order], z[order]
             first, count = _runs(k)
-            third = count >= SEEN_NTH
-            out[k[first[third]]] = z[first[third] + SEEN_NTH - 1]
-        return out
+            enough = count >= SEEN_NTH
+            seen[k[first[enough]]] = z[first[enough] + SEEN_NTH - 1]
+        return bottoms, seen
 
     def _middle(
         self, rays: _Rays, grid: NDArray[np.float64], which: NDArray[np.intp]
@@ -1084,6 +1077,46 @@ def _snoop_pieces(
     return solved
 
 
+def _snoop_panels(
+    which: NDArray[np.intp],
+    solved: _Solved,
+    solve: Callable[[NDArray[np.float64]], _Solved],
+    survey_sigma_m: float,
+    rounds: int = 3,
+) -> _Solved:
+    """Leave out, one at a time, the panel whose returns' common shift fails Baarda's
+    w-test (``which`` is changed in place): c'Wv over its sigma, c the panel's returns'
+    indicator, with the leverage the pose gives the panel (c'W Qvv W c, Qvv = W^-1 - J
+    Q J') and its survey offset's share (sigma_s^2 times that squared). A few returns
+    with much weight, alone on their panel (wall returns near grazing a short end panel),
+    bend the pose to fit them: each is then within its own w-test, but not their panel."""
+    for _ in range(rounds):
+        n = solved.n_points
+        k = which[which >= 0]
+        panels = int(k.max(initial=-1)) + 1
+        if panels < 2:
+            break
+        Wp, Jp = solved.W[:n], solved.J[:n]
+        weight = np.bincount(k, weights=Wp, minlength=panels)
+        shift = np.bincount(k, weights=Wp * solved.v[:n], minlength=panels)
+        pull = np.stack(
+            [np.bincount(k, weights=Wp * Jp[:, c], minlength=panels) for c in range(6)], axis=1
+        )
+        spread = weight - np.einsum("ij,jk,ik->i", pull, np.linalg.inv(solved.N), pull)
+        spread = np.maximum(spread, 1e-9 * weight)
+        shown = weight > 0
+        w = np.zeros(panels)
+        w[shown] = np.abs(shift[shown]) / np.sqrt(
+            spread[shown] + survey_sigma_m**2 * spread[shown] ** 2
+        )
+        worst = int(np.argmax(w))
+        if w[worst] <= w_critical(int(np.count_nonzero(shown))):
+            break
+        which[which == worst] = -1
+        solved = solve(solved.x)
+    return solved
+
+
 def _grazing(
     p: NDArray[np.float64], which: NDArray[np.intp], planes: PanelPlanes, pose: Pose3D
 ) -> NDArray[np.intp]:
@@ -1099,7 +1132,7 @@ def _grazing(
     u = np.take(p, on, axis=0) @ pose.rotation.T
     n = np.take(planes.normal, which[on], axis=0)
     cos = np.abs(u[:, 0] * n[:, 0] + u[:, 1] * n[:, 1]) / np.linalg.norm(u, axis=1)
-    return np.asarray(on[cos < math.sin(math.radians(GRAZING_DEG))], dtype=np.intp)
+    return np.asarray(on[cos < GRAZING_COS], dtype=np.intp)
 
 
 def adjust_pose(
@@ -1174,6 +1207,7 @@ def adjust_pose(
     solved = solve(x)
     if lines is not None:
         solved = _snoop_pieces(p, which, planes, solved, lines, solve)
+        solved = _snoop_panels(which, solved, solve, survey_sigma_m)
     for _ in range(snooping_rounds):
         n = solved.n_points
         Q = np.linalg.inv(solved.N)

@@ -9,7 +9,7 @@ Its range noise ``sigma_r`` along its ray moves it across the plane by
 panel (``u`` the ray's direction). With known panels and correspondences and
 independent Gaussian ranges, the Fisher information is ``sum g g^T / (sigma_r cos i)^2``,
 ``g`` the residual's derivatives by the pose. That is the range's own information:
-``d rho / d theta = -g / cos i``. Returns within 4° of grazing a panel are left out,
+``d rho / d theta = -g / cos i``. Returns within 2° of grazing a panel are left out,
 as by the adjustment (:data:`mast.pipeline.adjust3d.GRAZING_DEG`): a flat plane's grazing
 ray would claim an information no real panel edge gives. The panels are vertical, so
 the points carry nothing on the elevation.
@@ -48,8 +48,7 @@ from numpy.typing import NDArray
 
 from mast.core.frames import yaw_of_azimuth
 from mast.core.pose3d import Pose3D, rotation_rpy
-from mast.pipeline import adjust3d
-from mast.pipeline.adjust3d import PanelPlanes
+from mast.pipeline.adjust3d import GRAZING_COS, PanelPlanes
 from mast.pipeline.bounds import inverse_bound
 
 __all__ = [
@@ -243,7 +242,7 @@ def _top_rows(
 
 
 def _usable(cos_inc: NDArray[np.float64]) -> NDArray[np.bool_]:
-    return np.asarray(np.abs(cos_inc) > math.sin(math.radians(adjust3d.GRAZING_DEG)))
+    return np.asarray(np.abs(cos_inc) > GRAZING_COS)
 
 
 def information3d(
@@ -257,7 +256,7 @@ def information3d(
     brackets: tuple[Bracket, ...] = (),
 ) -> NDArray[np.float64]:
     """The 6×6 information (:data:`~mast.pipeline.adjust3d.PARAMETERS` order) of the
-    returns ``points`` (m, 3) on panels ``panel`` (m,) at ``pose`` (those within 2° of
+    returns ``points`` (m, 3) on panels ``panel`` (m,) at ``pose`` (those within ``GRAZING_DEG`` of
     grazing left out), plus the ``brackets``' pseudo-observations (which need
     ``points`` to be the whole frame they were found in, ``panel`` -1 off the panels)."""
     p = np.asarray(points, dtype=float).reshape(-1, 3)

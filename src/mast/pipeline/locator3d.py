@@ -898,8 +898,8 @@ def _fix3d(
             if adj is None:  # each panel cut at its highest tight hit, too
                 roof = planes._ceilings(rays, tight, 2.0 * sig_r)
             else:
-                floor = np.fmax(floor, planes._bottoms(rays, grid, which, gate))
-                boxes = planes._seen(rays, grid, which)
+                bottoms, boxes = planes._lows(rays, grid, which, gate)
+                floor = np.fmax(floor, bottoms)
             trial = cut(
                 rays, grid, gate + slack, top_margin_m=margin, bottoms=floor, reach_m=reach,
                 ceilings=roof, boxes=boxes,
@@ -938,8 +938,8 @@ def _fix3d(
             grid = pose.sensor_to_grid(pts)
             rays = planes._rays(grid - pose.position, pose.position, pairs)
             margin = max(2.0 * math.sqrt(adj.covariance[2, 2]), 2.0 * sig_r)
-            floor = np.fmax(floors(pose), planes._bottoms(rays, grid, which, gate))
-            boxes = planes._seen(rays, grid, which)
+            bottoms, boxes = planes._lows(rays, grid, which, gate)
+            floor = np.fmax(floors(pose), bottoms)
             again = cut(rays, grid, gate, top_margin_m=margin, bottoms=floor, boxes=boxes)
             again = _contiguous(again, grid, pose.position, planes, spacing, rays)
             if np.array_equal(again, which):
