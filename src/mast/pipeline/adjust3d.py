@@ -1103,14 +1103,15 @@ def _snoop_panels(
             [np.bincount(k, weights=Wp * Jp[:, c], minlength=panels) for c in range(6)], axis=1
         )
         spread = weight - np.einsum("ij,jk,ik->i", pull, np.linalg.inv(solved.N), pull)
-        spread = np.maximum(spread, 1e-9 * weight)
-        shown = weight > 0
+        # a panel whose shift the pose alone sets (the others do not check it) is not
+        # tested: its residuals are the rounding's
+        checked = (weight > 0) & (spread > 1e-6 * weight)
         w = np.zeros(panels)
-        w[shown] = np.abs(shift[shown]) / np.sqrt(
-            spread[shown] + survey_sigma_m**2 * spread[shown] ** 2
+        w[checked] = np.abs(shift[checked]) / np.sqrt(
+            spread[checked] + survey_sigma_m**2 * spread[checked] ** 2
         )
         worst = int(np.argmax(w))
-        if w[worst] <= w_critical(int(np.count_nonzero(shown))):
+        if w[worst] <= w_critical(max(int(np.count_nonzero(checked)), 1)):
             break
         which[which == worst] = -1
         solved = solve(solved.x)
