@@ -415,3 +415,26 @@ def test_a_return_a_panel_cuts_off_by_height_is_not_its_neighbours() -> None:
     on_middle = middle[np.maximum(which, 0)] & (which >= 0)
     assert np.array_equal(cut[~on_middle], which[~on_middle])
     assert np.count_nonzero(cut[on_middle] >= 0) < np.count_nonzero(on_middle)
+
+
+def test_the_compiled_panel_rows_agree_with_their_numpy_reference() -> None:
+    # One Gauss-Newton iteration's panel rows: residuals, derivatives, weights and their
+    # normal equations, summed in another order than numpy's: equal to rounding.
+    from mast.core._kernels import panel_rows3d
+    from mast.pipeline.adjust3d import _panel_rows_reference
+
+    rng = np.random.default_rng(3)
+    m = 257
+    weighed, rotations = rng.normal(size=(m, 14)), rng.normal(size=(14, 5))
+    offset = rng.normal(size=m)
+    rotations[:, 4] *= 1e-4  # some returns near grazing: the incidence's floor
+    normals = rng.normal(size=(m, 2))
+    got = []
+    for rows in (panel_rows3d, _panel_rows_reference):
+        v, W, J = np.zeros(m), np.zeros(m), np.zeros((m, 6))
+        J[:, :2] = normals
+        N, g = np.full((6, 6), 9.0), np.full(6, 9.0)  # set, not added to
+        rows(weighed, rotations, offset, 2500.0, v, J, W, N, g)
+        got.append((v, J, W, N, g))
+    for a, b in zip(*got, strict=True):
+        np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-12 * float(np.abs(b).max()))

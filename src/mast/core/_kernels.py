@@ -42,6 +42,7 @@ __all__ = [
     "nearest_within",
     "odometry_fit",
     "overrun_counts",
+    "panel_rows3d",
     "partition_dp",
     "penalty",
     "range_rows",
@@ -3470,6 +3471,53 @@ def _nearest_by_bearing(
     return dist, idx
 
 
+def _panel_rows3d(
+    weighed: NDArray[np.float64],
+    rotations: NDArray[np.float64],
+    offset: NDArray[np.float64],
+    weight: float,
+    v: NDArray[np.float64],
+    J: NDArray[np.float64],
+    W: NDArray[np.float64],
+    N: NDArray[np.float64],
+    g: NDArray[np.float64],
+) -> None:
+    """One Gauss-Newton iteration's panel rows of the 3D adjustment
+    (``adjust3d._panel_rows_reference``): each return's ``weighed`` (m, 14) times the
+    pose's ``rotations`` (14, 5) gives its residual across its plane (less ``offset``)
+    into ``v``, its derivatives by azimuth, pitch and roll into ``J[:, 2:5]`` (the first
+    two columns, its normal, are set already), and its weight, ``weight`` over its
+    incidence's square, into ``W``; ``N`` (6, 6) and ``g`` (6,) are set to
+    ``J' W J`` and ``J' W v`` of those rows, in one pass."""
+    m = weighed.shape[0]
+    for a in range(6):
+        g[a] = 0.0
+        for b in range(6):
+            N[a, b] = 0.0
+    row = np.empty(5)
+    for i in range(m):
+        for c in range(5):
+            acc = 0.0
+            for j in range(14):
+                acc += weighed[i, j] * rotations[j, c]
+            row[c] = acc
+        r = row[0] - offset[i]
+        v[i] = r
+        J[i, 2] = -row[1]  # d yaw / d A = -1
+        J[i, 3] = row[2]
+        J[i, 4] = row[3]
+        w = weight / max(row[4] * row[4], 1e-6)
+        W[i] = w
+        for a in range(5):
+            wa = w * J[i, a]
+            g[a] += wa * r
+            for b in range(a, 5):
+                N[a, b] += wa * J[i, b]
+    for a in range(5):
+        for b in range(a):
+            N[a, b] = N[b, a]
+
+
 #: Compiled on first use (numba's own types; mypy sees plain callables).
 #: ``error_model="numpy"``: no division-by-zero checks in the loop (every divisor is
 #: positive), so that it vectorises.
@@ -3572,3 +3620,4 @@ _walk_right_jit: Callable[..., int] = njit(cache=True, nogil=True)(_walk_right)
 nearest_by_bearing: Callable[..., Any] = njit(cache=True, nogil=True)(_nearest_by_bearing)
 _nearest_by_bearing_jit = nearest_by_bearing
 odometry_fit: Callable[..., Any] = njit(cache=True, nogil=True)(_odometry_fit)
+panel_rows3d: Callable[..., None] = njit(cache=True, nogil=True)(_panel_rows3d)

@@ -42,6 +42,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from mast.core._kernels import panel_rows3d
 from mast.core.beacon import Survey
 from mast.core.frames import yaw_of_azimuth
 from mast.core.pose import normalize_azimuth
@@ -936,8 +937,8 @@ def _solve(
         [n_k[:, :1] * pts, n_k[:, 1:] * pts, n_k[:, :1] * ray, n_k[:, 1:] * ray, n_k]
     )
     rotations = np.zeros((14, 5))
-    turns = np.array([-1.0, 1.0, 1.0])  # d yaw / d A = -1; pitch, roll
     weight = range_sigma_m**-2
+    N, g = np.zeros((6, 6)), np.zeros(6)
     x = x0.copy()
     done = 0
     edges: _TopEdges | None = None
@@ -962,12 +963,8 @@ def _solve(
         rotations[:6, :4] = D[_BY_PARAMETER, :2].reshape(4, 6).T  # R, d yaw, d pitch, d roll
         rotations[6:12, 4] = R[:2].ravel()
         rotations[12:, 0] = x[:2]
-        product = weighed @ rotations
-        v[:m] = product[:, 0] - d_k
-        J[:m, 2:5] = product[:, 1:4] * turns
-        # the range noise along the ray, seen across the panel
-        incidence = product[:, 4] * product[:, 4]
-        W[:m] = weight / np.maximum(incidence, 1e-6)
+        # the panel returns' rows and their share of the normal equations, in one pass
+        panel_rows3d(weighed, rotations, d_k, weight, v[:m], J[:m], W[:m], N, g)
         if edges is not None:
             at = p[edges.rows]
             middle, spread, dz = edges.brackets(at, at @ R.T, origin, (D[3], D[2], D[1]))
@@ -975,14 +972,38 @@ def _solve(
             J[seen], v[seen], W[seen] = dz, x[5] - middle, 1.0 / (spread + survey_sigma_m**2)
         if tilt_prior is not None:
             v[-2:] = x[3] - tilt_prior[0], x[4] - tilt_prior[1]
-        WJ = W[:, None] * J
-        N = J.T @ WJ
+        WJ = W[m:, None] * J[m:]  # the brackets' and the tilt prior's rows
+        N += J[m:].T @ WJ
         if not tops:
             N[5, 5] += 1.0 / UNBRACKETED  # the elevation unobserved: kept, with no weight
-        step = np.linalg.solve(N, -(WJ.T @ v))
+        step = np.linalg.solve(N, -(g + WJ.T @ v[m:]))
         x += step
         if done >= iterations or np.all(np.abs(step) < _CONVERGED):
             return _Solved(x, J, W, v, N, m, tops, done)
+
+
+def _panel_rows_reference(
+    weighed: NDArray[np.float64],
+    rotations: NDArray[np.float64],
+    offset: NDArray[np.float64],
+    weight: float,
+    v: NDArray[np.float64],
+    J: NDArray[np.float64],
+    W: NDArray[np.float64],
+    N: NDArray[np.float64],
+    g: NDArray[np.float64],
+) -> None:
+    """The numpy reference of :func:`mast.core._kernels.panel_rows3d`, the panel
+    returns' rows of one Gauss-Newton iteration of :func:`_solve`: residuals ``v``, the
+    derivatives by azimuth, pitch and roll ``J[:, 2:5]``, weights ``W`` (the range noise
+    along the ray, seen across the panel) and their normal equations ``N``, ``g``."""
+    product = weighed @ rotations
+    v[:] = product[:, 0] - offset
+    J[:, 2:5] = product[:, 1:4] * np.array([-1.0, 1.0, 1.0])  # d yaw / d A = -1
+    W[:] = weight / np.maximum(product[:, 4] * product[:, 4], 1e-6)
+    WJ = W[:, None] * J
+    N[:] = J.T @ WJ
+    g[:] = WJ.T @ v
 
 
 def _chosen_tops(
