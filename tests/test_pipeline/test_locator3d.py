@@ -22,10 +22,13 @@ from mast.pipeline.adjust3d import PanelPlanes
 from mast.pipeline.locator import Fix, LocatorConfig
 from mast.pipeline.locator3d import (
     PITCH_TRIES_DEG,
+    PLATE_RINGS,
+    PLATE_SLACK_M,
     Fix3D,
     Locator3DConfig,
     _contiguous,
     _on_one_beacon,
+    _plate_floors,
     _tries,
     _witnessed,
     locate3d,
@@ -108,6 +111,33 @@ def test_a_panel_is_one_run_of_heights() -> None:
     kept = _contiguous(which2, grid2, truth.position, planes, math.radians(2.0))
     assert kept[-1] == -1
     assert np.array_equal(kept[:-1], which)
+
+
+def test_a_panel_is_cut_below_its_beacons_other_panels_lowest_hits() -> None:
+    # A beacon is one plate: its panels' bottoms are as far below their tops. A ring
+    # under the other panels' lowest hits by more than a ring and a half at the range
+    # (and a slack for their lower parts hidden) would have crossed them too: below that
+    # a return on a panel is the floor's.
+    _, scene = paper_walls("parallel")
+    planes = PanelPlanes.of(scene.survey)
+    origin = np.array([7.0, 7.0, 1.2])
+    spacing = math.radians(2.0)
+    assert len(planes) == 6
+    lows = planes.top - 0.6  # every panel seen 0.6 m down
+    lows[2] = planes.top[2] - 2.4  # the first beacon's end panel: the floor at its foot
+    lows[4:] = np.nan  # the second beacon seen on its first panel only
+    floor = _plate_floors(planes, lows, origin, spacing)
+    middle = planes.start + planes.along * (0.5 * planes.length)[:, None]
+    gap = PLATE_RINGS * spacing * np.hypot(*(middle - origin[:2]).T) + PLATE_SLACK_M
+    # the end panel cut 0.6 m down and the gap more, the floor at 2.4 m out
+    assert floor[2] == pytest.approx(planes.top[2] - 0.6 - gap[2])
+    assert floor[2] > lows[2]
+    # its neighbours by the deepest of the others: the end panel's floor (permissive)
+    assert floor[0] == pytest.approx(planes.top[0] - 2.4 - gap[0])
+    assert floor[1] == pytest.approx(planes.top[1] - 2.4 - gap[1])
+    # the second beacon's unseen panels by its first; the first by none
+    assert np.isnan(floor[3])
+    assert floor[4:] == pytest.approx(planes.top[4:] - 0.6 - gap[4:])
 
 
 def test_a_return_near_a_free_end_is_kept_on_a_ring_its_beacon_shows_clear_of_it() -> None:
@@ -299,6 +329,16 @@ def test_floor_returns_by_a_walls_foot_are_no_end_panels() -> None:
     scene = random_drift_scene(34, frames=6, lidar="vlp16", range_sigma_m=0.03, lookalikes=True)
     sim, fix = _located(scene, 4, 0.03)
     assert np.degrees(np.abs(_within(fix, sim)[3:])).max() < 1.0
+
+
+def test_floor_returns_under_a_beacons_end_panel_lever_no_tilt() -> None:
+    # A VLP-16 at 3 cm: four floor returns of one ring cross a beacon's end panel's plane
+    # 2.4 m below its top, lower than its other panels are seen; taken for the panel
+    # they held a fix more than 1 deg off in tilt (7 sigma in pitch). Below the plate's
+    # other panels by more than a ring and a half, they are the floor's.
+    scene = random_drift_scene(1014, frames=10, lidar="vlp16", range_sigma_m=0.03, lookalikes=True)
+    sim, fix = _located(scene, 9, 0.03)
+    assert np.degrees(np.abs(_within(fix, sim, 3.0)[3:])).max() < 1.0
 
 
 def test_two_wall_returns_alone_on_a_near_beacons_end_panel_lever_no_tilt() -> None:
