@@ -18,7 +18,7 @@ from mast.core.pose3d import Pose3D
 from mast.core.scan import Scan
 from mast.errors import InputError
 from mast.pipeline import locator3d
-from mast.pipeline.adjust3d import PanelPlanes
+from mast.pipeline.adjust3d import Adjustment3D, PanelPlanes
 from mast.pipeline.locator import Fix, LocatorConfig
 from mast.pipeline.locator3d import (
     PITCH_TRIES_DEG,
@@ -59,6 +59,32 @@ def test_no_simulated_frame_gets_a_wrong_or_overconfident_fix() -> None:
             # many more
             assert np.all(np.abs(err) < 4.5 * np.sqrt(np.diag(fix.adjustment.covariance)))
     assert fixed >= 4  # not vacuous: the frames it fixes are checked
+
+
+def test_an_adjustment_whose_variances_are_not_all_positive_gives_no_fix(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    # Normal equations near singular invert to a "covariance" with a negative variance
+    # (an intermediate adjustment of a VLP-16 draw had -2e10 m^2 in plan): such an
+    # adjustment is refused, never given as a fix with a NaN sigma (nor a traceback).
+    walls, scene = paper_walls("convergent")
+    truth = Pose3D.from_degrees(7.0, 7.0, 1.2, 0.0, 6.0, -4.0)
+    frame = cast(truth, walls, 0.01, 2)
+    real = locator3d.adjust_pose
+
+    def broken(*args: object, **kwargs: object) -> Adjustment3D:
+        adj = real(*args, **kwargs)  # type: ignore[arg-type]
+        if kwargs.get("elevation", True):  # the elevation rounds, not the growth stages
+            cov = adj.covariance.copy()
+            cov[0, 0] = -cov[0, 0]
+            adj = replace(adj, covariance=cov)
+        return adj
+
+    monkeypatch.setattr(locator3d, "adjust_pose", broken)
+    fix = locate3d(frame, scene.survey, config=Locator3DConfig(range_sigma_m=0.01))
+    assert not fix.ok
+    assert fix.reason == "degenerate_geometry"
+    assert "variances are not all positive" in fix.detail
 
 
 @pytest.mark.parametrize(("pitch", "roll"), [(0.0, 0.0), (6.0, -4.0)])

@@ -992,6 +992,16 @@ def _fix3d(
             which = again
     except np.linalg.LinAlgError:  # the panels seen leave a direction unobserved
         return refused("degenerate_geometry", "the panels seen do not hold the pose in 3D")
+    variances = np.diag(adj.covariance)
+    if not np.all(np.isfinite(variances) & (variances > 0.0)):
+        # normal equations so near singular that their inverse is not a covariance: a
+        # direction the panels leave all but unobserved (no fix with a NaN sigma)
+        return refused(
+            "degenerate_geometry",
+            "the panels seen do not hold the pose in 3D (the adjustment's variances are "
+            "not all positive)",
+            adj,
+        )
     if adj.used is not None:
         which = adj.used  # less the returns the snooping left out
     beacons = _shown(which, lines, planes, cfg)
