@@ -61,6 +61,8 @@ def test_no_simulated_frame_gets_a_wrong_or_overconfident_fix() -> None:
     assert fixed >= 4  # not vacuous: the frames it fixes are checked
 
 
+# the rounds' moves, in sigmas of that covariance, warn of the root of its negative variance
+@pytest.mark.filterwarnings("ignore:invalid value encountered in sqrt:RuntimeWarning")
 def test_an_adjustment_whose_variances_are_not_all_positive_gives_no_fix(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
