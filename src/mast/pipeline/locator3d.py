@@ -914,6 +914,17 @@ def _fix3d(
     rays = planes._rays(grid - flat.position, flat.position, pairs)
     tight = planes._assign(rays, grid, loose, clear_m=clear)
     spacing = ring_spacing(frame) if spacing is None else spacing
+
+    def below(
+        rays: _Rays, grid: NDArray[np.float64], which: NDArray[np.intp], pose: Pose3D
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        # once adjusted, each panel's floor: the floor about it, the bottom its returns
+        # ``which`` show less the gate, and its plate's (_plate_floors); and the heights
+        # it is seen at (the boxes of PanelPlanes._assigns)
+        lows, seen = planes._lows(rays, grid, which, 0.0)
+        plate = _plate_floors(planes, lows, pose.position, spacing)
+        return np.fmax(np.fmax(floors(pose), lows - gate), plate), seen
+
     start = _start_elevation(grid, flat.position, tight, planes, 2.0 * loose, spacing, local, rays)
     if start is None:
         return refused("one_beacon", "no return on a surveyed panel in 3D")
@@ -933,13 +944,11 @@ def _fix3d(
             margin = spread + 2.0 * sig_r + START_SLACK_M  # the start's elevation
             slack = 0.0 if adj is not None else min(reach, 2.0) * TILT_SLACK
             roof = boxes = None
-            floor = floors(pose)
             if adj is None:  # each panel cut at its highest tight hit, too
+                floor = floors(pose)
                 roof = planes._ceilings(rays, tight, 2.0 * sig_r)
             else:
-                bottoms, boxes = planes._lows(rays, grid, which, gate)
-                plate = _plate_floors(planes, bottoms + gate, pose.position, spacing)
-                floor = np.fmax(np.fmax(floor, bottoms), plate)
+                floor, boxes = below(rays, grid, which, pose)
             trial = cut(
                 rays, grid, gate + slack, top_margin_m=margin, bottoms=floor, reach_m=reach,
                 ceilings=roof, boxes=boxes,
@@ -978,9 +987,7 @@ def _fix3d(
             grid = pose.sensor_to_grid(pts)
             rays = planes._rays(grid - pose.position, pose.position, pairs)
             margin = max(2.0 * math.sqrt(adj.covariance[2, 2]), 2.0 * sig_r)
-            bottoms, boxes = planes._lows(rays, grid, which, gate)
-            plate = _plate_floors(planes, bottoms + gate, pose.position, spacing)
-            floor = np.fmax(np.fmax(floors(pose), bottoms), plate)
+            floor, boxes = below(rays, grid, which, pose)
             again = cut(rays, grid, gate, top_margin_m=margin, bottoms=floor, boxes=boxes)
             again = _contiguous(again, grid, pose.position, planes, spacing, rays)
             if np.array_equal(again, which):
