@@ -438,3 +438,108 @@ def test_the_compiled_panel_rows_agree_with_their_numpy_reference() -> None:
         got.append((v, J, W, N, g))
     for a, b in zip(*got, strict=True):
         np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-12 * float(np.abs(b).max()))
+
+
+def _tilted_paper_frame(noise: float, gate: float):  # type: ignore[no-untyped-def]
+    """The convergent layout's frame from a tilted pose, its panel returns assigned."""
+    walls, scene = paper_walls("convergent")
+    planes = PanelPlanes.of(scene.survey)
+    truth = Pose3D.from_degrees(7.0, 7.0, 1.2, 20.0, 6.0, -4.0)
+    frame = cast(truth, walls, noise, 2)
+    which = planes.assign(truth.sensor_to_grid(frame.points), truth.position, gate)
+    x = np.array(
+        [truth.easting, truth.northing, truth.azimuth, truth.pitch, truth.roll, truth.elevation]
+    )
+    return planes, frame.points, which, x
+
+
+def test_the_compiled_top_edges_agree_with_their_numpy_reference() -> None:
+    # The top edges chosen at poses about the truth, compiled and in numpy: the same
+    # rays; a return given a panel it is not paired with takes numpy's own pairing.
+    from mast.pipeline.adjust3d import _chosen_tops, _derivatives, _top_edges
+
+    planes, p, which, x = _tilted_paper_frame(0.01, 0.04)
+    rng = np.random.default_rng(5)
+    pairs = planes._pairs(planes.local(Pose3D(*x[[0, 1, 5, 2, 3, 4]]).sensor_to_grid(p), 1.0))
+    chosen = 0
+    for _ in range(6):
+        at = x + rng.normal(scale=[0.02, 0.02, 0.005, 0.005, 0.005, 0.03])
+        R = _derivatives(at[4], at[3], math.pi / 2 - at[2])[0]
+        rel, origin = p @ R.T, at[[0, 1, 5]]
+        want = _top_edges(
+            rel + origin, rel, which, origin, planes, 0.04, rays=planes._rays(rel, origin, pairs)
+        )
+        assert _chosen_tops(p, which, planes, at, 0.04, pairs=pairs) == want
+        chosen += len(want)
+    assert chosen >= 12  # most panels' tops, each time
+    # a return given a panel outside the pairs: the reference answers
+    unpaired = which.copy()
+    far = np.flatnonzero(which < 0)[0]
+    unpaired[far] = int(which[which >= 0][0])
+    R = _derivatives(x[4], x[3], math.pi / 2 - x[2])[0]
+    rel, origin = p @ R.T, x[[0, 1, 5]]
+    want = _top_edges(
+        rel + origin, rel, unpaired, origin, planes, 0.04, rays=planes._rays(rel, origin, pairs)
+    )
+    assert _chosen_tops(p, unpaired, planes, x, 0.04, pairs=pairs) == want
+
+
+def test_the_compiled_brackets_and_iterations_agree_with_their_numpy_reference() -> None:
+    # One beacon's bracket per beacon, and the Gauss-Newton iterations of the whole
+    # adjustment with and without brackets and the tilt prior: equal to rounding, the
+    # same iterations done; the rotation's derivatives too.
+    from mast.core._kernels import gauss_newton3d, rotation_derivatives
+    from mast.pipeline.adjust3d import (
+        _CONVERGED,
+        BEAM_ANGLE_SIGMA,
+        _chosen_tops,
+        _derivatives,
+        _gauss_newton3d_reference,
+        _TopEdges,
+    )
+
+    planes, p, which, x = _tilted_paper_frame(0.0, 0.01)
+    for angles in [(0.1, -0.2, 1.3), (-0.05, 0.07, -2.9)]:
+        np.testing.assert_allclose(rotation_derivatives(*angles), _derivatives(*angles), atol=1e-15)
+    tops = _chosen_tops(p, which, planes, x, 0.01)
+    edges = _TopEdges.of(tops, planes)
+    assert len(edges.member) == 2
+    D = _derivatives(x[4], x[3], math.pi / 2 - x[2])
+    at = p[edges.rows]
+    got = edges.brackets(p, x[[0, 1, 5]], D)
+    want = edges.brackets_reference(at, at @ D[0].T, x[[0, 1, 5]], (D[3], D[2], D[1]))
+    for a, b in zip(got, want, strict=True):
+        np.testing.assert_allclose(a, b, rtol=1e-10, atol=1e-12)
+    on = which >= 0
+    k, pts = which[on], p[on]
+    n_k = planes.normal[k]
+    ray = pts / np.linalg.norm(pts, axis=1)[:, None]
+    weighed = np.hstack(
+        [n_k[:, :1] * pts, n_k[:, 1:] * pts, n_k[:, :1] * ray, n_k[:, 1:] * ray, n_k]
+    )
+    start = x + np.array([0.03, -0.02, 0.004, -0.01, 0.01, -0.05])
+    for use, tilt in [(edges, np.zeros(0)), (_TopEdges.none(), x[[3, 4]] + 0.002)]:
+        out = []
+        for kernel in (True, False):
+            rows = len(pts) + len(use.member) + len(tilt)
+            J, v, W, N = np.zeros((rows, 6)), np.zeros(rows), np.zeros(rows), np.zeros((6, 6))
+            J[: len(pts), :2] = n_k
+            if len(tilt):
+                J[-2:, 3], J[-2:, 4] = [1.0, 0.0], [0.0, 1.0]
+                W[-2:] = 1e4
+            xs = start.copy()
+            if kernel:
+                done = gauss_newton3d(
+                    weighed, planes.offset[k], 1e4, p, use.rows, use.ray, use.normal[0],
+                    use.normal[1], use.offset, use.top, use.member, BEAM_ANGLE_SIGMA, 1e-6,
+                    tilt, 1.0 / UNBRACKETED, xs, 12, _CONVERGED, J, v, W, N,
+                )  # fmt: skip
+            else:
+                done = _gauss_newton3d_reference(
+                    weighed, planes.offset[k], 1e4, p, use, 1e-6, tilt, xs, 12, J, v, W, N
+                )
+            out.append((done, xs, J, v, W, N))
+        (d1, *a), (d2, *b) = out
+        assert d1 == d2 > 1
+        for u, w in zip(a, b, strict=True):
+            np.testing.assert_allclose(u, w, rtol=1e-9, atol=1e-9 * float(np.abs(w).max()))

@@ -24,12 +24,14 @@ __all__ = [
     "beacons_in_reach",
     "beam_checks_of",
     "bound",
+    "brackets3d",
     "field_pyramid",
     "field_sliding",
     "first_at_least",
     "first_hits",
     "first_same",
     "gauss_newton",
+    "gauss_newton3d",
     "group_residuals",
     "icp_refine",
     "in_place_chi",
@@ -50,12 +52,14 @@ __all__ = [
     "reach_tallies",
     "rebreak",
     "robust_gate",
+    "rotation_derivatives",
     "run_breaks",
     "segment_run",
     "standardised",
     "straight_and_fitted_chi",
     "survey_shares",
     "tallies",
+    "top_edges3d",
     "triple_deviations",
     "window_picks",
     "window_scores",
@@ -3518,6 +3522,302 @@ def _panel_rows3d(
             N[a, b] = N[b, a]
 
 
+def _top_edges3d(
+    rel: NDArray[np.float64],
+    origin: NDArray[np.float64],
+    which: NDArray[np.intp],
+    pi: NDArray[np.intp],
+    pk: NDArray[np.intp],
+    normal: NDArray[np.float64],
+    offset: NDArray[np.float64],
+    start: NDArray[np.float64],
+    along: NDArray[np.float64],
+    length: NDArray[np.float64],
+    top: NDArray[np.float64],
+    lo: NDArray[np.float64],
+    hi: NDArray[np.float64],
+    inset: NDArray[np.float64],
+    hit_gate: float,
+    gate: float,
+) -> tuple[NDArray[np.intp], NDArray[np.intp], NDArray[np.intp], bool]:
+    """Each panel's top edge (``adjust3d._top_edges``, its numpy reference) among the
+    pairs of returns ``pi`` and panels ``pk``: the rays from ``origin`` to the returns
+    ``origin + rel`` (n, 3) crossing the panels' planes (``normal``, ``offset``; from
+    ``start`` along ``along`` for ``length``; tops ``top``), each panel's highest hit
+    (a return ``which`` gives it, within ``hit_gate`` of its plane, inside ``lo``..``hi``
+    along it; the least return at a tie) and its lowest crossing over above that hit
+    (the wall behind the plane by ``gate`` or more, on the far side from the sensor,
+    inside ``inset`` of either end; the first pair at a tie), both heights where the
+    rays cross the plane. Returns the panels with both (ascending), their hits' and
+    crossings' returns, and whether every return ``which`` gives a panel is paired with
+    it (if not, the reference's fallback must answer)."""
+    n_k = offset.shape[0]
+    o0, o1 = origin[0], origin[1]
+    plane = np.empty(n_k)
+    ahead = np.empty(n_k)
+    side = np.empty(n_k)
+    for k in range(n_k):
+        plane[k] = offset[k] - (normal[k, 0] * o0 + normal[k, 1] * o1)
+        ahead[k] = (o0 - start[k, 0]) * along[k, 0] + (o1 - start[k, 1]) * along[k, 1]
+        side[k] = o0 * normal[k, 0] + o1 * normal[k, 1] - offset[k]
+    hit = np.full(n_k, np.inf)
+    seen = np.zeros(n_k, dtype=np.bool_)  # a hit chosen (its height may be NaN)
+    ray_of = np.full(n_k, -1, dtype=np.intp)
+    own = 0
+    m = pi.shape[0]
+    for j in range(m):
+        i, k = pi[j], pk[j]
+        if which[i] != k:
+            continue
+        own += 1
+        rx, ry = rel[i, 0], rel[i, 1]
+        s = plane[k] / (rx * normal[k, 0] + ry * normal[k, 1])
+        t = ahead[k] + s * (rx * along[k, 0] + ry * along[k, 1])
+        across = (rx + o0) * normal[k, 0] + (ry + o1) * normal[k, 1] - offset[k]
+        if not (abs(across) <= hit_gate and t > lo[k] and t < hi[k] and np.isfinite(top[k])):
+            continue
+        h = s * rel[i, 2]
+        if not seen[k]:
+            better = True
+        elif np.isnan(h):
+            better = np.isnan(hit[k]) and i < ray_of[k]
+        elif np.isnan(hit[k]):
+            better = True
+        else:
+            better = h > hit[k] or (h == hit[k] and i < ray_of[k])
+        if better:
+            seen[k] = True
+            hit[k] = h
+            ray_of[k] = i
+    assigned = 0
+    for i in range(which.shape[0]):
+        if which[i] >= 0:
+            assigned += 1
+    low = np.full(n_k, np.inf)
+    over_of = np.full(n_k, -1, dtype=np.intp)
+    for j in range(m):
+        i, k = pi[j], pk[j]
+        if not np.isfinite(hit[k]):
+            continue
+        rx, ry = rel[i, 0], rel[i, 1]
+        s = plane[k] / (rx * normal[k, 0] + ry * normal[k, 1])
+        if not (s > 0.0 and s < 1.0):
+            continue
+        t = ahead[k] + s * (rx * along[k, 0] + ry * along[k, 1])
+        across = (rx + o0) * normal[k, 0] + (ry + o1) * normal[k, 1] - offset[k]
+        h = s * rel[i, 2]
+        if (
+            t > inset[k]
+            and t < length[k] - inset[k]
+            and across * side[k] < 0.0
+            and abs(across) >= gate
+            and h > hit[k]
+            and (over_of[k] < 0 or h < low[k])
+        ):
+            low[k] = h
+            over_of[k] = i
+    count = 0
+    for k in range(n_k):
+        if over_of[k] >= 0:
+            count += 1
+    ks = np.empty(count, dtype=np.intp)
+    hits = np.empty(count, dtype=np.intp)
+    overs = np.empty(count, dtype=np.intp)
+    c = 0
+    for k in range(n_k):
+        if over_of[k] >= 0:
+            ks[c], hits[c], overs[c] = k, ray_of[k], over_of[k]
+            c += 1
+    return ks, hits, overs, own == assigned
+
+
+def _brackets3d(
+    p: NDArray[np.float64],
+    rows: NDArray[np.intp],
+    ray: NDArray[np.intp],
+    D: NDArray[np.float64],
+    origin: NDArray[np.float64],
+    nx: NDArray[np.float64],
+    ny: NDArray[np.float64],
+    offset: NDArray[np.float64],
+    top: NDArray[np.float64],
+    member: NDArray[np.bool_],
+    beam_sigma: float,
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """The beacons' elevation brackets of one Gauss-Newton iteration
+    (``adjust3d._TopEdges.brackets_reference``): the top edges' rays, the returns
+    ``p[rows[ray]]`` (the hits' first, then the crossings over) turned by ``D[0]`` (R;
+    ``D[1..3]`` its derivatives by roll, pitch and yaw) from the sensor at ``origin``,
+    crossing their panels' planes (``nx``, ``ny``, ``offset``; tops ``top``); per beacon
+    (``member``: beacons × top edges) the middle of the intersection of its panels'
+    brackets, its variance (the uniform's over the width, and ``beam_sigma`` times the
+    range at each end) and the derivatives (beacons, 6) of ``Z - middle`` by (E, N, A,
+    pitch, roll, Z), through the two rays setting its ends."""
+    q_n = ray.shape[0]
+    tops = member.shape[1]
+    beacons = member.shape[0]
+    o0, o1 = origin[0], origin[1]
+    rel = np.empty((q_n, 3))
+    s = np.empty(q_n)
+    ends = np.empty(q_n)
+    for q in range(q_n):
+        row = rows[ray[q]]
+        for c in range(3):
+            rel[q, c] = D[0, c, 0] * p[row, 0] + D[0, c, 1] * p[row, 1] + D[0, c, 2] * p[row, 2]
+        s[q] = (offset[q] - (o0 * nx[q] + o1 * ny[q])) / (rel[q, 0] * nx[q] + rel[q, 1] * ny[q])
+        ends[q] = top[q] - s[q] * rel[q, 2]
+    middle = np.empty(beacons)
+    spread = np.empty(beacons)
+    d = np.zeros((beacons, 6))
+    for b in range(beacons):
+        # the top edges setting its ends: the lowest high, the highest low (the first
+        # at a tie; a NaN first of all, as numpy's argmin and argmax)
+        hi, lo = -1, -1
+        for e in range(tops):
+            if not member[b, e]:
+                continue
+            h, low = ends[e], ends[tops + e]
+            if hi < 0 or (not np.isnan(ends[hi]) and (np.isnan(h) or h < ends[hi])):
+                hi = e
+            if lo < 0 or (not np.isnan(ends[lo]) and (np.isnan(low) or low > ends[lo])):
+                lo = tops + e
+        reach2 = 0.0
+        for q in (hi, lo):
+            n0, n1 = nx[q], ny[q]
+            r0, r1, r2 = rel[q, 0], rel[q, 1], rel[q, 2]
+            across = r0 * n0 + r1 * n1
+            d[b, 0] += 0.5 * (-(r2 / across) * n0)
+            d[b, 1] += 0.5 * (-(r2 / across) * n1)
+            row = rows[ray[q]]
+            for a in range(3):  # by yaw, pitch, roll: the ray turned by each
+                turn = D[3 - a]
+                t0 = turn[0, 0] * p[row, 0] + turn[0, 1] * p[row, 1] + turn[0, 2] * p[row, 2]
+                t1 = turn[1, 0] * p[row, 0] + turn[1, 1] * p[row, 1] + turn[1, 2] * p[row, 2]
+                t2 = turn[2, 0] * p[row, 0] + turn[2, 1] * p[row, 1] + turn[2, 2] * p[row, 2]
+                sideways = t0 * n0 + t1 * n1
+                grad = s[q] * t2 - (s[q] * r2) * sideways / across
+                if a == 0:
+                    grad = -grad  # d yaw / d A = -1
+                d[b, 2 + a] += 0.5 * grad
+            x, y, z = s[q] * r0, s[q] * r1, s[q] * r2
+            reach = beam_sigma * math.sqrt(x * x + y * y + z * z)
+            reach2 += reach * reach
+        d[b, 5] = 1.0
+        middle[b] = 0.5 * (ends[lo] + ends[hi])
+        width = ends[hi] - ends[lo]
+        spread[b] = width * width / 12.0 + 0.25 * reach2
+    return middle, spread, d
+
+
+def _rotation_derivatives(roll: float, pitch: float, yaw: float) -> NDArray[np.float64]:
+    """R = Rz(yaw) Ry(pitch) Rx(roll) and its derivatives by roll, pitch and yaw, (4, 3,
+    3): ``adjust3d._derivatives``, compiled."""
+    cr, sr = math.cos(roll), math.sin(roll)
+    cp, sp = math.cos(pitch), math.sin(pitch)
+    cy, sy = math.cos(yaw), math.sin(yaw)
+    D = np.zeros((4, 3, 3))
+    D[0, 0, 0], D[0, 0, 1], D[0, 0, 2] = cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr
+    D[0, 1, 0], D[0, 1, 1], D[0, 1, 2] = sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr
+    D[0, 2, 0], D[0, 2, 1], D[0, 2, 2] = -sp, cp * sr, cp * cr
+    for r in range(3):  # by roll: R Kx
+        D[1, r, 1], D[1, r, 2] = D[0, r, 2], -D[0, r, 1]
+    D[2, 0, 0], D[2, 0, 1], D[2, 0, 2] = -cy * sp, cy * cp * sr, cy * cp * cr
+    D[2, 1, 0], D[2, 1, 1], D[2, 1, 2] = -sy * sp, sy * cp * sr, sy * cp * cr
+    D[2, 2, 0], D[2, 2, 1], D[2, 2, 2] = -cp, -sp * sr, -sp * cr
+    for c in range(3):  # by yaw: Kz R
+        D[3, 0, c], D[3, 1, c] = -D[0, 1, c], D[0, 0, c]
+    return D
+
+
+def _gauss_newton3d(
+    weighed: NDArray[np.float64],
+    offset_k: NDArray[np.float64],
+    weight: float,
+    p: NDArray[np.float64],
+    rows: NDArray[np.intp],
+    ray: NDArray[np.intp],
+    nx: NDArray[np.float64],
+    ny: NDArray[np.float64],
+    offset: NDArray[np.float64],
+    top: NDArray[np.float64],
+    member: NDArray[np.bool_],
+    beam_sigma: float,
+    survey_var: float,
+    tilt: NDArray[np.float64],
+    unobserved: float,
+    x: NDArray[np.float64],
+    iterations: int,
+    converged: NDArray[np.float64],
+    J: NDArray[np.float64],
+    v: NDArray[np.float64],
+    W: NDArray[np.float64],
+    N: NDArray[np.float64],
+) -> int:
+    """The Gauss-Newton iterations of the 3D adjustment (``adjust3d._solve``; its numpy
+    reference ``adjust3d._gauss_newton3d_reference``): from ``x`` (E, N, A, pitch, roll,
+    Z; updated in place) until every step is below ``converged`` or ``iterations`` are
+    done. Each iteration: the panel returns' rows (:func:`_panel_rows3d` on
+    ``weighed``, ``offset_k``, ``weight``); each beacon's bracket (:func:`_brackets3d`
+    on the top edges' rays; ``member`` has no row where there are none), weighed by
+    one over its variance plus ``survey_var``; the tilt prior's two rows (``tilt``:
+    pitch and roll, where given; their rows of ``J`` and ``W`` set already); and
+    ``unobserved`` added to the elevation's normal where no bracket holds it. ``J``
+    (its first two columns set), ``v``, ``W`` and ``N`` are the last iteration's.
+    Returns the iterations done, or -1 where the normal equations are singular."""
+    m = weighed.shape[0]
+    beacons = member.shape[0]
+    rows_n = v.shape[0]
+    rotations = np.zeros((14, 5))
+    g = np.zeros(6)
+    rhs = np.empty((6, 1))
+    done = 0
+    while True:
+        done += 1
+        D = _rotation_derivatives_jit(x[4], x[3], math.pi / 2 - x[2])
+        for a in range(2):
+            for b in range(3):
+                r = a * 3 + b
+                rotations[r, 0] = D[0, a, b]
+                rotations[r, 1] = D[3, a, b]  # by yaw, pitch, roll
+                rotations[r, 2] = D[2, a, b]
+                rotations[r, 3] = D[1, a, b]
+                rotations[6 + r, 4] = D[0, a, b]
+        rotations[12, 0], rotations[13, 0] = x[0], x[1]
+        _panel_rows3d_jit(weighed, rotations, offset_k, weight, v[:m], J[:m], W[:m], N, g)
+        if beacons:
+            origin = np.array([x[0], x[1], x[5]])
+            middle, spread, dz = _brackets3d_jit(
+                p, rows, ray, D, origin, nx, ny, offset, top, member, beam_sigma
+            )
+            for b in range(beacons):
+                J[m + b, :] = dz[b]
+                v[m + b] = x[5] - middle[b]
+                W[m + b] = 1.0 / (spread[b] + survey_var)
+        if tilt.shape[0] == 2:
+            v[rows_n - 2] = x[3] - tilt[0]
+            v[rows_n - 1] = x[4] - tilt[1]
+        for r in range(m, rows_n):
+            w = W[r]
+            for a in range(6):
+                wa = w * J[r, a]
+                g[a] += wa * v[r]
+                for b in range(6):
+                    N[a, b] += J[r, b] * wa
+        if beacons == 0:
+            N[5, 5] += unobserved
+        for a in range(6):
+            rhs[a, 0] = -g[a]
+        if not _lu_solve_jit(N, rhs):
+            return -1
+        small = True
+        for a in range(6):
+            x[a] += rhs[a, 0]
+            if not abs(rhs[a, 0]) < converged[a]:
+                small = False
+        if done >= iterations or small:
+            return done
+
+
 #: Compiled on first use (numba's own types; mypy sees plain callables).
 #: ``error_model="numpy"``: no division-by-zero checks in the loop (every divisor is
 #: positive), so that it vectorises.
@@ -3621,3 +3921,12 @@ nearest_by_bearing: Callable[..., Any] = njit(cache=True, nogil=True)(_nearest_b
 _nearest_by_bearing_jit = nearest_by_bearing
 odometry_fit: Callable[..., Any] = njit(cache=True, nogil=True)(_odometry_fit)
 panel_rows3d: Callable[..., None] = njit(cache=True, nogil=True)(_panel_rows3d)
+top_edges3d: Callable[..., Any] = njit(cache=True, nogil=True)(_top_edges3d)
+brackets3d: Callable[..., Any] = njit(cache=True, nogil=True)(_brackets3d)
+_brackets3d_jit = brackets3d
+_panel_rows3d_jit = panel_rows3d
+rotation_derivatives: Callable[..., NDArray[np.float64]] = njit(cache=True, nogil=True)(
+    _rotation_derivatives
+)
+_rotation_derivatives_jit = rotation_derivatives
+gauss_newton3d: Callable[..., int] = njit(cache=True, nogil=True)(_gauss_newton3d)

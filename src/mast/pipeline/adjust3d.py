@@ -42,7 +42,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from mast.core._kernels import panel_rows3d
+from mast.core._kernels import brackets3d, gauss_newton3d, top_edges3d
 from mast.core.beacon import Survey
 from mast.core.frames import yaw_of_azimuth
 from mast.core.pose import normalize_azimuth
@@ -826,7 +826,7 @@ def _brackets(
     if not tops:
         return []
     edges = _TopEdges.of(tops, planes)
-    middle, spread, d = edges.brackets(p[edges.rows], rel[edges.rows], origin, dR)
+    middle, spread, d = edges.brackets_reference(p[edges.rows], rel[edges.rows], origin, dR)
     return [(float(middle[i]), float(spread[i]), d[i]) for i in range(len(middle))]
 
 
@@ -857,16 +857,36 @@ class _TopEdges:
         return cls(rows, ray, planes.normal[both].T.copy(), planes.offset[both],
                    planes.top[both], member)  # fmt: skip
 
+    @classmethod
+    def none(cls) -> _TopEdges:
+        """No top edge: no bracket."""
+        empty = np.zeros(0, dtype=np.intp)
+        return cls(empty, empty, np.zeros((2, 0)), np.zeros(0), np.zeros(0),
+                   np.zeros((0, 0), dtype=np.bool_))  # fmt: skip
+
     def brackets(
+        self, p: NDArray[np.float64], origin: NDArray[np.float64], D: NDArray[np.float64]
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+        """Per beacon (see :func:`_brackets`), the middle, its variance and the
+        derivatives (beacons, 6) of its residual, from the frame's returns ``p`` (its
+        :attr:`rows` those of the rays) seen from the sensor at ``origin`` turned by
+        ``D[0]`` (R and its derivatives by roll, pitch and yaw, as
+        :func:`_derivatives`): :meth:`brackets_reference` in one compiled pass."""
+        return brackets3d(  # type: ignore[no-any-return]
+            p, self.rows, self.ray, D, origin, self.normal[0], self.normal[1], self.offset,
+            self.top, self.member, BEAM_ANGLE_SIGMA,
+        )  # fmt: skip
+
+    def brackets_reference(
         self,
         p: NDArray[np.float64],
         rel: NDArray[np.float64],
         origin: NDArray[np.float64],
         dR: tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]],
     ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
-        """Per beacon (see :func:`_brackets`), the middle, its variance and the
-        derivatives (beacons, 6) of its residual, from the returns ``p`` of
-        :attr:`rows` and their ``rel`` from the sensor at ``origin``."""
+        """The numpy reference of :meth:`brackets`: from the returns ``p`` of
+        :attr:`rows`, their ``rel`` from the sensor at ``origin`` and R's derivatives by
+        yaw, pitch and roll ``dR``."""
         (nx, ny), r = self.normal, rel[self.ray]
         plane = self.offset - (origin[0] * nx + origin[1] * ny)
         with np.errstate(divide="ignore", invalid="ignore"):
@@ -936,50 +956,79 @@ def _solve(
     weighed = np.hstack(
         [n_k[:, :1] * pts, n_k[:, 1:] * pts, n_k[:, :1] * ray, n_k[:, 1:] * ray, n_k]
     )
-    rotations = np.zeros((14, 5))
-    weight = range_sigma_m**-2
-    N, g = np.zeros((6, 6)), np.zeros(6)
     x = x0.copy()
+    if tops is None:
+        tops = _chosen_tops(p, which, planes, x, gate_m, skip, panels, pairs)
+    # only the top edges' rays are turned each iteration
+    edges = _TopEdges.of(tops, planes) if tops else _TopEdges.none()
+    # the rows: the panel returns', one per beacon's top edges, the tilt prior's two
+    rows = m + len(edges.member) + (2 if tilt_prior is not None else 0)
+    J, v, W = np.zeros((rows, 6)), np.zeros(rows), np.zeros(rows)
+    J[:m, :2] = n_k
+    tilt = np.zeros(0)
+    if tilt_prior is not None:  # the walls' vertical, as two observations
+        J[-2:] = _TILT_ROWS
+        W[-2:] = tilt_prior[2] ** -2
+        tilt = np.array(tilt_prior[:2])
+    N = np.zeros((6, 6))
+    done = gauss_newton3d(
+        weighed, d_k, range_sigma_m**-2, p, edges.rows, edges.ray, edges.normal[0],
+        edges.normal[1], edges.offset, edges.top, edges.member, BEAM_ANGLE_SIGMA,
+        survey_sigma_m**2, tilt, 1.0 / UNBRACKETED, x, iterations, _CONVERGED, J, v, W, N,
+    )  # fmt: skip
+    if done < 0:
+        raise np.linalg.LinAlgError("Singular matrix")
+    return _Solved(x, J, W, v, N, m, tops, done)
+
+
+def _gauss_newton3d_reference(
+    weighed: NDArray[np.float64],
+    offset_k: NDArray[np.float64],
+    weight: float,
+    p: NDArray[np.float64],
+    edges: _TopEdges,
+    survey_var: float,
+    tilt: NDArray[np.float64],
+    x: NDArray[np.float64],
+    iterations: int,
+    J: NDArray[np.float64],
+    v: NDArray[np.float64],
+    W: NDArray[np.float64],
+    N: NDArray[np.float64],
+) -> int:
+    """The numpy reference of :func:`mast.core._kernels.gauss_newton3d`, the iterations
+    of :func:`_solve` (``edges`` for its top edges' arrays; the brackets' beam error
+    :data:`BEAM_ANGLE_SIGMA`, the unobserved elevation's :data:`UNBRACKETED` and the
+    steps :data:`_CONVERGED`): ``x``, ``J``, ``v``, ``W``, ``N`` set in place, the
+    iterations done returned (numpy's own error where singular)."""
+    m = len(weighed)
+    rotations = np.zeros((14, 5))
+    g = np.zeros(6)
     done = 0
-    edges: _TopEdges | None = None
-    J = v = W = np.zeros(0)  # the panel returns' rows, the brackets', the tilt prior's
     while True:
         done += 1
         D = _derivatives(x[4], x[3], yaw_of_azimuth(x[2]))
-        R = D[0]
-        origin = np.array([x[0], x[1], x[5]])
-        if tops is None:
-            tops = _chosen_tops(p, which, planes, x, gate_m, skip, panels, pairs)
-        if tops and edges is None:  # only the top edges' rays are turned each iteration
-            edges = _TopEdges.of(tops, planes)
-        if done == 1:  # the rows: the top edges are known now
-            rows = m + (len(edges.member) if edges is not None else 0)
-            rows += 2 if tilt_prior is not None else 0
-            J, v, W = np.zeros((rows, 6)), np.zeros(rows), np.zeros(rows)
-            J[:m, :2] = n_k
-            if tilt_prior is not None:  # the walls' vertical, as two observations
-                J[-2:] = _TILT_ROWS
-                W[-2:] = tilt_prior[2] ** -2
         rotations[:6, :4] = D[_BY_PARAMETER, :2].reshape(4, 6).T  # R, d yaw, d pitch, d roll
-        rotations[6:12, 4] = R[:2].ravel()
+        rotations[6:12, 4] = D[0, :2].ravel()
         rotations[12:, 0] = x[:2]
-        # the panel returns' rows and their share of the normal equations, in one pass
-        panel_rows3d(weighed, rotations, d_k, weight, v[:m], J[:m], W[:m], N, g)
-        if edges is not None:
+        _panel_rows_reference(weighed, rotations, offset_k, weight, v[:m], J[:m], W[:m], N, g)
+        if len(edges.member):
             at = p[edges.rows]
-            middle, spread, dz = edges.brackets(at, at @ R.T, origin, (D[3], D[2], D[1]))
+            middle, spread, dz = edges.brackets_reference(
+                at, at @ D[0].T, np.array([x[0], x[1], x[5]]), (D[3], D[2], D[1])
+            )
             seen = slice(m, m + len(middle))
-            J[seen], v[seen], W[seen] = dz, x[5] - middle, 1.0 / (spread + survey_sigma_m**2)
-        if tilt_prior is not None:
-            v[-2:] = x[3] - tilt_prior[0], x[4] - tilt_prior[1]
+            J[seen], v[seen], W[seen] = dz, x[5] - middle, 1.0 / (spread + survey_var)
+        if len(tilt):
+            v[-2:] = x[3] - tilt[0], x[4] - tilt[1]
         WJ = W[m:, None] * J[m:]  # the brackets' and the tilt prior's rows
         N += J[m:].T @ WJ
-        if not tops:
+        if not len(edges.member):
             N[5, 5] += 1.0 / UNBRACKETED  # the elevation unobserved: kept, with no weight
         step = np.linalg.solve(N, -(g + WJ.T @ v[m:]))
         x += step
         if done >= iterations or np.all(np.abs(step) < _CONVERGED):
-            return _Solved(x, J, W, v, N, m, tops, done)
+            return done
 
 
 def _panel_rows_reference(
@@ -1024,8 +1073,19 @@ def _chosen_tops(
     rel = p @ R.T
     if pairs is None:
         pairs = planes._pairs(planes._everywhere(len(p)))
-    rays = planes._rays(rel, origin, pairs)
-    tops = _top_edges(rel + origin, rel, which, origin, planes, gate_m, rays=rays)
+    # _top_edges in one compiled pass over the pairs (its numpy reference), unless a
+    # return is given a panel it is not paired with (the reference then pairs them)
+    inset = np.maximum(0.05, 0.1 * planes.length)
+    lo, hi = planes._inside_all(gate_m + ROCK_M, inset)
+    k, hit, over, paired = top_edges3d(
+        rel, origin, which, pairs.i, pairs.k, planes.normal, planes.offset, planes.start,
+        planes.along, planes.length, planes.top, lo, hi, inset, HIT_SHARE * gate_m, gate_m,
+    )  # fmt: skip
+    if paired:
+        tops = list(zip(k.tolist(), hit.tolist(), over.tolist(), strict=True))
+    else:
+        rays = planes._rays(rel, origin, pairs)
+        tops = _top_edges(rel + origin, rel, which, origin, planes, gate_m, rays=rays)
     return [
         top
         for top in tops
