@@ -543,3 +543,32 @@ def test_the_compiled_brackets_and_iterations_agree_with_their_numpy_reference()
         assert d1 == d2 > 1
         for u, w in zip(a, b, strict=True):
             np.testing.assert_allclose(u, w, rtol=1e-9, atol=1e-9 * float(np.abs(w).max()))
+
+
+@pytest.mark.parametrize("noise", [0.0, 0.01])
+def test_the_compiled_assignment_agrees_with_its_numpy_reference(noise: float) -> None:
+    # Each clearance's assignment with every cut (heights, floors, ceilings, boxes,
+    # reach) and without, at poses about the truth: compiled and numpy, the same.
+    planes, p, _, x = _tilted_paper_frame(noise, 0.04)
+    rng = np.random.default_rng(11)
+    top = np.where(np.isfinite(planes.top), planes.top, 0.0)
+    options = [
+        {},
+        {"top_margin_m": 0.02, "reach_m": 1.0},
+        {"top_margin_m": 0.05, "bottoms": top - 0.6, "ceilings": top - 0.1},
+        {"top_margin_m": 0.03, "bottoms": np.where(np.array(planes.panel) == 2, top - 0.5, np.nan),
+         "boxes": top - 0.4},
+    ]  # fmt: skip
+    assigned = 0
+    for option in options:
+        at = x + rng.normal(scale=[0.02, 0.02, 0.003, 0.003, 0.003, 0.02])
+        pose = Pose3D(*at[[0, 1, 5, 2, 3, 4]])
+        grid = pose.sensor_to_grid(p)
+        rays = planes._rays(grid - pose.position, pose.position, planes.local(grid, 1.0))
+        got = planes._assigns(rays, grid, 0.04, (0.04, 0.02), **option)  # type: ignore[arg-type]
+        want = planes._assigns_reference(rays, grid, 0.04, (0.04, 0.02), **option)  # type: ignore[arg-type]
+        assert len(got) == len(want) == 2
+        for a, b in zip(got, want, strict=True):
+            np.testing.assert_array_equal(a, b)
+        assigned += int(np.count_nonzero(got[0] >= 0))
+    assert assigned > 1000

@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 from numpy.typing import NDArray
 
+from mast.core._kernels import floors3d
 from mast.core.beacon import Survey
 from mast.core.pose3d import Pose3D
 from mast.core.scan import Scan
@@ -139,6 +140,44 @@ def test_a_panel_is_one_run_of_heights() -> None:
     kept = _contiguous(which2, grid2, truth.position, planes, math.radians(2.0))
     assert kept[-1] == -1
     assert np.array_equal(kept[:-1], which)
+
+
+def test_the_compiled_runs_of_heights_and_floors_agree_with_their_numpy_references() -> None:
+    # A panel's run of heights, with gaps cut into it above and below its median, and
+    # each panel's floor, compiled and in numpy: the same returns, the same floors.
+    from mast.pipeline.locator3d import _contiguous_reference
+
+    scene = random_drift_scene(3, frames=4, lidar="vlp16", range_sigma_m=0.02)
+    planes = PanelPlanes.of(scene.survey)
+    rng = np.random.default_rng(4)
+    floors = cut = 0
+    for i in range(4):
+        sim = scene.simulate(i)
+        pose = sim.pose
+        grid = pose.sensor_to_grid(sim.frame.points)
+        which = planes.assign(grid, pose.position, 0.08)
+        # holes in some panels' runs: their returns in a band of heights left out
+        z = grid[:, 2]
+        for k in np.unique(which[which >= 0]):
+            on = np.flatnonzero(which == k)
+            lo = float(rng.uniform(z[on].min(), z[on].max()))
+            which[on[(z[on] > lo) & (z[on] < lo + 0.3)]] = -1
+        for spacing in (math.radians(0.5), math.radians(2.0)):
+            got = _contiguous(which, grid, pose.position, planes, spacing)
+            want = _contiguous_reference(which, grid, pose.position, planes, spacing)
+            np.testing.assert_array_equal(got, want)
+            cut += int(np.count_nonzero((got < 0) & (which >= 0)))
+        about = planes.local(grid, 1.5)
+        flat = np.concatenate(about)
+        first = np.cumsum([0] + [len(idx) for idx in about], dtype=np.intp)
+        got_floors = floors3d(
+            sim.frame.points, pose.rotation, pose.position, flat, first, planes.wall
+        )
+        want_floors = planes.floors(grid, about)
+        np.testing.assert_allclose(got_floors, want_floors, rtol=0, atol=1e-12)
+        floors += int(np.count_nonzero(np.isfinite(want_floors)))
+    assert cut > 0
+    assert floors > 0
 
 
 def test_a_panel_is_cut_below_its_beacons_other_panels_lowest_hits() -> None:

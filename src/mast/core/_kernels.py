@@ -19,17 +19,20 @@ from numpy.typing import NDArray
 
 __all__ = [
     "adjust_rounds",
+    "assigns3d",
     "associate",
     "beacon_statistics",
     "beacons_in_reach",
     "beam_checks_of",
     "bound",
     "brackets3d",
+    "contiguous3d",
     "field_pyramid",
     "field_sliding",
     "first_at_least",
     "first_hits",
     "first_same",
+    "floors3d",
     "gauss_newton",
     "gauss_newton3d",
     "group_residuals",
@@ -3818,6 +3821,206 @@ def _gauss_newton3d(
             return done
 
 
+def _assigns3d(
+    i: NDArray[np.intp],
+    k: NDArray[np.intp],
+    s: NDArray[np.float64],
+    t: NDArray[np.float64],
+    z: NDArray[np.float64],
+    reach: NDArray[np.float64],
+    grid: NDArray[np.float64],
+    gate: float,
+    height: float,
+    reach_m: float,
+    cap: NDArray[np.float64],
+    capped: bool,
+    floor: NDArray[np.float64],
+    floored: bool,
+    inner: NDArray[np.float64],
+    boxes: NDArray[np.float64],
+    boxed: bool,
+    turned: NDArray[np.bool_],
+    lo: NDArray[np.float64],
+    hi: NDArray[np.float64],
+    wall: NDArray[np.float64],
+    normal: NDArray[np.float64],
+    offset: NDArray[np.float64],
+) -> NDArray[np.intp]:
+    """The panel each return lies on, or -1, for each clearance's extent ``lo``..``hi``
+    (clearances × panels): ``adjust3d.PanelPlanes._assigns`` (its numpy reference)
+    over the pairs (return ``i``, panel ``k``; their ray's crossing ``s``, ``t``, ``z``;
+    the returns' ``reach`` and ``grid`` places). A pair is within ``gate`` along its
+    ray; its crossing within ``reach_m`` of the sensor's ``height`` (where finite), not
+    above ``cap`` (where ``capped``), not below ``floor`` (where ``floored``); ``boxed``
+    (where so) when it crosses below ``inner`` and above ``boxes`` (no wall test
+    there); inside the extent, alone there or the only one ``turned`` to the sensor;
+    and, unless boxed, nearer its panel's plane than its beacon's ``wall``."""
+    n = grid.shape[0]
+    m = i.shape[0]
+    clears = lo.shape[0]
+    out = np.full((clears, n), -1, dtype=np.intp)
+    gated = np.empty(m, dtype=np.bool_)
+    cut = np.empty(m, dtype=np.bool_)
+    box = np.zeros(m, dtype=np.bool_)
+    limited = np.isfinite(reach_m)
+    for j in range(m):
+        kj = k[j]
+        gated[j] = abs(1.0 - s[j]) * reach[i[j]] < gate and s[j] > 0.0
+        ok = True
+        if limited:
+            ok = abs(z[j] - height) <= reach_m
+        if capped:
+            ok = ok and z[j] <= cap[kj]
+        if floored:
+            ok = ok and z[j] >= floor[kj]
+        cut[j] = ok
+        if boxed:
+            box[j] = z[j] < inner[kj] and z[j] > boxes[kj]
+    facing = np.zeros(n, dtype=np.intp)
+    either = np.zeros(n, dtype=np.intp)
+    tested = np.zeros(n, dtype=np.bool_)
+    for c in range(clears):
+        facing[:] = 0
+        either[:] = 0
+        tested[:] = False
+        which = out[c]
+        for j in range(m):
+            kj = k[j]
+            if gated[j] and t[j] > lo[c, kj] and t[j] < hi[c, kj]:
+                either[i[j]] += 1
+                if turned[kj]:
+                    facing[i[j]] += 1
+        for j in range(m):
+            kj, ij = k[j], i[j]
+            if not (gated[j] and cut[j] and t[j] > lo[c, kj] and t[j] < hi[c, kj]):
+                continue
+            if facing[ij] > 0:
+                if not (turned[kj] and facing[ij] == 1):
+                    continue
+            elif either[ij] != 1:
+                continue
+            which[ij] = kj
+            if not box[j]:
+                tested[ij] = True
+        for q in range(n):  # nearer its beacon's wall than its panel: the wall's
+            if not tested[q]:
+                continue
+            kq = which[q]
+            x, y = grid[q, 0], grid[q, 1]
+            to_wall = abs(x * wall[kq, 0] + y * wall[kq, 1] - wall[kq, 2])
+            to_panel = abs(x * normal[kq, 0] + y * normal[kq, 1] - offset[kq])
+            if to_wall < to_panel:
+                which[q] = -1
+    return out
+
+
+def _contiguous3d(
+    k: NDArray[np.intp],
+    i: NDArray[np.intp],
+    h: NDArray[np.float64],
+    reach: NDArray[np.float64],
+    panels: int,
+    spacing: float,
+) -> NDArray[np.bool_]:
+    """Which of the panel returns (``i`` on panel ``k``, their rays crossing its plane at
+    height ``h``; ``reach`` the returns' ranges) fall outside their panel's run of
+    heights about its median that no gap wider than 1.5 ``spacing`` at its returns'
+    median range, plus 5 cm, breaks: ``locator3d._contiguous`` (its numpy
+    reference)."""
+    m = k.shape[0]
+    count = np.zeros(panels, dtype=np.intp)
+    for j in range(m):
+        count[k[j]] += 1
+    first = np.zeros(panels + 1, dtype=np.intp)
+    for q in range(panels):
+        first[q + 1] = first[q] + count[q]
+    filled = first[:-1].copy()
+    grouped = np.empty(m, dtype=np.intp)  # by panel, in their order
+    for j in range(m):
+        grouped[filled[k[j]]] = j
+        filled[k[j]] += 1
+    drop = np.zeros(m, dtype=np.bool_)
+    for q in range(panels):
+        c = count[q]
+        if c == 0:
+            continue
+        mine = grouped[first[q] : first[q + 1]]
+        hs = h[mine]
+        order = np.argsort(hs, kind="mergesort")  # by height, stable
+        hs = hs[order]
+        ranges = np.sort(reach[i[mine]])
+        mid = c // 2
+        if c % 2 == 1:
+            median_h, median_r = hs[mid], ranges[mid]
+        else:
+            median_h = (hs[mid - 1] + hs[mid]) / 2
+            median_r = (ranges[mid - 1] + ranges[mid]) / 2
+        gap = 1.5 * spacing * median_r + 0.05
+        middle = 0
+        for a in range(c):
+            if hs[a] < median_h:
+                middle += 1
+        lo, hi = 0, c
+        for a in range(c - 1):
+            if hs[a + 1] - hs[a] > gap:
+                if a < middle:
+                    lo = max(lo, a + 1)
+                else:
+                    hi = min(hi, a + 1)
+        for a in range(c):
+            if a < lo or a >= hi:
+                drop[mine[order[a]]] = True
+    return drop
+
+
+def _floors3d(
+    points: NDArray[np.float64],
+    R: NDArray[np.float64],
+    at: NDArray[np.float64],
+    about: NDArray[np.intp],
+    first: NDArray[np.intp],
+    wall: NDArray[np.float64],
+) -> NDArray[np.float64]:
+    """Each panel's floor (``adjust3d.PanelPlanes._floors``, its numpy reference) from
+    the ``points`` (sensor frame) at the pose ``R``, ``at``: of those about panel q,
+    ``about[first[q]:first[q + 1]]``, the 2nd percentile of their heights, where there
+    are 50 or more and the 20 or more within 5 cm of it spread across the beacon's
+    ``wall`` by more than 30 cm between their 10th and 90th percentiles; NaN
+    elsewhere."""
+    panels = first.shape[0] - 1
+    out = np.full(panels, np.nan)
+    height = np.empty(points.shape[0])
+    for p in range(points.shape[0]):
+        height[p] = points[p, 0] * R[2, 0] + points[p, 1] * R[2, 1] + points[p, 2] * R[2, 2]
+        height[p] += at[2]
+    for q in range(panels):
+        close = about[first[q] : first[q + 1]]
+        c = close.shape[0]
+        if c < 50:
+            continue
+        z = height[close]
+        low = np.partition(z, c // 50)[c // 50]
+        n = 0
+        for a in range(c):
+            if abs(z[a] - low) < 0.05:
+                n += 1
+        if n < 20:
+            continue
+        across = np.empty(n)
+        b = 0
+        for a in range(c):
+            if abs(z[a] - low) < 0.05:
+                p = close[a]
+                x = points[p, 0] * R[0, 0] + points[p, 1] * R[0, 1] + points[p, 2] * R[0, 2]
+                y = points[p, 0] * R[1, 0] + points[p, 1] * R[1, 1] + points[p, 2] * R[1, 2]
+                across[b] = (x + at[0]) * wall[q, 0] + (y + at[1]) * wall[q, 1]
+                b += 1
+        lo, hi = n // 10, (9 * n) // 10 - 1
+        if np.partition(across, hi)[hi] - np.partition(across, lo)[lo] > 0.3:
+            out[q] = low
+    return out
+
+
 #: Compiled on first use (numba's own types; mypy sees plain callables).
 #: ``error_model="numpy"``: no division-by-zero checks in the loop (every divisor is
 #: positive), so that it vectorises.
@@ -3930,3 +4133,6 @@ rotation_derivatives: Callable[..., NDArray[np.float64]] = njit(cache=True, nogi
 )
 _rotation_derivatives_jit = rotation_derivatives
 gauss_newton3d: Callable[..., int] = njit(cache=True, nogil=True)(_gauss_newton3d)
+assigns3d: Callable[..., NDArray[np.intp]] = njit(cache=True, nogil=True)(_assigns3d)
+contiguous3d: Callable[..., NDArray[np.bool_]] = njit(cache=True, nogil=True)(_contiguous3d)
+floors3d: Callable[..., NDArray[np.float64]] = njit(cache=True, nogil=True)(_floors3d)

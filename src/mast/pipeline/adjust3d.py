@@ -42,7 +42,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from mast.core._kernels import brackets3d, gauss_newton3d, top_edges3d
+from mast.core._kernels import assigns3d, brackets3d, gauss_newton3d, top_edges3d
 from mast.core.beacon import Survey
 from mast.core.frames import yaw_of_azimuth
 from mast.core.pose import normalize_azimuth
@@ -248,7 +248,45 @@ class PanelPlanes:
         """:meth:`_assign` with each of the clearances ``clears_m`` from the free ends,
         the gate and the heights' cuts made once for all. Where ``boxes`` (per panel, from
         :meth:`seen`) and the top are known, a crossing between them, each ``top_margin_m``
-        inside, is the panel's without the wall test."""
+        inside, is the panel's without the wall test. In one compiled pass
+        (:meth:`_assigns_reference` in numpy)."""
+        cap = np.full(len(self), math.inf)
+        if math.isfinite(top_margin_m):
+            cap = np.where(np.isfinite(self.top), self.top + top_margin_m, math.inf)
+        if ceilings is not None:
+            cap = np.minimum(cap, np.where(np.isfinite(ceilings), ceilings, math.inf))
+        floor = cap if bottoms is None else np.where(np.isfinite(bottoms), bottoms, -math.inf)
+        inner = above = cap
+        boxed = boxes is not None and math.isfinite(top_margin_m)
+        if boxes is not None and boxed:
+            inner = np.fmin(self.top, cap) - top_margin_m
+            inner = np.where(np.isfinite(boxes) & np.isfinite(self.top), inner, -math.inf)
+            above = boxes + top_margin_m
+        extents = [self._inside_all(clear) for clear in clears_m]
+        out = assigns3d(
+            rays.i, rays.k, rays.s, rays.t, rays.z, rays.reach, grid, gate_m,
+            float(rays.origin[2]), reach_m, cap, bool(np.isfinite(cap).any()), floor,
+            bottoms is not None, inner, above, boxed, self.facing(rays.origin),
+            np.array([lo for lo, _ in extents]), np.array([hi for _, hi in extents]),
+            self.wall, self.normal, self.offset,
+        )  # fmt: skip
+        return list(out)
+
+    def _assigns_reference(
+        self,
+        rays: _Rays,
+        grid: NDArray[np.float64],
+        gate_m: float,
+        clears_m: Sequence[float],
+        *,
+        top_margin_m: float = math.inf,
+        bottoms: NDArray[np.float64] | None = None,
+        reach_m: float = math.inf,
+        ceilings: NDArray[np.float64] | None = None,
+        boxes: NDArray[np.float64] | None = None,
+    ) -> list[NDArray[np.intp]]:
+        """The numpy reference of :meth:`_assigns` (of
+        :func:`mast.core._kernels.assigns3d`)."""
         s = rays.s
         # how far along its ray the return lies from the plane: its range error, were
         # it on the panel (a gate on it keeps both signs of the noise alike)

@@ -58,6 +58,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from numpy.typing import NDArray
 
+from mast.core._kernels import contiguous3d, floors3d
 from mast.core.beacon import Survey
 from mast.core.frames import yaw_of_azimuth
 from mast.core.pose import Pose2D
@@ -296,7 +297,31 @@ def _contiguous(
     cross its plane) about their median that no gap wider than 1.5 ring spacings at
     their range (their median), plus 5 cm, breaks: a panel is one piece, and the roof,
     the floor or the wall far above or below within the gate of its plane is not of it.
-    ``rays``: the crossings seen from ``origin``, where the caller has them."""
+    ``rays``: the crossings seen from ``origin``, where the caller has them. In one
+    compiled pass (:func:`_contiguous_reference` in numpy)."""
+    out = which.copy()
+    if rays is None:
+        o = np.asarray(origin, dtype=float).reshape(3)
+        rays = planes._rays(grid - o, o, _panel_lists(which, len(planes)))
+    rays, j = planes._own(rays, which)
+    if j.size == 0:
+        return out
+    k, i = rays.k[j], rays.i[j]
+    h = rays.s[j] * rays.rel[i, 2]
+    out[i[contiguous3d(k, i, h, rays.reach, len(planes), spacing_rad)]] = -1
+    return out
+
+
+def _contiguous_reference(
+    which: NDArray[np.intp],
+    grid: NDArray[np.float64],
+    origin: NDArray[np.float64],
+    planes: PanelPlanes,
+    spacing_rad: float,
+    rays: _Rays | None = None,
+) -> NDArray[np.intp]:
+    """The numpy reference of :func:`_contiguous` (of
+    :func:`mast.core._kernels.contiguous3d`)."""
     out = which.copy()
     if rays is None:
         o = np.asarray(origin, dtype=float).reshape(3)
@@ -869,16 +894,16 @@ def _fix3d(
     pts, grid = np.take(frame.points, near, axis=0), np.take(grid, near, axis=0)
 
     looked = np.take(frame.points, about, axis=0)
+    around_flat = np.concatenate(around) if around else np.zeros(0, dtype=np.intp)
+    around_first = np.cumsum([0] + [len(idx) for idx in around], dtype=np.intp)
 
     def floors(pose: Pose3D) -> NDArray[np.float64]:
         # planes.floors on the pose's grid, of which they need the heights and the
-        # lowest returns' places in plan
-        R, at = pose.rotation, pose.position
-
-        def in_plan(idx: NDArray[np.intp]) -> NDArray[np.float64]:
-            return np.asarray(np.take(looked, idx, axis=0) @ R[:2].T + at[:2], dtype=np.float64)
-
-        return planes._floors(looked @ R[2] + at[2], in_plan, around) + FLOOR_CLEAR_M
+        # lowest returns' places in plan: compiled (PanelPlanes._floors in numpy)
+        return (
+            floors3d(looked, pose.rotation, pose.position, around_flat, around_first, planes.wall)
+            + FLOOR_CLEAR_M
+        )
 
     lines = _lines(frame, near)
     sig_r, sig_s = cfg.range_sigma_m, cfg.survey_sigma_m
