@@ -572,3 +572,21 @@ def test_the_compiled_assignment_agrees_with_its_numpy_reference(noise: float) -
             np.testing.assert_array_equal(a, b)
         assigned += int(np.count_nonzero(got[0] >= 0))
     assert assigned > 1000
+
+
+def test_the_compiled_crossings_agree_with_their_numpy_reference() -> None:
+    # Where each ray crosses its panels' planes, compiled and in numpy, a ray along a
+    # plane included (numpy's infinities, no exception).
+    planes, p, _, x = _tilted_paper_frame(0.01, 0.04)
+    pose = Pose3D(*x[[0, 1, 5, 2, 3, 4]])
+    grid = pose.sensor_to_grid(p)
+    rel = grid - pose.position
+    rel[0, :2] = planes.along[0] * float(np.hypot(*rel[0, :2]))  # along panel 0's plane
+    pairs = planes._pairs(
+        [np.append(idx, 0) if k == 0 else idx for k, idx in enumerate(planes.local(grid, 1.0))]
+    )
+    got = planes._rays(rel, pose.position, pairs)
+    want = planes._rays_reference(rel, pose.position, pairs)
+    for a, b in [(got.s, want.s), (got.t, want.t), (got.z, want.z)]:
+        np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-12)
+    assert not np.isfinite(got.s[pairs.k == 0][-1])

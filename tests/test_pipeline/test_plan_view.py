@@ -47,3 +47,25 @@ def test_levelling_is_ry_rx_turning_up_onto_z_and_keeping_the_heading(
     assert np.allclose(L @ L.T, np.eye(3), atol=1e-12)
     assert np.allclose(L, rotation_rpy(roll, pitch, 0.0), atol=1e-12)
     assert level_rotation([0.0, 0.0, 2.0]) == pytest.approx(np.eye(3))
+
+
+@pytest.mark.parametrize(("band", "surface"), [((-1.0, 1.5), 0.05), ((-0.2, 0.3), 0.5)])
+def test_the_compiled_plan_ranges_agree_with_their_numpy_reference(
+    band: tuple[float, float], surface: float
+) -> None:
+    # Each bearing's mean range of its nearest surface, compiled and in numpy: the same
+    # bins seen, the same ranges to rounding.
+    from mast.core._kernels import plan_ranges
+    from mast.pipeline.plan_view import _plan_ranges_reference
+
+    walls, _ = paper_walls("convergent")
+    truth = Pose3D.from_degrees(7.0, 7.0, 1.2, 30.0, 6.0, -4.0)
+    frame = cast(truth, walls, noise_m=0.02, seed=4)
+    L = level_rotation(truth.rotation.T @ np.array([0.0, 0.0, 1.0]) + [0.02, -0.01, 0.0])
+    n = 1440
+    step = 2.0 * math.pi / n
+    got = plan_ranges(frame.points, L, band[0], band[1], n, step, surface)
+    want = _plan_ranges_reference(frame.points, L, band[0], band[1], n, step, surface)
+    np.testing.assert_array_equal(np.isnan(got), np.isnan(want))
+    assert np.count_nonzero(np.isfinite(want)) > 500
+    np.testing.assert_allclose(got, want, rtol=1e-12, equal_nan=True)

@@ -50,8 +50,10 @@ __all__ = [
     "panel_rows3d",
     "partition_dp",
     "penalty",
+    "plan_ranges",
     "range_rows",
     "ray_association",
+    "rays3d",
     "reach_tallies",
     "rebreak",
     "robust_gate",
@@ -4021,6 +4023,87 @@ def _floors3d(
     return out
 
 
+def _plan_ranges(
+    points: NDArray[np.float64],
+    L: NDArray[np.float64],
+    low: float,
+    high: float,
+    n: int,
+    step: float,
+    surface: float,
+) -> NDArray[np.float64]:
+    """The plan view's ranges (``plan_view.plan_scan``; its numpy reference
+    ``plan_view._plan_ranges_reference``): the ``points`` levelled by ``L`` between the
+    heights ``low`` and ``high``, binned by bearing from -pi in ``n`` bins of ``step``;
+    per bin, the mean range of the returns within ``surface`` of its nearest (NaN for
+    none)."""
+    m = points.shape[0]
+    bins = np.empty(m, dtype=np.intp)
+    r = np.empty(m)
+    nearest = np.full(n, np.inf)
+    kept = 0
+    for q in range(m):
+        px, py, pz = points[q, 0], points[q, 1], points[q, 2]
+        z = px * L[2, 0] + py * L[2, 1] + pz * L[2, 2]
+        if not (z >= low and z <= high):
+            continue
+        x = px * L[0, 0] + py * L[0, 1] + pz * L[0, 2]
+        y = px * L[1, 0] + py * L[1, 1] + pz * L[1, 2]
+        b = math.floor((math.atan2(y, x) + math.pi) / step) % n
+        bins[kept] = b
+        r[kept] = math.hypot(x, y)
+        if r[kept] < nearest[b]:
+            nearest[b] = r[kept]
+        kept += 1
+    total = np.zeros(n)
+    count = np.zeros(n)
+    for q in range(kept):
+        b = bins[q]
+        if r[q] <= nearest[b] + surface:
+            total[b] += r[q]
+            count[b] += 1.0
+    out = np.full(n, np.nan)
+    for b in range(n):
+        if count[b] > 0:
+            out[b] = total[b] / count[b]
+    return out
+
+
+def _rays3d(
+    rel: NDArray[np.float64],
+    origin: NDArray[np.float64],
+    i: NDArray[np.intp],
+    k: NDArray[np.intp],
+    normal: NDArray[np.float64],
+    offset: NDArray[np.float64],
+    start: NDArray[np.float64],
+    along: NDArray[np.float64],
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """Where the ray from ``origin`` to each return ``origin + rel[i]`` crosses the plane
+    of panel ``k`` (``normal``, ``offset``; from ``start`` along ``along``): how far
+    along the ray (1 at the return), along the panel and at what elevation
+    (``adjust3d.PanelPlanes._rays``; its numpy reference
+    ``PanelPlanes._rays_reference``)."""
+    panels = offset.shape[0]
+    o0, o1, o2 = origin[0], origin[1], origin[2]
+    plane = np.empty(panels)
+    ahead = np.empty(panels)
+    for q in range(panels):
+        plane[q] = offset[q] - (normal[q, 0] * o0 + normal[q, 1] * o1)
+        ahead[q] = (o0 - start[q, 0]) * along[q, 0] + (o1 - start[q, 1]) * along[q, 1]
+    m = i.shape[0]
+    s = np.empty(m)
+    t = np.empty(m)
+    z = np.empty(m)
+    for j in range(m):
+        q, r = k[j], i[j]
+        rx, ry = rel[r, 0], rel[r, 1]
+        s[j] = plane[q] / (rx * normal[q, 0] + ry * normal[q, 1])
+        z[j] = o2 + s[j] * rel[r, 2]
+        t[j] = ahead[q] + s[j] * (rx * along[q, 0] + ry * along[q, 1])
+    return s, t, z
+
+
 #: Compiled on first use (numba's own types; mypy sees plain callables).
 #: ``error_model="numpy"``: no division-by-zero checks in the loop (every divisor is
 #: positive), so that it vectorises.
@@ -4124,15 +4207,22 @@ nearest_by_bearing: Callable[..., Any] = njit(cache=True, nogil=True)(_nearest_b
 _nearest_by_bearing_jit = nearest_by_bearing
 odometry_fit: Callable[..., Any] = njit(cache=True, nogil=True)(_odometry_fit)
 panel_rows3d: Callable[..., None] = njit(cache=True, nogil=True)(_panel_rows3d)
-top_edges3d: Callable[..., Any] = njit(cache=True, nogil=True)(_top_edges3d)
-brackets3d: Callable[..., Any] = njit(cache=True, nogil=True)(_brackets3d)
+#: The 3D kernels divide by a ray's incidence on a panel's plane, zero where the ray runs
+#: along it: ``error_model="numpy"`` gives numpy's infinities and NaNs there, as their
+#: references do, rather than an exception.
+top_edges3d: Callable[..., Any] = njit(cache=True, nogil=True, error_model="numpy")(_top_edges3d)
+brackets3d: Callable[..., Any] = njit(cache=True, nogil=True, error_model="numpy")(_brackets3d)
 _brackets3d_jit = brackets3d
 _panel_rows3d_jit = panel_rows3d
 rotation_derivatives: Callable[..., NDArray[np.float64]] = njit(cache=True, nogil=True)(
     _rotation_derivatives
 )
 _rotation_derivatives_jit = rotation_derivatives
-gauss_newton3d: Callable[..., int] = njit(cache=True, nogil=True)(_gauss_newton3d)
+gauss_newton3d: Callable[..., int] = njit(cache=True, nogil=True, error_model="numpy")(
+    _gauss_newton3d
+)
 assigns3d: Callable[..., NDArray[np.intp]] = njit(cache=True, nogil=True)(_assigns3d)
 contiguous3d: Callable[..., NDArray[np.bool_]] = njit(cache=True, nogil=True)(_contiguous3d)
 floors3d: Callable[..., NDArray[np.float64]] = njit(cache=True, nogil=True)(_floors3d)
+plan_ranges: Callable[..., NDArray[np.float64]] = njit(cache=True, nogil=True)(_plan_ranges)
+rays3d: Callable[..., Any] = njit(cache=True, nogil=True, error_model="numpy")(_rays3d)

@@ -42,7 +42,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from mast.core._kernels import assigns3d, brackets3d, gauss_newton3d, top_edges3d
+from mast.core._kernels import assigns3d, brackets3d, gauss_newton3d, rays3d, top_edges3d
 from mast.core.beacon import Survey
 from mast.core.frames import yaw_of_azimuth
 from mast.core.pose import normalize_azimuth
@@ -369,6 +369,14 @@ class PanelPlanes:
         o = np.asarray(origin, dtype=float).reshape(3)
         if not isinstance(pairs, _Pairs):
             pairs = self._pairs(pairs)
+        s, t, z = rays3d(rel, o, pairs.i, pairs.k, self.normal, self.offset, self.start, self.along)
+        return _Rays(o, rel, pairs.i, pairs.k, s, t, z)
+
+    def _rays_reference(
+        self, rel: NDArray[np.float64], origin: NDArray[np.float64], pairs: _Pairs
+    ) -> _Rays:
+        """The numpy reference of :meth:`_rays` (of :func:`mast.core._kernels.rays3d`)."""
+        o = np.asarray(origin, dtype=float).reshape(3)
         k = pairs.k
         (nx, ny), (ax, ay) = pairs.normal, pairs.along
         r = np.take(rel, pairs.i, axis=0)  # a 2D array's rows: take is 4x fancy indexing

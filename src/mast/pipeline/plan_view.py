@@ -29,6 +29,7 @@ import math
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from mast.core._kernels import plan_ranges
 from mast.core.pose3d import Frame3D
 from mast.core.scan import Scan
 from mast.errors import InputError
@@ -70,14 +71,36 @@ def plan_scan(
     low, high = band
     if not low < high:
         raise InputError(f"plan-view band {band}: the lower bound must be below the upper")
-    p = frame.points @ level_rotation(up).T
-    keep = (p[:, 2] >= low) & (p[:, 2] <= high)
-    x, y = p[keep, 0], p[keep, 1]
-    r = np.hypot(x, y)
     step = math.radians(resolution_deg)
     n = round(2.0 * math.pi / step)
     step = 2.0 * math.pi / n
     angle_min = -math.pi + step / 2
+    points = np.ascontiguousarray(frame.points, dtype=np.float64)
+    ranges = plan_ranges(points, level_rotation(up), low, high, n, step, surface_m)
+    return Scan.from_laserscan(
+        angle_min=angle_min,
+        angle_increment=step,
+        ranges=ranges,
+        stamp_ns=frame.stamp_ns,
+        frame_id=frame.frame_id,
+    )
+
+
+def _plan_ranges_reference(
+    points: NDArray[np.float64],
+    L: NDArray[np.float64],
+    low: float,
+    high: float,
+    n: int,
+    step: float,
+    surface: float,
+) -> NDArray[np.float64]:
+    """The numpy reference of :func:`mast.core._kernels.plan_ranges`, the ranges of
+    :func:`plan_scan`."""
+    p = points @ L.T
+    keep = (p[:, 2] >= low) & (p[:, 2] <= high)
+    x, y = p[keep, 0], p[keep, 1]
+    r = np.hypot(x, y)
     ranges = np.full(n, np.nan)
     if r.size:
         bins = (np.floor((np.arctan2(y, x) + math.pi) / step).astype(np.int32) % n).astype(np.int16)
@@ -86,17 +109,11 @@ def plan_scan(
         starts = np.flatnonzero(np.r_[True, bins[1:] != bins[:-1]])
         counts = np.diff(np.r_[starts, r.size])
         nearest = np.repeat(np.minimum.reduceat(r, starts), counts)
-        near = r <= nearest + surface_m  # the nearest surface of each bin
+        near = r <= nearest + surface  # the nearest surface of each bin
         total = np.add.reduceat(np.where(near, r, 0.0), starts)
         count = np.add.reduceat(near.astype(np.float64), starts)
         ranges[bins[starts]] = total / count
-    return Scan.from_laserscan(
-        angle_min=angle_min,
-        angle_increment=step,
-        ranges=ranges,
-        stamp_ns=frame.stamp_ns,
-        frame_id=frame.frame_id,
-    )
+    return ranges
 
 
 def estimate_up(
