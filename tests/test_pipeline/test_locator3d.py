@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 from numpy.typing import NDArray
 
-from mast.core._kernels import floors3d
+from mast.core._kernels import contiguous3d, floors3d
 from mast.core.beacon import Survey
 from mast.core.pose3d import Pose3D
 from mast.core.scan import Scan
@@ -162,11 +162,17 @@ def test_the_compiled_runs_of_heights_and_floors_agree_with_their_numpy_referenc
             on = np.flatnonzero(which == k)
             lo = float(rng.uniform(z[on].min(), z[on].max()))
             which[on[(z[on] > lo) & (z[on] < lo + 0.3)]] = -1
+        rays = planes._rays(grid - pose.position, pose.position, planes.local(grid, 1.0))
+        rays, j = planes._own(rays, which)
+        k, at = rays.k[j], rays.i[j]
+        h = rays.s[j] * rays.rel[at, 2]
         for spacing in (math.radians(0.5), math.radians(2.0)):
-            got = _contiguous(which, grid, pose.position, planes, spacing)
-            want = _contiguous_reference(which, grid, pose.position, planes, spacing)
+            got = contiguous3d(k, at, h, rays.reach, len(planes), spacing)
+            want = _contiguous_reference(k, at, h, rays.reach, len(planes), spacing)
             np.testing.assert_array_equal(got, want)
-            cut += int(np.count_nonzero((got < 0) & (which >= 0)))
+            kept = _contiguous(which, grid, pose.position, planes, spacing, rays)
+            np.testing.assert_array_equal(kept[at[got]], -1)
+            cut += int(np.count_nonzero(got))
         about = planes.local(grid, 1.5)
         flat = np.concatenate(about)
         first = np.cumsum([0] + [len(idx) for idx in about], dtype=np.intp)

@@ -3551,8 +3551,9 @@ def _top_edges3d(
     ``start`` along ``along`` for ``length``; tops ``top``), each panel's highest hit
     (a return ``which`` gives it, within ``hit_gate`` of its plane, inside ``lo``..``hi``
     along it; the least return at a tie) and its lowest crossing over above that hit
-    (the wall behind the plane by ``gate`` or more, on the far side from the sensor,
-    inside ``inset`` of either end; the first pair at a tie), both heights where the
+    (a ray crossing the plane before its return, ``0 < s < 1``, returning from the
+    wall behind the plane by ``gate`` or more, on the far side from the sensor, inside
+    ``inset`` of either end; the first pair at a tie), both heights where the
     rays cross the plane. Returns the panels with both (ascending), their hits' and
     crossings' returns, and whether every return ``which`` gives a panel is paired with
     it (if not, the reference's fallback must answer)."""
@@ -3854,9 +3855,10 @@ def _assigns3d(
     the returns' ``reach`` and ``grid`` places). A pair is within ``gate`` along its
     ray; its crossing within ``reach_m`` of the sensor's ``height`` (where finite), not
     above ``cap`` (where ``capped``), not below ``floor`` (where ``floored``); ``boxed``
-    (where so) when it crosses below ``inner`` and above ``boxes`` (no wall test
-    there); inside the extent, alone there or the only one ``turned`` to the sensor;
-    and, unless boxed, nearer its panel's plane than its beacon's ``wall``."""
+    (where so) when it crosses below ``inner`` and above ``boxes`` (the heights the
+    panel's returns show it at, plus the top margin: no wall test there); inside the
+    extent, alone there or the only one ``turned`` to the sensor; and, unless boxed,
+    nearer its panel's plane than its beacon's ``wall``."""
     n = grid.shape[0]
     m = i.shape[0]
     clears = lo.shape[0]

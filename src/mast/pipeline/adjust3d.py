@@ -262,6 +262,8 @@ class PanelPlanes:
             inner = np.fmin(self.top, cap) - top_margin_m
             inner = np.where(np.isfinite(boxes) & np.isfinite(self.top), inner, -math.inf)
             above = boxes + top_margin_m
+        if not clears_m:
+            return []
         extents = [self._inside_all(clear) for clear in clears_m]
         out = assigns3d(
             rays.i, rays.k, rays.s, rays.t, rays.z, rays.reach, grid, gate_m,
@@ -915,9 +917,9 @@ class _TopEdges:
     ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
         """Per beacon (see :func:`_brackets`), the middle, its variance and the
         derivatives (beacons, 6) of its residual, from the frame's returns ``p`` (its
-        :attr:`rows` those of the rays) seen from the sensor at ``origin`` turned by
-        ``D[0]`` (R and its derivatives by roll, pitch and yaw, as
-        :func:`_derivatives`): :meth:`brackets_reference` in one compiled pass."""
+        :attr:`rows` those of the rays) seen from the sensor at ``origin``, ``D`` the
+        pose's R and its derivatives by roll, pitch and yaw (as :func:`_derivatives`):
+        :meth:`brackets_reference` in one compiled pass."""
         return brackets3d(  # type: ignore[no-any-return]
             p, self.rows, self.ray, D, origin, self.normal[0], self.normal[1], self.offset,
             self.top, self.member, BEAM_ANGLE_SIGMA,

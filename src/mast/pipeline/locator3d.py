@@ -313,33 +313,28 @@ def _contiguous(
 
 
 def _contiguous_reference(
-    which: NDArray[np.intp],
-    grid: NDArray[np.float64],
-    origin: NDArray[np.float64],
-    planes: PanelPlanes,
+    k: NDArray[np.intp],
+    i: NDArray[np.intp],
+    h: NDArray[np.float64],
+    reach: NDArray[np.float64],
+    panels: int,
     spacing_rad: float,
-    rays: _Rays | None = None,
-) -> NDArray[np.intp]:
-    """The numpy reference of :func:`_contiguous` (of
-    :func:`mast.core._kernels.contiguous3d`)."""
-    out = which.copy()
-    if rays is None:
-        o = np.asarray(origin, dtype=float).reshape(3)
-        rays = planes._rays(grid - o, o, _panel_lists(which, len(planes)))
-    rays, j = planes._own(rays, which)
-    if j.size == 0:
-        return out
+) -> NDArray[np.bool_]:
+    """The numpy reference of :func:`mast.core._kernels.contiguous3d` (the returns
+    :func:`_contiguous` drops), on the same arrays (``panels`` is the kernel's; here
+    the runs of ``k`` say which panels there are)."""
+    drop = np.zeros(len(k), dtype=np.bool_)
+    if not len(k) or not panels:
+        return drop
     # every panel's returns at once: by panel, and by height within it
-    k, i = rays.k[j], rays.i[j]
-    h = rays.s[j] * rays.rel[i, 2]
     by_height = np.lexsort((h, k))
     k, i, h = k[by_height], i[by_height], h[by_height]
     first, count = _runs(k)
     panel = np.repeat(np.arange(len(first)), count)  # each return's panel, 0.. here
     at = np.arange(len(k)) - first[panel]  # its place by height on its panel
-    reach = rays.reach[i]
-    reach = reach[np.lexsort((reach, k))]
-    gap = 1.5 * spacing_rad * _sorted_medians(reach, first, count) + 0.05
+    ranges = reach[i]
+    ranges = ranges[np.lexsort((ranges, k))]
+    gap = 1.5 * spacing_rad * _sorted_medians(ranges, first, count) + 0.05
     middle = np.bincount(panel[h < _sorted_medians(h, first, count)[panel]], minlength=len(first))
     # the gaps (between a return and the next up) wider than that, below the median
     # height and from it up: the run is from the highest below to the lowest above
@@ -349,8 +344,8 @@ def _contiguous_reference(
     np.maximum.at(lo, panel[wide[below]], at[wide[below]] + 1)
     hi = count.copy()
     np.minimum.at(hi, panel[wide[~below]], at[wide[~below]] + 1)
-    out[i[(at < lo[panel]) | (at >= hi[panel])]] = -1
-    return out
+    drop[by_height[(at < lo[panel]) | (at >= hi[panel])]] = True
+    return drop
 
 
 def _plate_floors(

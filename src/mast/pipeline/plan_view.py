@@ -103,8 +103,10 @@ def _plan_ranges_reference(
     r = np.hypot(x, y)
     ranges = np.full(n, np.nan)
     if r.size:
-        bins = (np.floor((np.arctan2(y, x) + math.pi) / step).astype(np.int32) % n).astype(np.int16)
-        order = np.argsort(bins, kind="stable")  # a radix sort, on 16-bit keys
+        bins = np.floor((np.arctan2(y, x) + math.pi) / step).astype(np.int32) % n
+        if n <= 1 << 15:
+            bins = bins.astype(np.int16)  # a radix sort below, on 16-bit keys
+        order = np.argsort(bins, kind="stable")
         bins, r = bins[order], r[order]
         starts = np.flatnonzero(np.r_[True, bins[1:] != bins[:-1]])
         counts = np.diff(np.r_[starts, r.size])
