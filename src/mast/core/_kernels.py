@@ -3559,13 +3559,11 @@ def _top_edges3d(
     it (if not, the reference's fallback must answer)."""
     n_k = offset.shape[0]
     o0, o1 = origin[0], origin[1]
-    plane = np.empty(n_k)
-    ahead = np.empty(n_k)
     side = np.empty(n_k)
     for k in range(n_k):
-        plane[k] = offset[k] - (normal[k, 0] * o0 + normal[k, 1] * o1)
-        ahead[k] = (o0 - start[k, 0]) * along[k, 0] + (o1 - start[k, 1]) * along[k, 1]
         side[k] = o0 * normal[k, 0] + o1 * normal[k, 1] - offset[k]
+    # where each pair's ray crosses its panel's plane: along the ray, along the panel
+    cross, along_panel, _ = _rays3d_jit(rel, origin, pi, pk, normal, offset, start, along)
     hit = np.full(n_k, np.inf)
     seen = np.zeros(n_k, dtype=np.bool_)  # a hit chosen (its height may be NaN)
     ray_of = np.full(n_k, -1, dtype=np.intp)
@@ -3576,10 +3574,8 @@ def _top_edges3d(
         if which[i] != k:
             continue
         own += 1
-        rx, ry = rel[i, 0], rel[i, 1]
-        s = plane[k] / (rx * normal[k, 0] + ry * normal[k, 1])
-        t = ahead[k] + s * (rx * along[k, 0] + ry * along[k, 1])
-        across = (rx + o0) * normal[k, 0] + (ry + o1) * normal[k, 1] - offset[k]
+        s, t = cross[j], along_panel[j]
+        across = (rel[i, 0] + o0) * normal[k, 0] + (rel[i, 1] + o1) * normal[k, 1] - offset[k]
         if not (abs(across) <= hit_gate and t > lo[k] and t < hi[k] and np.isfinite(top[k])):
             continue
         h = s * rel[i, 2]
@@ -3605,12 +3601,10 @@ def _top_edges3d(
         i, k = pi[j], pk[j]
         if not np.isfinite(hit[k]):
             continue
-        rx, ry = rel[i, 0], rel[i, 1]
-        s = plane[k] / (rx * normal[k, 0] + ry * normal[k, 1])
+        s, t = cross[j], along_panel[j]
         if not (s > 0.0 and s < 1.0):
             continue
-        t = ahead[k] + s * (rx * along[k, 0] + ry * along[k, 1])
-        across = (rx + o0) * normal[k, 0] + (ry + o1) * normal[k, 1] - offset[k]
+        across = (rel[i, 0] + o0) * normal[k, 0] + (rel[i, 1] + o1) * normal[k, 1] - offset[k]
         h = s * rel[i, 2]
         if (
             t > inset[k]
@@ -4228,3 +4222,4 @@ contiguous3d: Callable[..., NDArray[np.bool_]] = njit(cache=True, nogil=True)(_c
 floors3d: Callable[..., NDArray[np.float64]] = njit(cache=True, nogil=True)(_floors3d)
 plan_ranges: Callable[..., NDArray[np.float64]] = njit(cache=True, nogil=True)(_plan_ranges)
 rays3d: Callable[..., Any] = njit(cache=True, nogil=True, error_model="numpy")(_rays3d)
+_rays3d_jit = rays3d

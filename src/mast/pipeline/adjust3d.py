@@ -250,6 +250,8 @@ class PanelPlanes:
         :meth:`seen`) and the top are known, a crossing between them, each ``top_margin_m``
         inside, is the panel's without the wall test. In one compiled pass
         (:meth:`_assigns_reference` in numpy)."""
+        if not clears_m:
+            return []
         cap = np.full(len(self), math.inf)
         if math.isfinite(top_margin_m):
             cap = np.where(np.isfinite(self.top), self.top + top_margin_m, math.inf)
@@ -262,8 +264,6 @@ class PanelPlanes:
             inner = np.fmin(self.top, cap) - top_margin_m
             inner = np.where(np.isfinite(boxes) & np.isfinite(self.top), inner, -math.inf)
             above = boxes + top_margin_m
-        if not clears_m:
-            return []
         extents = [self._inside_all(clear) for clear in clears_m]
         out = assigns3d(
             rays.i, rays.k, rays.s, rays.t, rays.z, rays.reach, grid, gate_m,
@@ -779,11 +779,7 @@ def _top_edges(
         rays = planes._rays(rel, origin, local or planes._everywhere(len(grid)))
     own, j = planes._own(rays, which)
     n, d = planes.normal, planes.offset
-    # well inside: a ray just past a panel's side passes beside it, not over it; and
-    # near a free end the wall just above the panel is within the gate of its plane
-    # (and rough rock bulges towards it by up to ROCK_M)
-    inset = np.maximum(inset_m, 0.1 * planes.length)
-    lo, hi = planes._inside_all(gate_m + ROCK_M, inset)
+    inset, lo, hi = _top_extents(planes, gate_m, inset_m)
     # a hit well within the gate: the wall just above a panel, behind it by the
     # beacon's depth, may be within the gate, and is no hit
     k, i, t = own.k[j], own.i[j], own.t[j]
@@ -816,6 +812,19 @@ def _top_edges(
         order[np.concatenate([[True], k[c[order[1:]]] != k[c[order[:-1]]]])] if c.size else order
     )
     return [(int(k[c[f]]), int(ray_of[k[c[f]]]), int(i[c[f]])) for f in first]
+
+
+def _top_extents(
+    planes: PanelPlanes, gate_m: float, inset_m: float = 0.05
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """Where along each panel :func:`_top_edges` looks: a crossing over ``inset`` (at
+    least ``inset_m``, a tenth of the panel) in from either end, a hit between ``lo``
+    and ``hi``. Well inside: a ray just past a panel's side passes beside it, not over
+    it; and near a free end the wall just above the panel is within the gate of its
+    plane (and rough rock bulges towards it by up to :data:`ROCK_M`)."""
+    inset = np.maximum(inset_m, 0.1 * planes.length)
+    lo, hi = planes._inside_all(gate_m + ROCK_M, inset)
+    return inset, lo, hi
 
 
 def _height_gradients(
@@ -1123,8 +1132,7 @@ def _chosen_tops(
         pairs = planes._pairs(planes._everywhere(len(p)))
     # _top_edges in one compiled pass over the pairs (its numpy reference), unless a
     # return is given a panel it is not paired with (the reference then pairs them)
-    inset = np.maximum(0.05, 0.1 * planes.length)
-    lo, hi = planes._inside_all(gate_m + ROCK_M, inset)
+    inset, lo, hi = _top_extents(planes, gate_m)
     k, hit, over, paired = top_edges3d(
         rel, origin, which, pairs.i, pairs.k, planes.normal, planes.offset, planes.start,
         planes.along, planes.length, planes.top, lo, hi, inset, HIT_SHARE * gate_m, gate_m,
