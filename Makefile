@@ -41,9 +41,10 @@ browser:
 		echo "note: no chromium and not root (or no apt-get): install chromium to run the HTML report render test"; \
 	fi
 
-# Two to four processes, a test file to each (its module fixtures built once).
+# Two to four processes, a test file to each (its module fixtures built once), but the
+# heaviest tests spread and sent first (tests/conftest.py: SPREAD).
 pytest: $(DEVSTAMP) browser
-	$(BIN)/python -m pytest -n auto --maxprocesses 4 --dist loadfile
+	$(BIN)/python -m pytest -n auto --maxprocesses 4 --dist loadscope
 
 test: lint typecheck pytest
 

@@ -197,9 +197,9 @@ def test_the_window_search_ranks_and_picks_its_poses_as_the_reference(
             math.radians(tol_deg),
         )
         pts = sim.scan.points()[1]
+        want = _reference_prior_hypotheses(pts, panels, prior, sim.scan.range_max_m)
         for _ in range(2):  # built, then from the cache
             got = prior_hypotheses(pts, panels, prior, sim.scan.range_max_m)
-            want = _reference_prior_hypotheses(pts, panels, prior, sim.scan.range_max_m)
             assert [len(b) for b in got] == [len(b) for b in want]
             assert len(got[0]) > 0
             for g, w in zip([h for b in got for h in b], [h for b in want for h in b], strict=True):
