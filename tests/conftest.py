@@ -73,9 +73,8 @@ def pytest_sessionstart(session: pytest.Session) -> None:
 
 def _compile_kernels() -> None:
     """Every kernel the 2D locator, the odometry and the 3D locator call, through them."""
-    from mast.cli.warmup import compile_3d, compile_all
+    from mast.cli.warmup import compile_3d
 
-    compile_all()
     compile_3d()
 
 

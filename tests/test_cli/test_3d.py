@@ -275,6 +275,44 @@ def test_live_replays_a_pointcloud2_topic(
     assert "located in 3D" in done.stderr
 
 
+def test_the_3d_warm_up_fixes_the_demos_frame() -> None:
+    """The frame :func:`compile_3d` locates is fixed: every 3D stage and its kernels ran."""
+    from mast.cli.warmup import compile_3d
+
+    assert compile_3d() is True
+
+
+def test_live_compiles_the_3d_kernels_before_the_first_frame(
+    lidar_run: dict[str, Any], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A 3D lidar's first frame does not wait for the compiler: ``mast live`` warms the 3D
+    kernels up before it takes frames (in this process, to see the order of calls)."""
+    from typer.testing import CliRunner
+
+    import mast.cli.warmup
+    from mast.cli.root import app
+    from mast.runs.frames3d import FrameLocator
+
+    calls: list[str] = []
+    monkeypatch.setattr(mast.cli.warmup, "compile_3d", lambda: calls.append("warm-up") or True)
+    locate = FrameLocator.locate
+
+    def located(self: FrameLocator, *args: Any, **kwargs: Any) -> Any:
+        calls.append("frame")
+        return locate(self, *args, **kwargs)
+
+    monkeypatch.setattr(FrameLocator, "locate", located)
+    folder = lidar_run["folder"]
+    done = CliRunner().invoke(
+        app,
+        ["live", f"replay://{folder / 'run.bag'}?topic=/points&rate=100",
+         "-b", str(folder / "beacons.csv"), "--scanner", "vlp16", "--max-scans", "1"],
+    )  # fmt: skip
+    assert done.exit_code == 0, done.output
+    assert calls[:2] == ["warm-up", "frame"]
+    assert calls.count("warm-up") == 1
+
+
 def test_a_2d_bag_is_located_as_before(validator: jsonschema.Draft202012Validator) -> None:
     examples = Path(__file__).resolve().parents[2] / "examples"
     done = run_mast_text(

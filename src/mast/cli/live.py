@@ -258,6 +258,7 @@ def run_frames(
     import json
 
     from mast.cli.options import lidar_config
+    from mast.cli.warmup import compile_3d
     from mast.live.session import run_live3d
     from mast.runs.frames3d import FrameLocator, check_elevations
 
@@ -278,6 +279,7 @@ def run_frames(
     def record(fix: Fix3D, index: int, frame: Frame3D, now: ReportInputs) -> dict[str, Any]:
         return locator.record(fix, source=setup.source, index=index, frame=frame, inputs=now)
 
+    compile_3d()  # the first frame is located as fast as the rest
     with signals_as_flag() as (interrupt, caught):
         summary = run_live3d(
             frames,

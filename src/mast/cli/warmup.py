@@ -43,15 +43,17 @@ def compile_all() -> None:
 
 def compile_3d() -> bool:
     """Compile (or load from the cache) the 3D locator's kernels, and the 2D ones its
-    plan views call, by locating the simulated VLP-16 frame ``mast demo`` locates (a
-    frame owed a fix, so that every stage runs). ``mast live`` calls this before a 3D
-    lidar's first frame: without it, that frame waits for the compiler (about a minute
-    where nothing is cached yet). Returns whether the frame was fixed (it is: a test
-    holds the simulator to it)."""
+    plan views call (:func:`compile_all`: one frame's plan views need not meet every
+    2D kernel), by locating the simulated VLP-16 frame ``mast demo`` locates (a frame
+    owed a fix, so that every stage runs). ``mast live`` calls this before a 3D lidar's
+    first frame: without it, that frame waits for the compiler (about a minute and a
+    half where nothing is cached yet). Returns whether the frame was fixed (it is: a
+    test holds the simulator to it)."""
     from mast.cli.demo import DEMO_3D_FRAME, DEMO_3D_SEED
     from mast.pipeline.locator3d import Locator3DConfig, locate3d
     from mast.sim.lidar3d import random_drift_scene
 
+    compile_all()
     scene = random_drift_scene(
         DEMO_3D_SEED, frames=DEMO_3D_FRAME + 1, lidar="vlp16", range_sigma_m=0.02
     )
