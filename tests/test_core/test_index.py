@@ -193,3 +193,37 @@ def test_pairs_to_look_up_match_the_reference_and_a_walk(designs: int) -> None:
         assert not (inside and (i, j) not in kept)
         assert not (outside and (i, j) in kept)
     assert 0 < len(kept) < plain[0].size
+
+
+@pytest.mark.parametrize("designs", [1, 3, 40])
+def test_pairs_rows_are_each_pairs_rows_in_turn(designs: int) -> None:
+    """The look-up of many pairs of keys at once gives each pair's rows (keys either way
+    round), in its order, one pair after another."""
+    survey = _survey(90, designs, seed=designs)
+    index = SurveyIndex.from_survey(survey)
+    rng = np.random.default_rng(designs + 10)
+    ids = survey.ids
+    n = 300
+    picks = [(ids[int(rng.integers(len(ids)))], ids[int(rng.integers(len(ids)))]) for _ in range(n)]
+    edges = rng.choice(NODE_EDGES, size=(n, 2))
+    d = np.where(rng.random(n) < 0.5, rng.uniform(0.2, 60.0, n), 12.0 * rng.integers(1, 5, n))
+    tol = rng.choice([0.0, 0.05, 2.0, 10.0], size=n)
+    keys_a = np.array(
+        [index.node_key(a, int(e)) for (a, _), e in zip(picks, edges[:, 0], strict=True)]
+    )
+    keys_b = np.array(
+        [index.node_key(b, int(e)) for (_, b), e in zip(picks, edges[:, 1], strict=True)]
+    )
+    which, rows_a, rows_b = index.pairs_rows(keys_a, keys_b, d, tol)
+    want_which, want_a, want_b = [], [], []
+    for k, ((a, b), (ea, eb), dk, tk) in enumerate(zip(picks, edges, d, tol, strict=True)):
+        ra, rb = index.pair_rows(a, int(ea), b, int(eb), float(dk), float(tk))
+        want_which += [k] * ra.size
+        want_a += ra.tolist()
+        want_b += rb.tolist()
+    assert which.tolist() == want_which
+    assert rows_a.tolist() == want_a
+    assert rows_b.tolist() == want_b
+    assert np.any(keys_a > keys_b)
+    assert np.any(keys_a < keys_b)
+    assert len(set(want_which)) > 10

@@ -94,3 +94,30 @@ def test_similarity_refuses_unpaired_points_and_keeps_tiny_ones_exact() -> None:
         np.array([[0.0, 0.0], [1e-160, 0.0]]), np.array([[0.0, 0.0], [1.0, 0.0]])
     )
     assert sim.scale == pytest.approx(1e160, rel=1e-12)
+
+
+def test_similarities_at_once_are_each_set_in_turn() -> None:
+    """Many sets of point pairs at once give each set's transformation, a degenerate set
+    (coincident scanner points: lstsq's minimum-norm answer) among them."""
+    from mast.pipeline.alignment import similarity_transforms
+
+    rng = np.random.default_rng(4)
+    p = rng.uniform(-30.0, 30.0, (40, 3, 2))
+    q = rng.uniform(5.0e5, 5.1e5, (40, 3, 2))
+    p[7] = p[7, 0]  # coincident
+    got = similarity_transforms(p, q)
+    for k, sim in enumerate(got):
+        pc, qc = p[k].mean(axis=0), q[k].mean(axis=0)
+        design = np.zeros((6, 2))
+        x, y = (p[k] - pc).T
+        design[0::2, 0], design[0::2, 1] = x, -y
+        design[1::2, 0], design[1::2, 1] = y, x
+        (a, b), *_ = np.linalg.lstsq(design, (q[k] - qc).reshape(-1), rcond=None)
+        R = np.array([[a, -b], [b, a]])
+        t = qc - R @ pc
+        assert sim.scale == pytest.approx(math.hypot(a, b), rel=1e-12, abs=1e-15)
+        assert sim.rotation_rad == pytest.approx(math.atan2(b, a), abs=1e-12)
+        np.testing.assert_allclose(sim.translation, t, rtol=0, atol=1e-9)
+        resid = q[k] - (p[k] @ R.T + t)
+        assert sim.rms_m == pytest.approx(math.sqrt(np.mean(np.sum(resid**2, axis=1))), rel=1e-9)
+    assert got[7].scale == 0.0

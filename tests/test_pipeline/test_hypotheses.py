@@ -130,3 +130,136 @@ def test_design_pairs_for_every_pair_of_candidates_at_once_match_one_at_a_time(
             rows += got[0].size
     assert compared >= 50
     assert rows > 0
+
+
+@pytest.mark.parametrize(("distinct", "survey_sigma_m"), [(False, 0.0), (True, 0.005)])
+def test_readings_of_every_node_pair_at_once_match_one_pair_at_a_time(
+    distinct: bool, survey_sigma_m: float
+) -> None:
+    """The survey's readings of a scan's node pairs, taken for every pair at once, are
+    those taken one pair at a time, in their order and to the last bit: drive scans
+    against their survey and against a mine of 300 beacons of repeated or of distinct
+    designs (so that pairs of keys are looked up both ways round)."""
+    import functools
+
+    from mast.bench.minewide import minewide_survey
+    from mast.core.index import SurveyIndex
+    from mast.pipeline.hypotheses import (
+        HypothesisConfig,
+        _PanelsSeen,
+        _readings,
+        _readings_reference,
+        node_covariance,
+    )
+    from mast.pipeline.identification import identify_panels
+    from mast.pipeline.segmentation import segment_scan
+    from mast.sim.drive import drive_scene
+
+    scene = drive_scene(3, scans=120)
+    mine = minewide_survey(
+        scene.survey,
+        [s.pose for s in scene.shots],
+        copies=300,
+        clearance_m=60.0,
+        rng=np.random.default_rng(5),
+        distinct=distinct,
+    )
+    config = HypothesisConfig()
+    compared = rows = ones = 0
+    for survey in (scene.survey, mine):
+        index = SurveyIndex.from_survey(survey)
+        for k, sim in enumerate(scene.iter_simulated()):
+            if k % 4:
+                continue
+            seg = segment_scan(sim.scan)
+            nodes = identify_panels(seg, index.representatives).nodes
+            covs = np.array([node_covariance(n, seg) for n in nodes]).reshape(-1, 2, 2)
+            seen = functools.cache(lambda i: _PanelsSeen.of(nodes[i], seg))  # noqa: B023
+            got = _readings(nodes, covs, seen, index, config, survey_sigma_m)
+            want = _readings_reference(nodes, covs, seen, index, config, survey_sigma_m)
+            for g, w in zip(got, want, strict=True):
+                np.testing.assert_array_equal(g, w)
+            compared += 1
+            rows += got[0].size
+            ones += int(np.count_nonzero(got[0]))
+    assert compared >= 50
+    assert rows > ones > 0
+
+
+def test_single_node_hypotheses_take_turns_over_every_look_alike() -> None:
+    """Each single-node hypothesis puts its node on the edge of the beacon it is taken
+    for, turned by its panels' rotations averaged by their weights; the nodes take
+    turns (lowest Table 1 option first), each over every beacon of its design in the
+    survey's order, up to the cap: drive scans against a mine of 300 copies of their
+    beacons, listed first, so that each node's design has dozens of look-alikes."""
+    from mast.bench.minewide import minewide_survey
+    from mast.core.index import SurveyIndex
+    from mast.core.pose import wrap_angles
+    from mast.pipeline.hypotheses import HypothesisConfig, pose_hypotheses
+    from mast.pipeline.identification import identify_panels
+    from mast.pipeline.segmentation import segment_scan
+    from mast.sim.drive import drive_scene
+
+    scene = drive_scene(3, scans=40)
+    mine = minewide_survey(
+        scene.survey,
+        [s.pose for s in scene.shots],
+        copies=300,
+        clearance_m=60.0,
+        rng=np.random.default_rng(5),
+        copies_first=True,
+    )
+    index = SurveyIndex.from_survey(mine)
+    config = HypothesisConfig(max_single_hypotheses=90)
+    checked = later = 0
+    for k, sim in enumerate(scene.iter_simulated()):
+        if k % 4:
+            continue
+        seg = segment_scan(sim.scan)
+        ident = identify_panels(seg, index.representatives)
+        nodes = ident.nodes
+        made = pose_hypotheses(ident, seg, index, config)
+        singles = [h for h in made if h.kind == "single"]
+        # the order: a round over the nodes with a panel (by option), each its next beacon
+        queues = []
+        for n in sorted(nodes, key=lambda n: n.option):
+            if any(n.identified):
+                queues.append([(n, b) for b in index.beacons_like(n.beacon)])
+        want = []
+        while queues and len(want) < config.max_single_hypotheses:
+            for q in queues:
+                if q:
+                    want.append(q.pop(0))
+            queues = [q for q in queues if q]
+        want = want[: config.max_single_hypotheses]
+        assert len(singles) == len(want)
+        for h, (n, b) in zip(singles, want, strict=True):
+            (got,) = h.nodes
+            assert (got.beacon, got.edge, got.segments) == (b, n.edge, n.segments)
+            # the rotation: each panel's, averaged by its direction's weight
+            beacon = mine[b]
+            turns = []
+            weights = []
+            for s, panel, ok in zip(n.segments, n.panels, n.identified, strict=True):
+                if ok:
+                    d = seg.segments[s].direction
+                    e0, e1 = beacon.edges[panel - 1], beacon.edges[panel]
+                    mine_angle = math.atan2(e1[1] - e0[1], e1[0] - e0[0]) + (
+                        0 if n.forward else math.pi
+                    )
+                    turns.append(mine_angle - math.atan2(d[1], d[0]))
+                    weights.append(1.0 / max(seg.segments[s].sigma_direction, 1e-9) ** 2)
+            turns_ = wrap_angles(np.array(turns))
+            mean = turns_[0] + np.sum(np.array(weights) * wrap_angles(turns_ - turns_[0])) / sum(
+                weights
+            )
+            assert math.remainder(h.similarity.rotation_rad - mean, 2 * math.pi) == pytest.approx(
+                0.0, abs=1e-12
+            )
+            c, s_ = math.cos(mean), math.sin(mean)
+            placed = np.array([[c, -s_], [s_, c]]) @ n.node_scanner + h.similarity.translation
+            np.testing.assert_allclose(placed, beacon.edges[n.edge - 1], rtol=0, atol=1e-8)
+            checked += 1
+            later += got.beacon != index.beacons_like(n.beacon)[0]
+    assert checked > 100
+    assert later > 50

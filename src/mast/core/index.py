@@ -453,15 +453,27 @@ class SurveyIndex:
         """For each pair of keys (either order), how many surveyed edge pairs lie
         ``distance_m`` apart within ``tolerance_m``: the length of what :meth:`pair_rows`
         returns, for many at once (a binary search in every bucket side by side)."""
-        count = np.zeros(np.shape(keys_a), dtype=np.intp)
-        if self._codes.size == 0 or count.size == 0:
-            return count
+        lo, hi = self._spans(keys_a, keys_b, distance_m, tolerance_m)
+        return hi - lo
+
+    def _spans(
+        self,
+        keys_a: NDArray[np.int64],
+        keys_b: NDArray[np.int64],
+        distance_m: NDArray[np.float64],
+        tolerance_m: NDArray[np.float64],
+    ) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+        """For each pair of keys (either order), where the surveyed edge pairs
+        ``distance_m`` apart within ``tolerance_m`` start and stop in the sorted pairs
+        (both 0 where there are none)."""
+        shape = np.shape(keys_a)
+        if self._codes.size == 0 or math.prod(shape) == 0:
+            return np.zeros(shape, dtype=np.intp), np.zeros(shape, dtype=np.intp)
         at, found = self._buckets_of(keys_a, keys_b)
         start, stop = self._starts[at], np.where(found, self._starts[at + 1], self._starts[at])
         lo = _first_at_least(self._pair_d, start, stop, distance_m - tolerance_m, strict=False)
         hi = _first_at_least(self._pair_d, start, stop, distance_m + tolerance_m, strict=True)
-        count[:] = hi - lo
-        return count
+        return lo, hi
 
     def pair_rows(
         self,
@@ -474,24 +486,50 @@ class SurveyIndex:
     ) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
         """Rows (see :meth:`row_xy`) of the surveyed edge pairs of these designs and edges,
         ``distance_m`` apart within ``tolerance_m``, in (distance, first row, second row)
-        order; the two edges of one beacon are among them."""
-        ka, kb = self.node_key(beacon_a, edge_a), self.node_key(beacon_b, edge_b)
-        flip = ka > kb
-        b = self._bucket(kb, ka) if flip else self._bucket(ka, kb)
-        if b is None:
-            empty = np.zeros(0, dtype=np.intp)
-            return empty, empty
-        lo = int(np.searchsorted(b.dist, distance_m - tolerance_m, side="left"))
-        hi = int(np.searchsorted(b.dist, distance_m + tolerance_m, side="right"))
-        if not flip:
-            return b.first[lo:hi], b.second[lo:hi]
+        order; the two edges of one beacon are among them (:meth:`pairs_rows` for one)."""
+        keys = np.array([self.node_key(beacon_a, edge_a)], dtype=np.int64)
+        _, rows_a, rows_b = self.pairs_rows(
+            keys,
+            np.array([self.node_key(beacon_b, edge_b)], dtype=np.int64),
+            np.array([distance_m]),
+            np.array([tolerance_m]),
+        )
+        return rows_a, rows_b
+
+    def pairs_rows(
+        self,
+        keys_a: NDArray[np.int64],
+        keys_b: NDArray[np.int64],
+        distance_m: NDArray[np.float64],
+        tolerance_m: NDArray[np.float64],
+    ) -> tuple[NDArray[np.intp], NDArray[np.intp], NDArray[np.intp]]:
+        """:meth:`pair_rows` for many pairs of keys (:meth:`node_key`) at once:
+        ``(which, rows_a, rows_b)``, one entry per surveyed edge pair found, by pair
+        (``which``, its place in the arguments), then by (distance, first row, second
+        row); a binary search in every bucket side by side."""
+        keys_a = np.asarray(keys_a, dtype=np.int64).ravel()
+        keys_b = np.asarray(keys_b, dtype=np.int64).ravel()
+        lo, hi = self._spans(keys_a, keys_b, distance_m, tolerance_m)
+        count = hi - lo
+        which = np.repeat(np.arange(keys_a.size, dtype=np.intp), count)
+        pos = lo[which] + (np.arange(which.size) - np.repeat(np.cumsum(count) - count, count))
+        first, second = self._pair_i[pos], self._pair_j[pos]
+        flip = (keys_a > keys_b)[which]
+        if not flip.any():
+            return which, first, second
         # stored the other way round: swap, and restore the (distance, a, b) order
-        d, i, j = b.dist[lo:hi], b.second[lo:hi], b.first[lo:hi]
-        order = np.lexsort((j, i, d))
-        return i[order], j[order]
+        rows_a, rows_b = np.where(flip, second, first), np.where(flip, first, second)
+        order = np.lexsort((rows_b, rows_a, self._pair_d[pos], which))
+        return which, rows_a[order], rows_b[order]
 
     def row_xy(self, rows: NDArray[np.intp]) -> NDArray[np.float64]:
         """(E, N) of the node edges at ``rows``."""
+        return self._row_xy[rows]
+
+    def edge_xy(self, numbers: NDArray[np.intp], edges: NDArray[np.intp]) -> NDArray[np.float64]:
+        """(E, N) of node edge ``edges[k]`` (2 or 3) of the beacon at survey position
+        ``numbers[k]``."""
+        rows = np.asarray(numbers) * len(NODE_EDGES) + np.asarray(edges) - NODE_EDGES[0]
         return self._row_xy[rows]
 
     def row_beacon(self, rows: NDArray[np.intp]) -> NDArray[np.intp]:

@@ -78,28 +78,47 @@ def similarity_transform(
         raise ValueError("a similarity transformation needs at least two points")
     if q.shape != p.shape:
         raise ValueError(f"{p.shape[0]} scanner points but {q.shape[0]} mine points")
-    pc, qc = p.mean(axis=0), q.mean(axis=0)
-    x, y = (p - pc).T
-    u, v = (q - qc).T
+    return similarity_transforms(p[None], q[None])[0]
+
+
+def similarity_transforms(
+    points_scanner: NDArray[np.float64], points_mine: NDArray[np.float64]
+) -> list[Similarity]:
+    """:func:`similarity_transform` for ``k`` sets of ``n >= 2`` point pairs at once
+    (shape (k, n, 2) each)."""
+    p = np.asarray(points_scanner, dtype=float)
+    q = np.asarray(points_mine, dtype=float)
+    pc, qc = p.mean(axis=1), q.mean(axis=1)
+    x, y = p[..., 0] - pc[:, None, 0], p[..., 1] - pc[:, None, 1]
+    u, v = q[..., 0] - qc[:, None, 0], q[..., 1] - qc[:, None, 1]
     with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
-        sum_sq = np.sum(x * x + y * y)
-        norm = float(sum_sq)
-        a = float(np.sum(x * u + y * v) / sum_sq)
-        b = float(np.sum(x * v - y * u) / sum_sq)
-    if not (_TINY <= norm < math.inf and math.isfinite(a) and math.isfinite(b)):
+        sum_sq = np.sum(x * x + y * y, axis=1)
+        a = np.sum(x * u + y * v, axis=1) / sum_sq
+        b = np.sum(x * v - y * u, axis=1) / sum_sq
+    solved = (sum_sq >= _TINY) & (sum_sq < math.inf) & np.isfinite(a) & np.isfinite(b)
+    for k in np.flatnonzero(~solved).tolist():
         # Coincident points, or coordinates whose squares underflow or overflow: lstsq's
         # answer (the minimum-norm one where nothing is constrained).
-        n = p.shape[0]
+        n = p.shape[1]
         design = np.zeros((2 * n, 2))
-        design[0::2, 0], design[0::2, 1] = x, -y
-        design[1::2, 0], design[1::2, 1] = y, x
-        (a, b), *_ = np.linalg.lstsq(design, np.column_stack([u, v]).reshape(-1), rcond=None)
-    scale = math.hypot(a, b)
-    rot = math.atan2(b, a)
-    R = np.array([[a, -b], [b, a]])
-    t = qc - R @ pc
-    resid = q - (p @ R.T + t)
-    return Similarity(scale, rot, t, float(np.sqrt(np.mean(np.sum(resid**2, axis=1)))))
+        design[0::2, 0], design[0::2, 1] = x[k], -y[k]
+        design[1::2, 0], design[1::2, 1] = y[k], x[k]
+        (a[k], b[k]), *_ = np.linalg.lstsq(
+            design, np.column_stack([u[k], v[k]]).reshape(-1), rcond=None
+        )
+    # t = qc - R pc, R = [[a, -b], [b, a]]; the residuals q - (R p + t)
+    t = np.stack(
+        [qc[:, 0] - (a * pc[:, 0] - b * pc[:, 1]), qc[:, 1] - (b * pc[:, 0] + a * pc[:, 1])],
+        axis=1,
+    )
+    a_, b_ = a[:, None], b[:, None]
+    rx = q[..., 0] - ((a_ * p[..., 0] - b_ * p[..., 1]) + t[:, None, 0])
+    ry = q[..., 1] - ((b_ * p[..., 0] + a_ * p[..., 1]) + t[:, None, 1])
+    rms = np.sqrt(np.mean(rx**2 + ry**2, axis=1))
+    return [
+        Similarity(math.hypot(ak, bk), math.atan2(bk, ak), tk, rk)
+        for ak, bk, tk, rk in zip(a.tolist(), b.tolist(), t, rms.tolist(), strict=True)
+    ]
 
 
 #: Smallest normal double: a sum of squares below it has lost its precision.

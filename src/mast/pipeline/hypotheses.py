@@ -26,16 +26,16 @@ from __future__ import annotations
 import functools
 import itertools
 import math
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, replace
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 from numpy.typing import NDArray
 
 from mast.core.index import SurveyIndex
 from mast.core.pose import wrap_angles
-from mast.pipeline.alignment import Similarity, similarity_transform
+from mast.pipeline.alignment import Similarity, similarity_transforms
 from mast.pipeline.identification import NodeMatch, PanelIdentification
 from mast.pipeline.segmentation import Segment, Segmentation
 
@@ -197,40 +197,58 @@ def major_sigma(cov: NDArray[np.float64]) -> float:
     return math.sqrt(max(0.5 * (a + c) + math.hypot(0.5 * (a - c), b), 0.0))
 
 
-def _single_hypotheses(
-    node: NodeMatch,
-    seen: _PanelsSeen,
-    beacons: Iterable[str],
-    node_sigma_m: float,
+def _singles(
+    nodes: Sequence[NodeMatch],
+    panels: _PanelsOfNodes,
+    which: NDArray[np.intp],
+    beacons: NDArray[np.intp],
     index: SurveyIndex,
-) -> Iterator[Hypothesis]:
-    """The pose one node and its identified panels (``seen``) imply on their own, the
-    node taken for each of ``beacons`` in turn (made as each is asked for);
-    ``node_sigma_m`` is the node's :func:`node_sigma`."""
-    if seen.panel.size == 0:
-        return
-    w = 1.0 / np.maximum(seen.sigma, 1e-9) ** 2
-    sum_w = np.sum(w)
-    sigma_rot = 1.0 / math.sqrt(float(sum_w))
-    spread = node_sigma_m + 2.0 * float(np.hypot(*node.node_scanner)) * sigma_rot
-    todo = iter(beacons)
-    # The rotations of a few beacons at a time (a mine's design may have thousands of
-    # look-alikes, of which a scan asks for a few): each row's weighted mean is the
-    # rotation, the same sums in the same order as one beacon's alone.
-    while chunk := list(itertools.islice(todo, _SINGLES_AT_ONCE)):
-        rots = seen.rotations(index, np.array([index.number(b) for b in chunk]))
-        ref = rots[:, 0]
-        mean = ref + np.sum(w * wrap_angles(rots - ref[:, None]), axis=1) / sum_w
-        for beacon, rot in zip(chunk, mean.tolist(), strict=True):
-            named = _renamed(node, beacon)
-            c, s = math.cos(rot), math.sin(rot)
-            edge = index.survey[beacon].edges[named.edge - 1]
-            t = edge - np.array([[c, -s], [s, c]]) @ named.node_scanner
-            sim = Similarity(1.0, _wrap(rot), np.asarray(t, dtype=float), 0.0)
-            yield Hypothesis((named,), sim, 0.0, "single", spread)
+) -> list[Hypothesis | None]:
+    """The pose each node ``which[r]`` and its identified panels (``panels``) imply on
+    their own, the node taken for beacon ``beacons[r]`` (survey positions; of its
+    design): the panels' rotations (mine vs scanner) averaged, weighted by their
+    directions' variances, and the node put on that beacon's edge; None for a node
+    without an identified panel. Its spread is the node's position error plus that
+    rotation's error over twice its range."""
+    r, _, ok = panels.rotations(index, which, beacons)
+    if r.shape[1] == 0:
+        return [None] * which.size
+    w = panels.weight[which]
+    ref = r[:, 0]
+    rot = ref + np.sum(w * wrap_angles(r - ref[:, None]), axis=1) / panels.sum_weight[which]
+    xy = np.array([nodes[k].node_scanner for k in which.tolist()], dtype=float).reshape(-1, 2)
+    edge = index.edge_xy(beacons, np.array([nodes[k].edge for k in which.tolist()]))
+    c, s = np.cos(rot), np.sin(rot)
+    tx = edge[:, 0] - (c * xy[:, 0] - s * xy[:, 1])
+    ty = edge[:, 1] - (s * xy[:, 0] + c * xy[:, 1])
+    sigma_rot = 1.0 / np.sqrt(panels.sum_weight[which])
+    spread = panels.major[which] + 2.0 * np.hypot(xy[:, 0], xy[:, 1]) * sigma_rot
+    return [
+        Hypothesis(
+            (_renamed(nodes[k], index.beacon_id(b)),),
+            Similarity(1.0, _wrap(a), np.array([x, y]), 0.0),
+            0.0,
+            "single",
+            sp,
+        )
+        if any_panel
+        else None
+        for k, b, a, x, y, sp, any_panel in zip(
+            which.tolist(),
+            beacons.tolist(),
+            rot.tolist(),
+            tx.tolist(),
+            ty.tolist(),
+            spread.tolist(),
+            np.asarray(ok.any(axis=1), dtype=bool).tolist(),
+            strict=True,
+        )
+    ]
 
 
-#: Beacons whose single-node hypotheses are computed together (:func:`_single_hypotheses`).
+#: A node's single-node hypotheses for the beacons of its design computed together
+#: after its first (a mine's design may have thousands of look-alikes, of which a scan
+#: asks for a few).
 _SINGLES_AT_ONCE = 16
 
 
@@ -304,30 +322,267 @@ def pose_hypotheses(
     covs = np.array(node_covs, dtype=float).reshape(-1, 2, 2)
     # The panels of the nodes that are looked up.
     seen = functools.cache(lambda k: _PanelsSeen.of(nodes[k], segmentation))
-    # Per node pair, the survey's readings of it that fit: whether one beacon's two
-    # edges, the nodes' Table 1 options, the misfit, the nodes, their beacons (survey
-    # positions), edges and the spread (arrays, one row per reading).
-    found: list[tuple[NDArray[Any], ...]] = []
-    # Only node pairs whose designs and edges are surveyed within reach of each other.
+    # Per node pair, the survey's readings of it that fit (:func:`_readings`).
+    readings = _readings(nodes, covs, seen, index, config, survey_sigma_m)
+    xy = np.array([n.node_scanner for n in nodes], dtype=float).reshape(-1, 2)
+    # Prefer two beacons to one beacon's two edges (every look-alike of a beacon shows
+    # the same two edges; two beacons' relative place is the mine's own), then nodes
+    # identified with more panels (lower Table 1 option), then the better fit, in the
+    # order found on a tie; only those kept are solved (a mine's look-alikes past the
+    # cap never are).
+    one_k, opt_k, mis_k, i_k, j_k, ka_k, kb_k, ea_k, eb_k, sp_k = readings
+    order = np.lexsort((mis_k, opt_k, one_k))[: config.max_pair_hypotheses]
+    sims = similarity_transforms(
+        np.stack([xy[i_k[order]], xy[j_k[order]]], axis=1),
+        np.stack([ea_k[order], eb_k[order]], axis=1),
+    )
+    pairs = [
+        Hypothesis(
+            (
+                _renamed(nodes[i], index.beacon_id(ka)),
+                _renamed(nodes[j], index.beacon_id(kb)),
+            ),
+            sim,
+            mis,
+            "pair",
+            spread,
+        )
+        for i, j, ka, kb, mis, spread, sim in zip(
+            i_k[order].tolist(),
+            j_k[order].tolist(),
+            ka_k[order].tolist(),
+            kb_k[order].tolist(),
+            mis_k[order].tolist(),
+            sp_k[order].tolist(),
+            sims,
+            strict=True,
+        )
+    ]
+
+    # Single nodes take turns (lowest Table 1 option first), so that one corner's
+    # many look-alikes in a mine-wide survey cannot crowd out another corner's beacon.
+    # Made lazily: a whole mine's look-alikes past the cap are never computed.
+    # The first round takes each node's first beacon of its design, all at once, for
+    # as many nodes as it can reach; a node asked again takes the rest a few at a time.
+    by_option = sorted(range(len(nodes)), key=lambda k: nodes[k].option)
+    reached = np.array(by_option[: max(config.max_single_hypotheses, 0)], dtype=np.intp)
+    mine = _PanelsOfNodes.of(seen, covs, reached)
+    firsts = np.array(
+        [index.number(index.beacons_like(nodes[k].beacon)[0]) for k in reached.tolist()],
+        dtype=np.intp,
+    )
+    first_of = dict(
+        zip(reached.tolist(), _singles(nodes, mine, reached, firsts, index), strict=True)
+    )
+
+    def singles_of(k: int) -> Iterator[Hypothesis]:
+        first = first_of.get(k)
+        if first is None:
+            return
+        yield first
+        rest = iter(index.beacons_like(nodes[k].beacon)[1:])
+        while chunk := [index.number(b) for b in itertools.islice(rest, _SINGLES_AT_ONCE)]:
+            at = np.full(len(chunk), k, dtype=np.intp)
+            made = _singles(nodes, mine, at, np.array(chunk, dtype=np.intp), index)
+            yield from (h for h in made if h is not None)
+
+    singles = itertools.islice(
+        _taking_turns(singles_of(k) for k in by_option), config.max_single_hypotheses
+    )
+    return pairs + list(singles)
+
+
+#: The survey's readings of a scan's node pairs (:func:`_readings`): arrays, one row per
+#: reading, of whether it is one beacon's two edges, the nodes' Table 1 options summed,
+#: the misfit, the two nodes, their beacons (survey positions), their surveyed edges
+#: (E, N) and the spread.
+_Readings = tuple[
+    NDArray[np.bool_],
+    NDArray[np.intp],
+    NDArray[np.float64],
+    NDArray[np.intp],
+    NDArray[np.intp],
+    NDArray[np.intp],
+    NDArray[np.intp],
+    NDArray[np.float64],
+    NDArray[np.float64],
+    NDArray[np.float64],
+]
+
+
+def _node_pairs(
+    nodes: Sequence[NodeMatch],
+    covs: NDArray[np.float64],
+    index: SurveyIndex,
+    config: HypothesisConfig,
+    survey_sigma_m: float,
+) -> tuple[NDArray[np.int64], NDArray[np.float64], NDArray[np.intp], NDArray[np.intp]]:
+    """The nodes' keys (:meth:`~mast.core.index.SurveyIndex.node_key`) and places, and
+    the pairs ``i < j`` of them to look up: only node pairs whose designs and edges are
+    surveyed within reach of each other, about as far apart as some surveyed pair of
+    their keys (each node's share of the widest distance tolerance of :func:`_readings`:
+    the square root of a sum is at most the sum of the square roots)."""
     keys = np.array([index.node_key(n.beacon, n.edge) for n in nodes], dtype=np.int64)
     xy = np.array([n.node_scanner for n in nodes], dtype=float).reshape(-1, 2)
-    # Each node's share of the widest distance tolerance below (the square root of a sum
-    # is at most the sum of the square roots): only pairs about as far apart as some
-    # surveyed pair of their keys are formed at all.
     share = config.sigmas * np.sqrt(_largest_eigenvalues(covs) + survey_sigma_m**2)
     first, second = index.pairs_to_look_up(keys, xy, share)
-    # Only pairs the survey holds an edge pair for at their distance (the tolerance a
-    # hair wider than the one below, so none it takes is left out): with many designs
-    # a scan's corners are read as nodes of many, and few of their pairs fit.
-    if first.size:
-        gap = xy[second] - xy[first]
-        dist = np.hypot(gap[:, 0], gap[:, 1])
-        u = gap / np.where(dist > 0, dist, 1.0)[:, None]
-        both = covs[first] + covs[second]
-        var = np.einsum("ki,kij,kj->k", u, both, u) + 2 * survey_sigma_m**2
-        tol = config.sigmas * np.sqrt(np.maximum(var, 0.0)) * (1.0 + 1e-9) + 1e-12
-        held = index.pair_counts(keys[first], keys[second], dist, tol) > 0
-        first, second = first[held], second[held]
+    return keys, xy, first, second
+
+
+def _quadratic(u: NDArray[np.float64], m: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``u[k] @ m[k] @ u[k]`` for each row of ``u`` (k, 2) and 2x2 ``m`` (k, 2, 2)."""
+    u0, u1 = u[:, 0], u[:, 1]
+    return np.asarray(
+        (u0 * m[:, 0, 0] + u1 * m[:, 1, 0]) * u0 + (u0 * m[:, 0, 1] + u1 * m[:, 1, 1]) * u1
+    )
+
+
+def _readings(
+    nodes: Sequence[NodeMatch],
+    covs: NDArray[np.float64],
+    seen: Callable[[int], _PanelsSeen],
+    index: SurveyIndex,
+    config: HypothesisConfig,
+    survey_sigma_m: float,
+) -> _Readings:
+    """Per pair of the scan's ``nodes`` (covariances ``covs``, panels ``seen``), the
+    surveyed edge pairs that fit it, in the order of the pairs (:func:`_node_pairs`),
+    then of each one's surveyed edge pairs (distance, rows): the two nodes as far apart
+    as the two edges within ``sigmas`` of their distance's standard deviation, and the
+    rotation that carries one onto the other agreeing with each panel the nodes were
+    identified with (the misfit is the larger of the two tests' ratios to their
+    tolerances). One beacon's two edges are distinct edges met in one direction, and
+    only when both nodes are of its design; two beacons' nodes share no segment.
+
+    Every pair at once (:func:`_readings_reference` takes them one at a time: the tests
+    compare the two)."""
+    keys, xy, first, second = _node_pairs(nodes, covs, index, config, survey_sigma_m)
+    segments = np.array([n.segments for n in nodes], dtype=np.intp).reshape(-1, 2)
+    number = np.array([index.number(n.beacon) for n in nodes], dtype=np.intp)
+    design = np.array([index.design_of(n.beacon) for n in nodes], dtype=np.intp)
+    edge = np.array([n.edge for n in nodes], dtype=np.intp)
+    forward = np.array([n.forward for n in nodes], dtype=bool)
+    option = np.array([n.option for n in nodes], dtype=np.intp)
+    sa, sb = segments[first], segments[second]
+    shared = (sa[:, :, None] == sb[:, None, :]).any(axis=(1, 2))
+    ds_vec = xy[second] - xy[first]
+    ds = np.hypot(ds_vec[:, 0], ds_vec[:, 1])
+    go = ~(shared & (number[first] != number[second])) & (ds >= config.min_node_separation_m)
+    first, second, shared, ds_vec, ds = first[go], second[go], shared[go], ds_vec[go], ds[go]
+    u = ds_vec / ds[:, None]
+    both = covs[first] + covs[second]
+    tol_d = config.sigmas * np.sqrt(_quadratic(u, both) + 2 * survey_sigma_m**2)
+    which, ra, rb = index.pairs_rows(keys[first], keys[second], ds, tol_d)
+    ba, bb = index.row_beacon(ra), index.row_beacon(rb)
+    one = ba == bb
+    twin = (edge[first] == edge[second]) | (forward[first] != forward[second])
+    same_design = design[first] == design[second]
+    keep = np.where(same_design[which], ~(one & twin[which]), ~one) & (one | ~shared[which])
+    which, ra, rb, ba, bb, one = which[keep], ra[keep], rb[keep], ba[keep], bb[keep], one[keep]
+    edge_a, edge_b = index.row_xy(ra), index.row_xy(rb)
+    dm_vec = edge_b - edge_a
+    dm = np.hypot(dm_vec[:, 0], dm_vec[:, 1])
+    mis_d = np.abs(ds[which] - dm) / tol_d[which]
+    turned = np.arctan2(ds_vec[:, 1], ds_vec[:, 0])
+    rot = wrap_angles(np.arctan2(dm_vec[:, 1], dm_vec[:, 0]) - turned[which])
+    v_perp = np.stack([-u[:, 1], u[:, 0]], axis=1)
+    s_rot = np.sqrt(_quadratic(v_perp, both))[which] / dm
+    i_row, j_row = first[which], second[which]
+    # Each surveyed beacon's own panel directions must agree with the pair's rotation.
+    panels = _PanelsOfNodes.of(seen, covs, np.concatenate([first, second]))
+    r_a, s_a, ok_a = panels.rotations(index, i_row, ba)
+    r_b, s_b, ok_b = panels.rotations(index, j_row, bb)
+    r_k, s_k = np.concatenate([r_a, r_b], 1), np.concatenate([s_a, s_b], 1)
+    tol = np.maximum(config.min_rotation_tol_rad, config.sigmas * np.hypot(s_rot[:, None], s_k))
+    mis = np.abs(wrap_angles(r_k - rot[:, None])) / tol
+    mis_r = np.where(np.concatenate([ok_a, ok_b], 1), mis, 0.0).max(axis=1, initial=0.0)
+    reach = np.hypot(xy[:, 0], xy[:, 1])
+    spread = panels.major[i_row] + 2.0 * reach[i_row] * np.minimum(s_rot, math.pi)
+    misfit = np.maximum(mis_d, mis_r)
+    fits = mis_r <= 1.0
+    return (
+        one[fits],
+        (option[i_row] + option[j_row])[fits],
+        misfit[fits],
+        i_row[fits],
+        j_row[fits],
+        ba[fits],
+        bb[fits],
+        edge_a[fits],
+        edge_b[fits],
+        spread[fits],
+    )
+
+
+@dataclass(frozen=True, slots=True)
+class _PanelsOfNodes:
+    """The identified panels (:class:`_PanelsSeen`) of some of a scan's nodes, padded to
+    one width: their numbers, directions, directions' sigmas and which are panels, per
+    node (a row each), each node's turn and its ellipse's semi-major axis, and the
+    weights of its panels' directions (their inverse variances; 0 where no panel) and
+    their sum."""
+
+    panel: NDArray[np.intp]
+    angle: NDArray[np.float64]
+    sigma: NDArray[np.float64]
+    ok: NDArray[np.bool_]
+    turn: NDArray[np.float64]
+    major: NDArray[np.float64]
+    weight: NDArray[np.float64]
+    sum_weight: NDArray[np.float64]
+
+    @classmethod
+    def of(
+        cls, seen: Callable[[int], _PanelsSeen], covs: NDArray[np.float64], which: NDArray[np.intp]
+    ) -> _PanelsOfNodes:
+        """The panels of the nodes ``which`` (of those whose covariances are ``covs``;
+        the others' rows empty)."""
+        count = covs.shape[0]
+        looked = [(k, seen(k)) for k in np.unique(which).tolist()]
+        width = max((s.panel.size for _, s in looked), default=0)
+        out = cls(
+            np.zeros((count, width), dtype=np.intp),
+            np.zeros((count, width)),
+            np.ones((count, width)),
+            np.zeros((count, width), dtype=bool),
+            np.zeros(count),
+            np.zeros(count),
+            np.zeros((count, width)),
+            np.ones(count),
+        )
+        for k, s in looked:
+            m = s.panel.size
+            out.panel[k, :m], out.angle[k, :m], out.sigma[k, :m] = s.panel, s.angle, s.sigma
+            out.ok[k, :m] = True
+            out.turn[k] = s.turn
+            out.major[k] = major_sigma(covs[k])
+            w = 1.0 / np.maximum(s.sigma, 1e-9) ** 2
+            out.weight[k, :m] = w
+            out.sum_weight[k] = np.sum(w)
+        return out
+
+    def rotations(
+        self, index: SurveyIndex, nodes: NDArray[np.intp], beacons: NDArray[np.intp]
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.bool_]]:
+        """Per row, the rotation (mine vs scanner) each of node ``nodes[r]``'s panels
+        implies were it on beacon ``beacons[r]`` (:meth:`_PanelsSeen.rotations`), the
+        panels' direction sigmas and which columns are panels."""
+        mine = np.take_along_axis(index.panel_angles(beacons), self.panel[nodes], axis=1)
+        rot = wrap_angles(mine + self.turn[nodes][:, None] - self.angle[nodes])
+        return rot, self.sigma[nodes], self.ok[nodes]
+
+
+def _readings_reference(
+    nodes: Sequence[NodeMatch],
+    covs: NDArray[np.float64],
+    seen: Callable[[int], _PanelsSeen],
+    index: SurveyIndex,
+    config: HypothesisConfig,
+    survey_sigma_m: float,
+) -> _Readings:
+    """:func:`_readings`, one node pair at a time (the tests compare the two)."""
+    _, _, first, second = _node_pairs(nodes, covs, index, config, survey_sigma_m)
+    found: list[tuple[NDArray[Any], ...]] = []
     for i, j in zip(first.tolist(), second.tolist(), strict=True):
         a, b = nodes[i], nodes[j]
         shared = bool(set(a.segments) & set(b.segments))
@@ -388,35 +643,14 @@ def pose_hypotheses(
                     spread[fits],
                 )
             )
-    # Prefer two beacons to one beacon's two edges (every look-alike of a beacon shows
-    # the same two edges; two beacons' relative place is the mine's own), then nodes
-    # identified with more panels (lower Table 1 option), then the better fit, in the
-    # order found on a tie; only those kept are solved (a mine's look-alikes past the
-    # cap never are).
-    pairs = []
-    if found:
-        one_k, opt_k, mis_k, i_k, j_k, ka_k, kb_k, ea_k, eb_k, sp_k = (
-            np.concatenate(column) for column in zip(*found, strict=True)
-        )
-        order = np.lexsort((mis_k, opt_k, one_k))[: config.max_pair_hypotheses]
-        for k in order.tolist():
-            na = _renamed(nodes[int(i_k[k])], index.beacon_id(int(ka_k[k])))
-            nb = _renamed(nodes[int(j_k[k])], index.beacon_id(int(kb_k[k])))
-            sim = similarity_transform(
-                np.array([na.node_scanner, nb.node_scanner]), np.array([ea_k[k], eb_k[k]])
-            )
-            pairs.append(Hypothesis((na, nb), sim, float(mis_k[k]), "pair", float(sp_k[k])))
+    if not found:
+        return _no_readings()
+    return cast(_Readings, tuple(np.concatenate(column) for column in zip(*found, strict=True)))
 
-    # Single nodes take turns (lowest Table 1 option first), so that one corner's
-    # many look-alikes in a mine-wide survey cannot crowd out another corner's beacon.
-    # Made lazily: a whole mine's look-alikes past the cap are never computed.
-    def singles_of(k: int) -> Iterator[Hypothesis]:
-        beacons = index.beacons_like(nodes[k].beacon)
-        yield from _single_hypotheses(nodes[k], seen(k), beacons, major_sigma(covs[k]), index)
 
-    per_node = (singles_of(k) for k in sorted(range(len(nodes)), key=lambda k: nodes[k].option))
-    singles = itertools.islice(_taking_turns(per_node), config.max_single_hypotheses)
-    return pairs + list(singles)
+def _no_readings() -> _Readings:
+    no, none, nowhere = np.zeros(0, dtype=np.intp), np.zeros(0), np.zeros((0, 2))
+    return (np.zeros(0, dtype=bool), no, none, no, no, no, no, nowhere, nowhere, none)
 
 
 def _taking_turns(sources: Iterable[Iterator[Hypothesis]]) -> Iterator[Hypothesis]:
@@ -463,7 +697,6 @@ def panel_hypotheses(
     Bounded: at most ``max_panel_segments`` segments (most returns first), and
     only the design pairs surveyed within reach of each other are looked up.
     """
-    reps = index.representatives
     lengths, keys = index.middle_panels
     # Each segment that may be a middle panel (most returns first), and the designs
     # whose it may be.
@@ -500,8 +733,8 @@ def panel_hypotheses(
     if not apart:
         return []
     owner, ka_all, kb_all = _design_pairs(apart, cands, index, config.sigmas * segmentation.noise_m)
-    # Each candidate pair's tolerance, and how many surveyed pairs lie within it (one
-    # search for all): only those with any are looked up one by one.
+    # Each candidate pair's tolerance, and the surveyed pairs within it (one search for
+    # all), each tried in the order of the candidate pairs.
     seg_len = np.array([c[0].length for c in cands])
     sp_start = np.array([c[0].spacing_start for c in cands])
     sp_end = np.array([c[0].spacing_end for c in cands])
@@ -514,28 +747,23 @@ def panel_hypotheses(
     slack_b = 0.5 * np.abs(seg_len[second] - lb) + sp_start[second] + sp_end[second]
     tol_d = slack_a + slack_b + config.sigmas * segmentation.noise_m
     reach = 0.5 * (la + lb) + tol_d
-    some = index.pair_counts(keys[ka_all], keys[kb_all], gap, reach) > 0
-    for at, k_a, k_b, tol, far, slack in zip(
-        owner[some].tolist(),
-        ka_all[some].tolist(),
-        kb_all[some].tolist(),
-        tol_d[some].tolist(),
-        reach[some].tolist(),
-        np.maximum(slack_a, slack_b)[some].tolist(),
+    which, rows_a, rows_b = index.pairs_rows(keys[ka_all], keys[kb_all], gap, reach)
+    slack = np.maximum(slack_a, slack_b)
+    for w, ba, bb in zip(
+        which.tolist(),
+        index.row_beacon(rows_a).tolist(),
+        index.row_beacon(rows_b).tolist(),
         strict=True,
     ):
-        i, j, ds = apart[at]
-        (sa, _), (sb, _) = cands[i], cands[j]
-        rows_a, rows_b = index.pair_rows(reps[k_a].id, 2, reps[k_b].id, 2, ds, far)
-        for ba, bb in zip(
-            index.row_beacon(rows_a).tolist(), index.row_beacon(rows_b).tolist(), strict=True
-        ):
-            if ba == bb:
-                continue  # one beacon's own edge 2 twice
-            ea, eb = survey[ids[ba]].edges, survey[ids[bb]].edges
-            h = _panel_pair(sa, sb, ea, eb, ds, tol, slack, config)
-            if h is not None:
-                found.append(h)
+        if ba == bb:
+            continue  # one beacon's own edge 2 twice
+        i, j, ds = apart[int(owner[w])]
+        ea, eb = survey[ids[ba]].edges, survey[ids[bb]].edges
+        h = _panel_pair(
+            cands[i][0], cands[j][0], ea, eb, ds, float(tol_d[w]), float(slack[w]), config
+        )
+        if h is not None:
+            found.append(h)
     found.sort(key=lambda h: h.misfit)
     return found[: config.max_panel_hypotheses]
 
