@@ -824,13 +824,18 @@ def _on_their_edges(
     seg: Segmentation | None,
     noise: NoiseModel,
     cfg: VerificationConfig,
+    sigmas: dict[int, float] | None = None,
 ) -> set[str]:
     """The ``candidates`` one of whose edges an identified corner of the scan (of the
     beacon's design) lands on at ``icp``'s pose, within ``gate_sigmas`` of the corner's
-    own uncertainty, the survey's and the range noise; none without a segmentation."""
+    own uncertainty, the survey's and the range noise; none without a segmentation.
+    ``sigmas``, when given, keeps each corner's uncertainty (:func:`node_sigma`) by the
+    ``id`` of its node, for the scan's other poses."""
     node_ok: set[str] = set()
     if ident is None or seg is None:
         return node_ok
+    if sigmas is None:
+        sigmas = {}
     by_beacon = ident.nodes_by_beacon
     designs = {index.design_of(b) for b in candidates}
     # Only the nodes of a candidate's design (a survey of many designs reads each corner
@@ -843,19 +848,24 @@ def _on_their_edges(
             named = [b for b in members if b in by_beacon]
         else:
             named = [b for b in by_beacon if index.design_of(b) == design]
+        nodes = [n for b in named for n in by_beacon[b]]
+        if not nodes:
+            continue
         # The candidates of the design (not every look-alike in a mine's survey).
         mine = sorted(b for b in candidates if index.design_of(b) == design)
-        for node in (n for b in named for n in by_beacon[b]):
+        mapped = icp.pose.scanner_to_mine(np.array([n.node_scanner for n in nodes])).tolist()
+        for node, at in zip(nodes, mapped, strict=True):
             left = [b for b in mine if b not in node_ok]
             if not left:
                 break
-            mapped = icp.pose.scanner_to_mine(node.node_scanner[None, :])[0]
-            spread = node_sigma(node, seg)
+            spread = sigmas.get(id(node))
+            if spread is None:
+                spread = sigmas[id(node)] = node_sigma(node, seg)
             for b in left:
                 edge = node.edge - 1
                 surveyed = float(index.survey[b].sigmas_or(noise.survey_sigma_m)[edge])
                 gate = cfg.gate_sigmas * math.hypot(spread, surveyed, noise.range_sigma_m)
-                if math.dist(mapped, index.survey[b].edges[edge]) <= gate:
+                if math.dist(at, index.survey[b].edges[edge]) <= gate:
                     node_ok.add(b)
     return node_ok
 
@@ -873,6 +883,7 @@ def _support(
     cfg: VerificationConfig,
     tracked: bool = False,
     kept: Refinement | None = None,
+    sigmas: dict[int, float] | None = None,
 ) -> tuple[tuple[str, ...], tuple[str, ...], tuple[str, ...], tuple[str, ...]]:
     """Beacons that confirm a pose, the cornered and the shaped beacons, and the beacons
     refused only because their returns do not lie on their panels within their noise.
@@ -898,7 +909,7 @@ def _support(
     the beacon). Without a segmentation (``seg`` and ``ident`` None: a scan
     searched near a prior before it is segmented) no beacon has a node. ``kept``
     holds the beacons' tests at this pose from an earlier judgement of it, and keeps
-    those made now.
+    those made now; ``sigmas`` the scan's corners' uncertainties (:func:`_on_their_edges`).
     """
     in_place_memo: dict[str, bool] = {} if kept is None else kept.in_place
     fitted_memo: dict[str, tuple[float, float]] = {} if kept is None else kept.fitted
@@ -918,7 +929,7 @@ def _support(
         and _seen_from_front(index.survey[b].edges, icp.pose.position)
     }
     gate = cfg.gate_sigmas * noise.gate_sigma_m
-    node_ok = _on_their_edges(icp, candidates, index, ident, seg, noise, cfg)
+    node_ok = _on_their_edges(icp, candidates, index, ident, seg, noise, cfg, sigmas)
     # Identified by its corner or not, a beacon whose returns do not lie on its panels
     # within their noise is not read right at this pose (a look-alike 204 m away on a
     # long drive rested on such a corner).
@@ -1126,6 +1137,7 @@ def verify(
     done: list[_Refined] = []
     done_poses = _PoseList(cfg)
     sequence: dict[int, int] = {}  # id of a kept Verified -> its hypothesis' position
+    node_sigmas: dict[int, float] = {}  # id of an identified node -> its node_sigma
 
     def judged(r: _Refined) -> Verified:
         """``r`` judged by the beams, under the hypothesis it was refined for."""
@@ -1151,6 +1163,7 @@ def verify(
                 cfg,
                 tracked=h0.kind == "prior",
                 kept=r.kept,
+                sigmas=node_sigmas,
             )
             r.verified = Verified(h0, icp, r.counts, supported, checks, cornered, shaped, refused)
         return r.verified
