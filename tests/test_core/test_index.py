@@ -93,16 +93,15 @@ def test_look_ups_match_a_walk_over_every_pair(designs: int, reach: float) -> No
         assert got == _pairs_by_walk(index, a, ea, b, eb, d, tol, same, limit)
 
 
-@pytest.mark.parametrize("designs", [1, 3, 40])
-def test_pair_counts_are_the_lengths_of_pair_rows(designs: int) -> None:
-    survey = _survey(90, designs, seed=designs)
-    index = SurveyIndex.from_survey(survey)
-    rng = np.random.default_rng(designs)
-    ids = survey.ids
-    n = 400
+def _random_look_ups(  # type: ignore[no-untyped-def]
+    index: SurveyIndex, rng: np.random.Generator, n: int
+):
+    """``n`` random look-ups: pairs of beacons and of node edges, distances (half of them
+    near surveyed ones, so that windows open and close on pairs) and tolerances, and the
+    pairs' keys."""
+    ids = index.survey.ids
     picks = [(ids[int(rng.integers(len(ids)))], ids[int(rng.integers(len(ids)))]) for _ in range(n)]
     edges = rng.choice(NODE_EDGES, size=(n, 2))
-    # distances drawn near surveyed ones too, so that windows open and close on pairs
     d = np.where(rng.random(n) < 0.5, rng.uniform(0.2, 60.0, n), 12.0 * rng.integers(1, 5, n))
     tol = rng.choice([0.0, 0.05, 2.0, 10.0], size=n)
     keys_a = np.array(
@@ -110,6 +109,15 @@ def test_pair_counts_are_the_lengths_of_pair_rows(designs: int) -> None:
     )
     keys_b = np.array(
         [index.node_key(b, int(e)) for (_, b), e in zip(picks, edges[:, 1], strict=True)]
+    )
+    return picks, edges, d, tol, keys_a, keys_b
+
+
+@pytest.mark.parametrize("designs", [1, 3, 40])
+def test_pair_counts_are_the_lengths_of_pair_rows(designs: int) -> None:
+    index = SurveyIndex.from_survey(_survey(90, designs, seed=designs))
+    picks, edges, d, tol, keys_a, keys_b = _random_look_ups(
+        index, np.random.default_rng(designs), 400
     )
     got = index.pair_counts(keys_a, keys_b, d, tol)
     want = [
@@ -199,20 +207,9 @@ def test_pairs_to_look_up_match_the_reference_and_a_walk(designs: int) -> None:
 def test_pairs_rows_are_each_pairs_rows_in_turn(designs: int) -> None:
     """The look-up of many pairs of keys at once gives each pair's rows (keys either way
     round), in its order, one pair after another."""
-    survey = _survey(90, designs, seed=designs)
-    index = SurveyIndex.from_survey(survey)
-    rng = np.random.default_rng(designs + 10)
-    ids = survey.ids
-    n = 300
-    picks = [(ids[int(rng.integers(len(ids)))], ids[int(rng.integers(len(ids)))]) for _ in range(n)]
-    edges = rng.choice(NODE_EDGES, size=(n, 2))
-    d = np.where(rng.random(n) < 0.5, rng.uniform(0.2, 60.0, n), 12.0 * rng.integers(1, 5, n))
-    tol = rng.choice([0.0, 0.05, 2.0, 10.0], size=n)
-    keys_a = np.array(
-        [index.node_key(a, int(e)) for (a, _), e in zip(picks, edges[:, 0], strict=True)]
-    )
-    keys_b = np.array(
-        [index.node_key(b, int(e)) for (_, b), e in zip(picks, edges[:, 1], strict=True)]
+    index = SurveyIndex.from_survey(_survey(90, designs, seed=designs))
+    picks, edges, d, tol, keys_a, keys_b = _random_look_ups(
+        index, np.random.default_rng(designs + 10), 300
     )
     which, rows_a, rows_b = index.pairs_rows(keys_a, keys_b, d, tol)
     want_which, want_a, want_b = [], [], []

@@ -75,6 +75,20 @@ def test_corner_covariance_equals_the_matrix_formula() -> None:
         assert major_sigma(got) == pytest.approx(math.sqrt(np.linalg.eigvalsh(ref)[-1]), rel=1e-10)
 
 
+def _drive_and_mine(scans: int, **mine: bool):  # type: ignore[no-untyped-def]
+    """A simulated drive of ``scans`` scans and a mine of 300 beacons more, out of its
+    sight (:func:`~mast.bench.minewide.minewide_survey`'s options in ``mine``)."""
+    from mast.bench.minewide import minewide_survey
+    from mast.sim.drive import drive_scene
+
+    scene = drive_scene(3, scans=scans)
+    poses = [s.pose for s in scene.shots]
+    rng = np.random.default_rng(5)
+    return scene, minewide_survey(
+        scene.survey, poses, copies=300, clearance_m=60.0, rng=rng, **mine
+    )
+
+
 @pytest.mark.parametrize("distinct", [False, True])
 def test_design_pairs_for_every_pair_of_candidates_at_once_match_one_at_a_time(
     distinct: bool,
@@ -83,22 +97,11 @@ def test_design_pairs_for_every_pair_of_candidates_at_once_match_one_at_a_time(
     candidate middle panels' distance gives, for all pairs at once, the rows the look-up
     one pair at a time gives, in its order: drive scans against their survey and against
     a mine of 300 beacons of repeated or of distinct designs."""
-    from mast.bench.minewide import minewide_survey
     from mast.core.index import SurveyIndex
     from mast.pipeline.hypotheses import HypothesisConfig, _design_pairs, _design_pairs_reference
     from mast.pipeline.segmentation import segment_scan
-    from mast.sim.drive import drive_scene
 
-    scene = drive_scene(3, scans=120)
-    shots = [s.pose for s in scene.shots]
-    mine = minewide_survey(
-        scene.survey,
-        shots,
-        copies=300,
-        clearance_m=60.0,
-        rng=np.random.default_rng(5),
-        distinct=distinct,
-    )
+    scene, mine = _drive_and_mine(120, distinct=distinct)
     config = HypothesisConfig()
     compared = rows = 0
     for survey in (scene.survey, mine):
@@ -142,7 +145,6 @@ def test_readings_of_every_node_pair_at_once_match_one_pair_at_a_time(
     designs (so that pairs of keys are looked up both ways round)."""
     import functools
 
-    from mast.bench.minewide import minewide_survey
     from mast.core.index import SurveyIndex
     from mast.pipeline.hypotheses import (
         HypothesisConfig,
@@ -153,17 +155,8 @@ def test_readings_of_every_node_pair_at_once_match_one_pair_at_a_time(
     )
     from mast.pipeline.identification import identify_panels
     from mast.pipeline.segmentation import segment_scan
-    from mast.sim.drive import drive_scene
 
-    scene = drive_scene(3, scans=120)
-    mine = minewide_survey(
-        scene.survey,
-        [s.pose for s in scene.shots],
-        copies=300,
-        clearance_m=60.0,
-        rng=np.random.default_rng(5),
-        distinct=distinct,
-    )
+    scene, mine = _drive_and_mine(120, distinct=distinct)
     config = HypothesisConfig()
     compared = rows = ones = 0
     for survey in (scene.survey, mine):
@@ -192,23 +185,13 @@ def test_single_node_hypotheses_take_turns_over_every_look_alike() -> None:
     turns (lowest Table 1 option first), each over every beacon of its design in the
     survey's order, up to the cap: drive scans against a mine of 300 copies of their
     beacons, listed first, so that each node's design has dozens of look-alikes."""
-    from mast.bench.minewide import minewide_survey
     from mast.core.index import SurveyIndex
     from mast.core.pose import wrap_angles
     from mast.pipeline.hypotheses import HypothesisConfig, pose_hypotheses
     from mast.pipeline.identification import identify_panels
     from mast.pipeline.segmentation import segment_scan
-    from mast.sim.drive import drive_scene
 
-    scene = drive_scene(3, scans=40)
-    mine = minewide_survey(
-        scene.survey,
-        [s.pose for s in scene.shots],
-        copies=300,
-        clearance_m=60.0,
-        rng=np.random.default_rng(5),
-        copies_first=True,
-    )
+    scene, mine = _drive_and_mine(40, copies_first=True)
     index = SurveyIndex.from_survey(mine)
     config = HypothesisConfig(max_single_hypotheses=90)
     checked = later = 0
