@@ -127,6 +127,32 @@ def test_pair_counts_are_the_lengths_of_pair_rows(designs: int) -> None:
     assert got.tolist() == want
     assert sum(want) > 0
     assert want.count(0) > 0
+    # and the walk over every pair of rows, where no distance is on a window's edge
+    clear = [k for k in range(len(picks)) if tol[k] > 0 and d[k] % 12.0 != 0][:120]
+    walked = []
+    for k in clear:
+        (a, b), (ea, eb) = picks[k], edges[k]
+        walked.append(len(_pairs_by_walk(index, a, int(ea), b, int(eb), d[k], tol[k], True)))
+    assert got[clear].tolist() == walked
+    assert sum(walked) > 0
+
+
+def test_look_ups_of_odd_windows_hold_nothing_or_what_searchsorted_gives() -> None:
+    """A negative tolerance holds no pair (not a negative count); a window whose bound is
+    not a number is past every distance at that bound, as ``numpy.searchsorted`` has it."""
+    index = SurveyIndex.from_survey(_survey(40, 1, seed=3))
+    a = index.survey.ids[0]
+    key = np.array([index.node_key(a, 2)] * 5, dtype=np.int64)
+    d = np.array([12.0, 12.0, math.inf, -math.inf, math.nan])
+    tol = np.array([-1.0, 1.0, math.inf, math.inf, 1.0])
+    counts = index.pair_counts(key, key, d, tol)
+    which, _, _ = index.pairs_rows(key, key, d, tol)
+    assert counts[0] == 0
+    assert counts[1] > 0
+    assert counts[2] == 0  # from NaN (inf - inf) to inf: none
+    assert counts[3] == index.pair_counts(key[:1], key[:1], np.array([30.0]), np.array([1e9]))[0]
+    assert counts[4] == 0
+    assert np.bincount(which, minlength=5).tolist() == counts.tolist()
 
 
 def test_first_at_least_matches_the_numpy_reference() -> None:
@@ -221,6 +247,23 @@ def test_pairs_rows_are_each_pairs_rows_in_turn(designs: int) -> None:
     assert which.tolist() == want_which
     assert rows_a.tolist() == want_a
     assert rows_b.tolist() == want_b
-    assert np.any(keys_a > keys_b)
-    assert np.any(keys_a < keys_b)
     assert len(set(want_which)) > 10
+    # each pair's rows, keys stored the other way round or not, in the walk's order
+    checked = {True: 0, False: 0}
+    for k in sorted(set(want_which)):
+        if tol[k] == 0 or d[k] % 12.0 == 0:
+            continue  # a distance on the window's edge may round either way
+        here = which == k
+        got = [
+            (index.beacon_id(int(i)), index.beacon_id(int(j)))
+            for i, j in zip(
+                index.row_beacon(rows_a[here]), index.row_beacon(rows_b[here]), strict=True
+            )
+        ]
+        (a, b), (ea, eb) = picks[k], edges[k]
+        assert got == _pairs_by_walk(
+            index, a, int(ea), b, int(eb), float(d[k]), float(tol[k]), True
+        )
+        checked[bool(keys_a[k] > keys_b[k])] += 1
+    assert checked[True] > 0
+    assert checked[False] > 0

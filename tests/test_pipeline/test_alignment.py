@@ -98,7 +98,8 @@ def test_similarity_refuses_unpaired_points_and_keeps_tiny_ones_exact() -> None:
 
 def test_similarities_at_once_are_each_set_in_turn() -> None:
     """Many sets of point pairs at once give each set's transformation, a degenerate set
-    (coincident scanner points: lstsq's minimum-norm answer) among them."""
+    (coincident scanner points: lstsq's minimum-norm answer) among them; none gives none,
+    and sets of one point, or of unpaired points, are refused."""
     from mast.pipeline.alignment import similarity_transforms
 
     rng = np.random.default_rng(4)
@@ -121,3 +122,8 @@ def test_similarities_at_once_are_each_set_in_turn() -> None:
         resid = q[k] - (p[k] @ R.T + t)
         assert sim.rms_m == pytest.approx(math.sqrt(np.mean(np.sum(resid**2, axis=1))), rel=1e-9)
     assert got[7].scale == 0.0
+    assert similarity_transforms(np.zeros((0, 2, 2)), np.zeros((0, 2, 2))) == []
+    with pytest.raises(ValueError, match="two points"):
+        similarity_transforms(np.zeros((3, 1, 2)), np.zeros((3, 1, 2)))
+    with pytest.raises(ValueError, match="shapes"):
+        similarity_transforms(p, q[:, :2])

@@ -179,27 +179,37 @@ def test_readings_of_every_node_pair_at_once_match_one_pair_at_a_time(
     assert rows > ones > 0
 
 
-def test_single_node_hypotheses_take_turns_over_every_look_alike() -> None:
+@pytest.mark.parametrize(("cap", "blind"), [(90, False), (5, False), (1, True), (0, False)])
+def test_single_node_hypotheses_take_turns_over_every_look_alike(cap: int, blind: bool) -> None:
     """Each single-node hypothesis puts its node on the edge of the beacon it is taken
-    for, turned by its panels' rotations averaged by their weights; the nodes take
-    turns (lowest Table 1 option first), each over every beacon of its design in the
-    survey's order, up to the cap: drive scans against a mine of 300 copies of their
-    beacons, listed first, so that each node's design has dozens of look-alikes."""
+    for, turned by its panels' rotations averaged by their weights, its spread the node's
+    ellipse plus that rotation's error over twice its range; the nodes take turns
+    (lowest Table 1 option first), each over every beacon of its design in the survey's
+    order, up to the cap; a node without an identified panel (``blind``: the first one
+    made so) takes no turn: drive scans against a mine of 300 copies of their beacons,
+    listed first, so that each node's design has dozens of look-alikes."""
+    from dataclasses import replace
+
     from mast.core.index import SurveyIndex
     from mast.core.pose import wrap_angles
-    from mast.pipeline.hypotheses import HypothesisConfig, pose_hypotheses
-    from mast.pipeline.identification import identify_panels
+    from mast.pipeline.hypotheses import HypothesisConfig, node_covariance, pose_hypotheses
+    from mast.pipeline.identification import PanelIdentification, identify_panels
     from mast.pipeline.segmentation import segment_scan
 
     scene, mine = _drive_and_mine(40, copies_first=True)
     index = SurveyIndex.from_survey(mine)
-    config = HypothesisConfig(max_single_hypotheses=90)
+    config = HypothesisConfig(max_single_hypotheses=cap)
     checked = later = 0
     for k, sim in enumerate(scene.iter_simulated()):
         if k % 4:
             continue
         seg = segment_scan(sim.scan)
         ident = identify_panels(seg, index.representatives)
+        if blind and ident.nodes:
+            first = min(range(len(ident.nodes)), key=lambda i: ident.nodes[i].option)
+            nodes_ = list(ident.nodes)
+            nodes_[first] = replace(nodes_[first], identified=(False, False))
+            ident = PanelIdentification(tuple(nodes_), ident.singles)
         nodes = ident.nodes
         made = pose_hypotheses(ident, seg, index, config)
         singles = [h for h in made if h.kind == "single"]
@@ -242,7 +252,15 @@ def test_single_node_hypotheses_take_turns_over_every_look_alike() -> None:
             c, s_ = math.cos(mean), math.sin(mean)
             placed = np.array([[c, -s_], [s_, c]]) @ n.node_scanner + h.similarity.translation
             np.testing.assert_allclose(placed, beacon.edges[n.edge - 1], rtol=0, atol=1e-8)
+            spread = major_sigma(node_covariance(n, seg)) + 2.0 * float(
+                np.hypot(*n.node_scanner)
+            ) / math.sqrt(sum(weights))
+            assert h.spread_m == pytest.approx(spread, rel=1e-12)
             checked += 1
             later += got.beacon != index.beacons_like(n.beacon)[0]
-    assert checked > 100
-    assert later > 50
+    if cap == 0:
+        assert checked == 0
+    else:
+        assert checked > {90: 100, 5: 40, 1: 8}[cap]
+    if cap == 90:
+        assert later > 50

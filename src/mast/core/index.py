@@ -465,15 +465,19 @@ class SurveyIndex:
     ) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
         """For each pair of keys (either order), where the surveyed edge pairs
         ``distance_m`` apart within ``tolerance_m`` start and stop in the sorted pairs
-        (both 0 where there are none)."""
+        (the same place where there are none: a negative tolerance holds none). A bound
+        that is not a number is past every distance, as ``numpy.searchsorted`` has it."""
         shape = np.shape(keys_a)
         if self._codes.size == 0 or math.prod(shape) == 0:
             return np.zeros(shape, dtype=np.intp), np.zeros(shape, dtype=np.intp)
         at, found = self._buckets_of(keys_a, keys_b)
         start, stop = self._starts[at], np.where(found, self._starts[at + 1], self._starts[at])
-        lo = _first_at_least(self._pair_d, start, stop, distance_m - tolerance_m, strict=False)
-        hi = _first_at_least(self._pair_d, start, stop, distance_m + tolerance_m, strict=True)
-        return lo, hi
+        with np.errstate(invalid="ignore"):  # inf - inf: a bound that is not a number
+            bounds = (distance_m - tolerance_m, distance_m + tolerance_m)
+        below, above = (np.where(np.isnan(bound), math.inf, bound) for bound in bounds)
+        lo = _first_at_least(self._pair_d, start, stop, below, strict=False)
+        hi = _first_at_least(self._pair_d, start, stop, above, strict=True)
+        return lo, np.maximum(hi, lo)
 
     def pair_rows(
         self,

@@ -88,6 +88,10 @@ def similarity_transforms(
     (shape (k, n, 2) each)."""
     p = np.asarray(points_scanner, dtype=float)
     q = np.asarray(points_mine, dtype=float)
+    if p.ndim != 3 or p.shape[2] != 2 or q.shape != p.shape:
+        raise ValueError(f"point sets of shapes {p.shape} and {q.shape}: (k, n, 2) each")
+    if p.shape[1] < 2:
+        raise ValueError("a similarity transformation needs at least two points")
     pc, qc = p.mean(axis=1), q.mean(axis=1)
     x, y = p[..., 0] - pc[:, None, 0], p[..., 1] - pc[:, None, 1]
     u, v = q[..., 0] - qc[:, None, 0], q[..., 1] - qc[:, None, 1]

@@ -365,14 +365,20 @@ def pose_hypotheses(
     # The first round takes each node's first beacon of its design, all at once, for
     # as many nodes as it can reach; a node asked again takes the rest a few at a time.
     by_option = sorted(range(len(nodes)), key=lambda k: nodes[k].option)
-    reached = np.array(by_option[: max(config.max_single_hypotheses, 0)], dtype=np.intp)
-    mine = _PanelsOfNodes.of(seen, covs, reached)
+    # (a node without an identified panel implies no pose: it takes no turn)
+    with_panels = [k for k in by_option if any(nodes[k].identified)]
+    reached = np.array(with_panels[: max(config.max_single_hypotheses, 0)], dtype=np.intp)
+    panels_reached = _PanelsOfNodes.of(seen, covs, reached)
     firsts = np.array(
         [index.number(index.beacons_like(nodes[k].beacon)[0]) for k in reached.tolist()],
         dtype=np.intp,
     )
     first_of = dict(
-        zip(reached.tolist(), _singles(nodes, mine, reached, firsts, index), strict=True)
+        zip(
+            reached.tolist(),
+            _singles(nodes, panels_reached, reached, firsts, index),
+            strict=True,
+        )
     )
 
     def singles_of(k: int) -> Iterator[Hypothesis]:
@@ -383,7 +389,7 @@ def pose_hypotheses(
         rest = iter(index.beacons_like(nodes[k].beacon)[1:])
         while chunk := [index.number(b) for b in itertools.islice(rest, _SINGLES_AT_ONCE)]:
             at = np.full(len(chunk), k, dtype=np.intp)
-            made = _singles(nodes, mine, at, np.array(chunk, dtype=np.intp), index)
+            made = _singles(nodes, panels_reached, at, np.array(chunk, dtype=np.intp), index)
             yield from (h for h in made if h is not None)
 
     singles = itertools.islice(
@@ -468,6 +474,7 @@ def _readings(
     ds_vec = xy[second] - xy[first]
     ds = np.hypot(ds_vec[:, 0], ds_vec[:, 1])
     go = ~(shared & (number[first] != number[second])) & (ds >= config.min_node_separation_m)
+    go &= ds > 0.0  # two nodes at one place have no direction: no reading fits them
     first, second, shared, ds_vec, ds = first[go], second[go], shared[go], ds_vec[go], ds[go]
     u = ds_vec / ds[:, None]
     both = covs[first] + covs[second]
@@ -496,8 +503,8 @@ def _readings(
     tol = np.maximum(config.min_rotation_tol_rad, config.sigmas * np.hypot(s_rot[:, None], s_k))
     mis = np.abs(wrap_angles(r_k - rot[:, None])) / tol
     mis_r = np.where(np.concatenate([ok_a, ok_b], 1), mis, 0.0).max(axis=1, initial=0.0)
-    reach = np.hypot(xy[:, 0], xy[:, 1])
-    spread = panels.major[i_row] + 2.0 * reach[i_row] * np.minimum(s_rot, math.pi)
+    ranges = np.hypot(xy[:, 0], xy[:, 1])
+    spread = panels.major[i_row] + 2.0 * ranges[i_row] * np.minimum(s_rot, math.pi)
     misfit = np.maximum(mis_d, mis_r)
     fits = mis_r <= 1.0
     return (
@@ -520,7 +527,7 @@ class _PanelsOfNodes:
     one width: their numbers, directions, directions' sigmas and which are panels, per
     node (a row each), each node's turn and its ellipse's semi-major axis, and the
     weights of its panels' directions (their inverse variances; 0 where no panel) and
-    their sum."""
+    their sum (1 for a node without panels, whose rows are all padding)."""
 
     panel: NDArray[np.intp]
     angle: NDArray[np.float64]
@@ -556,20 +563,21 @@ class _PanelsOfNodes:
             out.ok[k, :m] = True
             out.turn[k] = s.turn
             out.major[k] = major_sigma(covs[k])
-            w = 1.0 / np.maximum(s.sigma, 1e-9) ** 2
-            out.weight[k, :m] = w
-            out.sum_weight[k] = np.sum(w)
+            if m:
+                w = 1.0 / np.maximum(s.sigma, 1e-9) ** 2
+                out.weight[k, :m] = w
+                out.sum_weight[k] = np.sum(w)
         return out
 
     def rotations(
-        self, index: SurveyIndex, nodes: NDArray[np.intp], beacons: NDArray[np.intp]
+        self, index: SurveyIndex, which: NDArray[np.intp], beacons: NDArray[np.intp]
     ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.bool_]]:
-        """Per row, the rotation (mine vs scanner) each of node ``nodes[r]``'s panels
+        """Per row, the rotation (mine vs scanner) each of node ``which[r]``'s panels
         implies were it on beacon ``beacons[r]`` (:meth:`_PanelsSeen.rotations`), the
         panels' direction sigmas and which columns are panels."""
-        mine = np.take_along_axis(index.panel_angles(beacons), self.panel[nodes], axis=1)
-        rot = wrap_angles(mine + self.turn[nodes][:, None] - self.angle[nodes])
-        return rot, self.sigma[nodes], self.ok[nodes]
+        mine = np.take_along_axis(index.panel_angles(beacons), self.panel[which], axis=1)
+        rot = wrap_angles(mine + self.turn[which][:, None] - self.angle[which])
+        return rot, self.sigma[which], self.ok[which]
 
 
 def _readings_reference(

@@ -824,18 +824,19 @@ def _on_their_edges(
     seg: Segmentation | None,
     noise: NoiseModel,
     cfg: VerificationConfig,
-    sigmas: dict[int, float] | None = None,
+    node_sigmas: dict[int, float] | None = None,
 ) -> set[str]:
     """The ``candidates`` one of whose edges an identified corner of the scan (of the
     beacon's design) lands on at ``icp``'s pose, within ``gate_sigmas`` of the corner's
     own uncertainty, the survey's and the range noise; none without a segmentation.
-    ``sigmas``, when given, keeps each corner's uncertainty (:func:`node_sigma`) by the
-    ``id`` of its node, for the scan's other poses."""
+    ``node_sigmas``, when given, keeps each corner's uncertainty (:func:`node_sigma`) by
+    the ``id`` of its node (``ident`` holds the nodes while the scan is verified), for
+    the scan's other poses."""
     node_ok: set[str] = set()
     if ident is None or seg is None:
         return node_ok
-    if sigmas is None:
-        sigmas = {}
+    if node_sigmas is None:
+        node_sigmas = {}
     by_beacon = ident.nodes_by_beacon
     designs = {index.design_of(b) for b in candidates}
     # Only the nodes of a candidate's design (a survey of many designs reads each corner
@@ -858,9 +859,9 @@ def _on_their_edges(
             left = [b for b in mine if b not in node_ok]
             if not left:
                 break
-            spread = sigmas.get(id(node))
+            spread = node_sigmas.get(id(node))
             if spread is None:
-                spread = sigmas[id(node)] = node_sigma(node, seg)
+                spread = node_sigmas[id(node)] = node_sigma(node, seg)
             for b in left:
                 edge = node.edge - 1
                 surveyed = float(index.survey[b].sigmas_or(noise.survey_sigma_m)[edge])
@@ -883,7 +884,7 @@ def _support(
     cfg: VerificationConfig,
     tracked: bool = False,
     kept: Refinement | None = None,
-    sigmas: dict[int, float] | None = None,
+    node_sigmas: dict[int, float] | None = None,
 ) -> tuple[tuple[str, ...], tuple[str, ...], tuple[str, ...], tuple[str, ...]]:
     """Beacons that confirm a pose, the cornered and the shaped beacons, and the beacons
     refused only because their returns do not lie on their panels within their noise.
@@ -909,7 +910,7 @@ def _support(
     the beacon). Without a segmentation (``seg`` and ``ident`` None: a scan
     searched near a prior before it is segmented) no beacon has a node. ``kept``
     holds the beacons' tests at this pose from an earlier judgement of it, and keeps
-    those made now; ``sigmas`` the scan's corners' uncertainties (:func:`_on_their_edges`).
+    those made now; ``node_sigmas`` the scan's corners' uncertainties (:func:`_on_their_edges`).
     """
     in_place_memo: dict[str, bool] = {} if kept is None else kept.in_place
     fitted_memo: dict[str, tuple[float, float]] = {} if kept is None else kept.fitted
@@ -929,7 +930,7 @@ def _support(
         and _seen_from_front(index.survey[b].edges, icp.pose.position)
     }
     gate = cfg.gate_sigmas * noise.gate_sigma_m
-    node_ok = _on_their_edges(icp, candidates, index, ident, seg, noise, cfg, sigmas)
+    node_ok = _on_their_edges(icp, candidates, index, ident, seg, noise, cfg, node_sigmas)
     # Identified by its corner or not, a beacon whose returns do not lie on its panels
     # within their noise is not read right at this pose (a look-alike 204 m away on a
     # long drive rested on such a corner).
@@ -1163,7 +1164,7 @@ def verify(
                 cfg,
                 tracked=h0.kind == "prior",
                 kept=r.kept,
-                sigmas=node_sigmas,
+                node_sigmas=node_sigmas,
             )
             r.verified = Verified(h0, icp, r.counts, supported, checks, cornered, shaped, refused)
         return r.verified
