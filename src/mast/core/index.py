@@ -184,16 +184,6 @@ def _first_at_least_reference(
         hi = np.where(open_ & ~below, mid, hi)
 
 
-@dataclass(frozen=True, slots=True)
-class _Bucket:
-    """The surveyed edge pairs of one (design, edge) key pair, sorted by (distance,
-    first row, second row)."""
-
-    dist: NDArray[np.float64]
-    first: NDArray[np.intp]
-    second: NDArray[np.intp]
-
-
 @dataclass(frozen=True, eq=False)
 class SurveyIndex:
     """Designs and edge-pair distances of a survey.
@@ -317,15 +307,6 @@ class SurveyIndex:
     def beacons_like(self, beacon_id: str) -> tuple[str, ...]:
         """Every surveyed beacon of the same design as ``beacon_id`` (itself included)."""
         return self.designs[self._design_of[beacon_id]]
-
-    def _bucket(self, ka: int, kb: int) -> _Bucket | None:
-        """The pairs of keys ``ka <= kb``, by distance; None if none."""
-        code = int(_key_pair_code(ka, kb, len(self.designs)))
-        at = int(np.searchsorted(self._codes, code))
-        if at == self._codes.size or int(self._codes[at]) != code:
-            return None
-        lo, hi = int(self._starts[at]), int(self._starts[at + 1])
-        return _Bucket(self._pair_d[lo:hi], self._pair_i[lo:hi], self._pair_j[lo:hi])
 
     def node_key(self, beacon_id: str, edge: int) -> int:
         """Key of a node edge (2 or 3) of a beacon of ``beacon_id``'s design."""
