@@ -65,17 +65,22 @@ def pytest_sessionstart(session: pytest.Session) -> None:
     """Under xdist (``-n``), the controller compiles the numba kernels into their cache
     before the workers start, once: else each worker, and each ``mast`` process the
     tests start in the first minutes, compiles them again (a minute of a core each)."""
+    from mast.cli.warmup import compile_3d
+
     config = session.config
     if hasattr(config, "workerinput") or not config.getoption("numprocesses", None):
         return
-    _compile_kernels()
+    compile_3d()  # every kernel the 2D and 3D locators and the odometry call
 
 
-def _compile_kernels() -> None:
-    """Every kernel the 2D locator, the odometry and the 3D locator call, through them."""
-    from mast.cli.warmup import compile_3d
+def named_test(nodeid: str) -> Callable[..., Any]:
+    """The test function a node id (``path::name``, no parameters) names."""
+    import importlib
 
-    compile_3d()
+    path, name = nodeid.split("::")
+    module = importlib.import_module(path.removesuffix(".py").replace("/", "."))
+    test: Callable[..., Any] = getattr(module, name)
+    return test
 
 
 @pytest.fixture

@@ -59,12 +59,17 @@ def readme_commands() -> list[str]:
     return lines
 
 
+def commands_run_here() -> list[str]:
+    """The README's commands the test runs: neither left out nor run by another test."""
+    return [c for c in readme_commands() if not SKIP.search(c) and c not in ELSEWHERE]
+
+
 def readme_chains() -> list[list[str]]:
     """The commands the test runs, in chains that do not depend on each other: a command
     that names a path an earlier one wrote (its ``--out``, ``--plot`` or ``--record``),
     or writes where it wrote, runs after it in its chain."""
     chains: list[tuple[set[str], list[str]]] = []
-    commands = [c for c in readme_commands() if not SKIP.search(c) and c not in ELSEWHERE]
+    commands = commands_run_here()
     for command in commands:
         words = shlex.split(command)
         named = {w.rstrip("/").split("/")[0] for w in words if not w.startswith("-")}
@@ -121,7 +126,7 @@ def test_every_readme_command_runs_on_the_examples(chain: list[str], tmp_path: P
 def test_the_readme_chains_keep_every_command_and_its_order() -> None:
     """Every command the test runs is in one chain, each chain in the README's order, and
     a command reading what another wrote is in the writer's chain, after it."""
-    commands = [c for c in readme_commands() if not SKIP.search(c) and c not in ELSEWHERE]
+    commands = commands_run_here()
     chains = readme_chains()
     assert sorted(c for chain in chains for c in chain) == sorted(commands)
     for chain in chains:
@@ -145,14 +150,15 @@ def test_a_readme_command_run_elsewhere_is_run_there(command: str, nodeid: str) 
     """The command is the README's, and the test that runs it exists and runs the
     command's arguments (given as a list to the CLI runner)."""
     import ast
-    import importlib
+    import inspect
+
+    from tests.conftest import named_test
 
     assert command in readme_commands()
-    path, name = nodeid.split("::")
-    module = importlib.import_module(path.removesuffix(".py").replace("/", "."))
-    test = getattr(module, name)
+    test = named_test(nodeid)
     argv = shlex.split(command)[1:]
-    source = ast.parse(Path(module.__file__ or "").read_text(encoding="utf-8"))
+    source = ast.parse(Path(inspect.getfile(test)).read_text(encoding="utf-8"))
+    name = nodeid.split("::")[1]
     (function,) = [f for f in ast.walk(source) if isinstance(f, ast.FunctionDef) and f.name == name]
     lists = [
         ast.literal_eval(node)
