@@ -17,6 +17,7 @@ from mast.bench.accuracy3d import (
     ACCURACY3D_CONFIGS,
     SHORT,
     Accuracy3DConfig,
+    is_far_3d,
     is_wrong_3d,
     run_accuracy3d,
     summarise_3d,
@@ -51,25 +52,43 @@ def _moved(pose: Pose3D, **by: float) -> Pose3D:
     ("by", "wrong"),
     [
         ({}, False),
-        ({"easting": 0.09}, False),
-        ({"easting": 0.11}, True),
-        ({"northing": -0.08, "easting": 0.08}, True),  # 0.113 m in plan
-        ({"elevation": 0.12}, True),
-        ({"azimuth": math.radians(0.9)}, False),
-        ({"azimuth": math.radians(-1.2)}, True),
-        ({"azimuth": math.radians(359.5)}, False),  # the same heading, wrapped
-        ({"roll": math.radians(1.1)}, True),
-        ({"pitch": math.radians(-1.1)}, True),
+        ({"easting": 0.04}, False),
+        ({"easting": 0.06}, True),
+        ({"northing": -0.04, "easting": 0.04}, True),  # 0.057 m in plan
+        ({"elevation": 0.06}, True),
+        ({"azimuth": math.radians(0.2)}, False),
+        ({"azimuth": math.radians(-0.3)}, True),
+        ({"azimuth": math.radians(359.8)}, False),  # the same heading, wrapped
+        ({"roll": math.radians(0.3)}, True),
+        ({"pitch": math.radians(-0.3)}, True),
     ],
 )
 def test_the_wrong_fix_rule(by: dict[str, float], wrong: bool) -> None:
+    # SIGMAS are 2 mm, 1 cm, 0.06 deg and 0.03 deg: each pose off is outside five
     assert is_wrong_3d(_fix(_moved(TRUTH, **by)), TRUTH) is wrong
+
+
+def test_a_fix_off_within_five_of_its_sigmas_is_far_but_not_wrong() -> None:
+    # a tilt the panels hold loosely (0.45 deg): 1.1 deg off in roll is 2.4 sigma
+    loose = SIGMAS.copy()
+    loose[3] = math.radians(0.45)
+    off = _fix(_moved(TRUTH, roll=math.radians(1.1)), loose)
+    assert not is_wrong_3d(off, TRUTH)
+    assert is_far_3d(off, TRUTH)
+    # past five sigmas, it is wrong; within the tolerances, sigmas do not matter
+    assert is_wrong_3d(_fix(_moved(TRUTH, roll=math.radians(2.5)), loose), TRUTH)
+    tight = _fix(_moved(TRUTH, azimuth=math.radians(0.2)), SIGMAS / 100)
+    assert not is_wrong_3d(tight, TRUTH)
+    assert not is_far_3d(tight, TRUTH)
+    assert not is_far_3d(_fix(_moved(TRUTH, easting=0.09)), TRUTH)
+    assert is_far_3d(_fix(_moved(TRUTH, easting=0.11)), TRUTH)
 
 
 def test_an_elevation_the_fix_says_it_does_not_know_is_not_held_against_it() -> None:
     unknown = SIGMAS.copy()
     unknown[2] = math.sqrt(UNBRACKETED)
     assert not is_wrong_3d(_fix(_moved(TRUTH, elevation=5.0), unknown), TRUTH)
+    assert not is_far_3d(_fix(_moved(TRUTH, elevation=5.0), unknown), TRUTH)
     assert is_wrong_3d(_fix(_moved(TRUTH, elevation=5.0, easting=0.2), unknown), TRUTH)
 
 
@@ -119,6 +138,7 @@ def test_the_benchmark_counts_wrong_fixes_by_its_rule(
     assert s.fix_rate == 1.0
     # every frame located is fixed, owed or not, and counts
     assert s.wrong == (s.frames if all_wrong else 0)
+    assert s.far == s.wrong  # 0.2 m and 2 deg are far off too
     if not offset:
         assert all(r == 0.0 for r in s.ratio[:2])  # no error at all
         assert s.ratio_points[:2] == (0.0, 0.0)
@@ -160,14 +180,26 @@ def test_a_short_run_of_the_locator_fills_its_tables_and_rows(tmp_path: Path) ->
     assert s.ms_per_kpoint_median > 0
     assert 25_000 < s.points_median < 32_000  # a VLP-16's frame
     table = lines[0]
-    for heading in ("owed", "fix %", "WRONG", "ms / 1000 pts", "points' own", *SHORT):
+    for heading in (
+        "owed",
+        "fix %",
+        "WRONG",
+        "> 0.1 m, 1°",
+        "ms / 1000 pts",
+        "points' own",
+        *SHORT,
+    ):
         assert heading in table
     assert "vlp16-2cm" in table
     rows = (tmp_path / "accuracy3d_vlp16-2cm.csv").read_text().splitlines()
     assert len(rows) == s.frames + 1
-    assert {"owed", "fixed", "wrong", "reason", "elapsed_ms", "points"} <= set(rows[0].split(","))
+    assert {"owed", "fixed", "wrong", "far", "reason", "elapsed_ms", "points"} <= set(
+        rows[0].split(",")
+    )
     summary = (tmp_path / "accuracy3d_summary.csv").read_text().splitlines()
-    assert {"ratio_E", "coverage_A", "sigma_over_crb_Z", "wrong"} <= set(summary[0].split(","))
+    assert {"ratio_E", "coverage_A", "sigma_over_crb_Z", "wrong", "far"} <= set(
+        summary[0].split(",")
+    )
 
 
 def test_a_run_is_the_same_for_the_same_seed() -> None:

@@ -14,9 +14,12 @@ Per configuration:
   within :data:`mast.pipeline.locator3d.MAX_TILT_SIGMA_DEG`, the loosest tilt a fix is
   given with (the others' tilt rests on their top edges' brackets, if on anything: the
   rule owes them a fix their panels alone cannot give);
-- **wrong fixes**, owed or not (:func:`is_wrong_3d`): more than 0.1 m off in position
-  (in 3D where the fix observes its elevation, in plan otherwise) or more than 1° off in
-  azimuth, roll or pitch;
+- **wrong fixes**, owed or not (:func:`is_wrong_3d`): confidently wrong, as in 2D
+  (:func:`mast.bench.robustness.is_wrong`): more than 5 cm off in position (in 3D where
+  the fix observes its elevation, in plan otherwise) or more than 0.25° in azimuth,
+  roll or pitch, and outside five of its own sigmas in one of them; and the fixes **far
+  off** (:func:`is_far_3d`: more than 0.1 m or 1°, whatever their sigmas), which a fix
+  whose tilt the panels hold loosely may be and say so;
 - over the owed frames' fixes, per parameter: **RMS/CRB** (each error over its frame's
   own bound, :func:`mast.pipeline.bounds3d.cramer_rao_bound3d` at the true pose from the
   simulator's noise-free returns on the beacon panels, then pooled), **coverage** (the
@@ -54,20 +57,30 @@ from mast.sim.lidar3d import SimulatedFrame3D, simulate_frames
 
 __all__ = [
     "ACCURACY3D_CONFIGS",
+    "FAR_ANGLE_DEG",
+    "FAR_POSITION_M",
     "WRONG_ANGLE_DEG",
     "WRONG_POSITION_M",
+    "WRONG_SIGMAS",
     "Accuracy3DConfig",
     "Accuracy3DSummary",
     "errors_3d",
+    "is_far_3d",
     "is_wrong_3d",
     "run_accuracy3d",
     "truth_bound_3d",
 ]
 
-#: A fix further off than this in position, metres, is wrong.
-WRONG_POSITION_M = 0.1
-#: A fix further off than this in azimuth, roll or pitch, degrees, is wrong.
-WRONG_ANGLE_DEG = 1.0
+#: A fix further off than this in position, metres, or in azimuth, roll or pitch,
+#: degrees, and outside WRONG_SIGMAS of its own sigmas in one of the six, is wrong (the
+#: 2D benchmarks' rule: :func:`mast.bench.robustness.is_wrong`).
+WRONG_POSITION_M = 0.05
+WRONG_ANGLE_DEG = 0.25
+WRONG_SIGMAS = 5.0
+#: A fix further off than this in position, metres, or in an angle, degrees, is far off,
+#: whatever its sigmas (counted beside the wrong fixes).
+FAR_POSITION_M = 0.1
+FAR_ANGLE_DEG = 1.0
 #: Short names of :data:`mast.pipeline.adjust3d.PARAMETERS`, in its order.
 SHORT = ("E", "N", "Z", "roll", "pitch", "A")
 #: Frames simulated for a configuration at most, per owed frame asked for.
@@ -117,6 +130,8 @@ class Accuracy3DSummary:
     tilt_held_fix_rate: float
     fixed_not_owed: int
     wrong: int
+    far: int
+    """Fixes (owed or not) more than 0.1 m or 1° off, whatever their sigmas."""
     misses: str
     ratio: tuple[float, ...]
     ratio_points: tuple[float, ...]
@@ -151,18 +166,39 @@ def _elevation_observed(covariance: NDArray[np.float64]) -> bool:
     return bool(covariance[2, 2] < UNBRACKETED / 2)
 
 
-def is_wrong_3d(fix: Fix3D, truth: Pose3D) -> bool:
-    """Whether a fix is wrong: more than :data:`WRONG_POSITION_M` off in position (in 3D
-    where the fix observes the elevation, in plan where it says it does not) or more
-    than :data:`WRONG_ANGLE_DEG` off in azimuth, roll or pitch. A no-fix is not wrong."""
-    if not fix.ok or fix.pose is None:
-        return False
+def _off(fix: Fix3D, truth: Pose3D, position_m: float, angle_deg: float) -> bool:
+    """Whether a fix is more than ``position_m`` off in position (in 3D where it
+    observes the elevation, in plan where it says it does not) or ``angle_deg`` in
+    azimuth, roll or pitch."""
+    assert fix.pose is not None
     err = errors_3d(fix.pose, truth)
     observed = fix.adjustment is None or _elevation_observed(fix.adjustment.covariance)
     position = float(np.linalg.norm(err[:3] if observed else err[:2]))
-    return position > WRONG_POSITION_M or bool(
-        np.any(np.abs(np.degrees(err[3:])) > WRONG_ANGLE_DEG)
-    )
+    return position > position_m or bool(np.any(np.abs(np.degrees(err[3:])) > angle_deg))
+
+
+def is_wrong_3d(fix: Fix3D, truth: Pose3D) -> bool:
+    """Whether a fix is confidently wrong: more than :data:`WRONG_POSITION_M` or
+    :data:`WRONG_ANGLE_DEG` off (:func:`_off`) and more than :data:`WRONG_SIGMAS` of its
+    own sigmas off in one of the six (the elevation only where the fix observes it). A
+    no-fix is not wrong; a fix without an adjustment has no sigmas to hide behind."""
+    if not fix.ok or fix.pose is None:
+        return False
+    if not _off(fix, truth, WRONG_POSITION_M, WRONG_ANGLE_DEG):
+        return False
+    if fix.adjustment is None:
+        return True
+    err = np.abs(errors_3d(fix.pose, truth))
+    sigma = np.sqrt(np.diag(fix.adjustment.covariance))
+    if not _elevation_observed(fix.adjustment.covariance):
+        err[2] = 0.0
+    return bool(np.any(err > WRONG_SIGMAS * sigma))
+
+
+def is_far_3d(fix: Fix3D, truth: Pose3D) -> bool:
+    """Whether a fix is more than :data:`FAR_POSITION_M` or :data:`FAR_ANGLE_DEG` off,
+    whatever its sigmas (a loosely held tilt may be, and say so). A no-fix is not."""
+    return fix.ok and fix.pose is not None and _off(fix, truth, FAR_POSITION_M, FAR_ANGLE_DEG)
 
 
 def truth_bound_3d(
@@ -208,6 +244,7 @@ def frame_row(
         "owed": int(sim.owed),
         "fixed": int(fix.ok),
         "wrong": int(is_wrong_3d(fix, sim.pose)),
+        "far": int(is_far_3d(fix, sim.pose)),
         "reason": fix.reason or "",
         "elapsed_ms": 1e3 * fix.elapsed_s,
     }
@@ -351,6 +388,7 @@ def summarise_3d(config: str, rows: list[dict[str, object]], seconds: float) -> 
         tilt_held_fix_rate=sum(1 for r in held if r["fixed"]) / len(held) if held else math.nan,
         fixed_not_owed=sum(1 for r in rows if r["fixed"] and not r["owed"]),
         wrong=sum(int(r["wrong"]) for r in rows),  # type: ignore[call-overload]
+        far=sum(int(r.get("far", 0)) for r in rows),  # type: ignore[call-overload]
         misses=", ".join(f"{k} {v}" for k, v in sorted(reasons.items(), key=lambda kv: -kv[1])),
         ratio=tuple(ratio),
         ratio_points=tuple(ratio_points),
@@ -392,8 +430,8 @@ def table_3d(summaries: Sequence[Accuracy3DSummary]) -> str:
     )
     for col_name in (
         "config", "owed", "fixed", "fix %", "tilt held: owed, fix %", "not owed fixed",
-        "WRONG", "E,N mm", "Z mm", "roll °", "pitch °", "A °", "ms / frame", "ms / 1000 pts",
-        "misses (owed)",
+        "WRONG", "> 0.1 m, 1°", "E,N mm", "Z mm", "roll °", "pitch °", "A °", "ms / frame",
+        "ms / 1000 pts", "misses (owed)",
     ):  # fmt: skip
         left = col_name.startswith(("config", "m"))
         first.add_column(col_name, justify="left" if left else "right", no_wrap=True)
@@ -406,6 +444,7 @@ def table_3d(summaries: Sequence[Accuracy3DSummary]) -> str:
             f"{s.owed_tilt_held}, {_f(100 * s.tilt_held_fix_rate, '.1f')}",
             str(s.fixed_not_owed),
             str(s.wrong),
+            str(s.far),
             f"{_f(s.pos_err_median_mm, '.1f')} / {_f(s.pos_err_p95_mm, '.1f')}",
             f"{_f(s.elev_err_median_mm, '.1f')} / {_f(s.elev_err_p95_mm, '.1f')}",
             f"{_f(s.roll_err_median_deg, '.3f')} / {_f(s.roll_err_p95_deg, '.3f')}",
