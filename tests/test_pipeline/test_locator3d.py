@@ -27,6 +27,7 @@ from mast.pipeline.locator3d import (
     PLATE_SLACK_M,
     Fix3D,
     Locator3DConfig,
+    _checked,
     _contiguous,
     _on_one_beacon,
     _plate_floors,
@@ -297,6 +298,33 @@ def test_a_survey_without_elevations_is_refused_for_a_3d_frame() -> None:
     frame = cast(Pose3D.from_degrees(7.0, 7.0, 1.2, 0.0), walls, 0.01, 0)
     with pytest.raises(InputError, match="needs the survey's elevations"):
         locate3d(frame, flat)
+
+
+def test_a_panels_lone_return_is_left_out_of_the_adjustment() -> None:
+    which = np.array([0, 0, -1, 1, 2, 2, 2, -1, 4])
+    planes = PanelPlanes.of(paper_walls("parallel")[1].survey)  # two beacons, six panels
+    assert locator3d.MIN_PANEL_RETURNS == 2
+    assert _checked(which, planes).tolist() == [0, 0, -1, -1, 2, 2, 2, -1, -1]
+    assert _checked(np.full(3, -1), planes).tolist() == [-1, -1, -1]
+
+
+def test_a_far_beacons_lone_return_does_not_lever_the_fix(monkeypatch: pytest.MonkeyPatch) -> None:
+    # A far beacon's middle-panel return just past the joint, taken for its end panel
+    # (the panel's only return), held the azimuth 7.3 sigma off (0.15 deg at 0.02) and
+    # the roll 4.1 sigma (1.3 deg): nothing else of that panel could check it.
+    scene = random_drift_scene(3000, 1, frames=10, lidar="os1-64", range_sigma_m=0.03)
+    sim = scene.simulate(3)
+
+    def z() -> NDArray[np.float64]:
+        fix = locate3d(sim.frame, scene.survey, config=Locator3DConfig(range_sigma_m=0.03))
+        assert fix.ok, fix.detail
+        assert fix.pose is not None
+        assert fix.adjustment is not None
+        return np.abs(fix.pose.minus(sim.pose)) / np.sqrt(np.diag(fix.adjustment.covariance))
+
+    assert z().max() < 3.5
+    monkeypatch.setattr(locator3d, "MIN_PANEL_RETURNS", 1)  # the lone return adjusted on
+    assert z().max() > 5.0
 
 
 @pytest.mark.parametrize(("seed", "index"), [(4, 3), (6, 0), (7, 2), (0, 3)])
