@@ -47,6 +47,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
+from mast.bench.robustness import WRONG_AZIMUTH_RAD, WRONG_POSITION_M, WRONG_SIGMAS
 from mast.bench.rows import write_rows
 from mast.core.beacon import Survey
 from mast.core.pose3d import Frame3D, Pose3D
@@ -72,11 +73,9 @@ __all__ = [
 ]
 
 #: A fix further off than this in position, metres, or in azimuth, roll or pitch,
-#: degrees, and outside WRONG_SIGMAS of its own sigmas in one of the six, is wrong (the
-#: 2D benchmarks' rule: :func:`mast.bench.robustness.is_wrong`).
-WRONG_POSITION_M = 0.05
-WRONG_ANGLE_DEG = 0.25
-WRONG_SIGMAS = 5.0
+#: degrees, and outside WRONG_SIGMAS of its own sigmas in one of the six, is wrong: the
+#: 2D benchmarks' rule and thresholds (:func:`mast.bench.robustness.is_wrong`).
+WRONG_ANGLE_DEG = math.degrees(WRONG_AZIMUTH_RAD)
 #: A fix further off than this in position, metres, or in an angle, degrees, is far off,
 #: whatever its sigmas (counted beside the wrong fixes).
 FAR_POSITION_M = 0.1
@@ -166,13 +165,10 @@ def _elevation_observed(covariance: NDArray[np.float64]) -> bool:
     return bool(covariance[2, 2] < UNBRACKETED / 2)
 
 
-def _off(fix: Fix3D, truth: Pose3D, position_m: float, angle_deg: float) -> bool:
-    """Whether a fix is more than ``position_m`` off in position (in 3D where it
-    observes the elevation, in plan where it says it does not) or ``angle_deg`` in
-    azimuth, roll or pitch."""
-    assert fix.pose is not None
-    err = errors_3d(fix.pose, truth)
-    observed = fix.adjustment is None or _elevation_observed(fix.adjustment.covariance)
+def _off(err: NDArray[np.float64], observed: bool, position_m: float, angle_deg: float) -> bool:
+    """Whether errors ``err`` (:func:`errors_3d`) are more than ``position_m`` in position
+    (in 3D where the fix ``observed`` the elevation, in plan where it says it did not) or
+    ``angle_deg`` in azimuth, roll or pitch."""
     position = float(np.linalg.norm(err[:3] if observed else err[:2]))
     return position > position_m or bool(np.any(np.abs(np.degrees(err[3:])) > angle_deg))
 
@@ -184,21 +180,25 @@ def is_wrong_3d(fix: Fix3D, truth: Pose3D) -> bool:
     no-fix is not wrong; a fix without an adjustment has no sigmas to hide behind."""
     if not fix.ok or fix.pose is None:
         return False
-    if not _off(fix, truth, WRONG_POSITION_M, WRONG_ANGLE_DEG):
-        return False
+    err = errors_3d(fix.pose, truth)
     if fix.adjustment is None:
-        return True
-    err = np.abs(errors_3d(fix.pose, truth))
+        return _off(err, True, WRONG_POSITION_M, WRONG_ANGLE_DEG)
+    observed = _elevation_observed(fix.adjustment.covariance)
+    if not _off(err, observed, WRONG_POSITION_M, WRONG_ANGLE_DEG):
+        return False
     sigma = np.sqrt(np.diag(fix.adjustment.covariance))
-    if not _elevation_observed(fix.adjustment.covariance):
-        err[2] = 0.0
-    return bool(np.any(err > WRONG_SIGMAS * sigma))
+    beyond = np.abs(err) > WRONG_SIGMAS * sigma
+    beyond[2] &= observed
+    return bool(np.any(beyond))
 
 
 def is_far_3d(fix: Fix3D, truth: Pose3D) -> bool:
     """Whether a fix is more than :data:`FAR_POSITION_M` or :data:`FAR_ANGLE_DEG` off,
     whatever its sigmas (a loosely held tilt may be, and say so). A no-fix is not."""
-    return fix.ok and fix.pose is not None and _off(fix, truth, FAR_POSITION_M, FAR_ANGLE_DEG)
+    if not fix.ok or fix.pose is None:
+        return False
+    observed = fix.adjustment is None or _elevation_observed(fix.adjustment.covariance)
+    return _off(errors_3d(fix.pose, truth), observed, FAR_POSITION_M, FAR_ANGLE_DEG)
 
 
 def truth_bound_3d(

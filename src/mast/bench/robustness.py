@@ -29,6 +29,8 @@ __all__ = ["RobustnessSummary", "is_wrong", "owed_clean", "pose_error", "run_rob
 
 WRONG_POSITION_M = 0.05
 WRONG_AZIMUTH_RAD = math.radians(0.25)
+#: ... and outside this many of its own standard deviations in one of its parameters.
+WRONG_SIGMAS = 5.0
 
 
 def owed_clean(sim: SimulatedScan) -> bool:
@@ -53,7 +55,7 @@ def is_wrong(fix: Fix, truth: SimulatedScan | Pose2D) -> bool:
         return False
     err = pose_error(fix.pose, truth if isinstance(truth, Pose2D) else truth.pose)
     big = math.hypot(err[0], err[1]) > WRONG_POSITION_M or abs(err[2]) > WRONG_AZIMUTH_RAD
-    outside = bool(np.any(np.abs(err) > 5 * fix.adjustment.sigma))
+    outside = bool(np.any(np.abs(err) > WRONG_SIGMAS * fix.adjustment.sigma))
     return big and outside
 
 
