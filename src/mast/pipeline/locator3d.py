@@ -1048,9 +1048,10 @@ def _fix3d(
             adj,
         )
     # the returns adjusted on: the panels hit thickly enough, less those snooping left out
-    used = _checked(which, planes) if adj.used is None else adj.used
+    checked = _checked(which, planes)
+    used = checked if adj.used is None else adj.used
     # the panels too thinly hit to be adjusted on are still beams' ends for the misfits
-    which = np.where((used < 0) & (which >= 0) & (_checked(which, planes) < 0), which, used)
+    which = np.where((checked < 0) & (which >= 0), which, used)
     beacons = _shown(which, lines, planes, cfg)
     if len(beacons) < 2:
         return refused("one_beacon", _too_few(beacons, cfg), adj)
