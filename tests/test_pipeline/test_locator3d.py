@@ -18,8 +18,8 @@ from mast.core.beacon import Survey
 from mast.core.pose3d import Pose3D
 from mast.core.scan import Scan
 from mast.errors import InputError
-from mast.pipeline import locator3d
-from mast.pipeline.adjust3d import Adjustment3D, PanelPlanes
+from mast.pipeline import adjust3d, locator3d
+from mast.pipeline.adjust3d import FLOOR_PAST_M, Adjustment3D, PanelPlanes
 from mast.pipeline.locator import Fix, LocatorConfig
 from mast.pipeline.locator3d import (
     PITCH_TRIES_DEG,
@@ -177,9 +177,11 @@ def test_the_compiled_runs_of_heights_and_floors_agree_with_their_numpy_referenc
         about = planes.local(grid, 1.5)
         flat = np.concatenate(about)
         first = np.cumsum([0] + [len(idx) for idx in about], dtype=np.intp)
+        side, depth = planes.footprint()
         got_floors = floors3d(
-            sim.frame.points, pose.rotation, pose.position, flat, first, planes.wall
-        )
+            sim.frame.points, pose.rotation, pose.position, flat, first, planes.wall, side,
+            depth + FLOOR_PAST_M,
+        )  # fmt: skip
         want_floors = planes.floors(grid, about)
         np.testing.assert_allclose(got_floors, want_floors, rtol=0, atol=1e-12)
         floors += int(np.count_nonzero(np.isfinite(want_floors)))
@@ -325,6 +327,59 @@ def test_a_far_beacons_lone_return_does_not_lever_the_fix(monkeypatch: pytest.Mo
     assert z().max() < 3.5
     monkeypatch.setattr(locator3d, "MIN_PANEL_RETURNS", 1)  # the lone return adjusted on
     assert z().max() > 5.0
+
+
+@pytest.mark.parametrize(
+    ("lidar", "lookalikes", "index"), [("os1-64", False, 9), ("vlp16", True, 4)]
+)
+def test_returns_above_their_panels_tops_refuse_the_fix(
+    monkeypatch: pytest.MonkeyPatch, lidar: str, lookalikes: bool, index: int
+) -> None:
+    # Two frames whose fix took returns 2.2 m above a panel's top (the OS1-64's, 1.45 deg
+    # off in roll at 8 sigma) and 1 m above (the VLP-16's, its pitch 9.4 deg off at 26
+    # sigma: the vehicle tilted 13 deg, and a tilt within the drift's walls moves each
+    # panel within its own plane). Their panels' tops refuse them.
+    scene = random_drift_scene(
+        3000, 0, frames=10, lidar=lidar, range_sigma_m=0.03, lookalikes=lookalikes
+    )
+    sim = scene.simulate(index)
+    cfg = Locator3DConfig(range_sigma_m=0.03)
+    fix = locate3d(sim.frame, scene.survey, config=cfg)
+    if fix.ok:
+        _within(fix, sim)
+    monkeypatch.setattr(locator3d, "TOP_SIGMAS", math.inf)  # no return too high
+    wrong = locate3d(sim.frame, scene.survey, config=cfg)
+    assert wrong.ok
+    assert wrong.pose is not None
+    assert wrong.adjustment is not None
+    z = np.abs(wrong.pose.minus(sim.pose)) / np.sqrt(np.diag(wrong.adjustment.covariance))
+    assert z.max() > 5.0
+
+
+def test_a_beacon_at_the_lowest_rings_is_not_its_own_floor(monkeypatch: pytest.MonkeyPatch) -> None:
+    # A VLP-16 pitched 13 deg: its lowest ring crosses B2 12 cm above the sensor, 33 cm
+    # below the beacon's top, on the panels and the wall beside them. The panels stand
+    # out from the wall, so those lowest returns spread 0.4 m across it, as a floor
+    # would; but they reach no further out than the panels. B3's floor, 2 m below, is
+    # the floor's, and reaches out into the drift.
+    scene = random_drift_scene(
+        3000, 0, frames=10, lidar="vlp16", range_sigma_m=0.03, lookalikes=True
+    )
+    sim = scene.simulate(4)
+    planes = PanelPlanes.of(scene.survey)
+    grid = sim.pose.sensor_to_grid(sim.frame.points)
+    about = planes.local(grid, locator3d.FLOOR_RADIUS_M)
+    b2 = [k for k in range(len(planes)) if planes.beacon[k] == "B2"]
+    b3 = [k for k in range(len(planes)) if planes.beacon[k] == "B3"]
+    floors = planes.floors(grid, about) - sim.pose.elevation
+    assert np.all(np.isnan(floors[b2]))
+    truth = [float(scene.drift.floor_at(planes.start[k])[0]) - sim.pose.elevation for k in b3]
+    np.testing.assert_allclose(floors[b3], truth, atol=0.15)
+    # not vacuous: wherever they reach, B2's own panels pass for its floor, within
+    # 0.4 m of its top
+    monkeypatch.setattr(adjust3d, "FLOOR_PAST_M", -math.inf)
+    taken = planes.floors(grid, about)
+    assert np.all(planes.top[b2] - taken[b2] < 0.4)
 
 
 @pytest.mark.parametrize(("seed", "index"), [(4, 3), (6, 0), (7, 2), (0, 3)])

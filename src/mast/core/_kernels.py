@@ -3978,13 +3978,16 @@ def _floors3d(
     about: NDArray[np.intp],
     first: NDArray[np.intp],
     wall: NDArray[np.float64],
+    side: NDArray[np.float64],
+    reach: NDArray[np.float64],
 ) -> NDArray[np.float64]:
     """Each panel's floor (``adjust3d.PanelPlanes._floors``, its numpy reference) from
     the ``points`` (sensor frame) at the pose ``R``, ``at``: of those about panel q,
     ``about[first[q]:first[q + 1]]``, the 2nd percentile of their heights, where there
     are 50 or more and the 20 or more within 5 cm of it spread across the beacon's
-    ``wall`` by more than 30 cm between their 10th and 90th percentiles; NaN
-    elsewhere."""
+    ``wall`` (n, d) by more than 30 cm between their 10th and 90th percentiles and,
+    where its panels stand out to ``side`` of it (+1 or -1; 0 for neither), reach out
+    to that side by more than ``reach`` (their 90th percentile out); NaN elsewhere."""
     panels = first.shape[0] - 1
     out = np.full(panels, np.nan)
     height = np.empty(points.shape[0])
@@ -4014,7 +4017,11 @@ def _floors3d(
                 across[b] = (x + at[0]) * wall[q, 0] + (y + at[1]) * wall[q, 1]
                 b += 1
         lo, hi = n // 10, (9 * n) // 10 - 1
-        if np.partition(across, hi)[hi] - np.partition(across, lo)[lo] > 0.3:
+        a_lo, a_hi = np.partition(across, lo)[lo], np.partition(across, hi)[hi]
+        if a_hi - a_lo <= 0.3:
+            continue
+        out_by = side[q] * ((a_hi if side[q] > 0.0 else a_lo) - wall[q, 2])
+        if side[q] == 0.0 or out_by > reach[q]:
             out[q] = low
     return out
 

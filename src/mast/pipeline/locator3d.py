@@ -65,6 +65,7 @@ from mast.core.pose import Pose2D
 from mast.core.pose3d import Frame3D, Pose3D, rotation_rpy
 from mast.errors import InputError
 from mast.pipeline.adjust3d import (
+    FLOOR_PAST_M,
     ROCK_M,
     UNBRACKETED,
     Adjustment3D,
@@ -77,6 +78,7 @@ from mast.pipeline.adjust3d import (
     _top_edges,
     adjust_pose,
 )
+from mast.pipeline.bounds3d import _rotation_derivatives
 from mast.pipeline.locator import Fix, LocatorConfig, locate
 from mast.pipeline.plan_view import estimate_up, level_rotation, plan_scan, rings_bottom_up
 from mast.pipeline.tracking import Prior
@@ -134,6 +136,14 @@ REFINE_TILT_SIGMA_DEG = 1.0
 #: not know where it is).
 ELEVATION_ROUNDS = 5
 SETTLE_SIGMAS = 2.0
+#: A return the fix adjusted on lies below its panel's surveyed top: above it by more
+#: than the gate and this many sigmas of its height there (the elevation's and the
+#: tilt's, from the adjustment that bracketed the elevation, and the survey's), the
+#: fix is refused. A tilt many degrees off within a drift's walls moves every panel
+#: within its own plane, which no plane residual and no beam test sees; the tops see it
+#: (two fixes 9.4 deg off in pitch at 26 sigma and 1.5 deg in roll at 8 sigma had
+#: returns 1 and 2.2 m above their panels' tops, 13 and 70 of these sigmas).
+TOP_SIGMAS = 5.0
 #: Plan views confirming one beacon only that a frame tries to start from
 #: (:func:`_from_one_beacon`), and the window of the prior the 3D pose they give sets
 #: the plan view located again (metres, degrees).
@@ -910,13 +920,17 @@ def _fix3d(
     around_flat = np.concatenate(around) if around else np.zeros(0, dtype=np.intp)
     around_first = np.cumsum([0] + [len(idx) for idx in around], dtype=np.intp)
 
+    side, depth = planes.footprint()
+    past = depth + FLOOR_PAST_M  # how far out a floor about each panel reaches
+
     def floors(pose: Pose3D) -> NDArray[np.float64]:
         # planes.floors on the pose's grid, of which they need the heights and the
         # lowest returns' places in plan: compiled (PanelPlanes._floors in numpy)
-        return (
-            floors3d(looked, pose.rotation, pose.position, around_flat, around_first, planes.wall)
-            + FLOOR_CLEAR_M
-        )
+        lows = floors3d(
+            looked, pose.rotation, pose.position, around_flat, around_first, planes.wall,
+            side, past,
+        )  # fmt: skip
+        return lows + FLOOR_CLEAR_M
 
     lines = _lines(frame, near)
     sig_r, sig_s = cfg.range_sigma_m, cfg.survey_sigma_m
@@ -1091,6 +1105,15 @@ def _fix3d(
             f"the panels seen hold the tilt to {math.degrees(tilt):.2f} deg only",
             adj,
         )
+    above = _above_tops(pts, used, planes, adj, gate, sig_s)
+    if above is not None:
+        k, height, sigma = above
+        return refused(
+            "inconsistent",
+            f"returns taken for panel {planes.beacon[k]}/P{planes.panel[k]} lie "
+            f"{100.0 * height:.0f} cm above its surveyed top ({height / sigma:.0f} sigma)",
+            adj,
+        )
     if adj.top_edges and math.sqrt(adj.covariance[2, 2]) > MAX_ELEVATION_SIGMA_M:
         cov = adj.covariance.copy()
         cov[2, :], cov[:, 2] = 0.0, 0.0
@@ -1125,6 +1148,39 @@ def _fix3d(
             adj,
         )
     return Fix3D("fix", adj.pose, adj, None, "", plan, up, beacons, panels)
+
+
+def _above_tops(
+    pts: NDArray[np.float64],
+    used: NDArray[np.intp],
+    planes: PanelPlanes,
+    adj: Adjustment3D,
+    gate_m: float,
+    survey_sigma_m: float,
+) -> tuple[int, float, float] | None:
+    """The panel whose returns (``pts``, sensor frame, taken for panels by ``used``) lie
+    highest above its surveyed top at the adjusted pose, in sigmas of their heights (the
+    covariance's elevation, roll and pitch, and the survey's ``survey_sigma_m``), where
+    one lies above it by more than ``gate_m`` and :data:`TOP_SIGMAS` of them: (panel,
+    its height above the top, its sigma); None where none does, or where no top edge
+    bracketed the elevation (then the heights are not known)."""
+    on = np.flatnonzero(used >= 0)
+    if adj.top_edges == 0 or on.size == 0:
+        return None
+    pose = adj.pose
+    p = np.take(pts, on, axis=0)
+    k = used[on]
+    R, d_roll, d_pitch, _ = _rotation_derivatives(pose)
+    above = p @ R[2] + pose.elevation - planes.top[k]
+    J = np.zeros((on.size, 3))  # the height by elevation, roll and pitch
+    J[:, 0], J[:, 1], J[:, 2] = 1.0, p @ d_roll[2], p @ d_pitch[2]
+    C = adj.covariance[2:5, 2:5]
+    sigma = np.sqrt(np.einsum("ij,jk,ik->i", J, C, J) + survey_sigma_m**2)
+    excess = (above - gate_m) / sigma
+    worst = int(np.argmax(excess))
+    if excess[worst] <= TOP_SIGMAS:
+        return None
+    return int(k[worst]), float(above[worst]), float(sigma[worst])
 
 
 def _panels_of(which: NDArray[np.intp], planes: PanelPlanes) -> dict[str, tuple[int, ...]]:
