@@ -31,6 +31,7 @@ from mast.pipeline.locator3d import (
     _contiguous,
     _on_one_beacon,
     _plate_floors,
+    _refused_off_plan,
     _tries,
     _witnessed,
     locate3d,
@@ -354,6 +355,44 @@ def test_returns_above_their_panels_tops_refuse_the_fix(
     assert wrong.adjustment is not None
     z = np.abs(wrong.pose.minus(sim.pose)) / np.sqrt(np.diag(wrong.adjustment.covariance))
     assert z.max() > 5.0
+
+
+@pytest.mark.parametrize(
+    ("lidar", "drift", "index", "name", "off", "refusal"),
+    [
+        # A VLP-16: the first plan view, seen with a vertical degrees off, put the
+        # position 83 mm from the 3D fix. Levelled by the 3D pose and located near it,
+        # the plan view agrees, and so does the 3D fix it starts.
+        ("vlp16", 6, 1, "_confirmed_again", lambda *a: _refused_off_plan(a[3]), "plan view"),
+        # An OS1-64: the first plan view 100 mm off; levelled by the 3D fix, it confirms
+        # one of its beacons alone near it, the other smeared out of its band. The fix
+        # stands on its own tests, its tilt held as a one-beacon start's must be.
+        ("os1-64", 6, 1, "ALONE_TILT_SIGMA_DEG", 0.0, "plan view"),
+        # An OS1-64: one ring crosses a near beacon's middle panel within a few
+        # millimetres of its top, some of its beams on the panel and some over it; 17 of
+        # them, counted against the pose, refused it.
+        ("os1-64", 1, 6, "_under_tops", lambda *a: None, "do not fit it"),
+    ],
+)
+def test_right_fixes_are_not_refused_for_their_plan_view_or_their_panels_tops(
+    monkeypatch: pytest.MonkeyPatch,
+    lidar: str,
+    drift: int,
+    index: int,
+    name: str,
+    off: object,
+    refusal: str,
+) -> None:
+    # Each at 3 cm, a fix right to millimetres that the stage ``name`` now lets stand:
+    # with ``off`` in its place, it is refused.
+    scene = random_drift_scene(0, drift, frames=10, lidar=lidar, range_sigma_m=0.03)
+    sim, fix = _located(scene, index, 0.03)
+    err = _within(fix, sim, 3.0)
+    assert np.hypot(err[0], err[1]) < 0.01
+    monkeypatch.setattr(locator3d, name, off)
+    refused = _located(scene, index, 0.03)[1]
+    assert refused.reason == "inconsistent"
+    assert refusal in refused.detail
 
 
 def test_a_beacon_at_the_lowest_rings_is_not_its_own_floor(monkeypatch: pytest.MonkeyPatch) -> None:

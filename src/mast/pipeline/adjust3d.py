@@ -574,10 +574,13 @@ class PanelPlanes:
         which: NDArray[np.intp],
         gate_m: float,
         local: list[NDArray[np.intp]] | None = None,
+        below: NDArray[np.float64] | None = None,
     ) -> NDArray[np.intp]:
         """Per panel, the rays (its :meth:`local` ones, where given) that cross it and
         do not fit it: crossing its plane well inside its plan extent (:meth:`inside`
-        the gate) between its lowest and highest hits twice the gate clear of a free end
+        the gate) between its lowest and highest hits (and, where ``below`` gives a
+        height for the panel, below it: its top, less the pose's own error there, where
+        the elevation is known) twice the gate clear of a free end
         (:meth:`inside`: near one the wall just below or above a panel is within the
         gate of its plane, and one such return would open the window to rays that pass
         under or over the panel; a panel with no such hit, a short end panel at a
@@ -590,15 +593,23 @@ class PanelPlanes:
         top or bottom (the beam verification of 2D, in 3D)."""
         o = np.asarray(origin, dtype=float).reshape(3)
         rays = self._rays(grid - o, o, local or self._everywhere(len(grid)))
-        return self._misfits(rays, which, gate_m)
+        return self._misfits(rays, which, gate_m, below)
 
-    def _misfits(self, rays: _Rays, which: NDArray[np.intp], gate_m: float) -> NDArray[np.intp]:
+    def _misfits(
+        self,
+        rays: _Rays,
+        which: NDArray[np.intp],
+        gate_m: float,
+        below: NDArray[np.float64] | None = None,
+    ) -> NDArray[np.intp]:
         """:meth:`misfits` with the crossings of ``rays``."""
         own, j = self._own(rays, which)
         clear_lo, clear_hi = self._inside_all(2.0 * gate_m)  # clear of a free end's wall
         j = j[(own.t[j] > clear_lo[own.k[j]]) & (own.t[j] < clear_hi[own.k[j]])]
         low = _per_panel(own.k[j], own.z[j], len(self), np.minimum, math.inf)
         high = _per_panel(own.k[j], own.z[j], len(self), np.maximum, -math.inf)
+        if below is not None:
+            high = np.fmin(high, below)  # NaN: no height given
         k, s, t, z = rays.k, rays.s, rays.t, rays.z
         lo, hi = self._inside_all(gate_m, 0.05)
         off = (1.0 - s) * rays.reach[rays.i]  # along the ray: > 0 beyond the plane
