@@ -395,6 +395,30 @@ def test_right_fixes_are_not_refused_for_their_plan_view_or_their_panels_tops(
     assert refusal in refused.detail
 
 
+def test_the_beam_test_keeps_the_rays_just_under_a_panels_top(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    # A VLP-16 at 2 cm whose adjustment put the elevation 116 mm off at 9 sigma: six
+    # beams crossing a panel within 4 cm under its top, where the pose puts it, passed
+    # through it. The beam test's window ends at the top, not below it.
+    scene = random_drift_scene(3000, 3, frames=10, lidar="vlp16", range_sigma_m=0.02)
+    sim = scene.simulate(2)
+    cfg = Locator3DConfig(range_sigma_m=0.02)
+    fix = locate3d(sim.frame, scene.survey, config=cfg)
+    if fix.ok:
+        _within(fix, sim)
+    else:
+        assert "do not fit it" in fix.detail
+    monkeypatch.setattr(
+        locator3d, "_under_tops", lambda planes, adj: planes.top - 0.04 if adj.top_edges else None
+    )
+    wrong = locate3d(sim.frame, scene.survey, config=cfg)
+    assert wrong.pose is not None
+    assert wrong.adjustment is not None
+    z = np.abs(wrong.pose.minus(sim.pose)) / np.sqrt(np.diag(wrong.adjustment.covariance))
+    assert z.max() > 5.0
+
+
 def test_a_beacon_at_the_lowest_rings_is_not_its_own_floor(monkeypatch: pytest.MonkeyPatch) -> None:
     # A VLP-16 pitched 13 deg: its lowest ring crosses B2 12 cm above the sensor, 33 cm
     # below the beacon's top, on the panels and the wall beside them. The panels stand

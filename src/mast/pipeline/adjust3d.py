@@ -579,8 +579,8 @@ class PanelPlanes:
         """Per panel, the rays (its :meth:`local` ones, where given) that cross it and
         do not fit it: crossing its plane well inside its plan extent (:meth:`inside`
         the gate) between its lowest and highest hits (and, where ``below`` gives a
-        height for the panel, below it: its top, less the pose's own error there, where
-        the elevation is known) twice the gate clear of a free end
+        height for the panel, below it: its surveyed top, where the elevation is known)
+        twice the gate clear of a free end
         (:meth:`inside`: near one the wall just below or above a panel is within the
         gate of its plane, and one such return would open the window to rays that pass
         under or over the panel; a panel with no such hit, a short end panel at a

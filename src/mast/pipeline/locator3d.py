@@ -144,12 +144,6 @@ SETTLE_SIGMAS = 2.0
 #: (two fixes 9.4 deg off in pitch at 26 sigma and 1.5 deg in roll at 8 sigma had
 #: returns 1 and 2.2 m above their panels' tops, 13 and 70 of these sigmas).
 TOP_SIGMAS = 5.0
-#: The beam test looks at a panel's rays below its surveyed top by this many sigmas of
-#: its height where the pose puts it (:func:`_under_tops`): a ray nearer the top than
-#: the pose's own error may pass over it. Without it, correct fixes (to millimetres and
-#: 0.1 deg) were refused for 13 to 27 rays of one ring crossing a near beacon's panel
-#: within a few millimetres of its top, or above it under a wall return within the gate.
-EDGE_SIGMAS = 3.0
 #: Plan views confirming one beacon only that a frame tries to start from
 #: (:func:`_from_one_beacon`), and the window of the prior the 3D pose they give sets
 #: the plan view located again (metres, degrees).
@@ -1223,9 +1217,7 @@ def _fix3d(
     # every beam crossing a panel where the pose puts it hits it
     grid = adj.pose.sensor_to_grid(pts)
     hits = np.bincount(which[which >= 0], minlength=len(planes))
-    misfit = planes.misfits(
-        grid, adj.pose.position, which, gate, local, _under_tops(planes, adj, sig_s)
-    )
+    misfit = planes.misfits(grid, adj.pose.position, which, gate, local, _under_tops(planes, adj))
     seen = np.flatnonzero(misfit > np.maximum(MISFIT_LEAST, MISFIT_SHARE * hits))
     if seen.size:
         k = int(seen[np.argmax(misfit[seen])])
@@ -1255,23 +1247,18 @@ def _height_sigmas(
     return np.asarray(np.sqrt(np.einsum("ij,jk,ik->i", J, C, J) + survey_sigma_m**2))
 
 
-def _under_tops(
-    planes: PanelPlanes, adj: Adjustment3D, survey_sigma_m: float
-) -> NDArray[np.float64] | None:
+def _under_tops(planes: PanelPlanes, adj: Adjustment3D) -> NDArray[np.float64] | None:
     """Per panel, the height below which the beam test looks at the rays crossing it:
-    its surveyed top, less :data:`EDGE_SIGMAS` sigmas of the height the adjusted pose
-    puts its top's middle at (:func:`_height_sigmas`); None where no top edge
-    bracketed the elevation (the tops' heights are then not known). A ray crossing the
-    plane nearer the top than that may pass over the panel where the pose's own error
-    puts the top, and says nothing against it; above the top, a hit is no panel's (the
-    wall a shallow beacon stands on, within the gate of its plane)."""
-    if adj.top_edges == 0:
-        return None
-    pose = adj.pose
-    middle = planes.start + planes.along * (0.5 * planes.length)[:, None]
-    tops = np.column_stack([middle, planes.top])
-    at = (tops - pose.position) @ pose.rotation  # sensor frame
-    return np.asarray(planes.top - EDGE_SIGMAS * _height_sigmas(adj, at, survey_sigma_m))
+    its surveyed top, where a top edge bracketed the elevation (None elsewhere: the
+    tops' heights are then not known). The test's window otherwise ends at the panel's
+    highest hit, and a hit above the top is no panel's (a shallow beacon's wall within
+    the gate of its plane, or a ring the pose puts a few millimetres over the top): the
+    rays of the same ring that passed over the panel were counted against right fixes
+    (13 to 27 of them, refusing fixes right to millimetres and 0.1 deg). Below the top
+    the window stays: a margin of three sigmas of the top's height there let an
+    elevation 12 cm off at 9 sigma through, whose only witness was six rays within 4 cm
+    under a panel's top."""
+    return planes.top if adj.top_edges else None
 
 
 def _above_tops(
