@@ -836,7 +836,9 @@ def _refused_off_plan(fix: Fix3D) -> Fix3D:
     why = _off_plan(fix) if fix.ok else None
     if why is None:
         return fix
-    return replace(fix, status="no_fix", pose=None, reason="inconsistent", detail=why)
+    return replace(
+        fix, status="no_fix", pose=None, reason="inconsistent", detail=why, beacons=(), panels={}
+    )
 
 
 def _levelled(pose2d: Pose2D, up: NDArray[np.float64]) -> Pose3D:
