@@ -178,10 +178,9 @@ def test_the_compiled_runs_of_heights_and_floors_agree_with_their_numpy_referenc
         about = planes.local(grid, 1.5)
         flat = np.concatenate(about)
         first = np.cumsum([0] + [len(idx) for idx in about], dtype=np.intp)
-        side, depth = planes.footprint()
         got_floors = floors3d(
-            sim.frame.points, pose.rotation, pose.position, flat, first, planes.wall, side,
-            depth + FLOOR_PAST_M,
+            sim.frame.points, pose.rotation, pose.position, flat, first, planes.wall,
+            planes.front, planes.depth + FLOOR_PAST_M,
         )  # fmt: skip
         want_floors = planes.floors(grid, about)
         np.testing.assert_allclose(got_floors, want_floors, rtol=0, atol=1e-12)
@@ -363,7 +362,7 @@ def test_returns_above_their_panels_tops_refuse_the_fix(
         # A VLP-16: the first plan view, seen with a vertical degrees off, put the
         # position 83 mm from the 3D fix. Levelled by the 3D pose and located near it,
         # the plan view agrees, and so does the 3D fix it starts.
-        ("vlp16", 6, 1, "_confirmed_again", lambda *a: _refused_off_plan(a[3]), "plan view"),
+        ("vlp16", 6, 1, "_confirmed", lambda *a: _refused_off_plan(a[3]), "plan view"),
         # An OS1-64: the first plan view 100 mm off; levelled by the 3D fix, it confirms
         # one of its beacons alone near it, the other smeared out of its band. The fix
         # stands on its own tests, its tilt held as a one-beacon start's must be.

@@ -125,19 +125,25 @@ class PanelPlanes:
     free ends e1 and e4, as (nx, ny, d) with ``n · X = d``. A shallow beacon's middle
     panel, or any panel near a free end, is within the gate of the wall above and below
     it: a return nearer the wall is the wall's."""
+    depth: NDArray[np.float64]
+    """(k,): how far out from its wall, to the side :attr:`front` tells, each panel's
+    beacon reaches (the furthest of its edges), metres; 0 where ``front`` is."""
 
     @classmethod
     def of(cls, survey: Survey) -> PanelPlanes:
         starts, alongs, lengths, tops, ids, panels, sines = [], [], [], [], [], [], []
         walls: list[tuple[float, float, float]] = []
         fronts: list[float] = []
+        depths: list[float] = []
         for b in survey:
             chord = b.edges[3] - b.edges[0]
             chord = chord / np.hypot(*chord)
             wall = np.array([chord[1], -chord[0]])
             walls += [(wall[0], wall[1], float(wall @ b.edges[0]))] * 3
             bulge = float(wall @ (0.5 * (b.edges[1] + b.edges[2]) - b.edges[0]))
-            fronts += [0.0 if abs(bulge) < 0.01 else math.copysign(1.0, bulge)] * 3
+            front = 0.0 if abs(bulge) < 0.01 else math.copysign(1.0, bulge)
+            fronts += [front] * 3
+            depths += [float(np.max(front * ((b.edges - b.edges[0]) @ wall)))] * 3  # 0 if no side
             for k in range(3):
                 a, c = b.edges[k], b.edges[k + 1]
                 u = c - a
@@ -166,6 +172,7 @@ class PanelPlanes:
             wall_sine=np.array(sines, dtype=float).reshape(-1, 2),
             wall=np.array(walls, dtype=float).reshape(-1, 3),
             front=np.array(fronts, dtype=float),
+            depth=np.array(depths, dtype=float),
         )
 
     def crossing(
@@ -480,23 +487,6 @@ class PanelPlanes:
         every = np.arange(n)
         return [every] * len(self)
 
-    def footprint(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        """Per panel, its beacon's footprint on its wall: the side of the wall (the sign
-        of ``wall · X - d``) its panels stand out to (0 where its middle edges lie within
-        a centimetre of the chord e1-e4), and how far out its panels reach, metres."""
-        xy, d = self.wall[:, :2], self.wall[:, 2]
-        ends = np.stack([self.start, self.start + self.along * self.length[:, None]])
-        out = np.einsum("ekj,kj->ek", ends, xy) - d  # each panel's ends off its wall
-        _, number = _beacon_groups(self.beacon)
-        side, depth = np.zeros(len(self)), np.zeros(len(self))
-        for b in np.unique(number):
-            mine = np.flatnonzero(number == b)
-            middle = 0.5 * (out[1, mine[0]] + out[1, mine[1]])  # e2 and e3, as ``front``
-            if abs(middle) >= 0.01:
-                side[mine] = math.copysign(1.0, middle)
-                depth[mine] = float(np.max(side[mine[0]] * out[:, mine]))
-        return side, depth
-
     def floors(
         self, grid: NDArray[np.float64], about: list[NDArray[np.intp]]
     ) -> NDArray[np.float64]:
@@ -523,7 +513,7 @@ class PanelPlanes:
         """:meth:`floors` from the points' ``height`` (n,) and ``plan``, their places in
         plan ((m, 2), of the points' indices it is given)."""
         out = np.full(len(self), np.nan)
-        side, depth = self.footprint()
+        side = self.front
         for k, close in enumerate(about):
             if close.size < 50:
                 continue
@@ -540,7 +530,7 @@ class PanelPlanes:
                 continue
             # the 90th percentile out from the wall, on the side the panels stand out to
             reach = side[k] * (across[ends[1] if side[k] > 0.0 else ends[0]] - self.wall[k, 2])
-            if side[k] == 0.0 or reach > depth[k] + FLOOR_PAST_M:
+            if side[k] == 0.0 or reach > self.depth[k] + FLOOR_PAST_M:
                 out[k] = low
         return out
 

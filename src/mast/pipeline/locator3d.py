@@ -623,8 +623,8 @@ def locate3d(
             t = time.perf_counter()
             fix = _fix3d(frame, planes, plan, tried, cfg, spacing=spacing)
             spent["adjustment"] += time.perf_counter() - t
-            if fix.ok and _off_plan(fix) is not None:
-                fix = _confirmed_again(frame, survey, planes, fix, band, cfg, spent, spacing)
+            if fix.ok:
+                fix = _confirmed(frame, survey, planes, fix, band, cfg, spent, spacing)
             if fix.ok:
                 return replace(fix, elapsed_s=time.perf_counter() - t0, stages_s=spent)
         else:
@@ -703,13 +703,7 @@ def _from_one_beacon(
         # the plan view (in the last band tried) confirms the first beacon where the 3D
         # pose puts it, and says nothing of the second (smeared out of its band): the 3D
         # tests stand, the tilt held to ALONE_TILT_SIGMA_DEG
-        alone = again.verified[0].supported if again.verified else ()
-        if (
-            again.reason == "one_beacon"
-            and alone == plan.verified[0].supported
-            and first.adjustment is not None
-            and _tilt_sigma(first.adjustment) <= math.radians(ALONE_TILT_SIGMA_DEG)
-        ):
+        if _confirms_alone(again, plan.verified[0].supported, first.adjustment):
             return first
         return replace(
             first,
@@ -765,7 +759,7 @@ def _plan_again(
     return again
 
 
-def _confirmed_again(
+def _confirmed(
     frame: Frame3D,
     survey: Survey,
     planes: PanelPlanes,
@@ -775,8 +769,9 @@ def _confirmed_again(
     spent: dict[str, float],
     spacing: float,
 ) -> Fix3D:
-    """A 3D ``fix`` that passed every 3D test but lies outside its plan view's ellipse
-    (:func:`_off_plan`), confirmed or refused: a plan view seen with a try's vertical,
+    """A 3D ``fix`` that passed every 3D test, as it is where it lies inside its plan
+    view's ellipse (:func:`_off_plan`); elsewhere confirmed or refused: a plan view seen
+    with a try's vertical,
     degrees off, is smeared, and its 2D fix may be decimetres off where the 3D fix is
     right to millimetres. The plan view levelled by the fix's own pose and located
     near it (:func:`_plan_again`) starts the 3D stages again, and that 3D fix must pass
@@ -784,28 +779,36 @@ def _confirmed_again(
     confirms one of the fix's beacons alone, the fix stands on its own tests with its
     tilt held to :data:`ALONE_TILT_SIGMA_DEG`, as a one-beacon start's; elsewhere the
     first fix is refused for its plan view's disagreement."""
+    why = _off_plan(fix)
+    if why is None:
+        return fix
     assert fix.pose is not None
-    assert fix.adjustment is not None
-    refused = _refused_off_plan(fix)
+    refused = _disagreeing(fix, why)
     again = _plan_again(frame, survey, fix.pose, fix.beacons, band, cfg, spent)
     if not again.ok or again.pose is None:
         # levelled, the plan view confirms one of the fix's beacons alone near it (the
         # other smeared out of its band): the 3D fix stands on its own tests, its tilt
         # held as a one-beacon start's must be (_from_one_beacon)
-        alone = again.verified[0].supported if again.verified else ()
-        if (
-            again.reason == "one_beacon"
-            and len(alone) == 1
-            and alone[0] in fix.beacons
-            and _tilt_sigma(fix.adjustment) <= math.radians(ALONE_TILT_SIGMA_DEG)
-        ):
-            return fix
-        return refused
+        return fix if _confirms_alone(again, fix.beacons, fix.adjustment) else refused
     t = time.perf_counter()
     vertical = np.asarray(fix.pose.rotation[2], dtype=np.float64)
     second = _refused_off_plan(_fix3d(frame, planes, again, vertical, cfg, spacing=spacing))
     spent["adjustment"] += time.perf_counter() - t
     return second if second.ok else refused
+
+
+def _confirms_alone(again: Fix, beacons: tuple[str, ...], adj: Adjustment3D | None) -> bool:
+    """Whether a plan view located again near a 3D pose (``again``, no fix) confirms
+    one beacon alone, one of ``beacons``, and the adjustment ``adj`` holds the tilt to
+    :data:`ALONE_TILT_SIGMA_DEG`: then the 3D fix stands on its own tests."""
+    alone = again.verified[0].supported if again.verified else ()
+    return (
+        again.reason == "one_beacon"
+        and len(alone) == 1
+        and alone[0] in beacons
+        and adj is not None
+        and _tilt_sigma(adj) <= math.radians(ALONE_TILT_SIGMA_DEG)
+    )
 
 
 def _off_plan(fix: Fix3D) -> str | None:
@@ -834,8 +837,11 @@ def _refused_off_plan(fix: Fix3D) -> Fix3D:
     """``fix`` refused (``inconsistent``) where it lies outside its plan view's ellipse
     (:func:`_off_plan`); as it is elsewhere."""
     why = _off_plan(fix) if fix.ok else None
-    if why is None:
-        return fix
+    return fix if why is None else _disagreeing(fix, why)
+
+
+def _disagreeing(fix: Fix3D, why: str) -> Fix3D:
+    """``fix`` refused (``inconsistent``) for its plan view's disagreement ``why``."""
     return replace(
         fix, status="no_fix", pose=None, reason="inconsistent", detail=why, beacons=(), panels={}
     )
@@ -1017,15 +1023,14 @@ def _fix3d(
     around_flat = np.concatenate(around) if around else np.zeros(0, dtype=np.intp)
     around_first = np.cumsum([0] + [len(idx) for idx in around], dtype=np.intp)
 
-    side, depth = planes.footprint()
-    past = depth + FLOOR_PAST_M  # how far out a floor about each panel reaches
+    past = planes.depth + FLOOR_PAST_M  # how far out a floor about each panel reaches
 
     def floors(pose: Pose3D) -> NDArray[np.float64]:
         # planes.floors on the pose's grid, of which they need the heights and the
         # lowest returns' places in plan: compiled (PanelPlanes._floors in numpy)
         lows = floors3d(
             looked, pose.rotation, pose.position, around_flat, around_first, planes.wall,
-            side, past,
+            planes.front, past,
         )  # fmt: skip
         return lows + FLOOR_CLEAR_M
 
@@ -1235,20 +1240,6 @@ def _fix3d(
     return Fix3D("fix", adj.pose, adj, None, "", plan, up, beacons, panels)
 
 
-def _height_sigmas(
-    adj: Adjustment3D, points: NDArray[np.float64], survey_sigma_m: float
-) -> NDArray[np.float64]:
-    """The sigmas of the grid heights the adjusted pose puts ``points`` (m, 3, sensor
-    frame) at, against the surveyed tops: from the covariance's elevation, roll and
-    pitch, and the survey's ``survey_sigma_m``."""
-    pose = adj.pose
-    _, d_roll, d_pitch, _ = _rotation_derivatives(pose)
-    J = np.zeros((len(points), 3))  # the height by elevation, roll and pitch
-    J[:, 0], J[:, 1], J[:, 2] = 1.0, points @ d_roll[2], points @ d_pitch[2]
-    C = adj.covariance[2:5, 2:5]
-    return np.asarray(np.sqrt(np.einsum("ij,jk,ik->i", J, C, J) + survey_sigma_m**2))
-
-
 def _under_tops(planes: PanelPlanes, adj: Adjustment3D) -> NDArray[np.float64] | None:
     """Per panel, the height below which the beam test looks at the rays crossing it:
     its surveyed top, where a top edge bracketed the elevation (None elsewhere: the
@@ -1284,7 +1275,11 @@ def _above_tops(
     p = np.take(pts, on, axis=0)
     k = used[on]
     above = p @ pose.rotation[2] + pose.elevation - planes.top[k]
-    sigma = _height_sigmas(adj, p, survey_sigma_m)
+    _, d_roll, d_pitch, _ = _rotation_derivatives(pose)
+    J = np.zeros((on.size, 3))  # the height by elevation, roll and pitch
+    J[:, 0], J[:, 1], J[:, 2] = 1.0, p @ d_roll[2], p @ d_pitch[2]
+    C = adj.covariance[2:5, 2:5]
+    sigma = np.sqrt(np.einsum("ij,jk,ik->i", J, C, J) + survey_sigma_m**2)
     excess = (above - gate_m) / sigma
     worst = int(np.argmax(excess))
     if excess[worst] <= TOP_SIGMAS:
