@@ -7,6 +7,7 @@ a survey without elevations refused."""
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import replace
 
 import numpy as np
@@ -15,7 +16,7 @@ from numpy.typing import NDArray
 
 from mast.core._kernels import contiguous3d, floors3d
 from mast.core.beacon import Survey
-from mast.core.pose3d import Pose3D
+from mast.core.pose3d import Frame3D, Pose3D
 from mast.core.scan import Scan
 from mast.errors import InputError
 from mast.pipeline import adjust3d, locator3d
@@ -27,6 +28,7 @@ from mast.pipeline.locator3d import (
     PLATE_SLACK_M,
     Fix3D,
     Locator3DConfig,
+    _beacon_bands,
     _checked,
     _contiguous,
     _on_one_beacon,
@@ -36,6 +38,7 @@ from mast.pipeline.locator3d import (
     _witnessed,
     locate3d,
 )
+from mast.pipeline.plan_view import level_rotation
 from mast.report.record import fix3d_record, fix3d_text
 from mast.sim.lidar3d import DriftScene3D, SimulatedFrame3D, random_drift_scene
 from tests._raycast3d import cast, paper_walls
@@ -310,7 +313,9 @@ def test_a_panels_lone_return_is_left_out_of_the_adjustment() -> None:
     assert _checked(np.full(3, -1), planes).tolist() == [-1, -1, -1]
 
 
-def test_a_far_beacons_lone_return_does_not_lever_the_fix(monkeypatch: pytest.MonkeyPatch) -> None:
+def test_a_far_beacons_lone_return_does_not_lever_the_fix(
+    bin_centre_plan: None, monkeypatch: pytest.MonkeyPatch
+) -> None:
     # A far beacon's middle-panel return just past the joint, taken for its end panel
     # (the panel's only return), held the azimuth 7.3 sigma off (0.15 deg at 0.02) and
     # the roll 4.1 sigma (1.3 deg): nothing else of that panel could check it.
@@ -333,7 +338,7 @@ def test_a_far_beacons_lone_return_does_not_lever_the_fix(monkeypatch: pytest.Mo
     ("lidar", "lookalikes", "index"), [("os1-64", False, 9), ("vlp16", True, 4)]
 )
 def test_returns_above_their_panels_tops_refuse_the_fix(
-    monkeypatch: pytest.MonkeyPatch, lidar: str, lookalikes: bool, index: int
+    bin_centre_plan: None, monkeypatch: pytest.MonkeyPatch, lidar: str, lookalikes: bool, index: int
 ) -> None:
     # Two frames whose fix took returns 2.2 m above a panel's top (the OS1-64's, 1.45 deg
     # off in roll at 8 sigma) and 1 m above (the VLP-16's, its pitch 9.4 deg off at 26
@@ -374,6 +379,7 @@ def test_returns_above_their_panels_tops_refuse_the_fix(
     ],
 )
 def test_right_fixes_are_not_refused_for_their_plan_view_or_their_panels_tops(
+    bin_centre_plan: None,
     monkeypatch: pytest.MonkeyPatch,
     lidar: str,
     drift: int,
@@ -480,6 +486,54 @@ def test_a_plan_view_of_one_beacon_starts_a_fix_the_2d_prior_confirms() -> None:
     assert fix.plan.config.prior is not None
 
 
+def _bin_centre_plan_scan(
+    frame: Frame3D,
+    *,
+    up: NDArray[np.float64],
+    band: tuple[float, float],
+    resolution_deg: float,
+    range_sigma_m: float = 0.0,
+    bands: Sequence[tuple[float, float, float, float]] = (),
+) -> Scan:
+    """The plan view as it was built before its beams moved to their returns' centroid
+    (2026-12-07): each bin at its centre, the mean range of the returns within 5 cm of
+    its nearest. In it, the frames below are hard in the ways their tests need (the plan
+    view confirms one beacon, or its fix is smeared), as they no longer are: each test
+    takes it (the fixture ``bin_centre_plan``) to show the stage it is about still does
+    its part."""
+    n = round(360.0 / resolution_deg)
+    step = 2.0 * math.pi / n
+    low, high = np.full(n, band[0]), np.full(n, band[1])
+    for start, end, lo, hi in bands:
+        which = (
+            np.arange(math.floor((start + math.pi) / step), math.floor((end + math.pi) / step) + 1)
+            % n
+        )
+        low[which], high[which] = lo, hi
+    p = frame.points @ level_rotation(up).T
+    bins = np.floor((np.arctan2(p[:, 1], p[:, 0]) + math.pi) / step).astype(np.intp) % n
+    keep = (p[:, 2] >= low[bins]) & (p[:, 2] <= high[bins])
+    bins, r = bins[keep], np.hypot(p[keep, 0], p[keep, 1])
+    nearest = np.full(n, np.inf)
+    np.minimum.at(nearest, bins, r)
+    near = r <= nearest[bins] + 0.05
+    count = np.bincount(bins[near], minlength=n)
+    total = np.bincount(bins[near], r[near], minlength=n)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        ranges = np.where(count > 0, total / count, np.nan)
+    centres = -math.pi + (np.arange(n) + 0.5) * step
+    return Scan(angles_rad=centres, ranges_m=ranges, stamp_ns=frame.stamp_ns)
+
+
+@pytest.fixture
+def bin_centre_plan(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The plan views as they were before 2026-12-07: bin centres, and the plan view
+    located again in the band of the shown beacons' tops or the try's (no beacon's
+    bearings given their own band)."""
+    monkeypatch.setattr(locator3d, "plan_scan", _bin_centre_plan_scan)
+    monkeypatch.setattr(locator3d, "_beacon_bands", lambda survey, pose: [])
+
+
 def _located(scene: DriftScene3D, index: int, sigma: float) -> tuple[SimulatedFrame3D, Fix3D]:
     """Frame ``index`` of ``scene`` and its fix (range sigma ``sigma``, no survey sigma)."""
     sim = scene.simulate(index)
@@ -503,7 +557,9 @@ def _thin_second_beacon() -> DriftScene3D:
     return random_drift_scene(4, frames=6, lidar="vlp16", range_sigma_m=0.01, lookalikes=True)
 
 
-def test_a_one_beacon_3d_fix_stands_where_the_plan_view_located_again_finds_none() -> None:
+def test_a_one_beacon_3d_fix_stands_where_the_plan_view_located_again_finds_none(
+    bin_centre_plan: None,
+) -> None:
     # Located again with the 3D pose as its prior, the plan view still confirms the
     # first beacon only. The 3D fix shows both and passes every 3D test (it had been
     # refused 1 mm and 0.04 deg off); its record names the panels the 3D fix used.
@@ -520,7 +576,7 @@ def test_a_one_beacon_3d_fix_stands_where_the_plan_view_located_again_finds_none
 
 @pytest.mark.parametrize("confirmed", [(), ("B2",)])
 def test_a_one_beacon_3d_fix_the_plan_view_located_again_does_not_confirm_is_refused(
-    confirmed: tuple[str, ...], monkeypatch: pytest.MonkeyPatch
+    bin_centre_plan: None, confirmed: tuple[str, ...], monkeypatch: pytest.MonkeyPatch
 ) -> None:
     # The same frame, its plan view located again confirming no beacon near the 3D pose,
     # or another beacon than the first: the one-beacon 3D fix does not stand.
@@ -569,7 +625,9 @@ def test_two_wall_returns_alone_on_a_near_beacons_end_panel_lever_no_tilt() -> N
     assert np.degrees(np.abs(_within(fix, sim)[3:])).max() < 0.3
 
 
-def test_a_one_beacon_3d_fix_the_plan_view_confirms_no_beacon_near_is_refused() -> None:
+def test_a_one_beacon_3d_fix_the_plan_view_confirms_no_beacon_near_is_refused(
+    bin_centre_plan: None,
+) -> None:
     # Located again near the one-beacon 3D pose, this plan view confirms no beacon at
     # all: that 3D fix was 1.7 deg off in pitch and 0.7 deg in azimuth at 120 sigma.
     # (The reason is the first 3D refusal of the frame's tries: since grazing returns
@@ -581,6 +639,7 @@ def test_a_one_beacon_3d_fix_the_plan_view_confirms_no_beacon_near_is_refused() 
 
 
 def test_a_one_beacon_3d_fix_without_the_plan_views_agreement_holds_the_tilt_tighter(
+    bin_centre_plan: None,
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
     # Standing without the plan view's agreement, a one-beacon 3D fix is held to a tilt
@@ -597,3 +656,54 @@ def test_a_one_beacon_3d_fix_without_the_plan_views_agreement_holds_the_tilt_tig
     monkeypatch.setattr(locator3d, "ALONE_TILT_SIGMA_DEG", 0.5 * tilt)
     _, held = _located(_thin_second_beacon(), 3, 0.01)
     assert not held.ok
+
+
+def test_each_beacons_bearings_get_the_band_of_its_tops() -> None:
+    # Bearings counter-clockwise from the heading (DESIGN.md: a beam at bearing phi
+    # lands at E0 + r sin(A - phi), N0 + r cos(A - phi)); the band from ONE_BEACON_BAND_M
+    # below the lowest top to below the highest, relative to the pose's elevation.
+    _, scene = paper_walls("parallel")
+    pose = Pose3D.from_degrees(7.0, 7.0, 1.2, 30.0, 2.0, -1.0)
+    bands = _beacon_bands(scene.survey, pose)
+    assert len(bands) == len(list(scene.survey))
+    for (start, end, low, high), beacon in zip(
+        bands, sorted(scene.survey, key=lambda b: -np.hypot(*(b.centroid - 7.0))), strict=True
+    ):
+        for e, n in beacon.edges:
+            phi = pose.azimuth - math.atan2(e - 7.0, n - 7.0)
+            r = math.hypot(e - 7.0, n - 7.0)
+            assert (phi - start + 1e-9) % (2 * math.pi) <= end - start + 2e-9
+            assert math.isclose(7.0 + r * math.sin(pose.azimuth - phi), e)
+        top = float(beacon.elevations.min()) - 1.2
+        assert low == pytest.approx(top - locator3d.ONE_BEACON_BAND_M[0])
+        assert high < float(beacon.elevations.max()) - 1.2
+
+
+@pytest.mark.parametrize(
+    ("lidar", "sigma", "lookalikes", "index", "refusal"),
+    [
+        # A grade puts the drift's other beacons above or below the band the 3D fix
+        # was confirmed in: the plan view levelled by the fix saw its beams pass over
+        # them (87 mm from the 3D position it had agreed with, seen in the try's band)
+        ("os1-64", 0.03, False, 0, "from the plan view's fix"),
+        # and, from one beacon's 3D pose, confirmed no pose near it.
+        ("os1-64", 0.01, True, 8, "no pose hypothesis within the prior"),
+    ],
+)
+def test_the_plan_view_located_again_sees_each_beacon_in_the_band_of_its_tops(
+    monkeypatch: pytest.MonkeyPatch,
+    lidar: str,
+    sigma: float,
+    lookalikes: bool,
+    index: int,
+    refusal: str,
+) -> None:
+    scene = random_drift_scene(
+        0, 4, frames=10, lidar=lidar, range_sigma_m=sigma, lookalikes=lookalikes
+    )
+    sim, fix = _located(scene, index, sigma)
+    _within(fix, sim, 3.5)
+    monkeypatch.setattr(locator3d, "_beacon_bands", lambda survey, pose: [])
+    refused = _located(scene, index, sigma)[1]
+    assert not refused.ok
+    assert refusal in refused.detail

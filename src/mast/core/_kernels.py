@@ -4029,46 +4029,56 @@ def _floors3d(
 def _plan_ranges(
     points: NDArray[np.float64],
     L: NDArray[np.float64],
-    low: float,
-    high: float,
+    low: NDArray[np.float64],
+    high: NDArray[np.float64],
     n: int,
     step: float,
     surface: float,
 ) -> NDArray[np.float64]:
-    """The plan view's ranges (``plan_view.plan_scan``; its numpy reference
-    ``plan_view._plan_ranges_reference``): the ``points`` levelled by ``L`` between the
-    heights ``low`` and ``high``, binned by bearing from -pi in ``n`` bins of ``step``;
-    per bin, the mean range of the returns within ``surface`` of its nearest (NaN for
-    none)."""
+    """The plan view's bearings and ranges (``plan_view.plan_scan``; its numpy reference
+    ``plan_view._plan_ranges_reference``), as a (2, n) array: the ``points`` levelled by
+    ``L`` between the heights ``low`` and ``high``, binned by bearing from -pi in ``n``
+    bins of ``step``; per bin, the bearing and range of the centroid of the returns
+    within ``surface`` of its nearest (the bin's centre and NaN for none)."""
     m = points.shape[0]
     bins = np.empty(m, dtype=np.intp)
     r = np.empty(m)
+    xs = np.empty(m)
+    ys = np.empty(m)
     nearest = np.full(n, np.inf)
     kept = 0
     for q in range(m):
         px, py, pz = points[q, 0], points[q, 1], points[q, 2]
-        z = px * L[2, 0] + py * L[2, 1] + pz * L[2, 2]
-        if not (z >= low and z <= high):
-            continue
         x = px * L[0, 0] + py * L[0, 1] + pz * L[0, 2]
         y = px * L[1, 0] + py * L[1, 1] + pz * L[1, 2]
         b = math.floor((math.atan2(y, x) + math.pi) / step) % n
+        z = px * L[2, 0] + py * L[2, 1] + pz * L[2, 2]
+        if not (z >= low[b] and z <= high[b]):
+            continue
         bins[kept] = b
+        xs[kept] = x
+        ys[kept] = y
         r[kept] = math.hypot(x, y)
         if r[kept] < nearest[b]:
             nearest[b] = r[kept]
         kept += 1
-    total = np.zeros(n)
+    sx = np.zeros(n)
+    sy = np.zeros(n)
     count = np.zeros(n)
     for q in range(kept):
         b = bins[q]
         if r[q] <= nearest[b] + surface:
-            total[b] += r[q]
+            sx[b] += xs[q]
+            sy[b] += ys[q]
             count[b] += 1.0
-    out = np.full(n, np.nan)
+    out = np.empty((2, n))
     for b in range(n):
-        if count[b] > 0:
-            out[b] = total[b] / count[b]
+        edge = -math.pi + b * step
+        out[0, b] = edge + 0.5 * step
+        out[1, b] = np.nan
+        if count[b] > 0:  # within its bin: the bearings strictly increase
+            out[0, b] = min(max(math.atan2(sy[b], sx[b]), edge + 1e-9), edge + step - 1e-9)
+            out[1, b] = math.hypot(sx[b], sy[b]) / count[b]
     return out
 
 

@@ -14,11 +14,11 @@ view, then the six-parameter adjustment on the panels it names (docs/3d.md).
    fails, the beacons its plan view found, even one, give the vertical
    (:func:`_vertical_from`), tried next. A plan view that confirms one beacon only
    starts the 3D stages from that beacon's pose; a second beacon they find is
-   confirmed by the plan view located again with the pose as a 2D prior, where that
-   plan view finds a fix (:func:`_from_one_beacon`; where it confirms the first beacon
-   alone, the 3D tests stand, the tilt held to :data:`ALONE_TILT_SIGMA_DEG`). No fix in
-   any, no 3D fix: the reason is the first refusal of a 3D adjustment's, or else the
-   first refusal's.
+   confirmed by the plan view located again with the pose as a 2D prior, each beacon
+   in the band of its own tops (:func:`_plan_again`), where that plan view finds a fix
+   (:func:`_from_one_beacon`; where it confirms the first beacon alone, the 3D tests
+   stand, the tilt held to :data:`ALONE_TILT_SIGMA_DEG`). No fix in any, no 3D fix: the
+   reason is the first refusal of a 3D adjustment's, or else the first refusal's.
 4. **The start**: the 2D pose with the levelling's pitch and roll, and the elevation
    where the most panels' top brackets agree (:func:`_start_elevation`: hits in a
    tight gate, each panel's run of them up from its middle, and the rays crossing over
@@ -149,9 +149,9 @@ TOP_SIGMAS = 5.0
 #: the plan view located again (metres, degrees).
 ONE_BEACON_STARTS = 2
 ONE_BEACON_PRIOR = (0.25, 2.0)
-#: The band that plan view is located again in first: from this far below the lowest
-#: top of the beacons the 3D pose shows to this far below the highest, metres (then the
-#: try's own band).
+#: The band of tops in the plan view located again (each beacon's bearings in its own,
+#: then every bearing in that of the beacons the 3D pose shows): from this far below
+#: the lowest of the tops to this far below the highest, metres.
 ONE_BEACON_BAND_M = (0.4, 0.05)
 #: The largest sigma of roll or pitch a one-beacon 3D fix is given with where the plan
 #: view located again confirms its first beacon alone, degrees: without the plan view's
@@ -615,7 +615,13 @@ def locate3d(
         # the same vertical pitched by a grade's worth, and the beacons at other heights
         tried, band = tries.pop(0)
         t = time.perf_counter()
-        scan = plan_scan(frame, up=tried, band=band, resolution_deg=cfg.plan_resolution_deg)
+        scan = plan_scan(
+            frame,
+            up=tried,
+            band=band,
+            resolution_deg=cfg.plan_resolution_deg,
+            range_sigma_m=cfg.range_sigma_m,
+        )
         plan = locate(scan, survey, config=plan_cfg)
         spent["plan"] += time.perf_counter() - t
         fix: Fix3D | None = None
@@ -731,32 +737,67 @@ def _plan_again(
     """The plan view levelled by a 3D ``pose`` (its vertical, which a fix knows to a
     fraction of a degree where a try's was degrees off), located by 2D with the pose as
     its prior (:data:`ONE_BEACON_PRIOR`: a prior only adds, and the 2D beam verification
-    confirms every beacon it takes): first in the band of the tops of the ``beacons``
-    the pose shows (:data:`ONE_BEACON_BAND_M`: the try's band may have missed one), then
-    in the try's ``band``; the first 2D fix, or the last refusal. ``spent`` is added
-    to."""
+    confirms every beacon it takes). First with each surveyed beacon's bearings in the
+    band of its own tops (:func:`_beacon_bands`: on a grade the beacons stand at other
+    heights than a band about the sensor, and its beams pass over or under them), the
+    try's ``band`` elsewhere; then every bearing in the band of the tops of the
+    ``beacons`` the pose shows (:data:`ONE_BEACON_BAND_M`); then in the try's band. The
+    first 2D fix, or the last refusal. ``spent`` is added to."""
     t = time.perf_counter()
     vertical = np.asarray(pose.rotation[2], dtype=np.float64)  # grid z, sensor frame
-    tops = [
-        float(np.mean(b.elevations)) - pose.elevation
-        for b in survey
-        if b.id in beacons and b.elevations is not None and np.isfinite(b.elevations).all()
-    ]
     radius, degrees = ONE_BEACON_PRIOR
     prior = Prior(pose.horizontal, radius, math.radians(degrees))
     plan_cfg = LocatorConfig(
         range_sigma_m=cfg.range_sigma_m, survey_sigma_m=cfg.survey_sigma_m, prior=prior
     )
-    bands = [band]
+    tops = [
+        float(np.mean(b.elevations)) - pose.elevation
+        for b in survey
+        if b.id in beacons and b.elevations is not None and np.isfinite(b.elevations).all()
+    ]
+    views: list[tuple[tuple[float, float], list[tuple[float, float, float, float]]]] = []
+    own = _beacon_bands(survey, pose)
+    if own:
+        views.append((band, own))
     if tops:
-        bands.insert(0, (min(tops) - ONE_BEACON_BAND_M[0], max(tops) - ONE_BEACON_BAND_M[1]))
-    for in_band in bands:
-        scan = plan_scan(frame, up=vertical, band=in_band, resolution_deg=cfg.plan_resolution_deg)
+        views.append(((min(tops) - ONE_BEACON_BAND_M[0], max(tops) - ONE_BEACON_BAND_M[1]), []))
+    views.append((band, []))
+    for in_band, bands in views:
+        scan = plan_scan(
+            frame,
+            up=vertical,
+            band=in_band,
+            resolution_deg=cfg.plan_resolution_deg,
+            range_sigma_m=cfg.range_sigma_m,
+            bands=bands,
+        )
         again = locate(scan, survey, config=plan_cfg)
         if again.ok:
             break
     spent["plan"] += time.perf_counter() - t
     return again
+
+
+def _beacon_bands(survey: Survey, pose: Pose3D) -> list[tuple[float, float, float, float]]:
+    """Each surveyed beacon's bearings from the ``pose`` (levelled, counter-clockwise
+    from its heading, as :func:`~mast.pipeline.plan_view.plan_scan` takes them), with
+    the band of its tops relative to the pose's elevation (:data:`ONE_BEACON_BAND_M`
+    below them), the farthest first (a nearer beacon's band is the one its bearings
+    keep)."""
+    out = []
+    for b in sorted(survey, key=lambda b: -float(np.hypot(*(b.centroid - pose.position[:2])))):
+        if b.elevations is None or not np.isfinite(b.elevations).all():
+            continue
+        d = b.edges - pose.position[:2]
+        bearing = np.unwrap(pose.azimuth - np.arctan2(d[:, 0], d[:, 1]))
+        start = (float(bearing.min()) + math.pi) % (2.0 * math.pi) - math.pi
+        tops = b.elevations - pose.elevation
+        low, high = (
+            float(tops.min()) - ONE_BEACON_BAND_M[0],
+            float(tops.max()) - ONE_BEACON_BAND_M[1],
+        )
+        out.append((start, start + float(np.ptp(bearing)), low, high))
+    return out
 
 
 def _confirmed(
