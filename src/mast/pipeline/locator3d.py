@@ -63,6 +63,7 @@ from mast.core.beacon import Survey
 from mast.core.frames import yaw_of_azimuth
 from mast.core.pose import Pose2D
 from mast.core.pose3d import Frame3D, Pose3D, rotation_rpy
+from mast.core.scan import Scan
 from mast.errors import InputError
 from mast.pipeline.adjust3d import (
     FLOOR_PAST_M,
@@ -615,14 +616,7 @@ def locate3d(
         # the same vertical pitched by a grade's worth, and the beacons at other heights
         tried, band = tries.pop(0)
         t = time.perf_counter()
-        scan = plan_scan(
-            frame,
-            up=tried,
-            band=band,
-            resolution_deg=cfg.plan_resolution_deg,
-            range_sigma_m=cfg.range_sigma_m,
-        )
-        plan = locate(scan, survey, config=plan_cfg)
+        plan = locate(_plan_view(frame, tried, band, cfg), survey, config=plan_cfg)
         spent["plan"] += time.perf_counter() - t
         fix: Fix3D | None = None
         if plan.ok and plan.pose is not None:
@@ -763,19 +757,31 @@ def _plan_again(
         views.append(((min(tops) - ONE_BEACON_BAND_M[0], max(tops) - ONE_BEACON_BAND_M[1]), []))
     views.append((band, []))
     for in_band, bands in views:
-        scan = plan_scan(
-            frame,
-            up=vertical,
-            band=in_band,
-            resolution_deg=cfg.plan_resolution_deg,
-            range_sigma_m=cfg.range_sigma_m,
-            bands=bands,
-        )
-        again = locate(scan, survey, config=plan_cfg)
+        again = locate(_plan_view(frame, vertical, in_band, cfg, bands), survey, config=plan_cfg)
         if again.ok:
             break
     spent["plan"] += time.perf_counter() - t
     return again
+
+
+def _plan_view(
+    frame: Frame3D,
+    up: NDArray[np.float64],
+    band: tuple[float, float],
+    cfg: Locator3DConfig,
+    bands: list[tuple[float, float, float, float]] | None = None,
+) -> Scan:
+    """The plan view of ``frame`` levelled by ``up``, in ``band`` (and ``bands``: see
+    :func:`~mast.pipeline.plan_view.plan_scan`), at the locator's resolution and range
+    noise."""
+    return plan_scan(
+        frame,
+        up=up,
+        band=band,
+        resolution_deg=cfg.plan_resolution_deg,
+        range_sigma_m=cfg.range_sigma_m,
+        bands=bands or (),
+    )
 
 
 def _beacon_bands(survey: Survey, pose: Pose3D) -> list[tuple[float, float, float, float]]:
