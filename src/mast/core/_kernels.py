@@ -4046,13 +4046,16 @@ def _plan_ranges(
     xs = np.empty(m)
     ys = np.empty(m)
     nearest = np.full(n, np.inf)
+    lowest, highest = low.min(), high.max()
     kept = 0
     for q in range(m):
         px, py, pz = points[q, 0], points[q, 1], points[q, 2]
+        z = px * L[2, 0] + py * L[2, 1] + pz * L[2, 2]
+        if not (z >= lowest and z <= highest):
+            continue  # outside every bin's band: no bearing needed
         x = px * L[0, 0] + py * L[0, 1] + pz * L[0, 2]
         y = px * L[1, 0] + py * L[1, 1] + pz * L[1, 2]
         b = math.floor((math.atan2(y, x) + math.pi) / step) % n
-        z = px * L[2, 0] + py * L[2, 1] + pz * L[2, 2]
         if not (z >= low[b] and z <= high[b]):
             continue
         bins[kept] = b
