@@ -38,7 +38,7 @@ from mast.pipeline.locator3d import (
     _witnessed,
     locate3d,
 )
-from mast.pipeline.plan_view import level_rotation
+from mast.pipeline.plan_view import _bin_bands, level_rotation
 from mast.report.record import fix3d_record, fix3d_text
 from mast.sim.lidar3d import DriftScene3D, SimulatedFrame3D, random_drift_scene
 from tests._raycast3d import cast, paper_walls
@@ -503,13 +503,7 @@ def _bin_centre_plan_scan(
     its part."""
     n = round(360.0 / resolution_deg)
     step = 2.0 * math.pi / n
-    low, high = np.full(n, band[0]), np.full(n, band[1])
-    for start, end, lo, hi in bands:
-        which = (
-            np.arange(math.floor((start + math.pi) / step), math.floor((end + math.pi) / step) + 1)
-            % n
-        )
-        low[which], high[which] = lo, hi
+    low, high = _bin_bands(n, band, bands)
     p = frame.points @ level_rotation(up).T
     bins = np.floor((np.arctan2(p[:, 1], p[:, 0]) + math.pi) / step).astype(np.intp) % n
     keep = (p[:, 2] >= low[bins]) & (p[:, 2] <= high[bins])

@@ -53,6 +53,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -769,7 +770,7 @@ def _plan_view(
     up: NDArray[np.float64],
     band: tuple[float, float],
     cfg: Locator3DConfig,
-    bands: list[tuple[float, float, float, float]] | None = None,
+    bands: Sequence[tuple[float, float, float, float]] = (),
 ) -> Scan:
     """The plan view of ``frame`` levelled by ``up``, in ``band`` (and ``bands``: see
     :func:`~mast.pipeline.plan_view.plan_scan`), at the locator's resolution and range
@@ -780,7 +781,7 @@ def _plan_view(
         band=band,
         resolution_deg=cfg.plan_resolution_deg,
         range_sigma_m=cfg.range_sigma_m,
-        bands=bands or (),
+        bands=bands,
     )
 
 
@@ -818,14 +819,13 @@ def _confirmed(
 ) -> Fix3D:
     """A 3D ``fix`` that passed every 3D test, as it is where it lies inside its plan
     view's ellipse (:func:`_off_plan`); elsewhere confirmed or refused: a plan view seen
-    with a try's vertical,
-    degrees off, is smeared, and its 2D fix may be decimetres off where the 3D fix is
-    right to millimetres. The plan view levelled by the fix's own pose and located
-    near it (:func:`_plan_again`) starts the 3D stages again, and that 3D fix must pass
-    every test, its agreement with that plan view included; where that plan view
-    confirms one of the fix's beacons alone, the fix stands on its own tests with its
-    tilt held to :data:`ALONE_TILT_SIGMA_DEG`, as a one-beacon start's; elsewhere the
-    first fix is refused for its plan view's disagreement."""
+    with a try's vertical, degrees off, is smeared, and its 2D fix may be decimetres off
+    where the 3D fix is right to millimetres. The plan view levelled by the fix's own
+    pose and located near it (:func:`_plan_again`) starts the 3D stages again, and that
+    3D fix must pass every test, its agreement with that plan view included; where that
+    plan view confirms one of the fix's beacons alone, the fix stands on its own tests
+    with its tilt held to :data:`ALONE_TILT_SIGMA_DEG`, as a one-beacon start's;
+    elsewhere the first fix is refused for its plan view's disagreement."""
     why = _off_plan(fix)
     if why is None:
         return fix

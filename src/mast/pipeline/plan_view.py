@@ -101,16 +101,26 @@ def plan_scan(
     n = round(360.0 / resolution_deg)
     step = 2.0 * math.pi / n
     points = np.ascontiguousarray(frame.points, dtype=np.float64)
-    lows, highs = np.full(n, float(low)), np.full(n, float(high))
+    lows, highs = _bin_bands(n, band, bands)
+    bearings, ranges = plan_ranges(points, level_rotation(up), lows, highs, n, step, surface_m)
+    return Scan(
+        angles_rad=bearings, ranges_m=ranges, stamp_ns=frame.stamp_ns, frame_id=frame.frame_id
+    )
+
+
+def _bin_bands(
+    n: int, band: tuple[float, float], bands: Sequence[tuple[float, float, float, float]]
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Each of ``n`` bearing bins' band (low, high): ``band``, or where one of ``bands``
+    (from, to, low, high) covers its bearings, that one's (the last given wins)."""
+    step = 2.0 * math.pi / n
+    lows, highs = np.full(n, float(band[0])), np.full(n, float(band[1]))
     for start, end, lo, hi in bands:
         first = math.floor((start + math.pi) / step)
         last = math.floor((end + math.pi) / step)
         which = np.arange(first, last + 1) % n
         lows[which], highs[which] = lo, hi
-    bearings, ranges = plan_ranges(points, level_rotation(up), lows, highs, n, step, surface_m)
-    return Scan(
-        angles_rad=bearings, ranges_m=ranges, stamp_ns=frame.stamp_ns, frame_id=frame.frame_id
-    )
+    return lows, highs
 
 
 def _plan_ranges_reference(
