@@ -3490,35 +3490,51 @@ def _panel_rows3d(
     W: NDArray[np.float64],
     N: NDArray[np.float64],
     g: NDArray[np.float64],
+    cosines: NDArray[np.float64],
 ) -> None:
     """One Gauss-Newton iteration's panel rows of the 3D adjustment
     (``adjust3d._panel_rows_reference``): each return's ``weighed`` (m, 14) times the
-    pose's ``rotations`` (14, 5) gives its residual across its plane (less ``offset``)
-    into ``v``, its derivatives by azimuth, pitch and roll into ``J[:, 2:5]`` (the first
-    two columns, its normal, are set already), and its weight, ``weight`` over its
-    incidence's square, into ``W``; ``N`` (6, 6) and ``g`` (6,) are set to
-    ``J' W J`` and ``J' W v`` of those rows, in one pass."""
+    pose's ``rotations`` (14, 8; zero but for the blocks ``gauss_newton3d`` sets) gives
+    its offset across its plane (less ``offset``), its
+    derivatives by azimuth, pitch and roll, its ray's incidence ``cos i`` (into
+    ``cosines``; a thousandth at least, with its sign) and that incidence's derivatives.
+    Its row is the range residual, the offset over ``cos i`` (the measured range less the
+    range along the ray to the plane), into ``v``; its derivatives by the five the plane
+    observes into ``J[:, :5]``, through the incidence as well; its weight ``weight``
+    into ``W``. ``N`` (6, 6) and ``g`` (6,) are set to ``J' W J`` and ``J' W v`` of those
+    rows, in one pass."""
     m = weighed.shape[0]
     for a in range(6):
         g[a] = 0.0
         for b in range(6):
             N[a, b] = 0.0
-    row = np.empty(5)
+    row = np.empty(8)
     for i in range(m):
-        for c in range(5):
+        # the points' six columns by R and its derivatives, the rays' six by the same,
+        # the normal by the position: the rest of ``rotations`` is zero
+        for c in range(4):
             acc = 0.0
-            for j in range(14):
+            ray = 0.0
+            for j in range(6):
                 acc += weighed[i, j] * rotations[j, c]
+                ray += weighed[i, 6 + j] * rotations[6 + j, 4 + c]
             row[c] = acc
-        r = row[0] - offset[i]
+            row[4 + c] = ray
+        row[0] += weighed[i, 12] * rotations[12, 0] + weighed[i, 13] * rotations[13, 0]
+        cos = row[4]
+        if abs(cos) < 1e-3:
+            cos = 1e-3 if cos >= 0.0 else -1e-3
+        cosines[i] = cos
+        r = (row[0] - offset[i]) / cos
         v[i] = r
-        J[i, 2] = -row[1]  # d yaw / d A = -1
-        J[i, 3] = row[2]
-        J[i, 4] = row[3]
-        w = weight / max(row[4] * row[4], 1e-6)
-        W[i] = w
+        J[i, 0] = weighed[i, 12] / cos
+        J[i, 1] = weighed[i, 13] / cos
+        J[i, 2] = (r * row[5] - row[1]) / cos  # d yaw / d A = -1
+        J[i, 3] = (row[2] - r * row[6]) / cos
+        J[i, 4] = (row[3] - r * row[7]) / cos
+        W[i] = weight
         for a in range(5):
-            wa = w * J[i, a]
+            wa = weight * J[i, a]
             g[a] += wa * r
             for b in range(a, 5):
                 N[a, b] += wa * J[i, b]
@@ -3752,6 +3768,7 @@ def _gauss_newton3d(
     v: NDArray[np.float64],
     W: NDArray[np.float64],
     N: NDArray[np.float64],
+    cosines: NDArray[np.float64],
 ) -> int:
     """The Gauss-Newton iterations of the 3D adjustment (``adjust3d._solve``; its numpy
     reference ``adjust3d._gauss_newton3d_reference``): from ``x`` (E, N, A, pitch, roll,
@@ -3761,13 +3778,14 @@ def _gauss_newton3d(
     on the top edges' rays; ``member`` has no row where there are none), weighed by
     one over its variance plus ``survey_var``; the tilt prior's two rows (``tilt``:
     pitch and roll, where given; their rows of ``J`` and ``W`` set already); and
-    ``unobserved`` added to the elevation's normal where no bracket holds it. ``J``
-    (its first two columns set), ``v``, ``W`` and ``N`` are the last iteration's.
-    Returns the iterations done, or -1 where the normal equations are singular."""
+    ``unobserved`` added to the elevation's normal where no bracket holds it. ``J``,
+    ``v``, ``W``, ``N`` and the panel returns' incidences ``cosines`` are the last
+    iteration's. Returns the iterations done, or -1 where the normal equations are
+    singular."""
     m = weighed.shape[0]
     beacons = member.shape[0]
     rows_n = v.shape[0]
-    rotations = np.zeros((14, 5))
+    rotations = np.zeros((14, 8))
     g = np.zeros(6)
     rhs = np.empty((6, 1))
     done = 0
@@ -3781,9 +3799,12 @@ def _gauss_newton3d(
                 rotations[r, 1] = D[3, a, b]  # by yaw, pitch, roll
                 rotations[r, 2] = D[2, a, b]
                 rotations[r, 3] = D[1, a, b]
-                rotations[6 + r, 4] = D[0, a, b]
+                rotations[6 + r, 4] = D[0, a, b]  # the ray's, for its incidence
+                rotations[6 + r, 5] = D[3, a, b]
+                rotations[6 + r, 6] = D[2, a, b]
+                rotations[6 + r, 7] = D[1, a, b]
         rotations[12, 0], rotations[13, 0] = x[0], x[1]
-        _panel_rows3d_jit(weighed, rotations, offset_k, weight, v[:m], J[:m], W[:m], N, g)
+        _panel_rows3d_jit(weighed, rotations, offset_k, weight, v[:m], J[:m], W[:m], N, g, cosines)
         if beacons:
             origin = np.array([x[0], x[1], x[5]])
             middle, spread, dz = _brackets3d_jit(

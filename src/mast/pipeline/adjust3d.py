@@ -10,10 +10,15 @@ elevation is its top end). Two kinds of evidence, each from the frame alone:
   panel's horizontal axis moves its returns off the plane in proportion to their
   height, so panels of different directions (the deflection angles, two beacons)
   observe pitch and roll. The elevation does not enter (the plane is vertical).
-  Gauss-Newton with analytic derivatives of ``R = Rz(yaw) Ry(pitch) Rx(roll)``; each
-  return weighed by its range sigma projected on the panel's normal, and one within 2°
-  of grazing its panel left out (it carries no usable range, as in 2D:
-  :data:`GRAZING_DEG`); the survey's
+  The observation is the return's range, as in 2D: its row is that residual over the
+  ray's incidence ``cos i = n_k · (R u)``, the measured range less the range along the
+  ray to the plane, weighed by the range sigma. Gauss-Newton with analytic derivatives
+  of ``R = Rz(yaw) Ry(pitch) Rx(roll)``, through the incidence too: weighing the
+  residual across the plane by ``1 / cos² i`` at each iteration's pose instead leaves
+  out that derivative, whose expectation over the range noise is not zero, and biases
+  the pose (by half its sigma in roll and azimuth at 2 cm, on a drift's panels seen
+  obliquely). A return within 2° of grazing its panel is left out (it carries no
+  usable range, as in 2D: :data:`GRAZING_DEG`); the survey's
   sigma, shared by every return of a panel, is propagated into the covariance after
   (as in 2D, :func:`mast.pipeline.adjustment.survey_covariance`).
 * **Top edges** (elevation). Every ray that crosses a panel's plane inside its plan
@@ -1015,6 +1020,13 @@ class _Solved:
     n_points: int
     tops: list[tuple[int, int, int]]
     iterations: int
+    cosines: NDArray[np.float64]  # each panel return's incidence, cos i (signed)
+
+    def offsets(self) -> NDArray[np.float64]:
+        """Each panel return's row's change per metre its panel's plane moves along its
+        normal: ``-1 / cos i`` (a range residual; the rows past the panel returns'
+        are not a plane's)."""
+        return -1.0 / self.cosines
 
 
 def _solve(
@@ -1055,7 +1067,7 @@ def _solve(
     # the rows: the panel returns', one per beacon's top edges, the tilt prior's two
     rows = m + len(edges.member) + (2 if tilt_prior is not None else 0)
     J, v, W = np.zeros((rows, 6)), np.zeros(rows), np.zeros(rows)
-    J[:m, :2] = n_k
+    cosines = np.zeros(m)
     tilt = np.zeros(0)
     if tilt_prior is not None:  # the walls' vertical, as two observations
         J[-2:] = _TILT_ROWS
@@ -1066,10 +1078,11 @@ def _solve(
         weighed, d_k, range_sigma_m**-2, p, edges.rows, edges.ray, edges.normal[0],
         edges.normal[1], edges.offset, edges.top, edges.member, BEAM_ANGLE_SIGMA,
         survey_sigma_m**2, tilt, 1.0 / UNBRACKETED, x, iterations, _CONVERGED, J, v, W, N,
+        cosines,
     )  # fmt: skip
     if done < 0:
         raise np.linalg.LinAlgError("Singular matrix")
-    return _Solved(x, J, W, v, N, m, tops, done)
+    return _Solved(x, J, W, v, N, m, tops, done, cosines)
 
 
 def _gauss_newton3d_reference(
@@ -1086,23 +1099,26 @@ def _gauss_newton3d_reference(
     v: NDArray[np.float64],
     W: NDArray[np.float64],
     N: NDArray[np.float64],
+    cosines: NDArray[np.float64],
 ) -> int:
     """The numpy reference of :func:`mast.core._kernels.gauss_newton3d`, the iterations
     of :func:`_solve` (``edges`` for its top edges' arrays; the brackets' beam error
     :data:`BEAM_ANGLE_SIGMA`, the unobserved elevation's :data:`UNBRACKETED` and the
-    steps :data:`_CONVERGED`): ``x``, ``J``, ``v``, ``W``, ``N`` set in place, the
-    iterations done returned (numpy's own error where singular)."""
+    steps :data:`_CONVERGED`): ``x``, ``J``, ``v``, ``W``, ``N``, ``cosines`` set in
+    place, the iterations done returned (numpy's own error where singular)."""
     m = len(weighed)
-    rotations = np.zeros((14, 5))
+    rotations = np.zeros((14, 8))
     g = np.zeros(6)
     done = 0
     while True:
         done += 1
         D = _derivatives(x[4], x[3], yaw_of_azimuth(x[2]))
         rotations[:6, :4] = D[_BY_PARAMETER, :2].reshape(4, 6).T  # R, d yaw, d pitch, d roll
-        rotations[6:12, 4] = D[0, :2].ravel()
+        rotations[6:12, 4:] = rotations[:6, :4]  # the rays', for their incidences
         rotations[12:, 0] = x[:2]
-        _panel_rows_reference(weighed, rotations, offset_k, weight, v[:m], J[:m], W[:m], N, g)
+        _panel_rows_reference(
+            weighed, rotations, offset_k, weight, v[:m], J[:m], W[:m], N, g, cosines
+        )
         if len(edges.member):
             at = p[edges.rows]
             middle, spread, dz = edges.brackets_reference(
@@ -1132,15 +1148,24 @@ def _panel_rows_reference(
     W: NDArray[np.float64],
     N: NDArray[np.float64],
     g: NDArray[np.float64],
+    cosines: NDArray[np.float64],
 ) -> None:
     """The numpy reference of :func:`mast.core._kernels.panel_rows3d`, the panel
-    returns' rows of one Gauss-Newton iteration of :func:`_solve`: residuals ``v``, the
-    derivatives by azimuth, pitch and roll ``J[:, 2:5]``, weights ``W`` (the range noise
-    along the ray, seen across the panel) and their normal equations ``N``, ``g``."""
+    returns' rows of one Gauss-Newton iteration of :func:`_solve`: the range residuals
+    ``v`` (the offset across the plane over the incidence ``cos i``, into ``cosines``),
+    their derivatives by the five the plane observes ``J[:, :5]`` (through the incidence
+    too), the weights ``W`` (the range noise's) and their normal equations ``N``, ``g``."""
     product = weighed @ rotations
-    v[:] = product[:, 0] - offset
-    J[:, 2:5] = product[:, 1:4] * np.array([-1.0, 1.0, 1.0])  # d yaw / d A = -1
-    W[:] = weight / np.maximum(product[:, 4] * product[:, 4], 1e-6)
+    cos = product[:, 4]
+    cos = np.where(np.abs(cos) < 1e-3, np.where(cos >= 0.0, 1e-3, -1e-3), cos)
+    cosines[:] = cos
+    r = (product[:, 0] - offset) / cos
+    v[:] = r
+    J[:, :2] = weighed[:, 12:] / cos[:, None]
+    # d yaw / d A = -1
+    J[:, 2] = (r * product[:, 5] - product[:, 1]) / cos
+    J[:, 3:5] = (product[:, 2:4] - r[:, None] * product[:, 6:8]) / cos[:, None]
+    W[:] = weight
     WJ = W[:, None] * J
     N[:] = J.T @ WJ
     g[:] = WJ.T @ v
@@ -1214,6 +1239,33 @@ def _failed_bracket(solved: _Solved, planes: PanelPlanes) -> str | None:
     return beacons[worst] if w[worst] > w_critical(len(beacons)) else None
 
 
+def _group_w(
+    solved: _Solved,
+    group: NDArray[np.intp],
+    c: NDArray[np.float64],
+    groups: int,
+    survey_var: float = 0.0,
+) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
+    """Baarda's w-test of each group of the panel returns' rows (``group``, 0 to
+    ``groups``) for a common offset, ``c`` each row's change by it: c'Wv over its sigma,
+    with the leverage the pose gives the group (c'W Qvv W c, Qvv = W^-1 - J Q J') and a
+    survey offset's share (``survey_var`` times that squared); and whether each is
+    tested. A group whose offset the pose alone sets (no other return checks it) is
+    not: its residuals are the rounding's."""
+    n = solved.n_points
+    Wc, J = solved.W[:n] * c, solved.J[:n]
+    weight = np.bincount(group, weights=Wc * c, minlength=groups)
+    shift = np.bincount(group, weights=Wc * solved.v[:n], minlength=groups)
+    pull = np.stack(
+        [np.bincount(group, weights=Wc * J[:, j], minlength=groups) for j in range(6)], axis=1
+    )
+    spread = weight - np.einsum("ij,jk,ik->i", pull, np.linalg.inv(solved.N), pull)
+    tested = (weight > 0) & (spread > 1e-6 * weight)
+    w = np.zeros(groups)
+    w[tested] = np.abs(shift[tested]) / np.sqrt(spread[tested] + survey_var * spread[tested] ** 2)
+    return w, tested
+
+
 def _snoop_pieces(
     p: NDArray[np.float64],
     which: NDArray[np.intp],
@@ -1224,8 +1276,8 @@ def _snoop_pieces(
     rounds: int = 12,
 ) -> _Solved:
     """Leave out, one at a time, the piece of panel returns (a quarter of a panel along
-    one line) whose mean standardised residual fails (see :func:`adjust_pose`);
-    ``which`` is changed in place."""
+    one line) whose common range offset fails Baarda's w-test (:func:`_group_w`; see
+    :func:`adjust_pose`); ``which`` is changed in place."""
     for _ in range(rounds):
         on = np.flatnonzero(which >= 0)
         k = which[on]
@@ -1237,11 +1289,9 @@ def _snoop_pieces(
         line = lines[on] - lines[on].min(initial=0)
         key = (k * (int(line.max(initial=0)) + 1) + line) * 4 + quarter
         _, piece = np.unique(key, return_inverse=True)
-        r = solved.v[: solved.n_points] * np.sqrt(solved.W[: solved.n_points])
-        count = np.bincount(piece)
-        mean = np.bincount(piece, weights=r) / np.sqrt(count)
-        worst = int(np.argmax(np.abs(mean)))
-        if abs(mean[worst]) <= w_critical(len(count)):
+        w, tested = _group_w(solved, piece, np.ones(len(piece)), int(piece.max()) + 1)
+        worst = int(np.argmax(w))
+        if w[worst] <= w_critical(max(int(np.count_nonzero(tested)), 1)):
             break
         which[on[piece == worst]] = -1
         solved = solve(solved.x)
@@ -1256,33 +1306,20 @@ def _snoop_panels(
     rounds: int = 3,
 ) -> _Solved:
     """Leave out, one at a time, the panel whose returns' common shift fails Baarda's
-    w-test (``which`` is changed in place): c'Wv over its sigma, c the panel's returns'
-    indicator, with the leverage the pose gives the panel (c'W Qvv W c, Qvv = W^-1 - J
-    Q J') and its survey offset's share (sigma_s^2 times that squared). A few returns
+    w-test (``which`` is changed in place): c'Wv over its sigma, c its returns' rows'
+    change as its plane moves along its normal (:meth:`_Solved.offsets`), with the
+    leverage the pose gives the panel (c'W Qvv W c, Qvv = W^-1 - J Q J') and its survey
+    offset's share (sigma_s^2 times that squared). A few returns
     with much weight, alone on their panel (wall returns near grazing a short end panel),
     bend the pose to fit them: each is then within its own w-test, but not their panel."""
     for _ in range(rounds):
-        n = solved.n_points
         k = which[which >= 0]
         panels = int(k.max(initial=-1)) + 1
         if panels < 2:
             break
-        Wp, Jp = solved.W[:n], solved.J[:n]
-        weight = np.bincount(k, weights=Wp, minlength=panels)
-        shift = np.bincount(k, weights=Wp * solved.v[:n], minlength=panels)
-        pull = np.stack(
-            [np.bincount(k, weights=Wp * Jp[:, c], minlength=panels) for c in range(6)], axis=1
-        )
-        spread = weight - np.einsum("ij,jk,ik->i", pull, np.linalg.inv(solved.N), pull)
-        # a panel whose shift the pose alone sets (the others do not check it) is not
-        # tested: its residuals are the rounding's
-        checked = (weight > 0) & (spread > 1e-6 * weight)
-        w = np.zeros(panels)
-        w[checked] = np.abs(shift[checked]) / np.sqrt(
-            spread[checked] + survey_sigma_m**2 * spread[checked] ** 2
-        )
+        w, tested = _group_w(solved, k, solved.offsets(), panels, survey_sigma_m**2)
         worst = int(np.argmax(w))
-        if w[worst] <= w_critical(max(int(np.count_nonzero(checked)), 1)):
+        if w[worst] <= w_critical(max(int(np.count_nonzero(tested)), 1)):
             break
         which[which == worst] = -1
         solved = solve(solved.x)
@@ -1344,8 +1381,10 @@ def adjust_pose(
     return too near to fail alone. So the panel returns are grouped into pieces (a
     panel's quarter along its length on one of ``lines``: the ring of each return,
     or any label of returns that lie on one line across a panel), and the piece whose
-    mean standardised residual is furthest out, beyond the critical value of the
-    largest of that many, is left out and the adjustment run again, until none is.
+    common range offset is furthest out by Baarda's w-test (its leverage counted: a
+    lone return that bends the pose to fit it is tested as one), beyond the critical
+    value of the largest of that many, is left out and the adjustment run again, until
+    none is.
 
     Without ``elevation`` no top edge enters: the elevation stays the start's (its
     variance :data:`UNBRACKETED`). ``tilt_prior`` (pitch, roll, sigma; radians) adds
@@ -1414,7 +1453,7 @@ def adjust_pose(
     # The survey's error is one offset per panel, shared by all its returns.
     G = Q @ (J.T * W)
     shared = np.zeros((n_points, len(planes)))
-    shared[np.arange(n_points), k_of] = 1.0
+    shared[np.arange(n_points), k_of] = solved.offsets()
     g = G[:, :n_points] @ shared  # (6, panels): each panel's offset's effect
     cov = Q + survey_sigma_m**2 * (g @ g.T)
     # (E, N, A, pitch, roll, Z) → (E, N, Z, roll, pitch, A)
