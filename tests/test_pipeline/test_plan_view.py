@@ -77,6 +77,27 @@ def test_the_compiled_plan_ranges_agree_with_their_numpy_reference(
     assert np.all(np.diff(got[0]) > 0)  # a scan's bearings, strictly increasing
 
 
+def test_the_compiled_floor_lows_agree_with_their_numpy_reference() -> None:
+    # Each floor column's lowest return, compiled and in numpy: the same returns in the
+    # same order, ties to the first; a simulated drift's frame (its floor), a grid with
+    # ties in every column, and nothing low enough.
+    from mast.core._kernels import floor_lows
+    from mast.pipeline.plan_view import _floor_lows_reference
+    from mast.sim.lidar3d import random_drift_scene
+
+    sim = random_drift_scene(7, frames=1, lidar="vlp16").simulate(0)
+    q = sim.frame.points @ level_rotation(sim.pose.rotation[2]).T
+    tied = np.array([[x, y, -1.0 - (x % 1.0 > 0.5)] for x in np.arange(-3, 3, 0.25)
+                     for y in np.arange(-2, 2, 0.25) for _ in range(2)])  # fmt: skip
+    for pts in (q, tied, tied + [0.0, 0.0, 5.0]):
+        got, near = floor_lows(pts, -0.3, 12.0, 0.5)
+        want, near_want = _floor_lows_reference(pts, -0.3, 12.0, 0.5)
+        np.testing.assert_array_equal(got, want)
+        assert near == near_want
+    assert len(_floor_lows_reference(q, -0.3, 12.0, 0.5)[0]) > 100
+    assert floor_lows(tied + [0.0, 0.0, 5.0], -0.3, 12.0, 0.5)[1] == 0
+
+
 def test_a_panel_seen_by_many_noisy_returns_is_not_pulled_in_front_of_its_plane() -> None:
     # Cut at the nearest return plus 5 cm, a bin's returns on a panel at 3 cm range
     # noise are the nearer part of their noise: the panel comes out about 2.5 cm in

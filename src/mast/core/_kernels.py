@@ -32,6 +32,7 @@ __all__ = [
     "first_at_least",
     "first_hits",
     "first_same",
+    "floor_lows",
     "floors3d",
     "gauss_newton",
     "gauss_newton3d",
@@ -4047,6 +4048,46 @@ def _floors3d(
     return out
 
 
+def _floor_lows(
+    q: NDArray[np.float64], below: float, reach: float, cell: float
+) -> tuple[NDArray[np.intp], int]:
+    """``plan_view._floor_lows_reference`` compiled: of the levelled returns ``q`` (m, 3)
+    lower than ``below`` and within ``reach`` in plan, the index of the lowest in each
+    ``cell`` square column (the first of those as low), by column (x, then y); and how
+    many returns were that low and near."""
+    m = q.shape[0]
+    kept = np.empty(m, dtype=np.intp)
+    cx = np.empty(m, dtype=np.int64)
+    cy = np.empty(m, dtype=np.int64)
+    k = 0
+    for i in range(m):
+        if q[i, 2] < below and math.hypot(q[i, 0], q[i, 1]) < reach:
+            kept[k] = i
+            cx[k] = math.floor(q[i, 0] / cell)
+            cy[k] = math.floor(q[i, 1] / cell)
+            k += 1
+    if k == 0:
+        return np.empty(0, dtype=np.intp), 0
+    x0, x1, y0, y1 = cx[0], cx[0], cy[0], cy[0]
+    for j in range(k):
+        x0, x1 = min(x0, cx[j]), max(x1, cx[j])
+        y0, y1 = min(y0, cy[j]), max(y1, cy[j])
+    ny = y1 - y0 + 1
+    best = np.full((x1 - x0 + 1) * ny, -1, dtype=np.intp)
+    for j in range(k):
+        c = (cx[j] - x0) * ny + cy[j] - y0
+        i = kept[j]
+        if best[c] < 0 or q[i, 2] < q[best[c], 2]:
+            best[c] = i
+    out = np.empty(best.size, dtype=np.intp)
+    n = 0
+    for c in range(best.size):
+        if best[c] >= 0:
+            out[n] = best[c]
+            n += 1
+    return out[:n], k
+
+
 def _plan_ranges(
     points: NDArray[np.float64],
     L: NDArray[np.float64],
@@ -4262,5 +4303,6 @@ assigns3d: Callable[..., NDArray[np.intp]] = njit(cache=True, nogil=True)(_assig
 contiguous3d: Callable[..., NDArray[np.bool_]] = njit(cache=True, nogil=True)(_contiguous3d)
 floors3d: Callable[..., NDArray[np.float64]] = njit(cache=True, nogil=True)(_floors3d)
 plan_ranges: Callable[..., NDArray[np.float64]] = njit(cache=True, nogil=True)(_plan_ranges)
+floor_lows: Callable[..., tuple[NDArray[np.intp], int]] = njit(cache=True, nogil=True)(_floor_lows)
 rays3d: Callable[..., Any] = njit(cache=True, nogil=True, error_model="numpy")(_rays3d)
 _rays3d_jit = rays3d

@@ -33,13 +33,15 @@ from collections.abc import Sequence
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from mast.core._kernels import plan_ranges
+from mast.core._kernels import floor_lows, plan_ranges
 from mast.core.pose3d import Frame3D
 from mast.core.scan import Scan
 from mast.errors import InputError
 
 __all__ = ["estimate_up", "level_rotation", "plan_scan", "rings_bottom_up"]
 
+#: A return the floor's may be is this far below the sensor at least (levelled), metres.
+FLOOR_DEPTH_M = 0.3
 #: A bin's nearest surface: the returns within this many range sigmas of its nearest
 #: one, and within SURFACE_M metres at least. Cut at 5 cm whatever the noise, a bin's
 #: returns on a panel at 3 cm range noise were the nearer part of their noise: the
@@ -211,22 +213,17 @@ def _floor_normal(
 ) -> NDArray[np.float64] | None:
     """The floor's normal in the sensor frame, or None where too little floor is seen:
     the frame levelled by ``up`` (roughly), the lowest return of each ``cell_m`` column
-    within ``reach_m`` and at least 0.3 m below the sensor (a column's lowest return is
-    the floor, or a wall's foot on it), and a plane fitted to them, trimmed twice to
-    those within 10 cm (the rock's roughness; a kerb or a heap of muck is left out).
-    Rings reach the floor metres apart, too far for the ring normals to see it."""
+    within ``reach_m`` and :data:`FLOOR_DEPTH_M` or more below the sensor (a column's
+    lowest return is the floor, or a wall's foot on it), and a plane fitted to them,
+    trimmed twice to those within 10 cm (the rock's roughness; a kerb or a heap of muck
+    is left out). Rings reach the floor metres apart, too far for the ring normals to
+    see it."""
     L = level_rotation(up)
     q = p[:: max(1, len(p) // 20_000)] @ L.T  # a floor is seen by far fewer returns
-    q = q[q[:, 2] < -0.3]
-    q = q[np.hypot(q[:, 0], q[:, 1]) < reach_m]
-    if len(q) < 50:
+    lowest, near = floor_lows(q, -FLOOR_DEPTH_M, reach_m, cell_m)  # _floor_lows_reference
+    if near < 50 or len(lowest) < 30:
         return None
-    cells = np.floor(q[:, :2] / cell_m).astype(np.int64)
-    cells -= cells.min(axis=0)
-    key = cells[:, 0] * (int(cells[:, 1].max()) + 1) + cells[:, 1]  # ordered as (x, y)
-    low = q[_first_lowest(key, q[:, 2])]
-    if len(low) < 30:
-        return None
+    low = q[lowest]
     A = np.c_[low[:, 0], low[:, 1], np.ones(len(low))]
     use = np.ones(len(low), dtype=bool)
     for _ in range(3):
@@ -236,6 +233,22 @@ def _floor_normal(
             return None
     n = np.array([-coef[0], -coef[1], 1.0])
     return np.asarray(L.T @ (n / np.linalg.norm(n)), dtype=np.float64)
+
+
+def _floor_lows_reference(
+    q: NDArray[np.float64], below: float, reach: float, cell: float
+) -> tuple[NDArray[np.intp], int]:
+    """The numpy reference of :func:`mast.core._kernels.floor_lows`: of the levelled
+    returns ``q`` lower than ``below`` and within ``reach`` in plan, the index of the
+    lowest in each ``cell`` square column (the first of those as low), by column; and
+    how many returns were that low and near."""
+    kept = np.flatnonzero((q[:, 2] < below) & (np.hypot(q[:, 0], q[:, 1]) < reach))
+    if kept.size == 0:
+        return kept, 0
+    cells = np.floor(q[kept, :2] / cell).astype(np.int64)
+    cells -= cells.min(axis=0)
+    key = cells[:, 0] * (int(cells[:, 1].max()) + 1) + cells[:, 1]  # ordered as (x, y)
+    return np.asarray(kept[_first_lowest(key, q[kept, 2])], dtype=np.intp), int(kept.size)
 
 
 def _first_lowest(key: NDArray[np.int64], z: NDArray[np.float64]) -> NDArray[np.intp]:
