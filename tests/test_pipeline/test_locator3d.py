@@ -130,6 +130,38 @@ def test_the_plan_view_is_tried_level_first_then_pitched_either_way() -> None:
     assert all(pitches.count(t) == pitches.count(-t) for t in pitches)  # either way alike
 
 
+def test_a_refined_vertical_is_tried_in_every_band(monkeypatch: pytest.MonkeyPatch) -> None:
+    # A VLP-16 2 cm look-alike frame of fresh draws (seed 1, drift 1, frame 3): the first
+    # try's plan view shows one beacon, whose panels refine the vertical; at that
+    # vertical the second beacon is in the widest band only. Refined tries in the first
+    # two bands, as they were, left the frame refused.
+    scene = random_drift_scene(1, 1, frames=10, lidar="vlp16", range_sigma_m=0.02, lookalikes=True)
+    seen: list[tuple[NDArray[np.float64], tuple[float, float]]] = []
+    refined: list[NDArray[np.float64]] = []
+    plan_view, vertical_from = locator3d._plan_view, locator3d._vertical_from
+
+    def viewed(frame: Frame3D, up: NDArray[np.float64], band: tuple[float, float], *a: Any) -> Any:
+        seen.append((np.array(up), band))
+        return plan_view(frame, up, band, *a)
+
+    def refining(*a: Any, **k: Any) -> Any:
+        better = vertical_from(*a, **k)
+        if better is not None:
+            refined.append(better)
+        return better
+
+    monkeypatch.setattr(locator3d, "_plan_view", viewed)
+    monkeypatch.setattr(locator3d, "_vertical_from", refining)
+    sim, fix = _located(scene, 3, 0.02)
+    _within(fix, sim)
+    assert len(refined) == 1
+    at_refined = [band for up, band in seen if np.array_equal(up, refined[0])]
+    assert at_refined[:3] == list(Locator3DConfig().bands_m)
+    assert fix.up is not None
+    assert np.array_equal(fix.up, refined[0])  # the fix is the refined vertical's
+    assert fix.plan.pose is not None
+
+
 def test_a_panel_is_one_run_of_heights() -> None:
     walls, scene = paper_walls("parallel")
     planes = PanelPlanes.of(scene.survey)

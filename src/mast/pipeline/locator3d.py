@@ -649,8 +649,11 @@ def locate3d(
             better = _vertical_from(frame, planes, plan, tried, cfg, spacing=spacing)
             spent["vertical"] += time.perf_counter() - t
             if better is not None:
+                # every band: at the refined vertical a second beacon may be in the
+                # widest band only (the first two bands alone left 3 of seed 0's 480
+                # owed frames and 5 of seeds 1 and 2's 960 unfixed)
                 refined = True
-                tries[:0] = [(better, band) for band in cfg.bands_m[:2]]
+                tries[:0] = [(better, band) for band in cfg.bands_m]
     assert first is not None
     return replace(first, elapsed_s=time.perf_counter() - t0, stages_s=spent)
 
