@@ -422,6 +422,7 @@ def _off_plan_refused(*args: Any) -> Fix3D:
 )
 def test_right_fixes_are_not_refused_for_their_plan_view_or_their_panels_tops(
     bin_centre_plan: None,
+    two_refined_bands: None,
     monkeypatch: pytest.MonkeyPatch,
     lidar: str,
     drift: int,
@@ -560,6 +561,14 @@ def _bin_centre_plan_scan(
         ranges = np.where(count > 0, total / count, np.nan)
     centres = -math.pi + (np.arange(n) + 0.5) * step
     return Scan(angles_rad=centres, ranges_m=ranges, stamp_ns=frame.stamp_ns)
+
+
+@pytest.fixture
+def two_refined_bands(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A refined vertical tried in the first two bands, as it was before 2026-12-07 (the
+    next session): frames that showed a stage deciding them were found so, and tried in
+    the widest band too, some are fixed by another way."""
+    monkeypatch.setattr(locator3d, "REFINED_BANDS", 2)
 
 
 @pytest.fixture
@@ -728,6 +737,7 @@ def test_each_beacons_bearings_get_the_band_of_its_tops() -> None:
     ],
 )
 def test_the_plan_view_located_again_sees_each_beacon_in_the_band_of_its_tops(
+    two_refined_bands: None,
     monkeypatch: pytest.MonkeyPatch,
     lidar: str,
     sigma: float,

@@ -89,6 +89,11 @@ __all__ = ["Fix3D", "Locator3DConfig", "locate3d"]
 
 #: The pitches about the estimated vertical the plan view is tried at, in turn, degrees.
 PITCH_TRIES_DEG = (0.0, 4.0, -4.0, 8.0, -8.0, 12.0, -12.0)
+#: How many of the bands (``Locator3DConfig.bands_m``, in order) a vertical refined
+#: from a beacon's panels is tried in: None, every band. At the refined vertical a second
+#: beacon may be in the widest band only (the first two bands alone left 3 of seed 0's
+#: 480 owed frames and 5 of seeds 1 and 2's 960 unfixed).
+REFINED_BANDS: int | None = None
 #: The heights about the sensor the adjustment is grown through, metres.
 REACH_M = (0.5, 1.0, 2.0, math.inf)
 #: Before the first adjustment, the gate is widened by this times a return's height
@@ -649,11 +654,8 @@ def locate3d(
             better = _vertical_from(frame, planes, plan, tried, cfg, spacing=spacing)
             spent["vertical"] += time.perf_counter() - t
             if better is not None:
-                # every band: at the refined vertical a second beacon may be in the
-                # widest band only (the first two bands alone left 3 of seed 0's 480
-                # owed frames and 5 of seeds 1 and 2's 960 unfixed)
                 refined = True
-                tries[:0] = [(better, band) for band in cfg.bands_m]
+                tries[:0] = [(better, band) for band in cfg.bands_m[:REFINED_BANDS]]
     assert first is not None
     return replace(first, elapsed_s=time.perf_counter() - t0, stages_s=spent)
 
