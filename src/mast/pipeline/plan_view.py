@@ -248,21 +248,9 @@ def _floor_lows_reference(
     cells = np.floor(q[kept, :2] / cell).astype(np.int64)
     cells -= cells.min(axis=0)
     key = cells[:, 0] * (int(cells[:, 1].max()) + 1) + cells[:, 1]  # ordered as (x, y)
-    return np.asarray(kept[_first_lowest(key, q[kept, 2])], dtype=np.intp), int(kept.size)
-
-
-def _first_lowest(key: NDArray[np.int64], z: NDArray[np.float64]) -> NDArray[np.intp]:
-    """The index of the lowest ``z`` of each ``key`` (the first where two are as low),
-    by increasing key: ``order[0]`` of each key's run of ``np.lexsort((z, key))``, with a
-    radix sort on the keys (non-negative) where they fit 16 bits."""
-    small = key.astype(np.uint16) if int(key.max()) < 1 << 16 else key
-    order = np.argsort(small, kind="stable")  # each key's returns in their order
-    k, zs = key[order], z[order]
-    new = np.r_[True, k[1:] != k[:-1]]
-    run = np.cumsum(new)  # each return's key, counted from 1
-    at = np.flatnonzero(zs == np.minimum.reduceat(zs, np.flatnonzero(new))[run - 1])
-    first = np.r_[True, run[at][1:] != run[at][:-1]]
-    return np.asarray(order[at[first]], dtype=np.intp)
+    order = np.lexsort((q[kept, 2], key))  # by column, lowest first, ties in their order
+    first = np.r_[True, key[order][1:] != key[order][:-1]]
+    return np.asarray(kept[order[first]], dtype=np.intp), int(kept.size)
 
 
 def _patch_normals(
