@@ -3496,9 +3496,9 @@ def _panel_rows3d(
     """One Gauss-Newton iteration's panel rows of the 3D adjustment
     (``adjust3d._panel_rows_reference``): each return's ``weighed`` (m, 14) times the
     pose's ``rotations`` (14, 8; zero but for the blocks ``gauss_newton3d`` sets) gives
-    its offset across its plane (less ``offset``), its
-    derivatives by azimuth, pitch and roll, its ray's incidence ``cos i`` (into
-    ``cosines``; a thousandth at least, with its sign) and that incidence's derivatives.
+    its offset across its plane (less ``offset``), its derivatives by azimuth, pitch and
+    roll, its ray's incidence ``cos i`` (into ``cosines``; a thousandth at least, with
+    its sign) and that incidence's derivatives.
     Its row is the range residual, the offset over ``cos i`` (the measured range less the
     range along the ray to the plane), into ``v``; its derivatives by the five the plane
     observes into ``J[:, :5]``, through the incidence as well; its weight ``weight``
