@@ -488,6 +488,49 @@ def test_the_compiled_top_edges_agree_with_their_numpy_reference() -> None:
     assert _chosen_tops(p, unpaired, planes, x, 0.04, pairs=pairs) == want
 
 
+def test_a_top_is_bracketed_where_the_fewest_hits_and_crossings_contradict_it() -> None:
+    """A VLP-16 3 cm frame (seed 1, drift 2, frame 7) at its true pose, the returns
+    within four range sigmas of a panel its: B5's middle panel, 2.6 m off, stands close
+    to its wall, and rings 13 to 15 pass over it and put 2, 1 and 2 wall returns within
+    the hit gate of its plane, up to 0.31 m above its top. Its highest hit is ring 15's
+    (bracketed by ring 15's own crossing, 0.29 m above the top), but rings 12 to 14
+    cross over it below that hit: bracketed where the fewest hits and crossings
+    contradict it, the hit is ring 12's on the panel, within 2 cm of the top, and the
+    crossing ring 12's just past it. The compiled choice is the numpy reference's at
+    poses about the truth."""
+    from mast.pipeline.adjust3d import _chosen_tops, _derivatives, _top_edges
+
+    scene = random_drift_scene(1, 2, frames=10, lidar="vlp16", range_sigma_m=0.03)
+    sim = scene.simulate(7)
+    planes = PanelPlanes.of(scene.survey)
+    truth, p = sim.pose, sim.frame.points
+    x = np.array(
+        [truth.easting, truth.northing, truth.azimuth, truth.pitch, truth.roll, truth.elevation]
+    )
+    grid = truth.sensor_to_grid(p)
+    which = planes.assign(grid, truth.position, 0.12)
+    pairs = planes._pairs(planes.local(grid, 1.0))
+    tops = {k: (hit, over) for k, hit, over in _chosen_tops(p, which, planes, x, 0.12, pairs=pairs)}
+    assert len(tops) >= 3
+    names = list(zip(planes.beacon, planes.panel, strict=True))
+    k = names.index(("B5", 2))
+    hit, over = tops[k]
+    surface = sim.drift.surfaces[sim.surface_index[hit]]
+    assert (surface.kind, surface.beacon) == ("beacon", "B5")
+    assert -0.02 < grid[hit, 2] - planes.top[k] <= 0.0
+    assert 0.0 < grid[over, 2] - planes.top[k] < 0.02
+    assert sim.frame.ring is not None
+    assert sim.frame.ring[hit] == sim.frame.ring[over] == 12
+    rng = np.random.default_rng(3)
+    for _ in range(8):
+        at = x + rng.normal(scale=[0.02, 0.02, 0.005, 0.005, 0.005, 0.03])
+        R = _derivatives(at[4], at[3], math.pi / 2 - at[2])[0]
+        rel, origin = p @ R.T, at[[0, 1, 5]]
+        rays = planes._rays(rel, origin, pairs)
+        want = _top_edges(rel + origin, rel, which, origin, planes, 0.12, rays=rays)
+        assert _chosen_tops(p, which, planes, at, 0.12, pairs=pairs) == want
+
+
 def test_the_compiled_brackets_and_iterations_agree_with_their_numpy_reference() -> None:
     # One beacon's bracket per beacon, and the Gauss-Newton iterations of the whole
     # adjustment with and without brackets and the tilt prior: equal to rounding, the

@@ -3565,12 +3565,14 @@ def _top_edges3d(
     """Each panel's top edge (``adjust3d._top_edges``, its numpy reference) among the
     pairs of returns ``pi`` and panels ``pk``: the rays from ``origin`` to the returns
     ``origin + rel`` (n, 3) crossing the panels' planes (``normal``, ``offset``; from
-    ``start`` along ``along`` for ``length``; tops ``top``), each panel's highest hit
-    (a return ``which`` gives it, within ``hit_gate`` of its plane, inside ``lo``..``hi``
-    along it; the least return at a tie) and its lowest crossing over above that hit
-    (a ray crossing the plane before its return, ``0 < s < 1``, returning from the
-    wall behind the plane by ``gate`` or more, on the far side from the sensor, inside
-    ``inset`` of either end; the first pair at a tie), both heights where the
+    ``start`` along ``along`` for ``length``; tops ``top``); each panel's hits (returns
+    ``which`` gives it, within ``hit_gate`` of its plane, inside ``lo``..``hi`` along
+    it, their heights finite) and crossings over (a ray crossing the plane before its
+    return, ``0 < s < 1``, returning from the wall behind the plane by ``gate`` or more,
+    on the far side from the sensor, inside ``inset`` of either end) above the median of
+    its hits, split at the height the fewest of them contradict (fewer than the
+    crossings above it; the lowest, at a tie): the highest hit below (the least return
+    at one height) and the lowest crossing above (the first pair), heights where the
     rays cross the plane. Returns the panels with both (ascending), their hits' and
     crossings' returns, and whether every return ``which`` gives a panel is paired with
     it (if not, the reference's fallback must answer)."""
@@ -3581,71 +3583,136 @@ def _top_edges3d(
         side[k] = o0 * normal[k, 0] + o1 * normal[k, 1] - offset[k]
     # where each pair's ray crosses its panel's plane: along the ray, along the panel
     cross, along_panel, _ = _rays3d_jit(rel, origin, pi, pk, normal, offset, start, along)
-    hit = np.full(n_k, np.inf)
-    seen = np.zeros(n_k, dtype=np.bool_)  # a hit chosen (its height may be NaN)
-    ray_of = np.full(n_k, -1, dtype=np.intp)
-    own = 0
     m = pi.shape[0]
+    kind = np.zeros(m, dtype=np.int8)  # 1: a hit; 2: a crossing over
+    height = np.empty(m)
+    hits_of = np.zeros(n_k, dtype=np.intp)
+    own = 0
     for j in range(m):
         i, k = pi[j], pk[j]
+        height[j] = cross[j] * rel[i, 2]
         if which[i] != k:
             continue
         own += 1
-        s, t = cross[j], along_panel[j]
+        t = along_panel[j]
         across = (rel[i, 0] + o0) * normal[k, 0] + (rel[i, 1] + o1) * normal[k, 1] - offset[k]
-        if not (abs(across) <= hit_gate and t > lo[k] and t < hi[k] and np.isfinite(top[k])):
-            continue
-        h = s * rel[i, 2]
-        if not seen[k]:
-            better = True
-        elif np.isnan(h):
-            better = np.isnan(hit[k]) and i < ray_of[k]
-        elif np.isnan(hit[k]):
-            better = True
-        else:
-            better = h > hit[k] or (h == hit[k] and i < ray_of[k])
-        if better:
-            seen[k] = True
-            hit[k] = h
-            ray_of[k] = i
+        if (
+            abs(across) <= hit_gate
+            and t > lo[k]
+            and t < hi[k]
+            and np.isfinite(top[k])
+            and np.isfinite(height[j])
+        ):
+            kind[j] = 1
+            hits_of[k] += 1
     assigned = 0
     for i in range(which.shape[0]):
         if which[i] >= 0:
             assigned += 1
-    low = np.full(n_k, np.inf)
-    over_of = np.full(n_k, -1, dtype=np.intp)
+    # each panel's hits' median height
+    begin = np.zeros(n_k + 1, dtype=np.intp)
+    for k in range(n_k):
+        begin[k + 1] = begin[k] + hits_of[k]
+    heights = np.empty(begin[n_k])
+    filled = begin[:n_k].copy()
+    for j in range(m):
+        if kind[j] == 1:
+            k = pk[j]
+            heights[filled[k]] = height[j]
+            filled[k] += 1
+    middle = np.full(n_k, np.nan)
+    for k in range(n_k):
+        c = hits_of[k]
+        if c == 0:
+            continue
+        run = np.sort(heights[begin[k] : begin[k + 1]])
+        half = c // 2
+        middle[k] = run[half] if c % 2 == 1 else (run[half - 1] + run[half]) / 2
+    # the hits and crossings over above it, per panel
+    above = np.zeros(n_k, dtype=np.intp)
+    crossings = np.zeros(n_k, dtype=np.intp)
     for j in range(m):
         i, k = pi[j], pk[j]
-        if not np.isfinite(hit[k]):
+        if not np.isfinite(middle[k]):
+            continue
+        h = height[j]
+        if kind[j] == 1:
+            if h >= middle[k]:
+                above[k] += 1
             continue
         s, t = cross[j], along_panel[j]
         if not (s > 0.0 and s < 1.0):
             continue
         across = (rel[i, 0] + o0) * normal[k, 0] + (rel[i, 1] + o1) * normal[k, 1] - offset[k]
-        h = s * rel[i, 2]
         if (
             t > inset[k]
             and t < length[k] - inset[k]
             and across * side[k] < 0.0
             and abs(across) >= gate
-            and h > hit[k]
-            and (over_of[k] < 0 or h < low[k])
+            and h > middle[k]
         ):
-            low[k] = h
-            over_of[k] = i
+            kind[j] = 2
+            above[k] += 1
+            crossings[k] += 1
+    begin[0] = 0
+    for k in range(n_k):
+        begin[k + 1] = begin[k] + (above[k] if crossings[k] > 0 else 0)
+    h_of = np.empty(begin[n_k])
+    tie = np.empty(begin[n_k], dtype=np.intp)
+    ray = np.empty(begin[n_k], dtype=np.intp)
+    hit_of = np.empty(begin[n_k], dtype=np.bool_)
+    filled = begin[:n_k].copy()
+    for j in range(m):
+        k = pk[j]
+        if crossings[k] == 0 or kind[j] == 0:
+            continue
+        if kind[j] == 1 and not height[j] >= middle[k]:
+            continue
+        f = filled[k]
+        h_of[f] = height[j]
+        ray[f] = pi[j]
+        hit_of[f] = kind[j] == 1
+        # at one height, hits first (by return, descending), then crossings by pair
+        tie[f] = -pi[j] - 1 if kind[j] == 1 else j
+        filled[k] += 1
+    ks = np.empty(n_k, dtype=np.intp)
+    hits = np.empty(n_k, dtype=np.intp)
+    overs = np.empty(n_k, dtype=np.intp)
     count = 0
     for k in range(n_k):
-        if over_of[k] >= 0:
+        b, e = begin[k], begin[k + 1]
+        if e == b:
+            continue
+        first = np.argsort(tie[b:e], kind="mergesort")
+        order = first[np.argsort(h_of[b:e][first], kind="mergesort")] + b
+        # contradictions of a split just below each: the hits from it up, the
+        # crossings below it
+        hits_up = 0
+        for q in range(e - b):
+            if hit_of[order[q]]:
+                hits_up += 1
+        below = 0
+        best, fewest = -1, 0
+        for q in range(e - b):
+            if q > 0:
+                lower, upper = order[q - 1], order[q]
+                wrong = hits_up + below
+                if (
+                    hit_of[lower]
+                    and not hit_of[upper]
+                    and h_of[lower] < h_of[upper]
+                    and wrong < crossings[k] - below
+                    and (best < 0 or wrong < fewest)
+                ):
+                    best, fewest = q, wrong
+            if hit_of[order[q]]:
+                hits_up -= 1
+            else:
+                below += 1
+        if best > 0:
+            ks[count], hits[count], overs[count] = k, ray[order[best - 1]], ray[order[best]]
             count += 1
-    ks = np.empty(count, dtype=np.intp)
-    hits = np.empty(count, dtype=np.intp)
-    overs = np.empty(count, dtype=np.intp)
-    c = 0
-    for k in range(n_k):
-        if over_of[k] >= 0:
-            ks[c], hits[c], overs[c] = k, ray_of[k], over_of[k]
-            c += 1
-    return ks, hits, overs, own == assigned
+    return ks[:count].copy(), hits[:count].copy(), overs[:count].copy(), own == assigned
 
 
 def _brackets3d(

@@ -25,8 +25,10 @@ elevation is its top end). Two kinds of evidence, each from the frame alone:
   extent either hit the panel (it crossed below the top) or went over it (it crossed
   above: its return lies beyond the plane). With the tilt known, each crossing's
   height relative to the sensor is known (from the ray's direction: no range noise),
-  so the sensor's elevation ``Z`` is bracketed: ``h_k - Z`` is at least the highest
-  hit and below the lowest crossing over. A beacon's panels are crossed by the same
+  so the sensor's elevation ``Z`` is bracketed: ``h_k - Z`` is at least a hit and
+  below a crossing over, the pair split where the fewest of the panel's hits and
+  crossings contradict its top (:func:`_top_edges`: the wall just above a shallow
+  beacon puts a hit or two over it). A beacon's panels are crossed by the same
   rings, so per beacon the brackets of its panels are intersected into one
   observation of ``Z``: the middle, with the variance of a uniform over the width,
   and the beams' angular error at the two ends (:data:`BEAM_ANGLE_SIGMA`); its
@@ -808,12 +810,20 @@ def _top_edges(
     rays: _Rays | None = None,
 ) -> list[tuple[int, int, int]]:
     """For each panel with a top, both hit and passed over inside its plan extent: the
-    panel, its highest hit and its lowest crossing over (above that hit: a ray
-    crossing under the panel is no evidence of its top), heights where the rays cross
-    the panel's plane. ``grid`` the returns in the grid, ``rel`` the same relative to the
-    sensor origin ``origin``; the rays over a panel are looked for among its ``local``
-    ones (:meth:`PanelPlanes.local`), where given, or the pairs of ``rays`` (``rel``
-    from ``origin``), where given."""
+    panel, and the hit and the crossing over that bracket its top, heights where the
+    rays cross the panel's plane. Of its hits and crossings over above the median of its
+    hits (a ray crossing under the panel is no evidence of its top), the height the
+    fewest of them contradict (hits above it, crossings below; fewer than the
+    crossings above it; the lowest such, at a tie) splits them, and the highest hit
+    below it and the lowest crossing above it are the bracket (the least return of
+    hits at one height, the first pair of crossings). A highest hit alone may be the
+    wall's: just above a shallow beacon, a ring or three up, the wall may put a return
+    or two within the gate of its plane (a VLP-16 frame's elevation came out a ring
+    off, 0.28 m at 41 sigma); a lowest crossing alone may be a stray, a ray that no
+    solid panel lets through. ``grid`` the returns in the grid, ``rel`` the same
+    relative to the sensor origin ``origin``; the rays over a panel are looked for among
+    its ``local`` ones (:meth:`PanelPlanes.local`), where given, or the pairs of
+    ``rays`` (``rel`` from ``origin``), where given."""
     if rays is None:
         rays = planes._rays(rel, origin, local or planes._everywhere(len(grid)))
     own, j = planes._own(rays, which)
@@ -825,32 +835,53 @@ def _top_edges(
     across = grid[i, 0] * n[k, 0] + grid[i, 1] * n[k, 1] - d[k]
     close = (np.abs(across) <= HIT_SHARE * gate_m) & (t > lo[k]) & (t < hi[k])
     close &= np.isfinite(planes.top[k])
+    height = own.s[j] * rel[i, 2]
+    close &= np.isfinite(height)
     c = np.flatnonzero(close)
     if c.size == 0:
         return []
-    height = own.s[j[c]] * rel[i[c], 2]
-    # each panel's highest hit (the first return of them at a tie)
-    order = np.lexsort((i[c], -height, k[c]))
-    first = order[np.concatenate([[True], k[c[order[1:]]] != k[c[order[:-1]]]])]
-    hit = np.full(len(planes), math.inf)
-    hit[k[c[first]]] = height[first]
-    ray_of = np.full(len(planes), -1, dtype=np.intp)
-    ray_of[k[c[first]]] = i[c[first]]
-    # each such panel's lowest crossing over (s: where each ray crosses, 0..1), above
-    # its highest hit, the first of them at a tie
-    ahead = np.flatnonzero(np.isfinite(hit)[rays.k] & (rays.s > 0) & (rays.s < 1))
-    k, i, s, t = rays.k[ahead], rays.i[ahead], rays.s[ahead], rays.t[ahead]
-    across = grid[i, 0] * n[k, 0] + grid[i, 1] * n[k, 1] - d[k]
-    side = origin[0] * n[:, 0] + origin[1] * n[:, 1] - d
-    over = (t > inset[k]) & (t < planes.length[k] - inset[k])
-    over &= (across * side[k] < 0) & (np.abs(across) >= gate_m)
-    over &= s * rel[i, 2] > hit[k]
-    c = np.flatnonzero(over)
-    order = np.lexsort((s[c] * rel[i[c], 2], k[c]))
-    first = (
-        order[np.concatenate([[True], k[c[order[1:]]] != k[c[order[:-1]]]])] if c.size else order
+    k, i, height = k[c], i[c], height[c]
+    # each panel's hits by height: their median
+    order = np.lexsort((height, k))
+    first, count = _runs(k[order])
+    middle = np.full(len(planes), math.nan)
+    mid = first + count // 2
+    middle[k[order[first]]] = np.where(
+        count % 2 == 1, height[order[mid]], (height[order[mid - 1]] + height[order[mid]]) / 2
     )
-    return [(int(k[c[f]]), int(ray_of[k[c[f]]]), int(i[c[f]])) for f in first]
+    # the crossings over (s: where each ray crosses, 0..1) above it
+    ahead = np.flatnonzero(np.isfinite(middle)[rays.k] & (rays.s > 0) & (rays.s < 1))
+    ka, ia, s, ta = rays.k[ahead], rays.i[ahead], rays.s[ahead], rays.t[ahead]
+    across = grid[ia, 0] * n[ka, 0] + grid[ia, 1] * n[ka, 1] - d[ka]
+    side = origin[0] * n[:, 0] + origin[1] * n[:, 1] - d
+    over = (ta > inset[ka]) & (ta < planes.length[ka] - inset[ka])
+    over &= (across * side[ka] < 0) & (np.abs(across) >= gate_m)
+    over_h = s * rel[ia, 2]
+    over &= over_h > middle[ka]
+    up = height >= middle[k]
+    out = []
+    for panel in np.unique(ka[over]).tolist():
+        mine = up & (k == panel)
+        crossing = over & (ka == panel)
+        h = np.concatenate([height[mine], over_h[crossing]])
+        is_hit = np.concatenate([np.ones(mine.sum(), bool), np.zeros(crossing.sum(), bool)])
+        ray = np.concatenate([i[mine], ia[crossing]])
+        # by height; at one height, hits first (by return, descending), then crossings
+        # by pair
+        tie = np.concatenate([-i[mine] - 1, np.arange(crossing.sum())])
+        order = np.lexsort((tie, h))
+        h, is_hit, ray = h[order], is_hit[order], ray[order]
+        # contradictions of a split just below each: the hits from it up, the crossings
+        # below it
+        wrong = np.cumsum(is_hit[::-1])[::-1] + np.concatenate([[0], np.cumsum(~is_hit)[:-1]])
+        split = np.flatnonzero(is_hit[:-1] & ~is_hit[1:] & (h[:-1] < h[1:])) + 1
+        # fewer contradictions than crossings over above it
+        split = split[wrong[split] < (~is_hit).sum() - np.cumsum(~is_hit)[split - 1]]
+        if split.size == 0:
+            continue
+        best = split[np.argmin(wrong[split])]
+        out.append((panel, int(ray[best - 1]), int(ray[best])))
+    return out
 
 
 def _top_extents(

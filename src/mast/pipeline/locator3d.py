@@ -286,16 +286,18 @@ def _start_elevation(
     own, j = planes._own(rays, which)
     k_of = own.k[j]
     highest = _per_panel(k_of, own.s[j] * own.rel[own.i[j], 2], len(planes), np.maximum, 0.0)
+    # a panel's bracket: its top edge's where it has one (a hit above a crossing over
+    # is no hit), else its highest hit's, open below
+    bracket: dict[int, tuple[float, float]] = {}
+    for k, a, b in _top_edges(grid, rel, which, o, planes, gate_m, local, rays=rays):
+        (sa, sb), _, _ = planes.crossing(k, o, rel[[a, b]])
+        bracket[k] = (float(planes.top[k] - sb * rel[b, 2]), float(planes.top[k] - sa * rel[a, 2]))
     for hit in np.flatnonzero(np.bincount(k_of, minlength=len(planes))):
         if not math.isfinite(planes.top[hit]):
             continue
-        ends.append((float(planes.top[hit] - highest[hit]), -1))
-        ends.append((-math.inf, +1))
-    for k, _, b in _top_edges(grid, rel, which, o, planes, gate_m, local, rays=rays):
-        s, _, _ = planes.crossing(k, o, rel[[b]])
-        lows = [e for e in ends if e[1] == +1 and math.isinf(e[0])]
-        ends.remove(lows[0])
-        ends.append((float(planes.top[k] - s[0] * rel[b, 2]), +1))
+        low, high = bracket.get(int(hit), (-math.inf, float(planes.top[hit] - highest[hit])))
+        ends.append((high, -1))
+        ends.append((low, +1))
     if not ends:
         return None
     ends.sort(key=lambda e: (e[0], -e[1]))  # at a tie, a bracket opens before one closes
