@@ -489,15 +489,15 @@ def test_the_compiled_top_edges_agree_with_their_numpy_reference() -> None:
 
 
 def test_a_top_is_bracketed_where_the_fewest_hits_and_crossings_contradict_it() -> None:
-    """A VLP-16 3 cm frame (seed 1, drift 2, frame 7) at its true pose, the returns
-    within four range sigmas of a panel its: B5's middle panel, 2.6 m off, stands close
-    to its wall, and rings 13 to 15 pass over it and put 2, 1 and 2 wall returns within
-    the hit gate of its plane, up to 0.31 m above its top. Its highest hit is ring 15's
-    (bracketed by ring 15's own crossing, 0.29 m above the top), but rings 12 to 14
-    cross over it below that hit: bracketed where the fewest hits and crossings
-    contradict it, the hit is ring 12's on the panel, within 2 cm of the top, and the
-    crossing ring 12's just past it. The compiled choice is the numpy reference's at
-    poses about the truth."""
+    """A VLP-16 3 cm frame (seed 1, drift 2, frame 7) at its true pose, each return
+    within four range sigmas of a panel's plane given to it: B5's middle panel, 2.6 m
+    off, stands close to its wall, and rings 13 to 15 pass over it and put 2, 1 and 2
+    wall returns within the hit gate of its plane, up to 0.31 m above its top. Its
+    highest hit is ring 15's (bracketed by ring 15's own crossing, 0.29 m above the
+    top), but rings 12 to 14 cross over it below that hit: bracketed where the fewest
+    hits and crossings contradict it, the hit is ring 12's on the panel, within 2 cm of
+    the top, and the crossing ring 12's just past it. The compiled choice is the numpy
+    reference's at poses about the truth."""
     from mast.pipeline.adjust3d import _chosen_tops, _derivatives, _top_edges
 
     scene = random_drift_scene(1, 2, frames=10, lidar="vlp16", range_sigma_m=0.03)

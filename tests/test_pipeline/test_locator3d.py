@@ -163,15 +163,16 @@ def test_a_refined_vertical_is_tried_in_every_band(monkeypatch: pytest.MonkeyPat
     assert fix.plan.pose is not None
 
 
-def test_a_wall_return_over_a_ray_passing_over_a_panel_is_no_hit_on_its_top() -> None:
+def test_wall_returns_above_rays_passing_over_a_panel_do_not_set_its_top() -> None:
     # A VLP-16 3 cm frame of fresh draws (seed 1, drift 2, frame 7), its 3D stages
     # started from the true plan pose and vertical. B5's middle panel, 2.6 m off, stands
     # close to its wall: rings 13 to 15 pass over it to the wall, and put 2, 1 and 2
     # returns within the hit gate of its plane, 0.08 to 0.31 m above its top (ring 12,
     # the top's own, put 42 on it, and passes over it too). Its highest hit was ring
     # 15's, bracketed by ring 15's own returns: the elevation a ring off (0.28 m at 41
-    # sigma), which the beam test refused. A hit above a ray passing over the panel is
-    # no hit: the top is below ring 12's crossing over.
+    # sigma), which the beam test refused. Split where the fewest of the panel's hits
+    # and crossings over contradict it, the top is bracketed by ring 12's hit and its
+    # crossing over: the five wall returns are outvoted by rings 12 to 14's crossings.
     scene = random_drift_scene(1, 2, frames=10, lidar="vlp16", range_sigma_m=0.03)
     sim = scene.simulate(7)
     cfg = Locator3DConfig(range_sigma_m=0.03, survey_sigma_m=0.0)
@@ -537,11 +538,13 @@ def _highest_hit_tops(  # type: ignore[no-untyped-def]
 def test_the_beam_test_keeps_the_rays_just_under_a_panels_top(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
-    # A VLP-16 at 2 cm whose adjustment, each top bracketed by its highest hit as
-    # before 2026-12-07, put the elevation 116 mm off at 9 sigma: six beams crossing a
-    # panel within 4 cm under its top, where the pose puts it, passed through it. The
-    # beam test's window ends at the top, not below it. (Bracketed where the fewest
-    # hits and crossings contradict a top, the frame is fixed within its sigmas.)
+    # A VLP-16 at 2 cm whose adjustment, each top bracketed by its highest hit as before
+    # 2026-12-07 (the adjustment's choice, _chosen_tops, replicated; the start
+    # elevation's brackets are the new rule's), put the elevation 116 mm off at 9 sigma:
+    # six beams crossing a panel within 4 cm under its top, where the pose puts it,
+    # passed through it. The beam test's window ends at the top, not below it.
+    # (Bracketed where the fewest hits and crossings contradict a top, the frame is
+    # fixed within its sigmas.)
     scene = random_drift_scene(3000, 3, frames=10, lidar="vlp16", range_sigma_m=0.02)
     sim = scene.simulate(2)
     cfg = Locator3DConfig(range_sigma_m=0.02)

@@ -3569,13 +3569,14 @@ def _top_edges3d(
     ``which`` gives it, within ``hit_gate`` of its plane, inside ``lo``..``hi`` along
     it, their heights finite) and crossings over (a ray crossing the plane before its
     return, ``0 < s < 1``, returning from the wall behind the plane by ``gate`` or more,
-    on the far side from the sensor, inside ``inset`` of either end) above the median of
-    its hits, split at the height the fewest of them contradict (fewer than the
-    crossings above it; the lowest, at a tie): the highest hit below (the least return
-    at one height) and the lowest crossing above (the first pair), heights where the
-    rays cross the plane. Returns the panels with both (ascending), their hits' and
-    crossings' returns, and whether every return ``which`` gives a panel is paired with
-    it (if not, the reference's fallback must answer)."""
+    on the far side from the sensor, inside ``inset`` of either end), the hits at or
+    above the median of its hits and the crossings above it, split at the height the
+    fewest of them contradict (fewer than the crossings above it; the lowest, at a tie):
+    the highest hit below (the least return at one height) and the lowest crossing above
+    (the first pair), heights where the rays cross the plane. Returns the panels with
+    both (ascending), their hits' and crossings' returns, and whether every return
+    ``which`` gives a panel is paired with it (if not, the reference's fallback must
+    answer)."""
     n_k = offset.shape[0]
     o0, o1 = origin[0], origin[1]
     side = np.empty(n_k)

@@ -811,19 +811,19 @@ def _top_edges(
 ) -> list[tuple[int, int, int]]:
     """For each panel with a top, both hit and passed over inside its plan extent: the
     panel, and the hit and the crossing over that bracket its top, heights where the
-    rays cross the panel's plane. Of its hits and crossings over above the median of its
-    hits (a ray crossing under the panel is no evidence of its top), the height the
-    fewest of them contradict (hits above it, crossings below; fewer than the
-    crossings above it; the lowest such, at a tie) splits them, and the highest hit
-    below it and the lowest crossing above it are the bracket (the least return of
-    hits at one height, the first pair of crossings). A highest hit alone may be the
-    wall's: just above a shallow beacon, a ring or three up, the wall may put a return
-    or two within the gate of its plane (a VLP-16 frame's elevation came out a ring
-    off, 0.28 m at 41 sigma); a lowest crossing alone may be a stray, a ray that no
-    solid panel lets through. ``grid`` the returns in the grid, ``rel`` the same
-    relative to the sensor origin ``origin``; the rays over a panel are looked for among
-    its ``local`` ones (:meth:`PanelPlanes.local`), where given, or the pairs of
-    ``rays`` (``rel`` from ``origin``), where given."""
+    rays cross the panel's plane. Of its hits at or above the median of its hits and its
+    crossings over above it (a ray crossing under the panel is no evidence of its top),
+    the height the fewest of them contradict (hits above it, crossings below; fewer than
+    the crossings above it; the lowest such, at a tie) splits them, and the highest hit
+    below it and the lowest crossing above it are the bracket (the least return of hits
+    at one height, the first pair of crossings). A highest hit alone may be the wall's:
+    just above a shallow beacon, a ring or three up, the wall may put a return or two
+    within the gate of its plane (a VLP-16 frame's elevation came out a ring off, 0.28 m
+    at 41 sigma); a lowest crossing alone may be a stray, a ray that no solid panel lets
+    through. ``grid`` the returns in the grid, ``rel`` the same relative to the sensor
+    origin ``origin``; the rays over a panel are looked for among its ``local`` ones
+    (:meth:`PanelPlanes.local`), where given, or the pairs of ``rays`` (``rel`` from
+    ``origin``), where given."""
     if rays is None:
         rays = planes._rays(rel, origin, local or planes._everywhere(len(grid)))
     own, j = planes._own(rays, which)

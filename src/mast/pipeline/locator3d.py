@@ -277,10 +277,11 @@ def _start_elevation(
 ) -> tuple[float, float] | None:
     """The sensor's elevation where the most panels' top brackets agree (``grid`` seen
     from ``origin`` at elevation 0, ``which`` tight hits): each panel with a hit says
-    ``top - lowest crossing over < Z <= top - highest hit``; a return on the roof or the
-    wall within the gate of a panel's plane far above it makes one panel's bracket
-    wrong, not the most. The middle and half the width of the interval the most
-    brackets share; None without a hit on a panel with a top. ``spacing_rad``: the
+    ``top - crossing over < Z <= top - hit``, its top edge's bracket where it has one
+    (:func:`~mast.pipeline.adjust3d._top_edges`), else ``Z <= top - highest hit``; a
+    return on the roof or the wall within the gate of a panel's plane far above it
+    makes one panel's bracket wrong, not the most. The middle and half the width of the
+    interval the most brackets share; None without a hit on a panel with a top. ``spacing_rad``: the
     lidar's rings' spacing; ``local``: each panel's returns (PanelPlanes.local);
     ``rays``: their crossings seen from ``origin``, where the caller has them."""
     o = np.asarray(origin, dtype=float)
@@ -292,8 +293,8 @@ def _start_elevation(
     own, j = planes._own(rays, which)
     k_of = own.k[j]
     highest = _per_panel(k_of, own.s[j] * own.rel[own.i[j], 2], len(planes), np.maximum, 0.0)
-    # a panel's bracket: its top edge's where it has one (a hit above a crossing over
-    # is no hit), else its highest hit's, open below
+    # a panel's bracket: its top edge's where it has one (split where the fewest of its
+    # hits and crossings over contradict it), else its highest hit's, open below
     bracket: dict[int, tuple[float, float]] = {}
     for k, a, b in _top_edges(grid, rel, which, o, planes, gate_m, local, rays=rays):
         (sa, sb), _, _ = planes.crossing(k, o, rel[[a, b]])
