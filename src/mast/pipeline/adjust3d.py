@@ -748,6 +748,16 @@ def _runs(keys: NDArray[np.intp]) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
     return first, np.diff(np.append(first, len(keys)))
 
 
+def _sorted_medians(
+    values: NDArray[np.float64], first: NDArray[np.intp], count: NDArray[np.intp]
+) -> NDArray[np.float64]:
+    """The median of each run ``values[first:first + count]``, each sorted (as
+    np.median: the middle one, or the mean of the middle two)."""
+    mid = first + count // 2
+    odd = values[mid]
+    return np.asarray(np.where(count % 2 == 1, odd, (values[mid - 1] + odd) / 2), dtype=np.float64)
+
+
 @dataclass(frozen=True, slots=True)
 class Adjustment3D:
     """A 3D pose adjusted on panel returns and bracketed by top edges.
@@ -845,10 +855,7 @@ def _top_edges(
     order = np.lexsort((height, k))
     first, count = _runs(k[order])
     middle = np.full(len(planes), math.nan)
-    mid = first + count // 2
-    middle[k[order[first]]] = np.where(
-        count % 2 == 1, height[order[mid]], (height[order[mid - 1]] + height[order[mid]]) / 2
-    )
+    middle[k[order[first]]] = _sorted_medians(height[order], first, count)
     # the crossings over (s: where each ray crosses, 0..1) above it
     ahead = np.flatnonzero(np.isfinite(middle)[rays.k] & (rays.s > 0) & (rays.s < 1))
     ka, ia, s, ta = rays.k[ahead], rays.i[ahead], rays.s[ahead], rays.t[ahead]

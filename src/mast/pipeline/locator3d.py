@@ -77,6 +77,7 @@ from mast.pipeline.adjust3d import (
     _per_panel,
     _Rays,
     _runs,
+    _sorted_medians,
     _top_edges,
     adjust_pose,
 )
@@ -152,15 +153,16 @@ SETTLE_SIGMAS = 2.0
 #: returns 1 and 2.2 m above their panels' tops, 13 and 70 of these sigmas).
 TOP_SIGMAS = 5.0
 #: Plan views confirming one beacon only that a frame tries to start from
-#: (:func:`_from_one_beacon`), and the window of the prior the 3D pose they give sets
-#: the plan view located again (metres, degrees). Where beacons share a design, one
-#: beacon alone is any of them to the plan view, and the first tries' single beacon is
-#: often another's identity, metres off, while a later try's is the true one (15 of
-#: seed 1's 24 VLP-16 misses at two starts had the true pose first in some try's plan
-#: view). Six starts rather than two fixed 16 more of fresh draws' 960 owed frames
-#: (seeds 1 and 2), none lost, none wrong; eight fixed no more of seed 1's misses
-#: (those fixed, at the third to sixth start).
+#: (:func:`_from_one_beacon`). Where beacons share a design, one beacon alone is any of
+#: them to the plan view, and the first tries' single beacon is often another's
+#: identity, metres off, while a later try's is the true one (15 of seed 1's 24 VLP-16
+#: misses at two starts had the true pose first in some try's plan view). Six starts
+#: rather than two fixed 16 more of fresh draws' 960 owed frames (seeds 1 and 2), none
+#: lost, none wrong; eight fixed no more of seed 1's misses (those fixed, at the third
+#: to sixth start).
 ONE_BEACON_STARTS = 6
+#: The window of the prior a one-beacon start's 3D pose sets the plan view located
+#: again (metres, degrees).
 ONE_BEACON_PRIOR = (0.25, 2.0)
 #: The band of tops in the plan view located again (each beacon's bearings in its own,
 #: then every bearing in that of the beacons the 3D pose shows): from this far below
@@ -279,11 +281,12 @@ def _start_elevation(
     from ``origin`` at elevation 0, ``which`` tight hits): each panel with a hit says
     ``top - crossing over < Z <= top - hit``, its top edge's bracket where it has one
     (:func:`~mast.pipeline.adjust3d._top_edges`), else ``Z <= top - highest hit``; a
-    return on the roof or the wall within the gate of a panel's plane far above it
-    makes one panel's bracket wrong, not the most. The middle and half the width of the
-    interval the most brackets share; None without a hit on a panel with a top. ``spacing_rad``: the
-    lidar's rings' spacing; ``local``: each panel's returns (PanelPlanes.local);
-    ``rays``: their crossings seen from ``origin``, where the caller has them."""
+    return on the roof or the wall within the gate of a panel's plane far above it makes
+    one panel's bracket wrong, not the most. The middle and half the width of the
+    interval the most brackets share; None without a hit on a panel with a top.
+    ``spacing_rad``: the lidar's rings' spacing; ``local``: each panel's returns
+    (PanelPlanes.local); ``rays``: their crossings seen from ``origin``, where the
+    caller has them."""
     o = np.asarray(origin, dtype=float)
     rel = grid - o
     if rays is None:
@@ -520,16 +523,6 @@ def _moved(before: Pose3D, after: Pose3D, covariance: NDArray[np.float64]) -> ND
     """How far ``after`` is from ``before`` in each parameter (record order), in sigmas of
     ``covariance``."""
     return np.asarray(np.abs(after.minus(before)) / np.sqrt(np.diag(covariance)))
-
-
-def _sorted_medians(
-    values: NDArray[np.float64], first: NDArray[np.intp], count: NDArray[np.intp]
-) -> NDArray[np.float64]:
-    """The median of each run ``values[first:first + count]``, each sorted (as
-    np.median: the middle one, or the mean of the middle two)."""
-    mid = first + count // 2
-    odd = values[mid]
-    return np.asarray(np.where(count % 2 == 1, odd, (values[mid - 1] + odd) / 2), dtype=np.float64)
 
 
 def _gathered(
