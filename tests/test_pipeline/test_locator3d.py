@@ -318,17 +318,25 @@ def test_a_return_near_a_free_end_is_kept_on_a_ring_its_beacon_shows_clear_of_it
     k = np.where(which >= 0, which, 0)
     grid = planes.start[k] + 0.5 * planes.length[k, None] * planes.along[k]
     gate = 0.04
-    kept = _witnessed(which, nearer, grid, lines, planes, 3, gate)
+    kept, same = _witnessed(which, (nearer, which), grid, lines, planes, 3, gate)
     # ring 5 crosses the first beacon at three returns clear of its ends: its return by
     # the free end is P1's; ring 6 puts one there only (the wall above or below the
     # beacon, at that height, may be all it is); ring 7 crosses the second beacon only
     assert kept.tolist() == [1, 1, 1, 0, 1, -1, 4, 4, 4, 3, -1]
-    assert _witnessed(which, which, grid, lines, planes, 3, gate).tolist() == which.tolist()
+    assert same.tolist() == which.tolist()
+    # each of several cuts nearer the ends is given what it is given alone
+    nearest = np.array([1, 1, 1, 0, 1, 0, 4, 4, 4, 5, 2])  # ring 7's second return on P3
+    both = _witnessed(which, (nearer, nearest), grid, lines, planes, 3, gate)
+    for given, alone in zip(both, (nearer, nearest), strict=True):
+        assert (
+            given.tolist() == _witnessed(which, (alone,), grid, lines, planes, 3, gate)[0].tolist()
+        )
+    assert both[1].tolist() == [1, 1, 1, 0, 1, -1, 4, 4, 4, 5, -1]
     # the wall a beacon stands on is no witness: returns within the gate and the rock's
     # bulge of it do not count one by one (the paper's middle panels stand 0.2 m out),
     # nor three as a mean from the chord (1.5 gates over root 3 is more than 0.2 m less
     # the bulge)
-    assert _witnessed(which, nearer, grid, lines, planes, 3, 0.2).tolist() == which.tolist()
+    assert _witnessed(which, (nearer,), grid, lines, planes, 3, 0.2)[0].tolist() == which.tolist()
 
 
 def test_a_shallow_middle_panel_witnesses_its_ring_by_its_mean_off_the_wall_the_ring_shows() -> (
@@ -350,21 +358,39 @@ def test_a_shallow_middle_panel_witnesses_its_ring_by_its_mean_off_the_wall_the_
     which = np.r_[np.full(8, 1), np.full(5, -1), -1]
     nearer = np.r_[np.full(8, 1), np.full(5, -1), 0]
     gate = 0.2  # each middle return within the gate and the rock's bulge of the wall
-    assert _witnessed(which, nearer, grid, lines, planes, 3, gate)[-1] == 0
+    assert _witnessed(which, (nearer,), grid, lines, planes, 3, gate)[0][-1] == 0
     # a pose off across the wall by the panel's depth: the wall the middle panel is put
     # on, and the wall past the ends, stand off the chord alike, and witness nothing
     moved = grid.copy()
     moved[8:13] += 0.2 * out
-    assert _witnessed(which, nearer, moved, lines, planes, 3, gate)[-1] == -1
+    assert _witnessed(which, (nearer,), moved, lines, planes, 3, gate)[0][-1] == -1
     # with no wall shown past the ends, the chord is the wall
     alone = np.r_[np.arange(8), 13]
-    kept = _witnessed(which[alone], nearer[alone], grid[alone], lines[alone], planes, 3, gate)
+    (kept,) = _witnessed(which[alone], (nearer[alone],), grid[alone], lines[alone], planes, 3, gate)
     assert kept[-1] == 0
     # a gate widened for the tilt's error: the wall the ring shows moves with the tilt as
     # its returns do, and the range noise's gate holds; the chord does not move
-    assert _witnessed(which, nearer, grid, lines, planes, 3, 2 * gate, gate)[-1] == 0
-    args = (which[alone], nearer[alone], grid[alone], lines[alone], planes, 3, 2 * gate, gate)
-    assert _witnessed(*args)[-1] == -1
+    assert _witnessed(which, (nearer,), grid, lines, planes, 3, 2 * gate, gate)[0][-1] == 0
+    args = (which[alone], (nearer[alone],), grid[alone], lines[alone], planes, 3, 2 * gate, gate)
+    assert _witnessed(*args)[0][-1] == -1
+
+
+def test_a_far_beacons_end_panel_is_shown_by_its_returns_nearer_its_free_end(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    # An OS1-64 2 cm frame of fresh draws (seed 1, drift 1, frame 1): the second beacon,
+    # B4, 10 m off, is crossed by rings of three returns on its end panel P3. Cut clear
+    # of its free end, the panel keeps two a ring, and the frame was refused as one
+    # beacon; the returns nearer the end show it, and the fix adjusted on the others
+    # is within 3 sigma.
+    scene = random_drift_scene(1, 1, frames=10, lidar="os1-64", range_sigma_m=0.02)
+    sim, fix = _located(scene, 1, 0.02)
+    _within(fix, sim, 3.0)
+    assert set(fix.beacons) == {"B4", "B5"}
+    assert fix.panels["B4"] == (2, 3)
+    monkeypatch.setattr(locator3d, "SHOWN_CLEAR", locator3d.WITNESSED_CLEAR)
+    _, refused = _located(scene, 1, 0.02)
+    assert refused.reason == "one_beacon"
 
 
 def test_one_beacons_panels_move_a_growth_stages_pose_where_they_hold_the_tilt() -> None:
@@ -435,7 +461,10 @@ def test_returns_above_their_panels_tops_refuse_the_fix(
     # Two frames whose fix took returns 2.2 m above a panel's top (the OS1-64's, 1.45 deg
     # off in roll at 8 sigma) and 1 m above (the VLP-16's, its pitch 9.4 deg off at 26
     # sigma: the vehicle tilted 13 deg, and a tilt within the drift's walls moves each
-    # panel within its own plane). Their panels' tops refuse them.
+    # panel within its own plane). Their panels' tops refuse them. The returns that
+    # show a panel are those it is adjusted on, as when these frames were found (nearer
+    # a free end, the OS1-64's is refused as one beacon by another flow).
+    monkeypatch.setattr(locator3d, "SHOWN_CLEAR", locator3d.WITNESSED_CLEAR)
     scene = random_drift_scene(
         3000, 0, frames=10, lidar=lidar, range_sigma_m=0.03, lookalikes=lookalikes
     )
