@@ -13,7 +13,7 @@ import pytest
 
 from mast.core.beacon import Beacon, Survey
 from mast.core.pose3d import Pose3D
-from mast.pipeline.adjust3d import UNBRACKETED, Adjustment3D, PanelPlanes, adjust_pose
+from mast.pipeline.adjust3d import UNBRACKETED, Adjustment3D, PanelPlanes, _behind, adjust_pose
 from mast.sim.lidar3d import random_drift_scene
 from tests._raycast3d import cast, cast_labelled, paper_walls
 
@@ -270,10 +270,39 @@ def test_misfits_see_a_panel_put_where_it_is_not() -> None:
     ):
         grid = wrong.sensor_to_grid(frame.points)
         which = planes.assign(grid, wrong.position, 0.04)
-        misfit = planes.misfits(grid, wrong.position, which, 0.04)
         hits = np.bincount(which[which >= 0], minlength=len(planes))
-        # the locator's rule (MISFIT_LEAST, MISFIT_SHARE)
-        assert np.any(misfit > np.maximum(3, 0.01 * hits)), (misfit, hits)
+        # the locator's rule (MISFIT_LEAST, MISFIT_SHARE), and with the lines that
+        # stand behind a panel at its bottom or top dropped from the window: a panel
+        # put tilted is missed there by rays whose lines' hits are its own
+        for lines in (None, frame.ring):
+            misfit = planes.misfits(grid, wrong.position, which, 0.04, lines=lines)
+            assert np.any(misfit > np.maximum(3, 0.01 * hits)), (misfit, hits)
+
+
+def test_the_lines_at_a_panels_ends_whose_hits_stand_behind_it_are_dropped() -> None:
+    gate = 0.12
+    rng = np.random.default_rng(0)
+    # panel 0: lines 0-8 bottom up; the two lowest the wall 4.5 cm behind it (a few
+    # returns each, within the gate), the others its own (20 each, sigma 3 cm)
+    counts = [4, 2, 20, 20, 20, 20, 20, 20, 3]
+    line = np.repeat(np.arange(9), counts)
+    z = 0.1 * line.astype(float)
+    off = rng.normal(0.0, 0.03, len(line))
+    off[line <= 1] = 0.045
+    off[line == 8] = 0.07  # the top line too (three returns)
+    k = np.zeros(len(line), dtype=np.intp)
+    drop = _behind(k, line, z, off, gate)
+    assert np.array_equal(drop, (line <= 1) | (line == 8))
+    # a panel put tilted: its lowest lines' few hits are its own, and stand nowhere
+    own = off.copy()
+    own[line <= 1] = rng.normal(0.0, 0.03, int(np.sum(line <= 1)))
+    own[line == 8] = 0.0
+    assert not _behind(k, line, z, own, gate).any()
+    # every line behind (a panel put where it is not): none dropped
+    assert not _behind(k, line, z, np.full(len(line), 0.05), gate).any()
+    # panels apart: a second panel's lines are its own
+    both = _behind(np.r_[k, k + 1], np.r_[line, line], np.r_[z, z], np.r_[off, own], gate)
+    assert np.array_equal(both, np.r_[drop, np.zeros(len(line), dtype=bool)])
 
 
 def test_a_beacons_own_panel_in_front_of_another_is_no_misfit() -> None:

@@ -393,6 +393,24 @@ def test_a_far_beacons_end_panel_is_shown_by_its_returns_nearer_its_free_end(
     assert refused.reason == "one_beacon"
 
 
+def test_the_wall_below_a_shallow_panel_opens_no_beam_test_window(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    # A VLP-16 3 cm frame of fresh draws (seed 2, drift 3, frame 2): B2's middle panel,
+    # 0.29 m wide, stands off its wall by less than the gate. Its five lowest rings put
+    # 16 returns of the wall below it on it (4.5 cm behind it on average), and the
+    # rays of those rings that the noise took beyond the gate, 107, were misfits of a
+    # fix 0.6 sigma off. Those rings stand behind the panel and open no window.
+    scene = random_drift_scene(2, 3, frames=10, lidar="vlp16", range_sigma_m=0.03)
+    sim, fix = _located(scene, 2, 0.03)
+    _within(fix, sim, 3.0)
+    monkeypatch.setattr(adjust3d, "BEHIND_GATES", math.inf)  # no line stands behind
+    _, refused = _located(scene, 2, 0.03)
+    assert refused.reason == "inconsistent"
+    assert "B2/P2" in refused.detail
+    assert "do not fit it" in refused.detail
+
+
 def test_one_beacons_panels_move_a_growth_stages_pose_where_they_hold_the_tilt() -> None:
     walls, scene = paper_walls("convergent")
     planes = PanelPlanes.of(scene.survey)

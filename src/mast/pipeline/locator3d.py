@@ -1296,7 +1296,9 @@ def _fix3d(
     # every beam crossing a panel where the pose puts it hits it
     grid = adj.pose.sensor_to_grid(pts)
     hits = np.bincount(which[which >= 0], minlength=len(planes))
-    misfit = planes.misfits(grid, adj.pose.position, which, gate, local, _under_tops(planes, adj))
+    misfit = planes.misfits(
+        grid, adj.pose.position, which, gate, local, _under_tops(planes, adj), lines
+    )
     seen = np.flatnonzero(misfit > np.maximum(MISFIT_LEAST, MISFIT_SHARE * hits))
     if seen.size:
         k = int(seen[np.argmax(misfit[seen])])
