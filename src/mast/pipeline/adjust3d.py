@@ -783,20 +783,28 @@ def _behind(
     first, count = _runs(ks * (int(ls.max()) + 1) + ls)  # each (panel, line)
     total = np.add.reduceat(off[order], first)
     height = np.add.reduceat(z[order], first) / count
-    panel = ks[first]
-    drop = np.zeros(len(first), dtype=np.bool_)
-    start, runs = _runs(panel)
-    for a, m in zip(start, runs, strict=True):
-        by = a + np.argsort(height[a : a + m], kind="stable")
-        ends = []
-        for side in (by, by[::-1]):
-            n, t = np.cumsum(count[side]), np.cumsum(total[side])
-            stands = np.flatnonzero(t / n > BEHIND_GATES * gate_m / np.sqrt(n))
-            ends.append(int(stands[-1]) + 1 if stands.size else 0)
-        if ends[0] + ends[1] < m:  # a line left that does not stand behind
-            drop[by[: ends[0]]] = True
-            drop[by[m - ends[1] :]] = True
-    out[order] = np.repeat(drop, count)
+    # the lines by panel, and by height within it; the most lines that stand behind
+    # from a panel's lowest up (a prefix) and from its highest down (a suffix)
+    by = np.lexsort((height, ks[first]))
+    panel, n, t = ks[first][by], count[by].astype(float), total[by]
+    start, size = _runs(panel)
+    group = np.repeat(np.arange(len(start)), size)
+    at = np.arange(len(by)) - start[group]  # a line's place in its panel, bottom up
+    before_n = np.concatenate([[0.0], np.cumsum(n)])[start][group]
+    before_t = np.concatenate([[0.0], np.cumsum(t)])[start][group]
+    low_n, low_t = np.cumsum(n) - before_n, np.cumsum(t) - before_t  # lowest to this
+    all_n, all_t = np.add.reduceat(n, start)[group], np.add.reduceat(t, start)[group]
+    high_n, high_t = all_n - low_n + n, all_t - low_t + t  # this to the highest
+    bar = BEHIND_GATES * gate_m
+    lows = np.zeros(len(start), dtype=np.intp)  # lines dropped from the lowest up
+    np.maximum.at(lows, group, np.where(low_t > bar * np.sqrt(low_n), at + 1, 0))
+    highs = np.zeros(len(start), dtype=np.intp)  # from the highest down
+    np.maximum.at(highs, group, np.where(high_t > bar * np.sqrt(high_n), size[group] - at, 0))
+    some = lows + highs < size  # a line left that does not stand behind
+    drop = some[group] & ((at < lows[group]) | (at >= size[group] - highs[group]))
+    dropped = np.zeros(len(first), dtype=np.bool_)
+    dropped[by] = drop
+    out[order] = np.repeat(dropped, count)
     return out
 
 

@@ -458,9 +458,16 @@ def _witnessed(
     off = np.abs(np.einsum("ij,ij->i", np.take(grid, on, axis=0)[:, :2], wall[:, :2]) - wall[:, 2])
     far = on[off > gate_m + ROCK_M]
     counts = np.bincount(beacon[which[far]] * span + lines[far] - low, minlength=len(ids) * span)
+    # a line with fewer than ``least`` returns on the beacon stands off by no mean
+    crossed = np.bincount(beacon[which[on]] * span + lines[on] - low, minlength=len(ids) * span)
     wanted = [beacon[nearer[extra]] for nearer, extra in zip(nearers, extras, strict=True)]
     keys = [w * span + lines[extra] - low for w, extra in zip(wanted, extras, strict=True)]
-    short = np.concatenate([w[counts[key] < least] for w, key in zip(wanted, keys, strict=True)])
+    short = np.concatenate(
+        [
+            w[(counts[key] < least) & (crossed[key] >= least)]
+            for w, key in zip(wanted, keys, strict=True)
+        ]
+    )
     for b in np.unique(short):  # those the returns alone do not
         counts[b * span : (b + 1) * span] += least * _standing_off(
             which, grid, lines - low, span, planes, np.flatnonzero(beacon == b), least, gate_m,
