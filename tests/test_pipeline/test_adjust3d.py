@@ -300,6 +300,13 @@ def test_the_lines_at_a_panels_ends_whose_hits_stand_behind_it_are_dropped() -> 
     assert not _behind(k, line, z, own, gate).any()
     # every line behind (a panel put where it is not): none dropped
     assert not _behind(k, line, z, np.full(len(line), 0.05), gate).any()
+    # a few lines far behind take none of the panel's own lines with them, however
+    # many of those there are (three wall lines of six hits 4.5 cm behind)
+    for own_lines in (5, 12):
+        ln = np.repeat(np.arange(3 + own_lines), 6)
+        far = np.where(ln < 3, 0.045, rng.normal(0.0, 0.03, len(ln)))
+        dropped = _behind(np.zeros(len(ln), dtype=np.intp), ln, 0.1 * ln, far, gate)
+        assert np.array_equal(dropped, ln < 3), own_lines
     # panels apart: a second panel's lines are its own
     both = _behind(np.r_[k, k + 1], np.r_[line, line], np.r_[z, z], np.r_[off, own], gate)
     assert np.array_equal(both, np.r_[drop, np.zeros(len(line), dtype=bool)])

@@ -78,11 +78,15 @@ HIT_SHARE = 0.625
 #: How far rough rock may bulge from a beacon's wall towards its panels' planes near a
 #: free end, where a return on it may pass for a panel's top hit, metres.
 ROCK_M = 0.05
-#: A line's hits on a panel stand behind it (:func:`_behind`) where their mean lies
-#: beyond its plane by more than this many gates over the root of their count (three
-#: sigmas of the mean: a line of the panel's own returns is taken for the wall behind
-#: once in 700).
+#: The lines at a panel's bottom or top stand behind it (:func:`_behind`) where their
+#: hits' mean lies beyond its plane by more than this many gates over the root of their
+#: count (three sigmas of the mean: one such test of the panel's own returns takes them
+#: for the wall behind once in 700), and each of them leans behind it, its own mean
+#: beyond the plane by more than BEHIND_LEAN_GATES gates over the root of its count
+#: (one sigma: three lines of a wall 4.5 cm behind would otherwise take ten of the
+#: panel's own with them in the pooled mean).
 BEHIND_GATES = 0.75
+BEHIND_LEAN_GATES = 0.25
 #: A return whose ray is nearer than this to grazing its panel, degrees, is no panel
 #: return for the adjustment (:func:`_grazing`) nor for the bound
 #: (:mod:`mast.pipeline.bounds3d`), as in 2D
@@ -763,18 +767,19 @@ def _behind(
     gate_m: float,
 ) -> NDArray[np.bool_]:
     """Which hits (panel ``k``, line ``line``, crossing at height ``z``, ``off`` beyond
-    the plane along the ray) are on the lines at a panel's bottom or top whose hits
-    stand behind it: the most lines from the lowest up (and from the highest down)
-    whose hits' mean lies beyond the plane by more than :data:`BEHIND_GATES` gates over
-    the root of their count. Below or above a shallow panel, the wall behind it lies
-    within the gate of its plane, and a ring there puts the returns its noise brings
-    within the gate on the panel and the others beyond it; those lines open the beam
-    test's window to rays that miss the panel for no fault of the pose (a middle panel
-    0.29 m wide had 107 such misfits at a fix 0.6 sigma off, its five lowest lines' 16
-    hits 4.5 cm behind it on average). A panel put tilted is missed at its bottom or
-    top by rays whose lines' hits are its own, which do not stand behind it; where
-    every line of a panel stands behind it, none is dropped (a panel put where it is
-    not is seen through on every line)."""
+    the plane along the ray, finite) are on the lines at a panel's bottom or top whose
+    hits stand behind it: the most lines from the lowest up (and from the highest
+    down), each leaning behind it (:data:`BEHIND_LEAN_GATES`), whose hits' mean lies
+    beyond the plane by more than :data:`BEHIND_GATES` gates over the root of their
+    count. Below or above a shallow panel, the wall behind it lies within the gate of
+    its plane, and a ring there puts the returns its noise brings within the gate on
+    the panel and the others beyond it; those lines open the beam test's window to rays
+    that miss the panel for no fault of the pose (a middle panel 0.29 m wide had 107
+    such misfits at a fix 0.6 sigma off, its five lowest lines' 16 hits 4.5 cm behind
+    it on average). A panel put tilted is missed at its bottom or top by rays whose
+    lines' hits are its own, which do not lean behind it; where the lines dropped from
+    either end would be all of a panel's, none is (a panel put where it is not is seen
+    through on every line)."""
     out = np.zeros(len(k), dtype=np.bool_)
     if not len(k):
         return out
@@ -796,10 +801,19 @@ def _behind(
     all_n, all_t = np.add.reduceat(n, start)[group], np.add.reduceat(t, start)[group]
     high_n, high_t = all_n - low_n + n, all_t - low_t + t  # this to the highest
     bar = BEHIND_GATES * gate_m
+    # only lines each leaning behind the panel, from either end, may be dropped: a few
+    # far behind must not take the panel's own lines with them in the pooled mean
+    upright = t <= BEHIND_LEAN_GATES * gate_m * np.sqrt(n)
+    below = size.copy()  # the lowest upright line's place, per panel
+    np.minimum.at(below, group[upright], at[upright])
+    above = np.full(len(start), -1, dtype=np.intp)  # the highest's
+    np.maximum.at(above, group[upright], at[upright])
     lows = np.zeros(len(start), dtype=np.intp)  # lines dropped from the lowest up
-    np.maximum.at(lows, group, np.where(low_t > bar * np.sqrt(low_n), at + 1, 0))
+    ok = (at < below[group]) & (low_t > bar * np.sqrt(low_n))
+    np.maximum.at(lows, group, np.where(ok, at + 1, 0))
     highs = np.zeros(len(start), dtype=np.intp)  # from the highest down
-    np.maximum.at(highs, group, np.where(high_t > bar * np.sqrt(high_n), size[group] - at, 0))
+    ok = (at > above[group]) & (high_t > bar * np.sqrt(high_n))
+    np.maximum.at(highs, group, np.where(ok, size[group] - at, 0))
     some = lows + highs < size  # a line left that does not stand behind
     drop = some[group] & ((at < lows[group]) | (at >= size[group] - highs[group]))
     dropped = np.zeros(len(first), dtype=np.bool_)

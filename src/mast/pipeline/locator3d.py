@@ -1222,7 +1222,7 @@ def _fix3d(
             floor, boxes = below(rays, grid, which, pose)
             again, shows = cut(rays, grid, gate, top_margin_m=margin, bottoms=floor, boxes=boxes)
             if np.array_equal(again, which):
-                held = True
+                held, shown = True, shows
                 break
             if len(_shown(shows, lines, planes, cfg)) < 2:
                 thinned = True  # the adjusted pose's own cut shows fewer than two beacons:
@@ -1246,8 +1246,11 @@ def _fix3d(
     # the panels too thinly hit to be adjusted on are still beams' ends for the misfits
     kept = which  # the cut adjusted on
     which = np.where((checked < 0) & (which >= 0), which, used)
-    # those only showing a panel (nearer a free end) still show it
-    beacons = _shown(np.where(which >= 0, which, np.where(kept < 0, shown, -1)), lines, planes, cfg)
+    # those only showing a panel (nearer a free end) still show it, where the snooping
+    # left the panel a return adjusted on
+    left = np.append(np.bincount(used[used >= 0], minlength=len(planes)) > 0, False)
+    only = np.where((kept < 0) & left[shown], shown, -1)
+    beacons = _shown(np.where(which >= 0, which, only), lines, planes, cfg)
     if len(beacons) < 2:
         return refused("one_beacon", _too_few(beacons, cfg), adj)
     if not held and float(np.max(moved)) > SETTLE_SIGMAS:
