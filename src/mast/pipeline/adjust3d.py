@@ -600,7 +600,7 @@ class PanelPlanes:
         top or bottom (the beam verification of 2D, in 3D). Where ``lines`` gives each
         return's line (ring), the lowest and highest hits are those of the lines left
         when the panel's lowest and highest lines whose hits stand behind it are dropped
-        (:func:`_behind`), as long as a line whose hits do not is left."""
+        (:func:`_behind`), as long as a line is left."""
         o = np.asarray(origin, dtype=float).reshape(3)
         rays = self._rays(grid - o, o, local or self._everywhere(len(grid)))
         return self._misfits(rays, which, gate_m, below, lines)
@@ -804,16 +804,13 @@ def _behind(
     # only lines each leaning behind the panel, from either end, may be dropped: a few
     # far behind must not take the panel's own lines with them in the pooled mean
     upright = t <= BEHIND_LEAN_GATES * gate_m * np.sqrt(n)
-    below = size.copy()  # the lowest upright line's place, per panel
-    np.minimum.at(below, group[upright], at[upright])
-    above = np.full(len(start), -1, dtype=np.intp)  # the highest's
-    np.maximum.at(above, group[upright], at[upright])
-    lows = np.zeros(len(start), dtype=np.intp)  # lines dropped from the lowest up
+    place = at[upright].astype(float)
+    below = _per_panel(group[upright], place, len(start), np.minimum, math.inf)  # lowest
+    above = _per_panel(group[upright], place, len(start), np.maximum, -1.0)  # upright line
     ok = (at < below[group]) & (low_t > bar * np.sqrt(low_n))
-    np.maximum.at(lows, group, np.where(ok, at + 1, 0))
-    highs = np.zeros(len(start), dtype=np.intp)  # from the highest down
+    lows = np.maximum.reduceat(np.where(ok, at + 1, 0), start)  # dropped from the lowest up
     ok = (at > above[group]) & (high_t > bar * np.sqrt(high_n))
-    np.maximum.at(highs, group, np.where(ok, size[group] - at, 0))
+    highs = np.maximum.reduceat(np.where(ok, size[group] - at, 0), start)  # highest down
     some = lows + highs < size  # a line left that does not stand behind
     drop = some[group] & ((at < lows[group]) | (at >= size[group] - highs[group]))
     dropped = np.zeros(len(first), dtype=np.bool_)
