@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -461,20 +462,73 @@ def test_beam_check_kernel_matches_the_reference() -> None:
 
     scene = paper_scene()
     panels = PanelSet.from_survey(scene.survey)
-    cfg = VerificationConfig()
+    strict = VerificationConfig()
+    lenient = replace(strict, wall_behind_m=0.15)  # a plan view's (locator3d)
     rng = np.random.default_rng(3)
     near_seen = 0
+    through = {strict: 0, lenient: 0}
     for k, shot in enumerate(scene.shots[:6]):
         scan = simulate_scan(scene.world, shot.pose, shot.scanner, rng=rng).scan
         for dx, dy, da in ((0.0, 0.0, 0.0), (0.03, -0.02, 0.004), (0.5, 0.3, -0.05)):
             pose = Pose2D(shot.pose.easting + dx, shot.pose.northing + dy, shot.pose.azimuth + da)
             for subset in (None, np.arange(len(panels))[k % 2 :: 2]):
                 noise = NoiseModel(range_sigma_m=0.01)
-                got = check_beams(scan, pose, panels, noise, cfg, subset=subset)
-                ref = _check_beams_reference(scan, pose, panels, noise, cfg, subset=subset)
-                _assert_same_checks(got, ref)
-                near_seen += sum(c.near for c in ref.values())
+                for cfg in (strict, lenient):
+                    got = check_beams(scan, pose, panels, noise, cfg, subset=subset)
+                    ref = _check_beams_reference(scan, pose, panels, noise, cfg, subset=subset)
+                    _assert_same_checks(got, ref)
+                    near_seen += sum(c.near for c in ref.values())
+                    through[cfg] += sum(c.through for c in ref.values())
     assert near_seen > 0  # returns just short of a panel were counted and compared
+    # the poses off put panels before walls: some beams through them land on the wall
+    assert 0 < through[lenient] < through[strict]
+
+
+def test_a_beam_onto_a_beacons_own_wall_is_no_verdict_where_asked() -> None:
+    """With ``wall_behind_m``, a beam beyond a panel that lands on the line of its
+    beacon's free ends (the wall it stands on: in a plan view of a 3D frame, a ring that
+    passed over or under the beacon) is missing, not through; one landing a metre
+    beyond that wall is through either way; without it, both are through."""
+    from mast.core.geometry import first_hits
+    from mast.core.noise import NoiseModel
+    from mast.core.scan import Scan
+    from mast.pipeline.verification import VerificationConfig, _check_beams_reference, check_beams
+
+    scene = paper_scene()
+    panels = PanelSet.from_survey(scene.survey)
+    pose = scene.shots[0].pose
+    angles = np.linspace(-math.pi, math.pi, 1440, endpoint=False)
+    dirs = pose.beam_directions(angles)
+    t, which = first_hits(pose.position, dirs, panels.a, panels.b)
+    crossing = np.flatnonzero(which >= 0)
+    # each beam that crosses a panel: how far to its beacon's chord e1-e4
+    first = {int(b): int(np.flatnonzero(panels.beacon == b)[0]) for b in set(panels.beacon)}
+    last = {int(b): int(np.flatnonzero(panels.beacon == b)[-1]) for b in set(panels.beacon)}
+    to_wall = np.full(angles.size, np.nan)
+    for i in crossing:
+        b = int(panels.beacon[which[i]])
+        e1, e4 = panels.a[first[b]], panels.b[last[b]]
+        c = e4 - e1
+        normal = np.array([-c[1], c[0]]) / np.hypot(*c)
+        to_wall[i] = float((e1 - pose.position) @ normal) / float(dirs[i] @ normal)
+    behind = crossing[to_wall[crossing] > t[crossing] + 0.05]  # the wall well behind
+    assert behind.size > 20
+    noise = NoiseModel(range_sigma_m=0.01)
+    strict = VerificationConfig()
+    lenient = replace(strict, wall_behind_m=0.15)
+    for past in (0.0, 1.0):
+        ranges = np.full(angles.size, np.nan)
+        ranges[behind] = to_wall[behind] + past
+        scan = Scan(angles, ranges)
+        tally = {}
+        for cfg in (strict, lenient):
+            got = check_beams(scan, pose, panels, noise, cfg)
+            _assert_same_checks(got, _check_beams_reference(scan, pose, panels, noise, cfg))
+            tally[cfg] = [sum(getattr(c, v) for c in got.values()) for v in ("through", "missing")]
+            assert sum(c.hit + c.occluded for c in got.values()) == 0
+        checked = tally[strict][0]  # those at a panel's ends or grazing it are not
+        assert checked > 0.9 * behind.size
+        assert tally[lenient] == ([0, checked + tally[strict][1]] if past == 0.0 else tally[strict])
 
 
 @pytest.mark.parametrize("turn", [0.0, 2.0 * math.pi, 0.75 * math.pi, -0.25 * math.pi])

@@ -2400,13 +2400,18 @@ def _beam_checks(
     through_ll: float,
     near: float,
     near_ll: float,
+    chord_a: NDArray[np.float64],
+    chord_b: NDArray[np.float64],
+    wall: float,
 ) -> tuple[NDArray[np.intp], NDArray[np.float64]]:
     """``verification._check_beams_reference`` beam by beam: for every beam that
     meets a segment (panels shrunk at their ends) within the range limits, not
     near grazing, its verdict (hit, occluded, through, missing) counted per owner
     (beacon), the occluded ones no more than ``near`` short counted again, and the
     log-likelihood of the hits plus ``through_ll`` per through and ``near_ll`` per
-    near-short return.
+    near-short return. Where ``wall`` is positive, a return beyond a segment that lands
+    within ``wall`` of the line from its ``chord_a`` to its ``chord_b`` (and no farther
+    past its ends) is missing, not through.
 
     Returns counts, shape (owners, 5), and log-likelihoods, shape (owners,).
     The ray-segment test is :func:`_first_hits`'s, to the bit.
@@ -2465,12 +2470,29 @@ def _beam_checks(
             if res >= -near:
                 counts[b, 4] += 1
         elif res > gate:
-            counts[b, 2] += 1
+            px, py = origin[0] + ranges[i] * dx, origin[1] + ranges[i] * dy
+            if wall > 0.0 and _lands_on_jit(px, py, chord_a[bj], chord_b[bj], wall):
+                counts[b, 3] += 1
+            else:
+                counts[b, 2] += 1
         else:  # a NaN range marked valid: no verdict but missing
             counts[b, 3] += 1
     for b in range(owners):
         ll[b] += counts[b, 2] * through_ll + counts[b, 4] * near_ll
     return counts, ll
+
+
+def _lands_on(
+    px: float, py: float, a: NDArray[np.float64], b: NDArray[np.float64], reach: float
+) -> bool:
+    """Whether (``px``, ``py``) lies within ``reach`` of the line from ``a`` to ``b``, no
+    farther than ``reach`` past either end (``verification._on_wall``, one point)."""
+    cx, cy = float(b[0] - a[0]), float(b[1] - a[1])
+    length = max(math.sqrt(cx * cx + cy * cy), 1e-12)
+    dx, dy = px - float(a[0]), py - float(a[1])
+    along = (dx * cx + dy * cy) / length
+    off = abs(dx * cy - dy * cx) / length
+    return off <= reach and -reach <= along <= length + reach
 
 
 def _beam_checks_of(
@@ -2495,14 +2517,21 @@ def _beam_checks_of(
     through_ll: float,
     near: float,
     near_ll: float,
+    chord_a: NDArray[np.float64],
+    chord_b: NDArray[np.float64],
+    wall: float,
 ) -> tuple[NDArray[np.intp], NDArray[np.intp], NDArray[np.float64]]:
     """:func:`_beam_checks` of the panels ``subset`` (of a panel set's ends ``a``, ``b``,
     ``direction``, ``normal`` and ``beacon``), each shrunk by ``margin`` at both ends, the
     verdicts counted per beacon of the subset: ``(beacons, counts, ll)``, the beacons in
-    increasing order (``numpy.unique``'s), a row of counts and a log-likelihood each."""
+    increasing order (``numpy.unique``'s), a row of counts and a log-likelihood each.
+    ``chord_a``, ``chord_b`` and ``wall``: :func:`_beam_checks`', a row of the chord a
+    panel of the set."""
     m = subset.shape[0]
     seg_a = np.empty((m, 2))
     seg_b = np.empty((m, 2))
+    wall_a = np.empty((m, 2))
+    wall_b = np.empty((m, 2))
     normals = np.empty((m, 2))
     mine = np.empty(m, dtype=np.intp)
     for k in range(m):
@@ -2513,6 +2542,8 @@ def _beam_checks_of(
         seg_b[k, 1] = b[q, 1] - margin * direction[q, 1]
         normals[k, 0] = normal[q, 0]
         normals[k, 1] = normal[q, 1]
+        wall_a[k, 0], wall_a[k, 1] = chord_a[q, 0], chord_a[q, 1]
+        wall_b[k, 0], wall_b[k, 1] = chord_b[q, 0], chord_b[q, 1]
         mine[k] = beacon[q]
     beacons = np.unique(mine)
     owner = np.searchsorted(beacons, mine).astype(np.intp)
@@ -2536,6 +2567,9 @@ def _beam_checks_of(
         through_ll,
         near,
         near_ll,
+        wall_a,
+        wall_b,
+        wall,
     )
     return beacons, counts, ll
 
@@ -4286,6 +4320,7 @@ _beam_windows_jit: Callable[..., int] = njit(cache=True, nogil=True)(_beam_windo
 _first_crossing_jit: Callable[..., Any] = njit(cache=True, nogil=True)(_first_crossing)
 _beams_toward_jit: Callable[..., Any] = njit(cache=True, nogil=True)(_beams_toward)
 _beacon_gathers_jit: Callable[..., bool] = njit(cache=True, nogil=True)(_beacon_gathers)
+_lands_on_jit: Callable[..., Any] = njit(cache=True, nogil=True)(_lands_on)
 _beam_checks_jit: Callable[..., Any] = njit(cache=True, nogil=True)(_beam_checks)
 beam_checks_of: Callable[..., Any] = njit(cache=True, nogil=True)(_beam_checks_of)
 _associate_into_jit: Callable[..., None] = njit(cache=True, nogil=True)(_associate_into)

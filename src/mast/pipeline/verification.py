@@ -163,6 +163,14 @@ class VerificationConfig:
         refined to two beacons' returns (an ICP that slid 2.5 m and 42 degrees,
         onto the pose already kept). Against a 200-beacon survey of repeated
         designs, 1 306 of 2 191 such starts are left unrefined (20 scans).
+    wall_behind_m : float
+        A return beyond a panel that lands within this of its beacon's wall
+        (the line of its free ends, e1-e4, and as far past them) is no verdict
+        (counted ``missing``) rather than a through-beam. 0 in a 2D scan,
+        where a beam at a panel's bearing is at its height. A plan view of a
+        3D frame cannot tell a beam through a panel from one passing over or
+        under it onto the wall the beacon is mounted on: the 3D locator's
+        lenient plan view (:data:`mast.pipeline.locator3d.LENIENT_WALL_M`).
     """
 
     min_panel_points: int = 3
@@ -192,6 +200,7 @@ class VerificationConfig:
     near_probability: float = 0.3
     look_alike_reach_m: float = 1.0
     look_alike_reach_rad: float = math.radians(3.0)
+    wall_behind_m: float = 0.0
 
 
 @dataclass(frozen=True, slots=True)
@@ -245,6 +254,7 @@ def check_beams(
     sel = np.arange(len(panels)) if subset is None else subset
     sigma = noise.gate_sigma_m
     span = _span(scan)
+    chord_a, chord_b = _chords(panels) if cfg.wall_behind_m > 0.0 else (panels.a, panels.b)
     # The subset's beacons numbered from 0: the tallies cost the panels checked, not the
     # survey's size.
     beacons, counts, ll = beam_checks_of(
@@ -269,12 +279,38 @@ def check_beams(
         math.log(cfg.through_probability),
         cfg.near_short_m,
         math.log(cfg.near_probability),
+        chord_a,
+        chord_b,
+        cfg.wall_behind_m,
     )
     out: dict[str, BeamCheck] = {}
     for k in np.flatnonzero(counts.sum(axis=1)):
         hit_n, occ_n, thr_n, mis_n, near_n = (int(c) for c in counts[k])
         out[panels.ids[beacons[k]]] = BeamCheck(hit_n, occ_n, thr_n, mis_n, float(ll[k]), near_n)
     return out
+
+
+def _chords(panels: PanelSet) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Each panel's beacon's wall: the ends of the line of its free ends (e1, e4), one
+    row a panel."""
+    first = np.r_[True, panels.beacon[1:] != panels.beacon[:-1]]
+    starts = np.flatnonzero(first)
+    ends = np.r_[starts[1:], len(panels)] - 1
+    run = np.cumsum(first) - 1
+    return panels.a[starts[run]], panels.b[ends[run]]
+
+
+def _on_wall(
+    points: NDArray[np.float64], a: NDArray[np.float64], b: NDArray[np.float64], reach: float
+) -> NDArray[np.bool_]:
+    """Whether each of ``points`` lies within ``reach`` of the line from its ``a`` to its
+    ``b`` (rows), and no farther than ``reach`` past either end."""
+    c = b - a
+    length = np.maximum(np.hypot(c[:, 0], c[:, 1]), 1e-12)
+    d = points - a
+    along = (d[:, 0] * c[:, 0] + d[:, 1] * c[:, 1]) / length
+    off = np.abs(d[:, 0] * c[:, 1] - d[:, 1] * c[:, 0]) / length
+    return np.asarray((off <= reach) & (along >= -reach) & (along <= length + reach))
 
 
 def _span(scan: Scan) -> float:
@@ -314,6 +350,10 @@ def _check_beams_reference(
     kind = np.full(idx.size, 3)  # missing
     kind[valid & (res < -gate)] = 1
     kind[valid & (res > gate)] = 2
+    if cfg.wall_behind_m > 0.0:
+        ca, cb = _chords(panels)
+        land = pose.position + np.where(valid, r, 0.0)[:, None] * dirs[idx]
+        kind[(kind == 2) & _on_wall(land, ca[j], cb[j], cfg.wall_behind_m)] = 3
     kind[valid & (np.abs(res) <= gate)] = 0
     near = valid & (res < -gate) & (res >= -cfg.near_short_m)
     # Clutter may return anywhere in the scanner's range.
