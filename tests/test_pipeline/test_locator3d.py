@@ -200,12 +200,13 @@ def test_one_beacon_starts_reach_the_try_whose_beacon_is_the_true_one(
     starts: list[tuple[str, ...]] = []
     from_one = locator3d._from_one_beacon
 
-    def counted(frame: Frame3D, survey: Survey, planes: PanelPlanes, plan: Fix, *a: Any,
-                **k: Any) -> Fix3D:  # fmt: skip
-        starts.append(plan.verified[0].supported)
-        return from_one(frame, survey, planes, plan, *a, **k)
+    def counted(frame: Frame3D, survey: Survey, planes: PanelPlanes, plan: Fix, start: Pose2D,
+                seen: tuple[str, ...], *a: Any, **k: Any) -> Fix3D:  # fmt: skip
+        starts.append(seen)
+        return from_one(frame, survey, planes, plan, start, seen, *a, **k)
 
     monkeypatch.setattr(locator3d, "_from_one_beacon", counted)
+    monkeypatch.setattr(locator3d, "LENIENT_STARTS", 0)  # the one-beacon starts alone
     sim, fix = _located(scene, 7, 0.01)
     _within(fix, sim, 3.0)
     assert starts == [("B2",), ("B2",), ("B5",)]
@@ -216,6 +217,34 @@ def test_one_beacon_starts_reach_the_try_whose_beacon_is_the_true_one(
     _, refused = _located(scene, 7, 0.01)
     assert not refused.ok
     assert starts == [("B2",), ("B2",)]
+
+
+def test_a_plan_view_that_sees_a_beacon_on_its_own_wall_starts_a_fix_leniently(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    # A VLP-16 1 cm frame of fresh draws with look-alikes (seed 2, drift 0, frame 1):
+    # no try's plan view confirms two beacons, for beams over or under a beacon onto the
+    # wall it stands on, which the plan view takes for beams through its panels. Located
+    # again with those beams no verdict (LENIENT_WALL_M), a plan view's 2D fix starts
+    # the 3D stages, whose fix the plan view levelled by it and each beacon in the band
+    # of its tops confirms.
+    scene = random_drift_scene(2, 0, frames=10, lidar="vlp16", range_sigma_m=0.01, lookalikes=True)
+    starts: list[tuple[str, ...]] = []
+    from_one = locator3d._from_one_beacon
+
+    def counted(frame: Frame3D, survey: Survey, planes: PanelPlanes, plan: Fix, start: Pose2D,
+                seen: tuple[str, ...], *a: Any, **k: Any) -> Fix3D:  # fmt: skip
+        starts.append(seen)
+        return from_one(frame, survey, planes, plan, start, seen, *a, **k)
+
+    monkeypatch.setattr(locator3d, "_from_one_beacon", counted)
+    sim, fix = _located(scene, 1, 0.01)
+    _within(fix, sim, 3.0)
+    assert len(starts[-1]) >= 2  # the last start was a lenient plan view's 2D fix
+    assert fix.plan.ok  # the plan view located again from the 3D pose agrees
+    monkeypatch.setattr(locator3d, "LENIENT_STARTS", 0)
+    _, refused = _located(scene, 1, 0.01)
+    assert not refused.ok
 
 
 def test_a_panel_is_one_run_of_heights() -> None:
@@ -821,11 +850,15 @@ def test_a_one_beacon_3d_fix_the_plan_view_confirms_no_beacon_near_is_refused(
     # all: that 3D fix was 1.7 deg off in pitch and 0.7 deg in azimuth at 120 sigma.
     # (The reason is the first 3D refusal of the frame's tries: since grazing returns
     # are left out, an earlier try's adjustment is rejected by the global test.) With
-    # the two one-beacon starts it was found with; a later start fixes it right.
+    # the two one-beacon starts it was found with; a later start fixes it right, and so,
+    # after the tries, does a plan view located leniently (LENIENT_STARTS).
     scene = random_drift_scene(49, frames=6, lidar="vlp16", range_sigma_m=0.02, lookalikes=True)
     sim, fix = _located(scene, 2, 0.02)
     _within(fix, sim, 3.0)
     monkeypatch.setattr(locator3d, "ONE_BEACON_STARTS", 2)
+    _, fix = _located(scene, 2, 0.02)
+    _within(fix, sim, 3.0)
+    monkeypatch.setattr(locator3d, "LENIENT_STARTS", 0)
     _, fix = _located(scene, 2, 0.02)
     assert not fix.ok
     assert fix.reason in {"inconsistent", "one_beacon", "rejected"}

@@ -161,6 +161,18 @@ TOP_SIGMAS = 5.0
 #: lost, none wrong; eight fixed no more of seed 1's misses (those fixed, at the third
 #: to sixth start).
 ONE_BEACON_STARTS = 6
+#: Where no try fixes, the plan views refused as ``inconsistent`` (no pose the beams
+#: confirm) are located again leniently (:data:`LENIENT_WALL_M`), in the tries' order,
+#: and at most this many of their 2D fixes start the 3D stages (:func:`_from_one_beacon`).
+LENIENT_STARTS = 3
+#: In the lenient plan view, a return beyond a panel within this of its beacon's wall
+#: (the line of its free ends) is no verdict rather than a beam through the panel
+#: (``VerificationConfig.wall_behind_m``), metres: a plan view cannot tell a beam
+#: through a panel from one passing over or under it onto the wall the beacon stands on
+#: (a beacon 2 m off and 0.9 m below the sensor, under every ring at most bearings,
+#: refused the true pose in every band by 88 such beams). The rock's roughness and the
+#: noise of a bin's centroid.
+LENIENT_WALL_M = 0.15
 #: The window of the prior a one-beacon start's 3D pose sets the plan view located
 #: again (metres, degrees).
 ONE_BEACON_PRIOR = (0.25, 2.0)
@@ -633,17 +645,22 @@ def locate3d(
     spent["vertical"] = time.perf_counter() - t0
     level = level_rotation(up)
     plan_cfg = LocatorConfig(range_sigma_m=cfg.range_sigma_m, survey_sigma_m=cfg.survey_sigma_m)
+    lenient_cfg = replace(
+        plan_cfg, verification=replace(plan_cfg.verification, wall_behind_m=LENIENT_WALL_M)
+    )
     first: Fix3D | None = None  # the first refusal: the frame's reason, where none fixes
     tries = [(level.T @ _pitched(tilt), band) for tilt, band in _tries(cfg)]
     refined = False
-    singles = 0
+    singles = starts = 0
+    refused: list[tuple[Scan, Fix, NDArray[np.float64], tuple[float, float]]] = []
     spacing = ring_spacing(frame, rings)
     while tries:
         # the walls leave the pitch along the drift to the floor, which a grade tilts:
         # the same vertical pitched by a grade's worth, and the beacons at other heights
         tried, band = tries.pop(0)
         t = time.perf_counter()
-        plan = locate(_plan_view(frame, tried, band, cfg), survey, config=plan_cfg)
+        view = _plan_view(frame, tried, band, cfg)
+        plan = locate(view, survey, config=plan_cfg)
         spent["plan"] += time.perf_counter() - t
         fix: Fix3D | None = None
         if plan.ok and plan.pose is not None:
@@ -662,11 +679,15 @@ def locate3d(
             alone = plan.verified[0].supported if plan.verified else ()
             if plan.reason == "one_beacon" and len(alone) == 1 and singles < ONE_BEACON_STARTS:
                 singles += 1
+                start = plan.verified[0].pose
                 fix = _from_one_beacon(
-                    frame, survey, planes, plan, tried, band, cfg, spent, spacing=spacing
-                )
+                    frame, survey, planes, plan, start, alone, tried, band, cfg, spent,
+                    spacing=spacing,
+                )  # fmt: skip
                 if fix.ok:
                     return replace(fix, elapsed_s=time.perf_counter() - t0, stages_s=spent)
+            if plan.reason == "inconsistent":
+                refused.append((view, plan, tried, band))
         if fix is not None and (first is None or first.adjustment is None):
             first = fix  # a 3D refusal says more
         if not refined:
@@ -677,6 +698,25 @@ def locate3d(
             if better is not None:
                 refined = True
                 tries[:0] = [(better, band) for band in cfg.bands_m[:REFINED_BANDS]]
+    # where no try fixes: the plan views no pose of which the beams confirmed, located
+    # again leniently (LENIENT_WALL_M), start the 3D stages from their 2D fixes
+    for view, plan, tried, band in refused:
+        if starts >= LENIENT_STARTS:
+            break
+        t = time.perf_counter()
+        lenient = locate(view, survey, config=lenient_cfg)
+        spent["plan"] += time.perf_counter() - t
+        if not lenient.ok or lenient.pose is None:
+            continue
+        starts += 1
+        fix = _from_one_beacon(
+            frame, survey, planes, plan, lenient.pose, lenient.beacons, tried, band, cfg, spent,
+            spacing=spacing,
+        )  # fmt: skip
+        if fix.ok:
+            return replace(fix, elapsed_s=time.perf_counter() - t0, stages_s=spent)
+        if first is None or first.adjustment is None:
+            first = fix
     assert first is not None
     return replace(first, elapsed_s=time.perf_counter() - t0, stages_s=spent)
 
@@ -686,6 +726,8 @@ def _from_one_beacon(
     survey: Survey,
     planes: PanelPlanes,
     plan: Fix,
+    start: Pose2D,
+    seen: tuple[str, ...],
     up: NDArray[np.float64],
     band: tuple[float, float],
     cfg: Locator3DConfig,
@@ -712,25 +754,26 @@ def _from_one_beacon(
     view's agreement refuses). ``spent`` is added to; ``spacing`` is the frame's
     :func:`ring_spacing`, where known."""
     t = time.perf_counter()
-    first = _fix3d(frame, planes, plan, up, cfg, one_beacon=plan.verified[0].pose, spacing=spacing)
+    first = _fix3d(frame, planes, plan, up, cfg, one_beacon=start, spacing=spacing)
     spent["adjustment"] += time.perf_counter() - t
     if not first.ok or first.pose is None:
         return first
-    if plan.verified[0].supported[0] not in first.beacons:
+    missing = [b for b in seen if b not in first.beacons]
+    if len(seen) - len(missing) < min(2, len(seen)):
         return replace(
             first,
             status="no_fix",
             pose=None,
             reason="inconsistent",
-            detail=f"in 3D, the plan view's one beacon {plan.verified[0].supported[0]} is not "
-            f"among those shown ({', '.join(first.beacons)})",
+            detail=f"in 3D, the plan view's beacon {missing[0]} is not among those shown "
+            f"({', '.join(first.beacons)})",
         )
     again = _plan_again(frame, survey, first.pose, first.beacons, band, cfg, spent)
     if not again.ok or again.pose is None:
         # the plan view (in the last band tried) confirms the first beacon where the 3D
         # pose puts it, and says nothing of the second (smeared out of its band): the 3D
         # tests stand, the tilt held to ALONE_TILT_SIGMA_DEG
-        if _confirms_alone(again, plan.verified[0].supported, first.adjustment):
+        if _confirms_alone(again, seen, first.adjustment):
             return first
         return replace(
             first,
