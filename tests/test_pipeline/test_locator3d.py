@@ -7,6 +7,7 @@ a survey without elevations refused."""
 from __future__ import annotations
 
 import math
+import warnings
 from collections.abc import Sequence
 from dataclasses import replace
 from typing import Any
@@ -33,6 +34,7 @@ from mast.pipeline.locator3d import (
     _beacon_bands,
     _checked,
     _contiguous,
+    _moved,
     _on_one_beacon,
     _plate_floors,
     _refused_off_plan,
@@ -245,6 +247,22 @@ def test_a_plan_view_that_sees_a_beacon_on_its_own_wall_starts_a_fix_leniently(
     monkeypatch.setattr(locator3d, "LENIENT_STARTS", 0)
     _, refused = _located(scene, 1, 0.01)
     assert not refused.ok
+
+
+def test_a_move_is_infinite_where_its_variance_is_not_positive() -> None:
+    # near-singular normal equations can give a covariance with a variance not positive
+    # (the fix is refused for it); the move there is not a number of sigmas, and says so
+    # without numpy's warning of a square root of a negative
+    before = Pose3D.from_degrees(10.0, 20.0, 1.5, 30.0, 1.0, -2.0)
+    after = Pose3D.from_degrees(10.01, 20.0, 1.5, 30.0, 1.0, -2.0)
+    cov = np.diag([1e-4, 1e-4, -1e-6, 1e-6, 1e-6, 0.0])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        moved = _moved(before, after, cov)
+    assert moved[0] == pytest.approx(1.0)
+    assert moved[2] == math.inf
+    assert moved[5] == math.inf
+    assert moved[1] == 0.0
 
 
 def test_a_panel_is_one_run_of_heights() -> None:

@@ -552,8 +552,13 @@ def _standing_off(
 
 def _moved(before: Pose3D, after: Pose3D, covariance: NDArray[np.float64]) -> NDArray[np.float64]:
     """How far ``after`` is from ``before`` in each parameter (record order), in sigmas of
-    ``covariance``."""
-    return np.asarray(np.abs(after.minus(before)) / np.sqrt(np.diag(covariance)))
+    ``covariance``; infinite where its variance is not positive (a direction the panels
+    leave unobserved, which the fix is refused for)."""
+    variance = np.diag(covariance)
+    out = np.full(variance.shape, np.inf)
+    known = variance > 0.0
+    out[known] = np.abs(after.minus(before))[known] / np.sqrt(variance[known])
+    return out
 
 
 def _gathered(
