@@ -2488,7 +2488,7 @@ def _lands_on(
     """Whether (``px``, ``py``) lies within ``reach`` of the line from ``a`` to ``b``, no
     farther than ``reach`` past either end (``verification._on_wall``, one point)."""
     cx, cy = float(b[0] - a[0]), float(b[1] - a[1])
-    length = max(math.sqrt(cx * cx + cy * cy), 1e-12)
+    length = max(math.hypot(cx, cy), 1e-12)  # np.hypot's, as the reference has it
     dx, dy = px - float(a[0]), py - float(a[1])
     along = (dx * cx + dy * cy) / length
     off = abs(dx * cy - dy * cx) / length
@@ -2525,8 +2525,8 @@ def _beam_checks_of(
     ``direction``, ``normal`` and ``beacon``), each shrunk by ``margin`` at both ends, the
     verdicts counted per beacon of the subset: ``(beacons, counts, ll)``, the beacons in
     increasing order (``numpy.unique``'s), a row of counts and a log-likelihood each.
-    ``chord_a``, ``chord_b`` and ``wall``: :func:`_beam_checks`', a row of the chord a
-    panel of the set."""
+    ``chord_a``, ``chord_b`` and ``wall``: as :func:`_beam_checks` takes them, one row a
+    panel of the whole set (its beacon's e1 and e4)."""
     m = subset.shape[0]
     seg_a = np.empty((m, 2))
     seg_b = np.empty((m, 2))

@@ -740,9 +740,12 @@ def _from_one_beacon(
     *,
     spacing: float | None = None,
 ) -> Fix3D:
-    """A 3D fix, or the 3D refusal, from a plan view that confirmed one beacon only
-    (``plan``, seen with the vertical ``up`` in ``band``; its best verified pose
-    supported by that one beacon): that pose starts the 3D stages, which find the other
+    """A 3D fix, or the 3D refusal, from a 2D pose ``start`` that the beacons ``seen``
+    support and no plan view's 2D fix confirms: the best verified pose of a plan view
+    that confirmed one beacon only (``plan``, seen with the vertical ``up`` in
+    ``band``), or a 2D fix of the plan view located leniently (``LENIENT_WALL_M``). The
+    3D fix must show ``seen`` (two of them where there are more). That pose starts the
+    3D stages, which find the other
     beacons' panels where it puts them (a beacon the plan view missed may be below or
     above the band, or smeared by the vertical's error); where they show that beacon
     and a second and pass every 3D test, that pose's vertical and position give the

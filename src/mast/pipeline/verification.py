@@ -210,7 +210,9 @@ class BeamCheck:
     ``hit``: returned within the gate of the predicted range; ``occluded``:
     returned short (something stood in front: allowed); ``through``: returned
     beyond the panel (the beam went where the beacon should be: evidence
-    against the pose); ``missing``: no return. ``log_likelihood`` is the
+    against the pose); ``missing``: no return (or, with
+    ``VerificationConfig.wall_behind_m``, one beyond the panel on its beacon's own
+    wall: no verdict either way). ``log_likelihood`` is the
     beam-model log-likelihood ratio of these beams against background clutter.
     ``near``: of the occluded, those no more than ``near_short_m`` short (what
     stands right in front of where the panels should be).
