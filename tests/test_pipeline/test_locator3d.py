@@ -190,15 +190,9 @@ def test_wall_returns_above_rays_passing_over_a_panel_do_not_set_its_top() -> No
     assert fix.adjustment.top_edges >= 2
 
 
-def test_one_beacon_starts_reach_the_try_whose_beacon_is_the_true_one(
-    monkeypatch: pytest.MonkeyPatch,
-) -> None:
-    # A VLP-16 1 cm frame of fresh draws (seed 1, drift 2, frame 7): its beacons share
-    # a design, and the first tries' plan views confirm one beacon only, each taking it
-    # for another beacon (B2, 24 m off). A later try's confirms the true one (B5), from
-    # which the 3D stages find the second beacon. Two starts, as before 2026-12-07 (the
-    # next session), stop short of it.
-    scene = random_drift_scene(1, 2, frames=10, lidar="vlp16", range_sigma_m=0.01)
+def _starts_seen(monkeypatch: pytest.MonkeyPatch) -> list[tuple[str, ...]]:
+    """The beacons each start of the 3D stages without a plan view's 2D fix must show
+    (:func:`locator3d._from_one_beacon`), in turn, as the locator runs."""
     starts: list[tuple[str, ...]] = []
     from_one = locator3d._from_one_beacon
 
@@ -208,6 +202,19 @@ def test_one_beacon_starts_reach_the_try_whose_beacon_is_the_true_one(
         return from_one(frame, survey, planes, plan, start, seen, *a, **k)
 
     monkeypatch.setattr(locator3d, "_from_one_beacon", counted)
+    return starts
+
+
+def test_one_beacon_starts_reach_the_try_whose_beacon_is_the_true_one(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    # A VLP-16 1 cm frame of fresh draws (seed 1, drift 2, frame 7): its beacons share
+    # a design, and the first tries' plan views confirm one beacon only, each taking it
+    # for another beacon (B2, 24 m off). A later try's confirms the true one (B5), from
+    # which the 3D stages find the second beacon. Two starts, as before 2026-12-07 (the
+    # next session), stop short of it.
+    scene = random_drift_scene(1, 2, frames=10, lidar="vlp16", range_sigma_m=0.01)
+    starts = _starts_seen(monkeypatch)
     monkeypatch.setattr(locator3d, "LENIENT_STARTS", 0)  # the one-beacon starts alone
     sim, fix = _located(scene, 7, 0.01)
     _within(fix, sim, 3.0)
@@ -231,15 +238,7 @@ def test_a_plan_view_that_sees_a_beacon_on_its_own_wall_starts_a_fix_leniently(
     # the 3D stages, whose fix the plan view levelled by it and each beacon in the band
     # of its tops confirms.
     scene = random_drift_scene(2, 0, frames=10, lidar="vlp16", range_sigma_m=0.01, lookalikes=True)
-    starts: list[tuple[str, ...]] = []
-    from_one = locator3d._from_one_beacon
-
-    def counted(frame: Frame3D, survey: Survey, planes: PanelPlanes, plan: Fix, start: Pose2D,
-                seen: tuple[str, ...], *a: Any, **k: Any) -> Fix3D:  # fmt: skip
-        starts.append(seen)
-        return from_one(frame, survey, planes, plan, start, seen, *a, **k)
-
-    monkeypatch.setattr(locator3d, "_from_one_beacon", counted)
+    starts = _starts_seen(monkeypatch)
     sim, fix = _located(scene, 1, 0.01)
     _within(fix, sim, 3.0)
     assert len(starts[-1]) >= 2  # the last start was a lenient plan view's 2D fix
