@@ -484,6 +484,27 @@ def test_beam_check_kernel_matches_the_reference() -> None:
     assert 0 < through[lenient] < through[strict]
 
 
+def test_a_panels_chord_is_its_beacons_e1_to_e4_whatever_the_panels_order() -> None:
+    """``PanelSet.chords`` (the wall ``wall_behind_m`` measures from) gives each panel
+    its own beacon's first and last edges, with the panels in survey order and shuffled."""
+    scene = paper_scene()
+    panels = PanelSet.from_survey(scene.survey)
+    edges = [b.edges for b in scene.survey]
+    shuffled = np.random.default_rng(5).permutation(len(panels))
+    mixed = PanelSet(
+        *(getattr(panels, f)[shuffled] for f in ("a", "b", "direction", "normal", "length")),
+        panels.beacon[shuffled],
+        panels.panel[shuffled],
+        panels.ids,
+    )
+    for ps in (panels, mixed):
+        a, b = ps.chords
+        for k in range(len(ps)):
+            e = edges[int(ps.beacon[k])]
+            assert np.array_equal(a[k], e[0])
+            assert np.array_equal(b[k], e[3])
+
+
 def test_a_beam_onto_a_beacons_own_wall_is_no_verdict_where_asked() -> None:
     """With ``wall_behind_m``, a beam beyond a panel that lands on the line of its
     beacon's free ends (the wall it stands on: in a plan view of a 3D frame, a ring that

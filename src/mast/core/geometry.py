@@ -384,6 +384,21 @@ class PanelSet:
         return order, np.concatenate([[0], np.cumsum(counts)]).astype(np.intp)
 
     @functools.cached_property
+    def chords(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Per panel, its beacon's wall: the ends e1 and e4 of the line of the beacon's
+        free ends (its first panel's ``a``, its last panel's ``b``), one row a panel."""
+        if not len(self):
+            return self.a, self.b
+        order = np.lexsort((self.panel, self.beacon))  # by beacon, then panel number
+        owner = self.beacon[order]
+        cut = owner[1:] != owner[:-1]
+        head = np.zeros(len(self.ids), dtype=np.intp)
+        tail = np.zeros(len(self.ids), dtype=np.intp)
+        head[owner[np.r_[True, cut]]] = order[np.r_[True, cut]]
+        tail[owner[np.r_[cut, True]]] = order[np.r_[cut, True]]
+        return self.a[head[self.beacon]], self.b[tail[self.beacon]]
+
+    @functools.cached_property
     def discs(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """Per beacon (by position in :attr:`ids`), a disc holding all its panels: the
         middle of their ends' box, and the farthest end's distance from it (a hair

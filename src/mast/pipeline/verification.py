@@ -256,7 +256,7 @@ def check_beams(
     sel = np.arange(len(panels)) if subset is None else subset
     sigma = noise.gate_sigma_m
     span = _span(scan)
-    chord_a, chord_b = _chords(panels) if cfg.wall_behind_m > 0.0 else (panels.a, panels.b)
+    chord_a, chord_b = panels.chords if cfg.wall_behind_m > 0.0 else (panels.a, panels.b)
     # The subset's beacons numbered from 0: the tallies cost the panels checked, not the
     # survey's size.
     beacons, counts, ll = beam_checks_of(
@@ -290,16 +290,6 @@ def check_beams(
         hit_n, occ_n, thr_n, mis_n, near_n = (int(c) for c in counts[k])
         out[panels.ids[beacons[k]]] = BeamCheck(hit_n, occ_n, thr_n, mis_n, float(ll[k]), near_n)
     return out
-
-
-def _chords(panels: PanelSet) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Each panel's beacon's wall: the ends of the line of its free ends (e1, e4), one
-    row a panel."""
-    first = np.r_[True, panels.beacon[1:] != panels.beacon[:-1]]
-    starts = np.flatnonzero(first)
-    ends = np.r_[starts[1:], len(panels)] - 1
-    run = np.cumsum(first) - 1
-    return panels.a[starts[run]], panels.b[ends[run]]
 
 
 def _on_wall(
@@ -353,7 +343,7 @@ def _check_beams_reference(
     kind[valid & (res < -gate)] = 1
     kind[valid & (res > gate)] = 2
     if cfg.wall_behind_m > 0.0:
-        ca, cb = _chords(panels)
+        ca, cb = panels.chords
         land = pose.position + np.where(valid, r, 0.0)[:, None] * dirs[idx]
         kind[(kind == 2) & _on_wall(land, ca[j], cb[j], cfg.wall_behind_m)] = 3
     kind[valid & (np.abs(res) <= gate)] = 0
