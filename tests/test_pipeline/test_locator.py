@@ -467,3 +467,37 @@ def test_a_mirror_pose_with_fewer_identified_corners_must_explain_the_scan_bette
 def test_the_locator_refuses_a_precision_no_instrument_has(field: str, value: float) -> None:
     with pytest.raises(ValueError, match=rf"^{field} must be a (positive|non-negative) number"):
         LocatorConfig(**{field: value})
+
+
+def test_located_again_under_other_rules_is_located_from_scratch() -> None:
+    # locate_again keeps the first search's segments and corners: what it gives under
+    # other verification and test rules is what locating the scan afresh under them gives
+    from mast.pipeline.locator import locate_again
+    from mast.pipeline.segmentation import SegmentationConfig
+    from mast.pipeline.verification import VerificationConfig
+
+    strict = LocatorConfig(range_sigma_m=0.012)
+    others = (
+        replace(strict, verification=VerificationConfig(wall_behind_m=0.15)),
+        replace(strict, reject_alpha=0.2, min_beacons=3),
+    )
+    seen = set()
+    for scene in paper_scenario(seed=3, noise=True):
+        for sim in scene.simulate_all():
+            first = locate(sim.scan, scene.survey, config=strict)
+            for other in others:
+                again = locate_again(first, sim.scan, scene.survey, other)
+                fresh = locate(sim.scan, scene.survey, config=other)
+                assert (again.status, again.reason, again.detail) == (
+                    fresh.status,
+                    fresh.reason,
+                    fresh.detail,
+                )
+                assert again.pose == fresh.pose
+                assert again.segmentation is first.segmentation
+                seen.add(again.reason)
+    assert None in seen  # fixes
+    assert len(seen) > 1  # and refusals
+    coarse = replace(strict, segmentation=SegmentationConfig(min_points=9))
+    with pytest.raises(ValueError, match="segment and identify"):
+        locate_again(first, sim.scan, scene.survey, coarse)

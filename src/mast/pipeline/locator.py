@@ -91,6 +91,7 @@ __all__ = [
     "SequenceStep",
     "Verified",
     "locate",
+    "locate_again",
     "locate_near",
     "locate_sequence",
     "survey_index",
@@ -532,6 +533,27 @@ def locate(scan: Scan, survey: Survey, *, config: LocatorConfig | None = None) -
         never raises for what a scan contains.
     """
     return Locator(survey, config).locate(scan)
+
+
+def locate_again(fix: Fix, scan: Scan, survey: Survey, config: LocatorConfig) -> Fix:
+    """:func:`locate` of ``scan`` again, without a prior, under ``config`` (other
+    verification or adjustment rules), on the segmentation and identified corners the
+    global search that gave ``fix`` made of the same scan: the same result as
+    :func:`locate`, without segmenting and identifying the scan twice. ``config`` must
+    segment and identify as ``fix``'s did; a fix found without its segmentation (near
+    a prior) is located from scratch."""
+    was = fix.config
+    if config.prior is not None or fix.segmentation is None or fix.identification is None:
+        return locate(scan, survey, config=config)
+    if (config.segmentation, config.identification, config.noise) != (
+        was.segmentation,
+        was.identification,
+        was.noise,
+    ):
+        raise ValueError("locate_again: the configuration must segment and identify as the fix's")
+    t0 = time.perf_counter()
+    ready = survey_index(survey, scan.range_max_m)
+    return _locate(scan, ready, config, t0, _Clock(), fix.segmentation, ident=fix.identification)
 
 
 class _Clock:
