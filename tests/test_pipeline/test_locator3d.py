@@ -137,32 +137,67 @@ def test_a_refined_vertical_is_tried_in_every_band(monkeypatch: pytest.MonkeyPat
     # A VLP-16 2 cm look-alike frame of fresh draws (seed 1, drift 1, frame 3): the first
     # try's plan view shows one beacon, whose panels refine the vertical; at that
     # vertical the second beacon is in the widest band only. Refined tries in the first
-    # two bands, as they were, left the frame refused.
+    # two bands, as they were, left the frame refused. (The one-beacon start again from
+    # that beacon's own panels fixes it first: not made here, see the next test.)
     scene = random_drift_scene(1, 1, frames=10, lidar="vlp16", range_sigma_m=0.02, lookalikes=True)
+    monkeypatch.setattr(locator3d, "OWN_TILT_SIGMA_DEG", -1.0)
     seen: list[tuple[NDArray[np.float64], tuple[float, float]]] = []
     refined: list[NDArray[np.float64]] = []
-    plan_view, vertical_from = locator3d._plan_view, locator3d._vertical_from
+    plan_view, on_its_panels = locator3d._plan_view, locator3d._on_its_panels
 
     def viewed(frame: Frame3D, up: NDArray[np.float64], band: tuple[float, float], *a: Any) -> Any:
         seen.append((np.array(up), band))
         return plan_view(frame, up, band, *a)
 
     def refining(*a: Any, **k: Any) -> Any:
-        better = vertical_from(*a, **k)
-        if better is not None:
-            refined.append(better)
-        return better
+        own = on_its_panels(*a, **k)
+        if own is not None and own[1] <= math.radians(locator3d.REFINE_TILT_SIGMA_DEG):
+            refined.append(np.asarray(own[0].rotation[2]))
+        return own
 
     monkeypatch.setattr(locator3d, "_plan_view", viewed)
-    monkeypatch.setattr(locator3d, "_vertical_from", refining)
+    monkeypatch.setattr(locator3d, "_on_its_panels", refining)
     sim, fix = _located(scene, 3, 0.02)
     _within(fix, sim)
-    assert len(refined) == 1
+    assert refined  # the first holds the refined tries' vertical
     at_refined = [band for up, band in seen if np.array_equal(up, refined[0])]
     assert at_refined[:3] == list(Locator3DConfig().bands_m)
     assert fix.up is not None
     assert np.array_equal(fix.up, refined[0])  # the fix is the refined vertical's
     assert fix.plan.pose is not None
+
+
+def test_a_one_beacon_start_starts_again_from_that_beacons_own_panels(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    # The same frame as above: its first try's plan view confirms one beacon, smeared by
+    # a vertical degrees off, and the 3D stages from its pose refuse. The beacon's own
+    # panels put it and the vertical elsewhere, and from there the 3D stages fix it.
+    scene = random_drift_scene(1, 1, frames=10, lidar="vlp16", range_sigma_m=0.02, lookalikes=True)
+    made: list[tuple[Pose2D, NDArray[np.float64], bool]] = []
+    from_one = locator3d._from_one_beacon
+
+    def recorded(frame: Frame3D, survey: Survey, planes: PanelPlanes, plan: Fix,
+                 start: Pose2D, seen: tuple[str, ...], up: NDArray[np.float64], *a: Any,
+                 **k: Any) -> Fix3D:  # fmt: skip
+        fix = from_one(frame, survey, planes, plan, start, seen, up, *a, **k)
+        made.append((start, np.array(up), fix.ok))
+        return fix
+
+    monkeypatch.setattr(locator3d, "_from_one_beacon", recorded)
+    sim, fix = _located(scene, 3, 0.02)
+    _within(fix, sim, 3.0)
+    (plan_start, tried, refused), (own_start, own_up, fixed) = made
+    assert not refused
+    assert fixed
+    truth = np.asarray(sim.pose.rotation[2])
+    off = [math.degrees(math.acos(min(1.0, float(v @ truth)))) for v in (tried, own_up)]
+    assert off[1] < 1.0 < locator3d.OWN_APART_DEG < off[0], off  # 5.8 and 0.16 deg off
+    monkeypatch.setattr(locator3d, "OWN_TILT_SIGMA_DEG", -1.0)
+    made.clear()
+    _located(scene, 3, 0.02)
+    assert made[0][0] == plan_start
+    assert all(start != own_start for start, _, _ in made)  # not started from its panels
 
 
 def test_wall_returns_above_rays_passing_over_a_panel_do_not_set_its_top() -> None:
@@ -215,7 +250,8 @@ def test_one_beacon_starts_reach_the_try_whose_beacon_is_the_true_one(
     # next session), stop short of it.
     scene = random_drift_scene(1, 2, frames=10, lidar="vlp16", range_sigma_m=0.01)
     starts = _starts_seen(monkeypatch)
-    monkeypatch.setattr(locator3d, "LENIENT_STARTS", 0)  # the one-beacon starts alone
+    monkeypatch.setattr(locator3d, "LENIENT_STARTS", 0)  # the one-beacon starts alone,
+    monkeypatch.setattr(locator3d, "OWN_TILT_SIGMA_DEG", -1.0)  # from the plan views
     sim, fix = _located(scene, 7, 0.01)
     _within(fix, sim, 3.0)
     assert starts == [("B2",), ("B2",), ("B5",)]
@@ -581,12 +617,15 @@ def test_right_fixes_are_not_refused_for_their_plan_view_or_their_panels_tops(
     refusal: tuple[str, str],
 ) -> None:
     # Each at 3 cm, a fix right to millimetres that the stage ``name`` now lets stand:
-    # with ``off`` in its place, it is refused (``refusal``: the reason and its words).
+    # with ``off`` in its place, it is refused (``refusal``: the reason and its words),
+    # where no one-beacon start is made again from its beacon's own panels (the VLP-16's
+    # is fixed so, within 1.5 sigma).
     scene = random_drift_scene(0, drift, frames=10, lidar=lidar, range_sigma_m=0.03)
     sim, fix = _located(scene, index, 0.03)
     err = _within(fix, sim, 3.0)
     assert np.hypot(err[0], err[1]) < 0.01
     monkeypatch.setattr(locator3d, name, off)
+    monkeypatch.setattr(locator3d, "OWN_TILT_SIGMA_DEG", -1.0)
     refused = _located(scene, index, 0.03)[1]
     assert not refused.ok
     assert refused.reason == refusal[0]
@@ -868,7 +907,8 @@ def test_a_one_beacon_3d_fix_the_plan_view_confirms_no_beacon_near_is_refused(
     # (The reason is the first 3D refusal of the frame's tries: since grazing returns
     # are left out, an earlier try's adjustment is rejected by the global test.) With
     # the two one-beacon starts it was found with; a later start fixes it right, and so,
-    # after the tries, does a plan view located leniently (LENIENT_STARTS).
+    # after the tries, does a plan view located leniently (LENIENT_STARTS), and a start
+    # again from the beacon's own panels (OWN_TILT_SIGMA_DEG).
     scene = random_drift_scene(49, frames=6, lidar="vlp16", range_sigma_m=0.02, lookalikes=True)
     sim, fix = _located(scene, 2, 0.02)
     _within(fix, sim, 3.0)
@@ -876,6 +916,9 @@ def test_a_one_beacon_3d_fix_the_plan_view_confirms_no_beacon_near_is_refused(
     _, fix = _located(scene, 2, 0.02)
     _within(fix, sim, 3.0)
     monkeypatch.setattr(locator3d, "LENIENT_STARTS", 0)
+    _, fix = _located(scene, 2, 0.02)
+    _within(fix, sim, 3.0)
+    monkeypatch.setattr(locator3d, "OWN_TILT_SIGMA_DEG", -1.0)
     _, fix = _located(scene, 2, 0.02)
     assert not fix.ok
     assert fix.reason in {"inconsistent", "one_beacon", "rejected"}
@@ -947,6 +990,7 @@ def test_the_plan_view_located_again_sees_each_beacon_in_the_band_of_its_tops(
     sim, fix = _located(scene, index, sigma)
     _within(fix, sim, 3.5)
     monkeypatch.setattr(locator3d, "_beacon_bands", lambda survey, pose: [])
+    monkeypatch.setattr(locator3d, "OWN_TILT_SIGMA_DEG", -1.0)  # its refusal, not another's
     refused = _located(scene, index, sigma)[1]
     assert not refused.ok
     assert refusal in refused.detail
