@@ -469,19 +469,21 @@ def test_the_locator_refuses_a_precision_no_instrument_has(field: str, value: fl
         LocatorConfig(**{field: value})
 
 
-def test_located_again_under_other_rules_is_located_from_scratch() -> None:
+def test_located_again_under_other_rules_is_what_locating_afresh_gives() -> None:
     # locate_again keeps the first search's segments and corners: what it gives under
     # other verification and test rules is what locating the scan afresh under them gives
     from mast.pipeline.locator import locate_again
     from mast.pipeline.segmentation import SegmentationConfig
+    from mast.pipeline.tracking import Prior
     from mast.pipeline.verification import VerificationConfig
 
     strict = LocatorConfig(range_sigma_m=0.012)
     others = (
         replace(strict, verification=VerificationConfig(wall_behind_m=0.15)),
+        replace(strict, verification=VerificationConfig(min_panel_points=40)),
         replace(strict, reject_alpha=0.2, min_beacons=3),
     )
-    seen = set()
+    seen, changed = set(), 0
     for scene in paper_scenario(seed=3, noise=True):
         for sim in scene.simulate_all():
             first = locate(sim.scan, scene.survey, config=strict)
@@ -495,9 +497,25 @@ def test_located_again_under_other_rules_is_located_from_scratch() -> None:
                 )
                 assert again.pose == fresh.pose
                 assert again.segmentation is first.segmentation
+                assert again.identification is first.identification
+                changed += (fresh.status, fresh.pose) != (first.status, first.pose)
                 seen.add(again.reason)
+    assert changed >= 10  # the rules decide: a locate_again under the first's would fail
     assert None in seen  # fixes
     assert len(seen) > 1  # and refusals
-    coarse = replace(strict, segmentation=SegmentationConfig(min_points=9))
-    with pytest.raises(ValueError, match="segment and identify"):
-        locate_again(first, sim.scan, scene.survey, coarse)
+    # the range sigma alone neither segments nor identifies; the survey sigma does
+    wider = replace(strict, range_sigma_m=0.02)
+    assert locate_again(first, sim.scan, scene.survey, wider).pose == (
+        locate(sim.scan, scene.survey, config=wider).pose
+    )
+    for unlike in (
+        replace(strict, segmentation=SegmentationConfig(min_points=9)),
+        replace(strict, survey_sigma_m=0.01),
+    ):
+        with pytest.raises(ValueError, match="segment and identify"):
+            locate_again(first, sim.scan, scene.survey, unlike)
+    # with a prior, the scan is located afresh, the prior's search first
+    assert first.pose is not None
+    near = replace(strict, prior=Prior(first.pose, 0.2, math.radians(2.0)))
+    again = locate_again(first, sim.scan, scene.survey, near)
+    assert again.pose == locate(sim.scan, scene.survey, config=near).pose

@@ -187,9 +187,9 @@ def test_a_one_beacon_start_starts_again_from_that_beacons_own_panels(
     monkeypatch.setattr(locator3d, "_from_one_beacon", recorded)
     sim, fix = _located(scene, 3, 0.02)
     _within(fix, sim, 3.0)
-    (plan_start, tried, refused), (own_start, own_up, fixed) = made
-    assert not refused
-    assert fixed
+    (plan_start, tried, plan_fixed), (own_start, own_up, own_fixed) = made
+    assert not plan_fixed
+    assert own_fixed
     truth = np.asarray(sim.pose.rotation[2])
     off = [math.degrees(math.acos(min(1.0, float(v @ truth)))) for v in (tried, own_up)]
     assert off[1] < 1.0 < locator3d.OWN_APART_DEG < off[0], off  # 5.8 and 0.16 deg off
@@ -197,7 +197,44 @@ def test_a_one_beacon_start_starts_again_from_that_beacons_own_panels(
     made.clear()
     _located(scene, 3, 0.02)
     assert made[0][0] == plan_start
-    assert all(start != own_start for start, _, _ in made)  # not started from its panels
+    for start, _, _ in made:  # none started from its panels
+        assert not locator3d._same_start(start, (), tried, own_start, (), tried)
+
+
+def test_a_one_beacon_start_made_already_is_not_run_again(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    # A VLP-16 2 cm frame (seed 0, drift 6, frame 1): two tries' plan views confirm the
+    # same beacon within a few millimetres, with the same vertical. The 3D stages from
+    # the second are not run again (SAME_START_M): their result is the first's, handed
+    # on with the second try's plan view, and confirmed in its band.
+    scene = random_drift_scene(0, 6, frames=10, lidar="vlp16", range_sigma_m=0.02)
+    runs: list[Pose2D] = []
+    handed: list[tuple[Fix, Fix3D | None]] = []
+    fix3d, from_one = locator3d._fix3d, locator3d._from_one_beacon
+
+    def counted(*a: Any, one_beacon: Pose2D | None = None, **k: Any) -> Fix3D:
+        if one_beacon is not None:
+            runs.append(one_beacon)
+        return fix3d(*a, one_beacon=one_beacon, **k)
+
+    def recorded(frame: Frame3D, survey: Survey, planes: PanelPlanes, plan: Fix,
+                 *a: Any, **k: Any) -> Fix3D:  # fmt: skip
+        handed.append((plan, k.get("first")))
+        return from_one(frame, survey, planes, plan, *a, **k)
+
+    monkeypatch.setattr(locator3d, "_fix3d", counted)
+    monkeypatch.setattr(locator3d, "_from_one_beacon", recorded)
+    sim, fix = _located(scene, 1, 0.02)
+    _within(fix, sim, 3.0)
+    assert len(handed) == 2
+    assert len(runs) == 1  # the second start's 3D stages were the first's
+    assert all(first is not None and first.plan is plan for plan, first in handed)
+    monkeypatch.setattr(locator3d, "SAME_START_M", -1.0)
+    runs.clear()
+    _, again = _located(scene, 1, 0.02)
+    _within(again, sim, 3.0)
+    assert len(runs) == 2
 
 
 def test_wall_returns_above_rays_passing_over_a_panel_do_not_set_its_top() -> None:
@@ -990,7 +1027,6 @@ def test_the_plan_view_located_again_sees_each_beacon_in_the_band_of_its_tops(
     sim, fix = _located(scene, index, sigma)
     _within(fix, sim, 3.5)
     monkeypatch.setattr(locator3d, "_beacon_bands", lambda survey, pose: [])
-    monkeypatch.setattr(locator3d, "OWN_TILT_SIGMA_DEG", -1.0)  # its refusal, not another's
     refused = _located(scene, index, sigma)[1]
     assert not refused.ok
     assert refusal in refused.detail

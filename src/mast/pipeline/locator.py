@@ -538,17 +538,19 @@ def locate(scan: Scan, survey: Survey, *, config: LocatorConfig | None = None) -
 def locate_again(fix: Fix, scan: Scan, survey: Survey, config: LocatorConfig) -> Fix:
     """:func:`locate` of ``scan`` again, without a prior, under ``config`` (other
     verification or adjustment rules), on the segmentation and identified corners the
-    global search that gave ``fix`` made of the same scan: the same result as
-    :func:`locate`, without segmenting and identifying the scan twice. ``config`` must
-    segment and identify as ``fix``'s did; a fix found without its segmentation (near
-    a prior) is located from scratch."""
+    global search that gave ``fix`` made of the same scan (against the same survey):
+    the same result as :func:`locate`, without segmenting and identifying the scan
+    twice (its ``stages_s`` and ``elapsed_s`` count the stages run again only).
+    ``config`` must segment and identify as ``fix``'s did (the same segmentation and
+    identification settings and survey sigma); a fix found without its segmentation
+    (near a prior), or a ``config`` with a prior, is located from scratch."""
     was = fix.config
     if config.prior is not None or fix.segmentation is None or fix.identification is None:
         return locate(scan, survey, config=config)
-    if (config.segmentation, config.identification, config.noise) != (
+    if (config.segmentation, config.identification, config.noise.survey_sigma_m) != (
         was.segmentation,
         was.identification,
-        was.noise,
+        was.noise.survey_sigma_m,
     ):
         raise ValueError("locate_again: the configuration must segment and identify as the fix's")
     t0 = time.perf_counter()

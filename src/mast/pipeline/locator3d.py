@@ -734,7 +734,8 @@ def locate3d(
                     if _apart(own, tried):
                         assert own is not None
                         vertical = np.asarray(own[0].rotation[2], dtype=np.float64)
-                        fix = one_start(plan, own[0].horizontal, alone, vertical, band)
+                        again = one_start(plan, own[0].horizontal, alone, vertical, band)
+                        fix = again if again.ok else fix  # the first start's refusal stands
                 if fix.ok:
                     return replace(fix, elapsed_s=time.perf_counter() - t0, stages_s=spent)
             if plan.reason == "inconsistent":
@@ -747,7 +748,7 @@ def locate3d(
                 t = time.perf_counter()
                 own = _on_its_panels(frame, planes, plan, tried, cfg, spacing)
                 spent["vertical"] += time.perf_counter() - t
-            if own is not None and own[1] <= math.radians(REFINE_TILT_SIGMA_DEG):
+            if own is not None and not own[1] > math.radians(REFINE_TILT_SIGMA_DEG):
                 refined = True
                 better = np.asarray(own[0].rotation[2], dtype=np.float64)
                 tries[:0] = [(better, band) for band in cfg.bands_m[:REFINED_BANDS]]
