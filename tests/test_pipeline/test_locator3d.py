@@ -43,6 +43,7 @@ from mast.pipeline.locator3d import (
     locate3d,
 )
 from mast.pipeline.plan_view import _bin_bands, level_rotation
+from mast.pipeline.verification import VerificationConfig
 from mast.report.record import fix3d_record, fix3d_text
 from mast.sim.lidar3d import DriftScene3D, SimulatedFrame3D, random_drift_scene
 from tests._raycast3d import cast, paper_walls
@@ -199,6 +200,45 @@ def test_a_one_beacon_start_starts_again_from_that_beacons_own_panels(
     assert made[0][0] == plan_start
     for start, _, _ in made:  # none started from its panels
         assert not locator3d._same_start(start, (), tried, own_start, (), tried)
+
+
+def test_the_plan_view_located_again_near_a_3d_pose_is_not_dragged_onto_a_wall(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    # A VLP-16 2 cm frame of fresh draws (seed 2, drift 3, frame 4): B3, 3.3 m off, has
+    # its top 0.79 m below the sensor and only the lowest ring grazing it, so the plan
+    # view shows there its wall, a decimetre or two behind its panels. The 3D stages
+    # from B4's own panels fix B4 and B5; the plan view located again near that pose
+    # must confirm them, and with the 2D gates (15 cm first) ICP took B3's wall for its
+    # panels and dragged each hypothesis decimetres, the beams refusing the rest.
+    scene = random_drift_scene(2, 3, frames=10, lidar="vlp16", range_sigma_m=0.02, lookalikes=True)
+    again: list[Fix] = []
+    plan_again = locator3d._plan_again
+
+    def recorded(*a: Any) -> Fix:
+        fix = plan_again(*a)
+        again.append(fix)
+        return fix
+
+    monkeypatch.setattr(locator3d, "_plan_again", recorded)
+    sim, fix = _located(scene, 4, 0.02)
+    _within(fix, sim, 3.0)
+    assert set(fix.beacons) >= {"B4", "B5"}
+    confirmed = [f for f in again if f.ok and f.pose is not None]
+    assert confirmed
+    for f in confirmed:  # the 2D fix where the 3D pose is, not dragged off it
+        assert f.pose is not None
+        off = math.hypot(f.pose.easting - sim.pose.easting, f.pose.northing - sim.pose.northing)
+        assert off < 0.02, off
+    strict = VerificationConfig().coarse_gates_m
+    for gates, wall in ((strict, locator3d.AGAIN_WALL_M), (locator3d.AGAIN_GATES_M, 0.0)):
+        monkeypatch.setattr(locator3d, "AGAIN_GATES_M", gates)
+        monkeypatch.setattr(locator3d, "AGAIN_WALL_M", wall)
+        again.clear()
+        _, refused = _located(scene, 4, 0.02)
+        assert not refused.ok  # either rule alone leaves the frame unfixed
+        assert again
+        assert not any(f.ok for f in again)
 
 
 def test_a_one_beacon_start_made_already_is_not_run_again(
@@ -647,6 +687,7 @@ def _off_plan_refused(*args: Any) -> Fix3D:
 def test_right_fixes_are_not_refused_for_their_plan_view_or_their_panels_tops(
     bin_centre_plan: None,
     two_refined_bands: None,
+    strict_plan_again: None,
     monkeypatch: pytest.MonkeyPatch,
     lidar: str,
     drift: int,
@@ -835,6 +876,15 @@ def two_refined_bands(monkeypatch: pytest.MonkeyPatch) -> None:
     next session): frames that showed a stage deciding them were found so, and tried in
     the widest band too, some are fixed by another way."""
     monkeypatch.setattr(locator3d, "REFINED_BANDS", 2)
+
+
+@pytest.fixture
+def strict_plan_again(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The plan view located again near a 3D pose as it was before 2026-12-07 (the
+    seventh session that day): the strict beam rule and the 2D gates. A frame whose
+    plan view, so located, confirmed one beacon alone may now confirm both."""
+    monkeypatch.setattr(locator3d, "AGAIN_GATES_M", VerificationConfig().coarse_gates_m)
+    monkeypatch.setattr(locator3d, "AGAIN_WALL_M", 0.0)
 
 
 @pytest.fixture
@@ -1029,6 +1079,12 @@ def test_the_plan_view_located_again_sees_each_beacon_in_the_band_of_its_tops(
     sim, fix = _located(scene, index, sigma)
     _within(fix, sim, 3.5)
     monkeypatch.setattr(locator3d, "_beacon_bands", lambda survey, pose: [])
+    # the plan view located again with the lenient rule and narrow gates (AGAIN_GATES_M)
+    # confirms the fix in the try's band too, where the beams passing over the other
+    # beacons land on their walls
+    _within(_located(scene, index, sigma)[1], sim, 3.5)
+    monkeypatch.setattr(locator3d, "AGAIN_GATES_M", VerificationConfig().coarse_gates_m)
+    monkeypatch.setattr(locator3d, "AGAIN_WALL_M", 0.0)
     refused = _located(scene, index, sigma)[1]
     assert not refused.ok
     assert refusal in refused.detail

@@ -195,6 +195,20 @@ LENIENT_WALL_M = 0.15
 #: The window of the prior a one-beacon start's 3D pose sets the plan view located
 #: again (metres, degrees).
 ONE_BEACON_PRIOR = (0.25, 2.0)
+#: The plan view located again near a 3D pose (:func:`_plan_again`) is verified as the
+#: lenient one is (AGAIN_WALL_M: :data:`LENIENT_WALL_M`), and ICP refines its
+#: hypotheses with these coarse gates only (metres; one less certain than the first
+#: starts wider, by its own spread, as in 2D). A 3D pose is millimetres off in plan, and
+#: a beacon whose panels the band passes over or under shows the plan view only its
+#: wall, a decimetre or two behind them: the 2D gates (15 cm first) took that wall for
+#: its panels, and dragged a hypothesis that started 3 mm off to 0.44 m (a VLP-16 frame
+#: of fresh draws, seed 2, drift 3, frame 4: B3 3.3 m off, its top 0.79 m below the
+#: sensor and grazed by the lowest ring), and the strict beams took that wall's returns
+#: for 68 beams through its panels. Near a pose that passed every 3D test (the 3D beams'
+#: own, :meth:`~mast.pipeline.adjust3d.PanelPlanes.misfits`, among them) the plan view
+#: must still show two beacons' panels where the pose puts them.
+AGAIN_GATES_M = (0.05,)
+AGAIN_WALL_M = LENIENT_WALL_M
 #: The band of tops in the plan view located again (each beacon's bearings in its own,
 #: then every bearing in that of the beacons the 3D pose shows): from this far below
 #: the lowest of the tops to this far below the highest, metres.
@@ -885,18 +899,25 @@ def _plan_again(
     """The plan view levelled by a 3D ``pose`` (its vertical, which a fix knows to a
     fraction of a degree where a try's was degrees off), located by 2D with the pose as
     its prior (:data:`ONE_BEACON_PRIOR`: a prior only adds, and the 2D beam verification
-    confirms every beacon it takes). First with each surveyed beacon's bearings in the
-    band of its own tops (:func:`_beacon_bands`: on a grade the beacons stand at other
-    heights than a band about the sensor, and its beams pass over or under them), the
-    try's ``band`` elsewhere; then every bearing in the band of the tops of the
-    ``beacons`` the pose shows (:data:`ONE_BEACON_BAND_M`); then in the try's band. The
-    first 2D fix, or the last refusal. ``spent`` is added to."""
+    confirms every beacon it takes), a return on a beacon's own wall no verdict and
+    ICP's coarse gates narrow (:data:`AGAIN_GATES_M`). First with each surveyed beacon's
+    bearings in the band of its own tops (:func:`_beacon_bands`: on a grade the beacons
+    stand at other heights than a band about the sensor, and its beams pass over or
+    under them), the try's ``band`` elsewhere; then every bearing in the band of the
+    tops of the ``beacons`` the pose shows (:data:`ONE_BEACON_BAND_M`); then in the
+    try's band. The first 2D fix, or the last refusal. ``spent`` is added to."""
     t = time.perf_counter()
     vertical = np.asarray(pose.rotation[2], dtype=np.float64)  # grid z, sensor frame
     radius, degrees = ONE_BEACON_PRIOR
     prior = Prior(pose.horizontal, radius, math.radians(degrees))
     plan_cfg = LocatorConfig(
         range_sigma_m=cfg.range_sigma_m, survey_sigma_m=cfg.survey_sigma_m, prior=prior
+    )
+    plan_cfg = replace(
+        plan_cfg,
+        verification=replace(
+            plan_cfg.verification, coarse_gates_m=AGAIN_GATES_M, wall_behind_m=AGAIN_WALL_M
+        ),
     )
     tops = [
         float(np.mean(b.elevations)) - pose.elevation
