@@ -241,6 +241,51 @@ def test_the_plan_view_located_again_near_a_3d_pose_is_not_dragged_onto_a_wall(
         assert not any(f.ok for f in again)
 
 
+def test_top_edges_alternating_between_two_choices_give_their_mixture(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    # A VLP-16 1 cm look-alike frame of fresh draws (seed 3, drift 3, frame 4): B1, 3.1 m
+    # off, has its top at the sensor's height, and the top edges' rays chosen at each
+    # adjusted pose alternate between two choices, each adjustment within about a
+    # sigma of the truth. The fix is their mean, its covariance their mixture's.
+    scene = random_drift_scene(3, 3, frames=10, lidar="vlp16", range_sigma_m=0.01, lookalikes=True)
+    pairs: list[tuple[NDArray[np.float64], NDArray[np.float64]]] = []
+    mixed: list[tuple[Adjustment3D, tuple[NDArray[np.float64], NDArray[np.float64]]]] = []
+    alternate, adjust = adjust3d._alternate, locator3d.adjust_pose
+
+    def recorded(solved: Any, before: Any, *a: Any) -> Any:
+        other = alternate(solved, before, *a)
+        if other is not None:
+            pairs.append((solved.x.copy(), other.x.copy()))
+        return other
+
+    def adjusted(*a: Any, **k: Any) -> Adjustment3D:
+        adj = adjust(*a, **k)
+        if adj.mixed:
+            mixed.append((adj, pairs[-1]))
+        return adj
+
+    monkeypatch.setattr(adjust3d, "_alternate", recorded)
+    monkeypatch.setattr(locator3d, "adjust_pose", adjusted)
+    sim, fix = _located(scene, 4, 0.01)
+    _within(fix, sim, 3.0)
+    assert fix.adjustment is not None
+    assert fix.adjustment.mixed
+    assert mixed
+    for adj, (one, other) in mixed:  # (E, N, A, pitch, roll, Z) -> the record's order
+        order = [0, 1, 5, 4, 3, 2]
+        one, other = one[order], other[order]
+        mean = adj.pose.minus(Pose3D(*(one[[0, 1, 2, 5, 4, 3]])))
+        half = 0.5 * (other - one)
+        assert np.allclose(mean, half, atol=1e-9)  # the mean of the two
+        sigma = np.sqrt(np.diag(adj.covariance))
+        assert np.all(np.abs(half) <= sigma)  # either choice within one sigma
+    monkeypatch.setattr(adjust3d, "_alternate", lambda *a: None)
+    refused = _located(scene, 4, 0.01)[1]
+    assert not refused.ok
+    assert "alternate between two choices" in refused.detail
+
+
 def test_a_one_beacon_start_made_already_is_not_run_again(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:

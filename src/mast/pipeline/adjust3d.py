@@ -36,7 +36,9 @@ elevation is its top end). Two kinds of evidence, each from the frame alone:
   rays are chosen at the start of each adjustment and kept through its iterations
   (chosen again, and the adjustment run again, until the choice holds, at most six
   times: :attr:`Adjustment3D.settled`); a beacon's bracket that fails its w-test
-  against the others is left out.
+  against the others is left out. Where the choice alternates between two, each
+  chosen at the pose the other adjusts to, the pose is the two adjustments' mean and
+  its covariance their equal mixture's (:attr:`Adjustment3D.mixed`).
 """
 
 from __future__ import annotations
@@ -858,8 +860,14 @@ class Adjustment3D:
     snooping left out), -1 for none."""
     settled: bool = True
     """Whether the top edges' rays, chosen again at the adjusted pose, held and passed
-    their w-test: where they alternate between two choices, the elevation and the tilt
-    they lever are not known, and a locator should not give the fix."""
+    their w-test, or alternated between two choices that each passed it (``mixed``):
+    otherwise the elevation and the tilt they lever are not known, and a locator should
+    not give the fix."""
+    mixed: bool = False
+    """Whether the top edges' rays alternated between two choices, each chosen at the
+    pose the other adjusts to and each passing its w-test: the pose is then the two
+    adjustments' mean, and its covariance their equal mixture's (their mean covariance
+    plus the outer product of half their difference), which covers either."""
 
 
 def _derivatives(roll: float, pitch: float, yaw: float) -> NDArray[np.float64]:
@@ -1486,7 +1494,8 @@ def adjust_pose(
     derivatives by all six parameters those of the two rays that set its ends. The
     rays are chosen again at the adjusted pose until the choice holds and every
     beacon's bracket passes its w-test (at most six times: :attr:`Adjustment3D.settled`
-    says whether it did).
+    says whether it did; where the choice alternates between two, the two adjustments'
+    mixture: :attr:`Adjustment3D.mixed`).
 
     Returns that are not the panel's (the wall just above, below or beside one, within
     the gate of its plane) are found by data snooping: Baarda's w-test on each
@@ -1532,6 +1541,10 @@ def adjust_pose(
     distrust: set[str] = set()
     pairs = planes._pairs(local) if local is not None else None
 
+    def choose(x0: NDArray[np.float64]) -> list[tuple[int, int, int]]:
+        return _chosen_tops(p, which, planes, x0, gate_m, frozenset(distrust), top_panels,
+                            pairs)  # fmt: skip
+
     solved = solve(x)
     if lines is not None:
         solved = _snoop_pieces(p, which, planes, solved, lines, solve)
@@ -1548,31 +1561,34 @@ def adjust_pose(
         which[np.flatnonzero(which >= 0)[bad]] = -1
         solved = solve(solved.x)
     settled = not elevation
+    before: _Solved | None = None  # the adjustment on the rays chosen before the last
     for _ in range(6 if elevation else 0):
         # the top edges' rays chosen again where the pose moved: the same rays, the same
         # adjustment (where it converged on them); others, the adjustment again on them
         tops = _chosen_tops(p, which, planes, solved.x, gate_m, frozenset(distrust),
                             top_panels, pairs)  # fmt: skip
         if tops != solved.tops or solved.iterations >= iterations:
-            solved = solve(solved.x, tops)
+            before, solved = solved, solve(solved.x, tops)
             continue
         worst = _failed_bracket(solved, planes)
         if worst is None:
             settled = True
             break
         distrust.add(worst)
-        solved = solve(solved.x)
-    x, J, W, v, n_points = solved.x, solved.J, solved.W, solved.v, solved.n_points
-    k_of = which[which >= 0]
-    Q = np.linalg.inv(solved.N)
+        before, solved = None, solve(solved.x)
+    other = None if settled else _alternate(solved, before, iterations, planes, choose)
+    x, W, v, n_points = solved.x, solved.W, solved.v, solved.n_points
     dof = n_points - 5
     s0 = float(W[:n_points] @ (v[:n_points] ** 2)) / dof if dof > 0 else math.nan
-    # The survey's error is one offset per panel, shared by all its returns.
-    G = Q @ (J.T * W)
-    shared = np.zeros((n_points, len(planes)))
-    shared[np.arange(n_points), k_of] = solved.offsets()
-    g = G[:, :n_points] @ shared  # (6, panels): each panel's offset's effect
-    cov = Q + survey_sigma_m**2 * (g @ g.T)
+    cov = _covariance(solved, which, planes, survey_sigma_m)
+    if other is not None:
+        # the two choices' equal mixture: their mean, and a covariance that covers either
+        half = 0.5 * (other.x - x)
+        half[2] = 0.5 * math.remainder(other.x[2] - x[2], 2.0 * math.pi)
+        x = x + half
+        cov = 0.5 * (cov + _covariance(other, which, planes, survey_sigma_m))
+        cov += np.outer(half, half)
+        settled = True
     # (E, N, A, pitch, roll, Z) → (E, N, Z, roll, pitch, A)
     order = [0, 1, 5, 4, 3, 2]
     pose = Pose3D(x[0], x[1], x[5], normalize_azimuth(x[2]), x[3], x[4])
@@ -1587,4 +1603,41 @@ def adjust_pose(
         top_edges=len({planes.beacon[k] for k, _, _ in solved.tops}),
         used=which,
         settled=settled,
+        mixed=other is not None,
     )
+
+
+def _covariance(
+    solved: _Solved, which: NDArray[np.intp], planes: PanelPlanes, survey_sigma_m: float
+) -> NDArray[np.float64]:
+    """An adjustment's covariance (E, N, A, pitch, roll, Z): its normal equations' inverse,
+    and the survey's error, one offset per panel shared by all its returns."""
+    Q = np.linalg.inv(solved.N)
+    n_points = solved.n_points
+    G = Q @ (solved.J.T * solved.W)
+    shared = np.zeros((n_points, len(planes)))
+    shared[np.arange(n_points), which[which >= 0]] = solved.offsets()
+    g = G[:, :n_points] @ shared  # (6, panels): each panel's offset's effect
+    return np.asarray(Q + survey_sigma_m**2 * (g @ g.T), dtype=np.float64)
+
+
+def _alternate(
+    solved: _Solved,
+    before: _Solved | None,
+    iterations: int,
+    planes: PanelPlanes,
+    choose: Callable[[NDArray[np.float64]], list[tuple[int, int, int]]],
+) -> _Solved | None:
+    """``before``, where the top edges' rays alternate between its choice and
+    ``solved``'s: each chosen at the pose the other adjusts to, both adjustments
+    converged and each beacon's bracket passing its w-test; else None (``choose``: the
+    rays chosen at a pose)."""
+    if before is None or before.tops == solved.tops or not solved.tops:
+        return None
+    if max(before.iterations, solved.iterations) >= iterations:
+        return None
+    if choose(solved.x) != before.tops or choose(before.x) != solved.tops:
+        return None
+    if _failed_bracket(solved, planes) is not None or _failed_bracket(before, planes) is not None:
+        return None
+    return before
