@@ -10,6 +10,7 @@ import math
 import warnings
 from collections.abc import Sequence
 from dataclasses import replace
+from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
@@ -250,8 +251,9 @@ def test_top_edges_alternating_between_two_choices_give_their_mixture(
     # sigma of the truth. The fix is their mean, its covariance their mixture's.
     scene = random_drift_scene(3, 3, frames=10, lidar="vlp16", range_sigma_m=0.01, lookalikes=True)
     pairs: list[tuple[NDArray[np.float64], NDArray[np.float64]]] = []
-    mixed: list[tuple[Adjustment3D, tuple[NDArray[np.float64], NDArray[np.float64]]]] = []
-    alternate, adjust = adjust3d._alternate, locator3d.adjust_pose
+    covariances: list[NDArray[np.float64]] = []
+    mixed: list[tuple[Adjustment3D, tuple[NDArray[np.float64], ...], list[NDArray[Any]]]] = []
+    alternate, adjust, covariance = adjust3d._alternate, locator3d.adjust_pose, adjust3d._covariance
 
     def recorded(solved: Any, before: Any, *a: Any) -> Any:
         other = alternate(solved, before, *a)
@@ -259,31 +261,58 @@ def test_top_edges_alternating_between_two_choices_give_their_mixture(
             pairs.append((solved.x.copy(), other.x.copy()))
         return other
 
+    def kept(*a: Any) -> NDArray[np.float64]:
+        covariances.append(covariance(*a))
+        return covariances[-1]
+
     def adjusted(*a: Any, **k: Any) -> Adjustment3D:
+        covariances.clear()
         adj = adjust(*a, **k)
         if adj.mixed:
-            mixed.append((adj, pairs[-1]))
+            mixed.append((adj, pairs[-1], list(covariances)))
         return adj
 
     monkeypatch.setattr(adjust3d, "_alternate", recorded)
+    monkeypatch.setattr(adjust3d, "_covariance", kept)
     monkeypatch.setattr(locator3d, "adjust_pose", adjusted)
     sim, fix = _located(scene, 4, 0.01)
     _within(fix, sim, 3.0)
     assert fix.adjustment is not None
     assert fix.adjustment.mixed
     assert mixed
-    for adj, (one, other) in mixed:  # (E, N, A, pitch, roll, Z) -> the record's order
-        order = [0, 1, 5, 4, 3, 2]
-        one, other = one[order], other[order]
-        mean = adj.pose.minus(Pose3D(*(one[[0, 1, 2, 5, 4, 3]])))
+    order = [0, 1, 5, 4, 3, 2]  # (E, N, A, pitch, roll, Z) -> the record's order
+    for adj, (one, other), (c_one, c_other) in mixed:
         half = 0.5 * (other - one)
-        assert np.allclose(mean, half, atol=1e-9)  # the mean of the two
-        sigma = np.sqrt(np.diag(adj.covariance))
-        assert np.all(np.abs(half) <= sigma)  # either choice within one sigma
+        mean = adj.pose.minus(Pose3D(one[0], one[1], one[5], one[2], one[3], one[4]))
+        assert np.allclose(mean, half[order], atol=1e-9)  # the mean of the two
+        mixture = 0.5 * (c_one + c_other) + np.outer(half, half)
+        assert np.allclose(adj.covariance, mixture[np.ix_(order, order)], rtol=1e-12, atol=0)
+        assert np.abs(half[5]) > 0.2 * math.sqrt(mixture[5, 5])  # the choices differ
     monkeypatch.setattr(adjust3d, "_alternate", lambda *a: None)
     refused = _located(scene, 4, 0.01)[1]
     assert not refused.ok
-    assert "alternate between two choices" in refused.detail
+    assert "settle on no choice" in refused.detail
+
+
+def test_only_a_two_choice_cycle_of_converged_bracketing_adjustments_is_mixed() -> None:
+    # _alternate's guards, on stand-ins for the adjustments: the rays chosen at the
+    # last pose must be the first's, both choices must bracket, differ and have
+    # converged.
+    a_tops, b_tops = [(0, 1, 2)], [(0, 3, 4)]
+    planes = PanelPlanes.of(paper_walls("parallel")[1].survey)
+
+    def solved(tops: list[tuple[int, int, int]], iterations: int = 3) -> Any:
+        return SimpleNamespace(x=np.zeros(6), tops=tops, iterations=iterations)
+
+    back = lambda tops: lambda x: tops  # noqa: E731 - the rays chosen at any pose
+    alternate = adjust3d._alternate
+    assert alternate(solved(b_tops), None, 20, planes, back(a_tops)) is None
+    assert alternate(solved(a_tops), solved(a_tops), 20, planes, back(a_tops)) is None
+    assert alternate(solved(b_tops), solved([]), 20, planes, back([])) is None
+    assert alternate(solved([]), solved(a_tops), 20, planes, back(a_tops)) is None
+    assert alternate(solved(b_tops), solved(a_tops, 20), 20, planes, back(a_tops)) is None
+    assert alternate(solved(b_tops, 20), solved(a_tops), 20, planes, back(a_tops)) is None
+    assert alternate(solved(b_tops), solved(a_tops), 20, planes, back(b_tops)) is None
 
 
 def test_a_one_beacon_start_made_already_is_not_run_again(
@@ -732,7 +761,7 @@ def _off_plan_refused(*args: Any) -> Fix3D:
 def test_right_fixes_are_not_refused_for_their_plan_view_or_their_panels_tops(
     bin_centre_plan: None,
     two_refined_bands: None,
-    strict_plan_again: None,
+    request: pytest.FixtureRequest,
     monkeypatch: pytest.MonkeyPatch,
     lidar: str,
     drift: int,
@@ -745,6 +774,10 @@ def test_right_fixes_are_not_refused_for_their_plan_view_or_their_panels_tops(
     # with ``off`` in its place, it is refused (``refusal``: the reason and its words),
     # where no one-beacon start is made again from its beacon's own panels (the VLP-16's
     # is fixed so, within 1.5 sigma).
+    # The one-beacon fix that stands alone is the plan view's, located again as before
+    # 2026-12-07's seventh session: it now confirms both beacons (strict_plan_again).
+    if name == "ALONE_TILT_SIGMA_DEG":
+        request.getfixturevalue("strict_plan_again")
     scene = random_drift_scene(0, drift, frames=10, lidar=lidar, range_sigma_m=0.03)
     sim, fix = _located(scene, index, 0.03)
     err = _within(fix, sim, 3.0)

@@ -1629,14 +1629,16 @@ def _alternate(
     choose: Callable[[NDArray[np.float64]], list[tuple[int, int, int]]],
 ) -> _Solved | None:
     """``before``, where the top edges' rays alternate between its choice and
-    ``solved``'s: each chosen at the pose the other adjusts to, both adjustments
-    converged and each beacon's bracket passing its w-test; else None (``choose``: the
-    rays chosen at a pose)."""
-    if before is None or before.tops == solved.tops or not solved.tops:
+    ``solved``'s: each chosen at the pose the other adjusts to, both choices bracketing
+    the elevation, both adjustments converged and each beacon's bracket passing its
+    w-test; else None (``choose``: the rays chosen at a pose). ``solved`` is the
+    adjustment on the rays chosen at ``before``'s pose (:func:`adjust_pose` keeps it
+    so), so only the way back is chosen here."""
+    if before is None or not before.tops or not solved.tops or before.tops == solved.tops:
         return None
     if max(before.iterations, solved.iterations) >= iterations:
         return None
-    if choose(solved.x) != before.tops or choose(before.x) != solved.tops:
+    if choose(solved.x) != before.tops:
         return None
     if _failed_bracket(solved, planes) is not None or _failed_bracket(before, planes) is not None:
         return None

@@ -1426,8 +1426,9 @@ def _fix3d(
     if not adj.settled:
         return refused(
             "inconsistent",
-            "the top edges' rays alternate between two choices: the elevation and the tilt "
-            "they lever are not known",
+            "the top edges' rays settle on no choice, nor alternate between two that each "
+            "bracket the elevation and pass their w-test: the elevation and the tilt they "
+            "lever are not known",
             adj,
         )
     if adj.test_p < cfg.reject_alpha:
