@@ -112,8 +112,13 @@ TILT_PRIOR_DEG = 5.0
 #: own sigma up to the limit: at 0.6 deg rather than 0.3, the benchmark fixed 424
 #: owed frames of 480 against 393 (24 more at the VLP-16 at 3 cm) and fresh draws 776
 #: of 1060 against 667, none wrong, the plan position still to millimetres
-#: (docs/3d.md).
-MAX_TILT_SIGMA_DEG = 0.6
+#: (docs/3d.md). At 1 deg rather than 0.6 (2026-12-07, the seventh session), 12 more of
+#: seeds 0-3's 1 920 owed frames, none lost, none wrong, every one within 2.1 sigma, the
+#: coverage the same: 1 374 of the fresh seeds' 1 440 against 1 362 (no owed frame of
+#: them is left refused for its tilt). Such a fix's roll and pitch are no survey's; its
+#: position and azimuth are (within 12 mm and 0.002 deg on those frames), and the
+#: record's sigmas say which.
+MAX_TILT_SIGMA_DEG = 1.0
 MAX_ELEVATION_SIGMA_M = 0.05
 #: A panel with fewer returns than this is left out of the fix's adjustment: a lone
 #: return cannot be checked against its panel's others (its residual is all its own),
