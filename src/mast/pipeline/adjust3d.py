@@ -1565,8 +1565,7 @@ def adjust_pose(
     for _ in range(6 if elevation else 0):
         # the top edges' rays chosen again where the pose moved: the same rays, the same
         # adjustment (where it converged on them); others, the adjustment again on them
-        tops = _chosen_tops(p, which, planes, solved.x, gate_m, frozenset(distrust),
-                            top_panels, pairs)  # fmt: skip
+        tops = choose(solved.x)
         if tops != solved.tops or solved.iterations >= iterations:
             before, solved = solved, solve(solved.x, tops)
             continue
