@@ -27,9 +27,11 @@ from mast.pipeline import adjust3d, locator3d
 from mast.pipeline.adjust3d import FLOOR_PAST_M, Adjustment3D, PanelPlanes
 from mast.pipeline.locator import Fix, LocatorConfig, locate
 from mast.pipeline.locator3d import (
+    NEAR_M,
     PITCH_TRIES_DEG,
     PLATE_RINGS,
     PLATE_SLACK_M,
+    START_HITS,
     Fix3D,
     Locator3DConfig,
     _beacon_bands,
@@ -39,6 +41,7 @@ from mast.pipeline.locator3d import (
     _on_one_beacon,
     _plate_floors,
     _refused_off_plan,
+    _start_elevation,
     _tries,
     _witnessed,
     locate3d,
@@ -488,6 +491,39 @@ def test_a_panel_is_one_run_of_heights() -> None:
     kept = _contiguous(which2, grid2, truth.position, planes, math.radians(2.0))
     assert kept[-1] == -1
     assert np.array_equal(kept[:-1], which)
+
+
+def test_a_lone_stray_return_on_a_panel_does_not_set_the_start_elevation() -> None:
+    # A beacon's three panels hit up to 10 cm under their tops, no ray over them: each
+    # bracket is open below (Z <= top - highest hit), and all three say the sensor is at
+    # most 10 cm above its true elevation. One return on a panel of the other beacon,
+    # 2.9 m above its top (the roof, within the gate of its plane), opens a fourth that
+    # every elevation under it meets with the three: it alone must not set the start.
+    _, scene = paper_walls("parallel")  # the first beacon: panels 0-2, the second 3-5
+    planes = PanelPlanes.of(scene.survey)
+    z_true = float(planes.top[1]) - 0.6  # the sensor 0.6 m below the first beacon's tops
+    middle = planes.start[1] + 0.5 * planes.length[1] * planes.along[1]
+    assert planes.front[1] != 0.0
+    origin = np.array([*(middle + 2.5 * planes.front[1] * planes.normal[1]), 0.0])  # facing it
+    points, which = [], []
+    for k in range(3):
+        for share in (0.3, 0.5, 0.7):
+            xy = planes.start[k] + share * planes.length[k] * planes.along[k]
+            for below in (0.1, 0.2, 0.3):  # grid heights: the sensor at elevation 0
+                points.append([*xy, planes.top[k] - below - z_true])
+                which.append(k)
+    stray = planes.start[3] + 0.5 * planes.length[3] * planes.along[3]
+    points.append([*stray, planes.top[3] + 2.9 - z_true])
+    which.append(3)
+    grid, hits = np.array(points), np.array(which)
+    local = planes.local(grid, NEAR_M)
+    args = (grid, origin, hits, planes, 0.05, math.radians(2.0), local)
+    start = _start_elevation(*args, least=START_HITS)
+    assert start is not None
+    assert -0.3 < start[0] - z_true <= 0.1
+    alone = _start_elevation(*args)  # every panel hit once brackets: the stray's wins
+    assert alone is not None
+    assert alone[0] - z_true < -2.5
 
 
 def test_the_compiled_runs_of_heights_and_floors_agree_with_their_numpy_references() -> None:
