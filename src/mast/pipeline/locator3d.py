@@ -22,8 +22,9 @@ view, then the six-parameter adjustment on the panels it names (docs/3d.md).
    reason is the first refusal of a 3D adjustment's, or else the first refusal's.
 4. **The start**: the 2D pose with the levelling's pitch and roll, and the elevation
    where the most panels' top brackets agree (:func:`_start_elevation`: hits in a
-   tight gate, each panel's run of them up from its middle, and the rays crossing over
-   it). Only returns within :data:`NEAR_M` of a panel in plan are looked at after.
+   tight gate, on panels with :data:`START_HITS` of them, each panel's run of them up
+   from its middle, and the rays crossing over it). Only returns within :data:`NEAR_M`
+   of a panel in plan are looked at after.
 5. **The tilt, grown out** (:func:`mast.pipeline.adjust3d.adjust_pose`, elevation
    held): on the returns within four range sigmas of the panels, first those within
    half a metre of the sensor's height, where the plan view's tilt error moves a return
@@ -236,13 +237,26 @@ WITNESSED_CLEAR = 0.5
 #: and 2), none lost, none wrong; seed 0 the same.
 SHOWN_CLEAR = 0.0
 #: A ring's returns on a beacon witness it (:func:`_standing_off`) where their mean
-#: stands off the wall by more than the rock's bulge plus this many gates over the root
-#: of their count, the wall measured where the ring shows it within WALL_PAST_M past the
-#: beacon's free ends (metres). On my eleven draws (803 owed frames) 1.5 fixed 24 more
-#: than the per-return rule alone, none wrong; 0.75 fixed 30 more, one of them wrong
-#: (1.5 deg in pitch), and 0.75 from the chord alone a fix 16 sigma off in azimuth (a
-#: far beacon's middle panel put on its wall, which the pose's error made stand off it).
+#: stands off the wall by more than the rock's bulge plus some gates over the root of
+#: their count. From the chord e1-e4, where the ring shows no wall past the beacon's
+#: free ends, WITNESS_MEAN_GATES of the gate (a pose's error moves the returns off the
+#: chord and does not average out). On my eleven draws (803 owed frames) 1.5 fixed 24
+#: more than the per-return rule alone, none wrong (then the bar from the wall shown
+#: too); 0.75 fixed 30 more, one of them wrong (1.5 deg in pitch), and 0.75 from the
+#: chord alone a fix 16 sigma off in azimuth (a far beacon's middle panel put on its
+#: wall, which the pose's error made stand off it).
 WITNESS_MEAN_GATES = 1.5
+#: From the wall the ring shows within WALL_PAST_M past the beacon's free ends (metres;
+#: a pose's error moves it as it moves the returns), WITNESS_WALL_GATES of the range
+#: noise's gate: 2.5 sigmas of the difference of three returns' mean and three others'
+#: median (the gate is four range sigmas, the median's own noise about 0.7 sigma),
+#: where 1.5 gates were 3.8. A beacon standing 12.8 cm off its wall, its middle panel
+#: crossed by three or four returns a ring at 3 cm, met a bar of 14.0 to 15.4 cm on
+#: every ring: none was witnessed, its 0.2 m end panel (all of it within the clearance
+#: of its free end) was shown by none, and the frame was refused as one beacon even from
+#: the true pose. On seeds 0-3 (1 920 owed frames) 1.0 rather than 1.5 fixed 4 more,
+#: none lost, none wrong (83 fixes moved, within 2.9 sigma after).
+WITNESS_WALL_GATES = 1.0
 WALL_PAST_M = 0.3
 #: How far about a panel, in plan, the lowest returns are its floor, metres (a floor
 #: may rise to the wall's foot: at 2 m the lowest returns of a drift's middle, 22 cm
@@ -354,7 +368,7 @@ def _start_elevation(
     show nothing else would each open one, and outnumber the top edges where the tops
     agree (on seed 0 a lone return 2.9 m above a panel's top put the start 3.2 m low,
     where the stages grew a pitch 7 deg off). The middle and half the width of the
-    interval the most brackets share; None without a hit on a panel with a top.
+    interval the most brackets share; None without ``least`` hits on a panel with a top.
     ``spacing_rad``: the lidar's rings' spacing; ``local``: each panel's returns
     (PanelPlanes.local); ``rays``: their crossings seen from ``origin``, where the
     caller has them."""
@@ -562,19 +576,20 @@ def _standing_off(
 ) -> NDArray[np.bool_]:
     """Per line (``line``, 0 to ``span``), whether its ``n >= least`` returns of ``which``
     on the beacon of ``panels`` (its three, in order) stand, on average, off the wall by
-    more than :data:`~mast.pipeline.adjust3d.ROCK_M` plus :data:`WITNESS_MEAN_GATES`
-    gates over the root of n: the wall where the same line shows it just past the
-    beacon's free ends (:data:`WALL_PAST_M`, the median of at least ``least`` of its
-    returns there), the gate the range noise's (``noise_gate_m``); else the chord e1-e4,
-    the gate ``gate_m`` (widened for the tilt's error before the first adjustment). A
+    more than :data:`~mast.pipeline.adjust3d.ROCK_M` plus some gates over the root of n:
+    the wall where the same line shows it just past the beacon's free ends
+    (:data:`WALL_PAST_M`, the median of at least ``least`` of its returns there), by
+    :data:`WITNESS_WALL_GATES` of the range noise's gate (``noise_gate_m``); else the
+    chord e1-e4, by :data:`WITNESS_MEAN_GATES` of the gate ``gate_m`` (widened for the
+    tilt's error before the first adjustment). A
     pose off across the wall, or tilted, moves the wall the line shows as it moves the
     returns, and does not make the wall stand off itself; the chord it does, and a
     pose's error does not average out over a ring's returns, which a dense lidar's many
     returns would let through were the pose far enough off (on my draws, 0.75 gates
     from the chord gave a fix 16 sigma off in azimuth; 1.5 none). With the median's
-    own noise (about 0.7 sigma from three returns) the bar from the wall shown is at
-    least 2.5 sigmas of the difference beyond the rock's bulge. A beacon whose middle
-    edges stand out to neither side witnesses nothing."""
+    own noise (about 0.7 sigma from three returns) the bar from the wall shown is 2.5
+    sigmas of the difference beyond the rock's bulge, for three returns each side. A
+    beacon whose middle edges stand out to neither side witnesses nothing."""
     first, last = int(panels[0]), int(panels[-1])
     if planes.front[first] == 0:
         return np.zeros(span, dtype=np.bool_)
@@ -592,7 +607,7 @@ def _standing_off(
     n = np.bincount(line[mine], minlength=span)
     mean = np.bincount(line[mine], weights=d[mine], minlength=span) / np.maximum(n, 1)
     wall = np.zeros(span)
-    gate = np.full(span, gate_m)
+    gates = np.full(span, WITNESS_MEAN_GATES * gate_m)
     if past.any():
         lp, dp = line[past], d[past]
         order = np.lexsort((dp, lp))
@@ -600,8 +615,8 @@ def _standing_off(
         starts, count = _runs(lp)
         shown = count >= least
         wall[lp[starts[shown]]] = _sorted_medians(dp, starts, count)[shown]
-        gate[lp[starts[shown]]] = noise_gate_m
-    bar = ROCK_M + WITNESS_MEAN_GATES * gate / np.sqrt(np.maximum(n, 1))
+        gates[lp[starts[shown]]] = WITNESS_WALL_GATES * noise_gate_m
+    bar = ROCK_M + gates / np.sqrt(np.maximum(n, 1))
     return np.asarray((n >= least) & (mean - wall > bar), dtype=np.bool_)
 
 
@@ -1341,7 +1356,9 @@ def _fix3d(
         grid, flat.position, tight, planes, 2.0 * loose, step, local, rays, least=START_HITS
     )
     if start is None:
-        return refused("one_beacon", "no return on a surveyed panel in 3D")
+        return refused(
+            "one_beacon", f"no surveyed panel with {START_HITS} returns in the start's gate in 3D"
+        )
     z0, spread = start
     pose = Pose3D(flat.easting, flat.northing, z0, flat.azimuth, flat.pitch, flat.roll)
     adj: Adjustment3D | None = None
