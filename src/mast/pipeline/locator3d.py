@@ -376,8 +376,7 @@ def _start_elevation(
     o = np.asarray(origin, dtype=float)
     rel = grid - o
     if least > 1:
-        counts = np.bincount(which[which >= 0], minlength=len(planes))
-        which = np.where(np.append(counts >= least, False)[which], which, -1)
+        which = _checked(which, planes, least)
     if rays is None:
         rays = planes._rays(rel, o, local)
     ends: list[tuple[float, int]] = []
@@ -685,11 +684,13 @@ def _shown(
     return tuple(sorted(b for b, n in shown.items() if n >= 2))
 
 
-def _checked(which: NDArray[np.intp], planes: PanelPlanes) -> NDArray[np.intp]:
-    """``which`` less the returns of panels with fewer than :data:`MIN_PANEL_RETURNS`
-    (-1: no panel's)."""
+def _checked(
+    which: NDArray[np.intp], planes: PanelPlanes, least: int = MIN_PANEL_RETURNS
+) -> NDArray[np.intp]:
+    """``which`` less the returns of panels with fewer than ``least`` of them
+    (:data:`MIN_PANEL_RETURNS` unless given; -1: no panel's)."""
     counts = np.bincount(which[which >= 0], minlength=len(planes))
-    kept = np.append(counts >= MIN_PANEL_RETURNS, False)  # which == -1 reads the last
+    kept = np.append(counts >= least, False)  # which == -1 reads the last
     return np.where(kept[which], which, -1)
 
 
